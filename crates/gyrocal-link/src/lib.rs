@@ -1,0 +1,81 @@
+//! # gyrocal-link
+//!
+//! The async, line-oriented transport every gyrocal instrument driver talks through.
+//!
+//! Instruments on RS-232 (the HP 34401A, a rate table behind a serial converter) speak lines of
+//! text. The drivers only need four things from a link: send a line, read one complete line with
+//! a deadline, write raw bytes (the 34401A's Ctrl-C device clear), and throw away stale input.
+//! [`Transport`] is exactly that, so the protocol code is generic over the link and the same
+//! driver runs on a real serial port, a pseudo-terminal, a TCP socket, an in-memory pipe driven in
+//! virtual time, or a [`ScriptedTransport`] that checks the exact bytes a driver writes.
+//!
+//! Why lines are cut here and not in the drivers: a reply that arrives in pieces (a serial port
+//! hands over bytes as they come) must never be mistaken for a whole reply, and every driver would
+//! otherwise re-implement the same buffering, CR stripping and timeout handling.
+
+mod error;
+mod scripted;
+mod stream;
+
+pub use error::{ErrorKind, LinkError, show_bytes};
+pub use scripted::{ScriptStep, ScriptedTransport};
+pub use stream::{AsyncStream, DynStream, StreamTransport, memory_pair};
+
+use std::future::Future;
+use std::time::Duration;
+
+/// The Ctrl-C byte: on the HP 34401A's RS-232 port it is the device clear (aborts a measurement,
+/// clears the input and output buffers, keeps the configuration and the error queue).
+pub const DEVICE_CLEAR: u8 = 0x03;
+
+/// A line-oriented link to one instrument.
+///
+/// Lines sent end in LF. Lines received are split on LF with one trailing CR removed; a partial
+/// line (no LF yet) is never returned as a line.
+pub trait Transport: Send {
+    /// A short description for error messages and logs, such as `/dev/ttyUSB0` or
+    /// `tcp://10.0.0.5:9878`.
+    fn describe(&self) -> &str;
+
+    /// Writes raw bytes (no terminator added) and flushes them.
+    fn write_raw(&mut self, bytes: &[u8]) -> impl Future<Output = Result<(), LinkError>> + Send;
+
+    /// Writes one line: `line` followed by LF.
+    fn send_line(&mut self, line: &str) -> impl Future<Output = Result<(), LinkError>> + Send {
+        let mut bytes = Vec::with_capacity(line.len() + 1);
+        bytes.extend_from_slice(line.as_bytes());
+        bytes.push(b'\n');
+        async move { self.write_raw(&bytes).await }
+    }
+
+    /// Reads one complete line, without its terminator. `None` waits for ever.
+    fn read_line(
+        &mut self,
+        timeout: Option<Duration>,
+    ) -> impl Future<Output = Result<String, LinkError>> + Send;
+
+    /// Throws away everything received and not yet read (buffered here and already waiting on
+    /// the link). Returns how many bytes were dropped. Never waits for more to arrive.
+    fn discard_input(&mut self) -> impl Future<Output = Result<usize, LinkError>> + Send;
+}
+
+impl<T: Transport + ?Sized> Transport for &mut T {
+    fn describe(&self) -> &str {
+        (**self).describe()
+    }
+    fn write_raw(&mut self, bytes: &[u8]) -> impl Future<Output = Result<(), LinkError>> + Send {
+        (**self).write_raw(bytes)
+    }
+    fn send_line(&mut self, line: &str) -> impl Future<Output = Result<(), LinkError>> + Send {
+        (**self).send_line(line)
+    }
+    fn read_line(
+        &mut self,
+        timeout: Option<Duration>,
+    ) -> impl Future<Output = Result<String, LinkError>> + Send {
+        (**self).read_line(timeout)
+    }
+    fn discard_input(&mut self) -> impl Future<Output = Result<usize, LinkError>> + Send {
+        (**self).discard_input()
+    }
+}

@@ -1,0 +1,221 @@
+//! [`StreamTransport`]: line framing over any async byte stream (serial port, TCP socket,
+//! in-memory pipe).
+
+use std::time::Duration;
+
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, DuplexStream};
+
+use crate::{LinkError, Transport};
+
+/// Any bidirectional async byte stream that can back a [`StreamTransport`].
+pub trait AsyncStream: AsyncRead + AsyncWrite + Send + Unpin {}
+impl<T: AsyncRead + AsyncWrite + Send + Unpin> AsyncStream for T {}
+
+/// A type-erased stream, so a program can pick serial or TCP at run time and still hand the
+/// drivers one concrete transport type.
+pub type DynStream = Box<dyn AsyncStream>;
+
+/// Default longest line accepted: a `FETC?` of 512 readings is 8 KiB; this leaves room for
+/// several times that while still catching a runaway stream of bytes without a terminator.
+pub const DEFAULT_MAX_LINE: usize = 256 * 1024;
+
+/// Line framing over a byte stream: buffers input, returns whole LF-terminated lines with a
+/// trailing CR removed, and keeps any bytes after the LF for the next call.
+pub struct StreamTransport<S> {
+    stream: S,
+    name: String,
+    buf: Vec<u8>,
+    max_line: usize,
+}
+
+impl<S: AsyncStream> StreamTransport<S> {
+    /// Wraps `stream`; `name` is what error messages call the link.
+    pub fn new(stream: S, name: impl Into<String>) -> Self {
+        StreamTransport { stream, name: name.into(), buf: Vec::new(), max_line: DEFAULT_MAX_LINE }
+    }
+
+    /// Sets the longest line accepted before the input is declared garbled.
+    pub fn with_max_line(mut self, max_line: usize) -> Self {
+        self.max_line = max_line.max(1);
+        self
+    }
+
+    /// The wrapped stream.
+    pub fn get_ref(&self) -> &S {
+        &self.stream
+    }
+
+    /// The wrapped stream, mutably (for backend-specific calls such as modem lines).
+    pub fn get_mut(&mut self) -> &mut S {
+        &mut self.stream
+    }
+
+    /// Erases the stream type.
+    pub fn boxed(self) -> StreamTransport<DynStream>
+    where
+        S: 'static,
+    {
+        StreamTransport {
+            stream: Box::new(self.stream),
+            name: self.name,
+            buf: self.buf,
+            max_line: self.max_line,
+        }
+    }
+
+    /// Takes one complete line out of the buffer, if there is one.
+    fn take_line(&mut self) -> Option<Result<String, LinkError>> {
+        let pos = self.buf.iter().position(|&b| b == b'\n')?;
+        let mut line: Vec<u8> = self.buf.drain(..=pos).collect();
+        line.pop(); // LF
+        if line.last() == Some(&b'\r') {
+            line.pop();
+        }
+        Some(String::from_utf8(line).map_err(|e| LinkError::Garbled {
+            device: self.name.clone(),
+            reason: "reply is not valid text".into(),
+            bytes: e.into_bytes(),
+        }))
+    }
+
+    async fn fill(&mut self) -> Result<usize, LinkError> {
+        let mut chunk = [0u8; 4096];
+        let n = self
+            .stream
+            .read(&mut chunk)
+            .await
+            .map_err(|e| LinkError::io(&self.name, "reading", e))?;
+        self.buf.extend_from_slice(&chunk[..n]);
+        Ok(n)
+    }
+}
+
+impl<S: AsyncStream> Transport for StreamTransport<S> {
+    fn describe(&self) -> &str {
+        &self.name
+    }
+
+    async fn write_raw(&mut self, bytes: &[u8]) -> Result<(), LinkError> {
+        let res = async {
+            self.stream.write_all(bytes).await?;
+            self.stream.flush().await
+        }
+        .await;
+        res.map_err(|e| match e.kind() {
+            std::io::ErrorKind::BrokenPipe
+            | std::io::ErrorKind::ConnectionReset
+            | std::io::ErrorKind::ConnectionAborted
+            | std::io::ErrorKind::NotConnected => {
+                LinkError::Disconnected { device: self.name.clone(), partial: Vec::new() }
+            }
+            _ => LinkError::io(&self.name, "writing", e),
+        })
+    }
+
+    async fn read_line(&mut self, timeout: Option<Duration>) -> Result<String, LinkError> {
+        let deadline = timeout.map(|t| tokio::time::Instant::now() + t);
+        loop {
+            if let Some(line) = self.take_line() {
+                return line;
+            }
+            if self.buf.len() > self.max_line {
+                let bytes = std::mem::take(&mut self.buf);
+                return Err(LinkError::Garbled {
+                    device: self.name.clone(),
+                    reason: format!("no line terminator within {} bytes", self.max_line),
+                    bytes,
+                });
+            }
+            let n = match deadline {
+                Some(d) => match tokio::time::timeout_at(d, self.fill()).await {
+                    Ok(r) => r?,
+                    Err(_) => {
+                        return Err(LinkError::Timeout {
+                            device: self.name.clone(),
+                            timeout: timeout.unwrap_or_default(),
+                            partial: self.buf.clone(),
+                        });
+                    }
+                },
+                None => self.fill().await?,
+            };
+            if n == 0 {
+                return Err(LinkError::Disconnected {
+                    device: self.name.clone(),
+                    partial: std::mem::take(&mut self.buf),
+                });
+            }
+        }
+    }
+
+    async fn discard_input(&mut self) -> Result<usize, LinkError> {
+        let mut dropped = std::mem::take(&mut self.buf).len();
+        loop {
+            // A zero timeout still polls the read once: whatever is already waiting is taken,
+            // and nothing is waited for.
+            match tokio::time::timeout(Duration::ZERO, self.fill()).await {
+                Ok(Ok(0)) | Err(_) => break,
+                Ok(Ok(n)) => {
+                    dropped += n;
+                    self.buf.clear();
+                }
+                Ok(Err(e)) => return Err(e),
+            }
+        }
+        Ok(dropped)
+    }
+}
+
+/// An in-memory link: the driver's transport and the raw stream a simulated device serves.
+/// Deterministic and instant, so whole calibration runs can go in tokio's virtual time.
+pub fn memory_pair(name: impl Into<String>) -> (StreamTransport<DuplexStream>, DuplexStream) {
+    let (host, device) = tokio::io::duplex(64 * 1024);
+    (StreamTransport::new(host, name), device)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ErrorKind;
+
+    #[tokio::test(start_paused = true)]
+    async fn lines_are_split_and_cr_stripped() {
+        let (mut t, mut dev) = memory_pair("mem");
+        dev.write_all(b"+1.0E+00\r\nNEXT\npart").await.unwrap();
+        assert_eq!(t.read_line(Some(Duration::from_secs(1))).await.unwrap(), "+1.0E+00");
+        assert_eq!(t.read_line(Some(Duration::from_secs(1))).await.unwrap(), "NEXT");
+        let err = t.read_line(Some(Duration::from_secs(1))).await.unwrap_err();
+        assert_eq!(err.kind(), ErrorKind::Timeout);
+        assert!(err.to_string().contains("part"), "{err}");
+        // the partial line is kept and completed by later bytes
+        dev.write_all(b"ial\n").await.unwrap();
+        assert_eq!(t.read_line(Some(Duration::from_secs(1))).await.unwrap(), "partial");
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn eof_is_disconnected_and_discard_drops_pending() {
+        let (mut t, mut dev) = memory_pair("mem");
+        dev.write_all(b"stale\nstale2\n").await.unwrap();
+        tokio::task::yield_now().await;
+        assert_eq!(t.discard_input().await.unwrap(), 13);
+        t.send_line("*IDN?").await.unwrap();
+        let mut got = [0u8; 6];
+        dev.read_exact(&mut got).await.unwrap();
+        assert_eq!(&got, b"*IDN?\n");
+        drop(dev);
+        let err = t.read_line(None).await.unwrap_err();
+        assert_eq!(err.kind(), ErrorKind::Disconnected);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn non_utf8_and_runaway_lines_are_garbled() {
+        let (t, mut dev) = memory_pair("mem");
+        let mut t = t.with_max_line(16);
+        dev.write_all(b"\xff\xfe\n").await.unwrap();
+        let err = t.read_line(Some(Duration::from_secs(1))).await.unwrap_err();
+        assert_eq!(err.kind(), ErrorKind::Garbled);
+        dev.write_all(&[b'x'; 40]).await.unwrap();
+        let err = t.read_line(Some(Duration::from_secs(1))).await.unwrap_err();
+        assert_eq!(err.kind(), ErrorKind::Garbled);
+    }
+}

@@ -1,0 +1,16 @@
+//! # gyrocal-sim
+//!
+//! The simulated bench gyrocal's tests (and operators in training) run against: an HP 34401A
+//! multimeter, an ACUTROL-style rate table and the hemispherical resonator gyro that sits on it.
+//!
+//! The simulator replaces the *devices*, never the drivers: each simulated instrument serves the
+//! raw byte stream of its wire protocol (an in-memory pipe in virtual time, or a pseudo-terminal
+//! in real time), so tests exercise the real driver code and the real bytes. Every instrument
+//! keeps its time on tokio's clock, so a whole calibration runs in virtual time in seconds.
+//!
+//! Fidelity follows `shared/docs/hp34401a.md` and `shared/docs/rate-table.md`; what those leave
+//! open is configurable, with the default documented on the configuration field.
+
+pub mod signal;
+
+pub use signal::SignalSource;
