@@ -1,0 +1,1205 @@
+//! Test plans: TOML file -> raw serde structs -> validated [`Plan`] -> [`Step`] schedule.
+//!
+//! Parsing happens in two stages, ripgrep-style:
+//!
+//! 1. **Raw**: private serde structs mirror the file (`[plan]`, `[table]`, `[dmm]`,
+//!    `[simulation]`), reject unknown keys (`deny_unknown_fields`) and keep the byte span of
+//!    every value ([`toml::Spanned`]). TOML syntax errors, unknown keys, missing keys and wrong
+//!    types are reported here from `toml`'s own spans.
+//! 2. **Validated**: the raw values, with defaults filled in, become a [`PlanDoc`] (the plain,
+//!    serialisable form with the file's key names) and are checked against the instruments'
+//!    limits. Every semantic error points at the offending value through the span kept in
+//!    stage 1, so a message reads `configs/bad.toml:7:21: [table] acceleration_dps2 must be > 0
+//!    (got 0)`.
+//!
+//! A [`Plan`] serialises (serde) as its [`PlanDoc`], so the manifest holds the plan "as parsed":
+//! the file's keys, every default made explicit. Deserialising a `Plan` (from a manifest)
+//! runs the same validation, so nothing read back from disk is trusted.
+//!
+//! # The content hash
+//!
+//! [`Plan::hash`] is the SHA-256 (hex) of a canonical serialisation of the *validated* plan, not
+//! of the file bytes: comments, whitespace, key order, `0` versus `0.0`, `-0` versus `0` and
+//! spelled-out defaults do not change it; any change of a rate, a setting or the simulated truth
+//! does. The canonical form is the compact JSON of the [`PlanDoc`] (fields in declaration
+//! order, numbers in shortest round-trip form) prefixed with `gyrocal-plan-v1\n`, with the
+//! two serial/TCP port fields left out: where an instrument is plugged in does not change the
+//! measurement, and an operator who moved a USB adapter must still be able to resume.
+
+use std::collections::BTreeMap;
+use std::fmt;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+use toml::Spanned;
+
+/// Hard ceiling for `[table] max_rate_dps`, in °/s. Laboratory single-axis rate tables reach a
+/// few hundred to about 1000 °/s; a larger figure is a typo, and a dangerous one.
+pub const HARD_MAX_RATE_DPS: f64 = 1000.0;
+/// Hard ceiling for `[table] acceleration_dps2`, in °/s². Same reasoning as [`HARD_MAX_RATE_DPS`].
+pub const HARD_MAX_ACCELERATION_DPS2: f64 = 1000.0;
+/// Upper bound for `[plan] samples_per_rate`: one million readings is about 11.5 hours at the
+/// 34401A's 24 readings/s (NPLC 1, autozero on); more is certainly a typo.
+pub const MAX_SAMPLES_PER_RATE: u32 = 1_000_000;
+/// Upper bound for `[plan] repeat`.
+pub const MAX_REPEAT: u32 = 1000;
+/// Upper bound for `[plan] whole_revolutions`.
+pub const MAX_WHOLE_REVOLUTIONS: u32 = 1000;
+/// Upper bound for every duration key (`settle_s`, `stability_window_s`, `at_rate_timeout_s`):
+/// one day.
+pub const MAX_DURATION_S: f64 = 86_400.0;
+/// Baud rates the HP 34401A offers (also accepted for the table's serial link).
+pub const BAUD_RATES: [u32; 6] = [300, 600, 1200, 2400, 4800, 9600];
+/// Integration times (power-line cycles) the HP 34401A offers for DC volts.
+pub const NPLC_VALUES: [f64; 5] = [0.02, 0.2, 1.0, 10.0, 100.0];
+/// DC voltage ranges of the HP 34401A, in volts.
+pub const RANGES_V: [f64; 5] = [0.1, 1.0, 10.0, 100.0, 1000.0];
+/// Mains frequencies the meter integrates against.
+pub const LINE_HZ: [u32; 2] = [50, 60];
+
+const HASH_DOMAIN: &str = "gyrocal-plan-v1\n";
+
+// ---------------------------------------------------------------------------------------------
+// Errors
+// ---------------------------------------------------------------------------------------------
+
+/// Where in a plan source an error is: the file (or another origin such as a manifest) and,
+/// when known, the 1-based line and column.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Location {
+    /// The file the plan came from (or a label such as `manifest.json`).
+    pub file: PathBuf,
+    /// 1-based line, when the error could be placed.
+    pub line: Option<u32>,
+    /// 1-based column (in characters), when the error could be placed.
+    pub column: Option<u32>,
+}
+
+impl fmt::Display for Location {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.file.display())?;
+        if let Some(line) = self.line {
+            write!(f, ":{line}")?;
+            if let Some(column) = self.column {
+                write!(f, ":{column}")?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Everything that can be wrong with a plan. Every variant names the file; the TOML variants
+/// also the line, the column and the section or key.
+#[derive(Debug, thiserror::Error)]
+pub enum PlanError {
+    /// The plan file could not be read.
+    #[error("{}: cannot read the plan: {source}", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// TOML syntax error, unknown key, missing key or wrong type (stage 1).
+    #[error("{location}: {}{message}", section.as_ref().map(|s| format!("[{s}] ")).unwrap_or_default())]
+    Syntax {
+        /// Where.
+        location: Location,
+        /// The section (`plan`, `table`, `dmm`, `simulation`) the error is in, when known.
+        section: Option<String>,
+        /// What `toml`/serde said (names the key for unknown and missing keys).
+        message: String,
+    },
+    /// A value that parses but is not acceptable (stage 2).
+    #[error("{location}: [{section}] {key} {message}")]
+    Invalid {
+        /// Where (the offending value, when the file had it).
+        location: Location,
+        /// The section (`plan`, `table`, `dmm`, `simulation`).
+        section: String,
+        /// The key, e.g. `acceleration_dps2` or `rates_dps[3]`.
+        key: String,
+        /// What is wrong, e.g. `must be > 0 (got 0)`.
+        message: String,
+    },
+}
+
+impl PlanError {
+    /// The location of the error, when it has one (not for [`PlanError::Read`]).
+    pub fn location(&self) -> Option<&Location> {
+        match self {
+            PlanError::Read { .. } => None,
+            PlanError::Syntax { location, .. } | PlanError::Invalid { location, .. } => {
+                Some(location)
+            }
+        }
+    }
+}
+
+/// Converts a byte offset into a 1-based (line, column in characters).
+pub(crate) fn line_col(src: &str, offset: usize) -> (u32, u32) {
+    let offset = offset.min(src.len());
+    let before = src.get(..offset).unwrap_or(src);
+    let line = before.matches('\n').count() + 1;
+    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+    let column = before.get(line_start..).map_or(0, |s| s.chars().count()) + 1;
+    (to_u32(line), to_u32(column))
+}
+
+fn to_u32(n: usize) -> u32 {
+    u32::try_from(n).unwrap_or(u32::MAX)
+}
+
+/// The `[section]` header in force at a byte offset (a heuristic for error messages only).
+fn section_at(src: &str, offset: usize) -> Option<String> {
+    let before = src.get(..offset.min(src.len()))?;
+    before.lines().rev().find_map(|line| {
+        let t = line.trim();
+        let inner = t.strip_prefix('[')?.split(']').next()?.trim();
+        let is_header = !inner.is_empty()
+            && inner
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.' | '"'));
+        is_header.then(|| inner.to_string())
+    })
+}
+
+// ---------------------------------------------------------------------------------------------
+// Stage 1: raw structs
+// ---------------------------------------------------------------------------------------------
+
+type S<T> = Spanned<T>;
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFile {
+    plan: RawPlan,
+    table: RawTable,
+    dmm: RawDmm,
+    simulation: Option<RawSimulation>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPlan {
+    name: Option<S<String>>,
+    rates_dps: S<Vec<S<f64>>>,
+    samples_per_rate: S<u32>,
+    settle_s: Option<S<f64>>,
+    repeat: Option<S<u32>>,
+    whole_revolutions: Option<S<u32>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTable {
+    dialect: Option<S<String>>,
+    port: S<String>,
+    baud: Option<S<u32>>,
+    max_rate_dps: S<f64>,
+    acceleration_dps2: S<f64>,
+    rate_tolerance_dps: Option<S<f64>>,
+    stability_window_s: Option<S<f64>>,
+    at_rate_timeout_s: Option<S<f64>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDmm {
+    port: S<String>,
+    baud: Option<S<u32>>,
+    framing: Option<S<String>>,
+    range_v: Option<S<f64>>,
+    nplc: Option<S<f64>>,
+    autozero: Option<S<bool>>,
+    line_hz: Option<S<u32>>,
+    acquisition: Option<S<String>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSimulation {
+    seed: Option<S<u64>>,
+    scale_factor: Option<S<f64>>,
+    bias: Option<S<f64>>,
+    k2: Option<S<f64>>,
+    k3: Option<S<f64>>,
+    asymmetry: Option<S<f64>>,
+    noise_v: Option<S<f64>>,
+    bias_walk: Option<S<f64>>,
+    latitude_deg: Option<S<f64>>,
+    rate_noise_dps: Option<S<f64>>,
+    ripple_dps: Option<S<f64>>,
+}
+
+/// Spans of the values present in the file, keyed by `section.key` (`plan.rates_dps[2]`).
+#[derive(Default)]
+struct Spans(BTreeMap<String, Range<usize>>);
+
+impl Spans {
+    fn take<T>(&mut self, key: &str, v: S<T>) -> T {
+        self.0.insert(key.to_string(), v.span());
+        v.into_inner()
+    }
+    fn opt<T>(&mut self, key: &str, v: Option<S<T>>, default: T) -> T {
+        match v {
+            Some(v) => self.take(key, v),
+            None => default,
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The plain document (serialised form)
+// ---------------------------------------------------------------------------------------------
+
+/// The plan as parsed, with every default filled in: the same sections and key names as the
+/// TOML file. This is what a [`Plan`] serialises to (in the manifest) and what the hash is
+/// computed from. Building a [`Plan`] from it always goes through validation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlanDoc {
+    /// `[plan]`
+    pub plan: PlanSectionDoc,
+    /// `[table]`
+    pub table: TableDoc,
+    /// `[dmm]`
+    pub dmm: DmmDoc,
+    /// `[simulation]`
+    pub simulation: Simulation,
+}
+
+/// `[plan]` as parsed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlanSectionDoc {
+    /// Free-text name.
+    pub name: String,
+    /// Rates in the order applied, °/s.
+    pub rates_dps: Vec<f64>,
+    /// Readings per rate.
+    pub samples_per_rate: u32,
+    /// Dwell after the table is at rate, s.
+    pub settle_s: f64,
+    /// Passes over the whole schedule.
+    pub repeat: u32,
+    /// Whole table turns to acquire over at each non-zero rate (0: off).
+    pub whole_revolutions: u32,
+}
+
+/// `[table]` as parsed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TableDoc {
+    /// Command language, `acl`.
+    pub dialect: String,
+    /// Serial device path or `tcp://HOST:PORT`.
+    pub port: String,
+    /// Serial baud rate.
+    pub baud: u32,
+    /// Client-side rate limit, °/s.
+    pub max_rate_dps: f64,
+    /// Acceleration limit, °/s².
+    pub acceleration_dps2: f64,
+    /// "At rate" tolerance, °/s.
+    pub rate_tolerance_dps: f64,
+    /// "At rate" stability window, s.
+    pub stability_window_s: f64,
+    /// Time allowed to reach the rate, s.
+    pub at_rate_timeout_s: f64,
+}
+
+/// `[dmm]` as parsed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DmmDoc {
+    /// Serial device path or `tcp://HOST:PORT`.
+    pub port: String,
+    /// Serial baud rate.
+    pub baud: u32,
+    /// `8N2`, `7E2` or `7O2`.
+    pub framing: String,
+    /// DC range, V.
+    pub range_v: f64,
+    /// Integration time, power-line cycles.
+    pub nplc: f64,
+    /// Autozero on or off.
+    pub autozero: bool,
+    /// Mains frequency, Hz.
+    pub line_hz: u32,
+    /// `auto`, `stream`, `memory` or `poll`.
+    pub acquisition: String,
+}
+
+// ---------------------------------------------------------------------------------------------
+// Validated types
+// ---------------------------------------------------------------------------------------------
+
+/// Where an instrument is connected.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Port {
+    /// A serial device (`/dev/ttyUSB0`, `COM3`, a pseudo-terminal).
+    Serial(PathBuf),
+    /// A TCP endpoint (`tcp://HOST:PORT`), e.g. a serial-to-Ethernet converter or ACL's port 9878.
+    Tcp {
+        /// Host name or address (IPv6 without brackets).
+        host: String,
+        /// TCP port (1..=65535).
+        port: u16,
+    },
+}
+
+impl Port {
+    /// Parses `tcp://HOST:PORT` (IPv6 as `tcp://[::1]:9878`) or a serial device path.
+    pub fn parse(s: &str) -> Result<Port, String> {
+        if s.trim().is_empty() {
+            return Err("must not be empty".into());
+        }
+        if s.chars().any(char::is_control) {
+            return Err(format!("must not contain control characters (got {s:?})"));
+        }
+        if let Some(rest) = s.strip_prefix("tcp://") {
+            let bad = || format!("must be tcp://HOST:PORT with PORT in 1..=65535 (got {s:?})");
+            let (host, port) = if let Some(v6) = rest.strip_prefix('[') {
+                let (host, after) = v6.split_once(']').ok_or_else(bad)?;
+                (host, after.strip_prefix(':').ok_or_else(bad)?)
+            } else {
+                rest.rsplit_once(':').ok_or_else(bad)?
+            };
+            if host.is_empty()
+                || host.contains(['/', ' '])
+                || (host.contains(':') && !rest.starts_with('['))
+            {
+                return Err(bad());
+            }
+            let port: u16 = port.parse().map_err(|_| bad())?;
+            if port == 0 {
+                return Err(bad());
+            }
+            return Ok(Port::Tcp {
+                host: host.to_string(),
+                port,
+            });
+        }
+        if s.contains("://") {
+            return Err(format!(
+                "unknown scheme: use a device path or tcp://HOST:PORT (got {s:?})"
+            ));
+        }
+        Ok(Port::Serial(PathBuf::from(s)))
+    }
+}
+
+impl fmt::Display for Port {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Port::Serial(p) => write!(f, "{}", p.display()),
+            Port::Tcp { host, port } if host.contains(':') => write!(f, "tcp://[{host}]:{port}"),
+            Port::Tcp { host, port } => write!(f, "tcp://{host}:{port}"),
+        }
+    }
+}
+
+/// The rate table's command language.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TableDialect {
+    /// Acutronic ACL (ACUTROL3000), the first dialect gyrocal speaks.
+    Acl,
+}
+
+impl TableDialect {
+    /// The name used in plan files.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            TableDialect::Acl => "acl",
+        }
+    }
+}
+
+/// RS-232 character framing of the 34401A: parity and data bits are tied, always 2 stop bits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Framing {
+    /// 8 data bits, no parity, 2 stop bits.
+    N8,
+    /// 7 data bits, even parity, 2 stop bits.
+    E7,
+    /// 7 data bits, odd parity, 2 stop bits.
+    O7,
+}
+
+impl Framing {
+    /// The name used in plan files (`8N2`, `7E2`, `7O2`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Framing::N8 => "8N2",
+            Framing::E7 => "7E2",
+            Framing::O7 => "7O2",
+        }
+    }
+}
+
+/// How the multimeter acquires a step's readings (see `hp34401a.md`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Acquisition {
+    /// Let the sequencer choose: stream when the wire keeps up, memory otherwise.
+    Auto,
+    /// `READ?` with a sample count: readings stream as they are taken.
+    Stream,
+    /// `INIT;*OPC?` then `FETC?` in bursts of at most 512 readings.
+    Memory,
+    /// One `READ?` per reading (the slow baseline).
+    Poll,
+}
+
+impl Acquisition {
+    /// The name used in plan files.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Acquisition::Auto => "auto",
+            Acquisition::Stream => "stream",
+            Acquisition::Memory => "memory",
+            Acquisition::Poll => "poll",
+        }
+    }
+}
+
+/// The validated `[table]` section.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TableSettings {
+    /// Command language.
+    pub dialect: TableDialect,
+    /// Where the table controller is connected.
+    pub port: Port,
+    /// Serial baud rate (one of [`BAUD_RATES`]).
+    pub baud: u32,
+    /// Client-side rate limit, °/s, in (0, [`HARD_MAX_RATE_DPS`]].
+    pub max_rate_dps: f64,
+    /// Acceleration limit, °/s², in (0, [`HARD_MAX_ACCELERATION_DPS2`]].
+    pub acceleration_dps2: f64,
+    /// "At rate" tolerance on the measured rate, °/s (> 0).
+    pub rate_tolerance_dps: f64,
+    /// The measured rate must stay within tolerance this long (> 0).
+    pub stability_window: Duration,
+    /// Reaching the rate takes longer than this: a fault (> the stability window).
+    pub at_rate_timeout: Duration,
+}
+
+/// The validated `[dmm]` section.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DmmSettings {
+    /// Where the multimeter is connected.
+    pub port: Port,
+    /// Serial baud rate (one of [`BAUD_RATES`]).
+    pub baud: u32,
+    /// Character framing.
+    pub framing: Framing,
+    /// DC range, V (one of [`RANGES_V`]).
+    pub range_v: f64,
+    /// Integration time in power-line cycles (one of [`NPLC_VALUES`]).
+    pub nplc: f64,
+    /// Autozero on (doubles each reading's time).
+    pub autozero: bool,
+    /// Mains frequency, 50 or 60 Hz.
+    pub line_hz: u32,
+    /// Acquisition strategy.
+    pub acquisition: Acquisition,
+}
+
+/// `[simulation]`: the truth of the in-process simulated bench used by `--simulate`.
+/// Every key is optional; the defaults resemble the paper's HRG.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Simulation {
+    /// Seed of every random stream (default 1).
+    pub seed: u64,
+    /// Scale factor `Kn`, V/(°/s) (default 0.3612, the paper's result; non-zero).
+    pub scale_factor: f64,
+    /// Bias `K0`, V (default 0.0088, the paper's result).
+    pub bias: f64,
+    /// Second-order term, V/(°/s)² (default 2e-5: about 8 mV at 20 °/s, the even-order
+    /// residual shape of the paper).
+    pub k2: f64,
+    /// Third-order term, V/(°/s)³ (default 0).
+    pub k3: f64,
+    /// Relative difference of the two directions' scale factors, `(K+ - K-)/Kbar` (default 0,
+    /// |asymmetry| < 0.1).
+    pub asymmetry: f64,
+    /// Standard deviation of one reading's noise, V (default 0.002, ≥ 0).
+    pub noise_v: f64,
+    /// Bias random walk, V/√s (default 0, ≥ 0).
+    pub bias_walk: f64,
+    /// Latitude of the bench, degrees; the vertical Earth rate 15.041 °/h · sin(latitude) adds
+    /// to every input (default 0, within ±90).
+    pub latitude_deg: f64,
+    /// Table rate noise std, °/s (default 0.0002, ≥ 0).
+    pub rate_noise_dps: f64,
+    /// Table once-per-revolution rate ripple amplitude, °/s (default 0.0005, ≥ 0).
+    pub ripple_dps: f64,
+}
+
+impl Default for Simulation {
+    fn default() -> Self {
+        Simulation {
+            seed: 1,
+            scale_factor: 0.3612,
+            bias: 0.0088,
+            k2: 2e-5,
+            k3: 0.0,
+            asymmetry: 0.0,
+            noise_v: 0.002,
+            bias_walk: 0.0,
+            latitude_deg: 0.0,
+            rate_noise_dps: 0.0002,
+            ripple_dps: 0.0005,
+        }
+    }
+}
+
+/// A validated test plan. Built only by [`Plan::from_toml_str`], [`Plan::from_file`] or
+/// [`Plan::from_doc`], so its invariants hold; serialises (serde) as its [`PlanDoc`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    name: String,
+    rates_dps: Vec<f64>,
+    samples_per_rate: u32,
+    settle: Duration,
+    repeat: u32,
+    whole_revolutions: u32,
+    table: TableSettings,
+    dmm: DmmSettings,
+    simulation: Simulation,
+}
+
+/// What a step acquires.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Acquire {
+    /// A fixed number of readings (`samples_per_rate`; also zero-rate steps of a
+    /// whole-revolution plan).
+    Samples(u32),
+    /// Readings spanning this long, a whole number of table turns
+    /// (`whole_revolutions · 360 / |ω|`); see [`Step::sample_count`].
+    Span {
+        /// Required acquisition duration.
+        duration: Duration,
+        /// Number of whole turns it covers.
+        revolutions: u32,
+    },
+}
+
+/// One step of the schedule: one rate of one pass.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Step {
+    /// 0-based position in the schedule; stable for a given plan (the run directory's `step`).
+    pub index: usize,
+    /// 0-based pass (`0..repeat`).
+    pub pass: u32,
+    /// Demanded rate, °/s.
+    pub rate_dps: f64,
+    /// What to acquire.
+    pub acquire: Acquire,
+}
+
+impl Step {
+    /// Readings to take given the meter's time per reading: `Samples(n)` gives `n`; `Span`
+    /// gives `round(duration / reading_period)` (at least 1), the count whose total time is
+    /// closest to the whole turns.
+    pub fn sample_count(&self, reading_period: Duration) -> u64 {
+        match self.acquire {
+            Acquire::Samples(n) => u64::from(n),
+            Acquire::Span { duration, .. } => {
+                let p = reading_period.as_secs_f64();
+                if p <= 0.0 || !p.is_finite() {
+                    return 1;
+                }
+                let n = (duration.as_secs_f64() / p).round();
+                // `as` saturates; the bound keeps a silly period from asking for billions.
+                (n.max(1.0) as u64).min(u64::from(u32::MAX))
+            }
+        }
+    }
+
+    /// The required acquisition duration, for whole-revolution steps.
+    pub fn span(&self) -> Option<Duration> {
+        match self.acquire {
+            Acquire::Samples(_) => None,
+            Acquire::Span { duration, .. } => Some(duration),
+        }
+    }
+}
+
+impl Plan {
+    /// Reads and validates a plan file; errors name `path`.
+    pub fn from_file(path: &Path) -> Result<Plan, PlanError> {
+        let src = std::fs::read_to_string(path).map_err(|source| PlanError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Plan::from_toml_str(&src, path)
+    }
+
+    /// Parses and validates plan text; `origin` is the file name used in errors.
+    pub fn from_toml_str(src: &str, origin: &Path) -> Result<Plan, PlanError> {
+        let raw: RawFile = toml::from_str(src).map_err(|e| {
+            let (line, column, section) = match e.span() {
+                Some(span) => {
+                    let (l, c) = line_col(src, span.start);
+                    (Some(l), Some(c), section_at(src, span.start))
+                }
+                None => (None, None, None),
+            };
+            PlanError::Syntax {
+                location: Location {
+                    file: origin.to_path_buf(),
+                    line,
+                    column,
+                },
+                section,
+                message: e.message().trim().to_string(),
+            }
+        })?;
+        let mut spans = Spans::default();
+        let doc = raw_to_doc(raw, &mut spans);
+        validate(
+            doc,
+            &Ctx {
+                origin,
+                src: Some(src),
+                spans: &spans,
+            },
+        )
+    }
+
+    /// Validates a plain document (e.g. read back from a manifest); errors carry `origin`
+    /// without a line.
+    pub fn from_doc(doc: PlanDoc, origin: &Path) -> Result<Plan, PlanError> {
+        validate(
+            doc,
+            &Ctx {
+                origin,
+                src: None,
+                spans: &Spans::default(),
+            },
+        )
+    }
+
+    /// The plan as parsed, defaults explicit (what the manifest stores).
+    pub fn to_doc(&self) -> PlanDoc {
+        PlanDoc {
+            plan: PlanSectionDoc {
+                name: self.name.clone(),
+                rates_dps: self.rates_dps.clone(),
+                samples_per_rate: self.samples_per_rate,
+                settle_s: self.settle.as_secs_f64(),
+                repeat: self.repeat,
+                whole_revolutions: self.whole_revolutions,
+            },
+            table: TableDoc {
+                dialect: self.table.dialect.as_str().into(),
+                port: self.table.port.to_string(),
+                baud: self.table.baud,
+                max_rate_dps: self.table.max_rate_dps,
+                acceleration_dps2: self.table.acceleration_dps2,
+                rate_tolerance_dps: self.table.rate_tolerance_dps,
+                stability_window_s: self.table.stability_window.as_secs_f64(),
+                at_rate_timeout_s: self.table.at_rate_timeout.as_secs_f64(),
+            },
+            dmm: DmmDoc {
+                port: self.dmm.port.to_string(),
+                baud: self.dmm.baud,
+                framing: self.dmm.framing.as_str().into(),
+                range_v: self.dmm.range_v,
+                nplc: self.dmm.nplc,
+                autozero: self.dmm.autozero,
+                line_hz: self.dmm.line_hz,
+                acquisition: self.dmm.acquisition.as_str().into(),
+            },
+            simulation: self.simulation.clone(),
+        }
+    }
+
+    /// SHA-256 (lower-case hex) of the canonical serialisation; see the module docs for what
+    /// it covers (everything but the two port fields).
+    pub fn hash(&self) -> String {
+        let mut doc = self.to_doc();
+        doc.table.port.clear();
+        doc.dmm.port.clear();
+        let mut h = Sha256::new();
+        h.update(HASH_DOMAIN.as_bytes());
+        // Serialising plain structs of numbers, strings and bools to JSON cannot fail; an
+        // empty body would still hash deterministically.
+        h.update(serde_json::to_vec(&doc).unwrap_or_default());
+        h.finalize().iter().map(|b| format!("{b:02x}")).collect()
+    }
+
+    /// The schedule: `repeat` passes over `rates_dps`, in order.
+    pub fn schedule(&self) -> Vec<Step> {
+        let mut steps = Vec::with_capacity(self.step_count());
+        for pass in 0..self.repeat {
+            for &rate_dps in &self.rates_dps {
+                let acquire = if self.whole_revolutions > 0 && rate_dps != 0.0 {
+                    let secs = f64::from(self.whole_revolutions) * 360.0 / rate_dps.abs();
+                    // Validation bounds `secs` to MAX_DURATION_S; the fallback is unreachable.
+                    let duration = Duration::try_from_secs_f64(secs)
+                        .unwrap_or(Duration::from_secs_f64(MAX_DURATION_S));
+                    Acquire::Span {
+                        duration,
+                        revolutions: self.whole_revolutions,
+                    }
+                } else {
+                    Acquire::Samples(self.samples_per_rate)
+                };
+                steps.push(Step {
+                    index: steps.len(),
+                    pass,
+                    rate_dps,
+                    acquire,
+                });
+            }
+        }
+        steps
+    }
+
+    /// Number of steps (`repeat × rates`).
+    pub fn step_count(&self) -> usize {
+        self.rates_dps.len() * self.repeat as usize
+    }
+
+    /// Free-text name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+    /// Rates of one pass, in the order applied, °/s.
+    pub fn rates_dps(&self) -> &[f64] {
+        &self.rates_dps
+    }
+    /// Readings per rate (for zero-rate and non-revolution steps).
+    pub fn samples_per_rate(&self) -> u32 {
+        self.samples_per_rate
+    }
+    /// Dwell after "at rate", before acquiring.
+    pub fn settle(&self) -> Duration {
+        self.settle
+    }
+    /// Passes over the schedule.
+    pub fn repeat(&self) -> u32 {
+        self.repeat
+    }
+    /// Whole turns per non-zero rate (0: off).
+    pub fn whole_revolutions(&self) -> u32 {
+        self.whole_revolutions
+    }
+    /// `[table]`.
+    pub fn table(&self) -> &TableSettings {
+        &self.table
+    }
+    /// `[dmm]`.
+    pub fn dmm(&self) -> &DmmSettings {
+        &self.dmm
+    }
+    /// `[simulation]`.
+    pub fn simulation(&self) -> &Simulation {
+        &self.simulation
+    }
+    /// Overrides the table's port (`--table-port`); ports are not part of the hash.
+    pub fn set_table_port(&mut self, port: Port) {
+        self.table.port = port;
+    }
+    /// Overrides the multimeter's port (`--dmm-port`); ports are not part of the hash.
+    pub fn set_dmm_port(&mut self, port: Port) {
+        self.dmm.port = port;
+    }
+}
+
+impl Serialize for Plan {
+    fn serialize<Ser: serde::Serializer>(&self, s: Ser) -> Result<Ser::Ok, Ser::Error> {
+        self.to_doc().serialize(s)
+    }
+}
+
+impl<'de> Deserialize<'de> for Plan {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let doc = PlanDoc::deserialize(d)?;
+        Plan::from_doc(doc, Path::new("plan")).map_err(serde::de::Error::custom)
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Stage 2: validation
+// ---------------------------------------------------------------------------------------------
+
+fn raw_to_doc(raw: RawFile, sp: &mut Spans) -> PlanDoc {
+    let d = Simulation::default();
+    let p = raw.plan;
+    let rates = sp.take("plan.rates_dps", p.rates_dps);
+    let rates_dps = rates
+        .into_iter()
+        .enumerate()
+        .map(|(i, r)| sp.take(&format!("plan.rates_dps[{i}]"), r))
+        .collect();
+    let t = raw.table;
+    let m = raw.dmm;
+    let plan = PlanSectionDoc {
+        name: sp.opt("plan.name", p.name, String::new()),
+        rates_dps,
+        samples_per_rate: sp.take("plan.samples_per_rate", p.samples_per_rate),
+        settle_s: sp.opt("plan.settle_s", p.settle_s, 10.0),
+        repeat: sp.opt("plan.repeat", p.repeat, 1),
+        whole_revolutions: sp.opt("plan.whole_revolutions", p.whole_revolutions, 0),
+    };
+    let table = TableDoc {
+        dialect: sp.opt("table.dialect", t.dialect, "acl".into()),
+        port: sp.take("table.port", t.port),
+        baud: sp.opt("table.baud", t.baud, 9600),
+        max_rate_dps: sp.take("table.max_rate_dps", t.max_rate_dps),
+        acceleration_dps2: sp.take("table.acceleration_dps2", t.acceleration_dps2),
+        rate_tolerance_dps: sp.opt("table.rate_tolerance_dps", t.rate_tolerance_dps, 0.001),
+        stability_window_s: sp.opt("table.stability_window_s", t.stability_window_s, 2.0),
+        at_rate_timeout_s: sp.opt("table.at_rate_timeout_s", t.at_rate_timeout_s, 60.0),
+    };
+    let dmm = DmmDoc {
+        port: sp.take("dmm.port", m.port),
+        baud: sp.opt("dmm.baud", m.baud, 9600),
+        framing: sp.opt("dmm.framing", m.framing, "8N2".into()),
+        range_v: sp.opt("dmm.range_v", m.range_v, 10.0),
+        nplc: sp.opt("dmm.nplc", m.nplc, 1.0),
+        autozero: sp.opt("dmm.autozero", m.autozero, true),
+        line_hz: sp.opt("dmm.line_hz", m.line_hz, 50),
+        acquisition: sp.opt("dmm.acquisition", m.acquisition, "auto".into()),
+    };
+    let simulation = match raw.simulation {
+        None => d,
+        Some(s) => Simulation {
+            seed: sp.opt("simulation.seed", s.seed, d.seed),
+            scale_factor: sp.opt("simulation.scale_factor", s.scale_factor, d.scale_factor),
+            bias: sp.opt("simulation.bias", s.bias, d.bias),
+            k2: sp.opt("simulation.k2", s.k2, d.k2),
+            k3: sp.opt("simulation.k3", s.k3, d.k3),
+            asymmetry: sp.opt("simulation.asymmetry", s.asymmetry, d.asymmetry),
+            noise_v: sp.opt("simulation.noise_v", s.noise_v, d.noise_v),
+            bias_walk: sp.opt("simulation.bias_walk", s.bias_walk, d.bias_walk),
+            latitude_deg: sp.opt("simulation.latitude_deg", s.latitude_deg, d.latitude_deg),
+            rate_noise_dps: sp.opt(
+                "simulation.rate_noise_dps",
+                s.rate_noise_dps,
+                d.rate_noise_dps,
+            ),
+            ripple_dps: sp.opt("simulation.ripple_dps", s.ripple_dps, d.ripple_dps),
+        },
+    };
+    PlanDoc {
+        plan,
+        table,
+        dmm,
+        simulation,
+    }
+}
+
+struct Ctx<'a> {
+    origin: &'a Path,
+    src: Option<&'a str>,
+    spans: &'a Spans,
+}
+
+impl Ctx<'_> {
+    /// An error at `path` (`section.key`), placed at the value's span when the file had it.
+    fn err(&self, path: &str, message: String) -> PlanError {
+        let (section, key) = path.split_once('.').unwrap_or(("plan", path));
+        let (line, column) = match (self.src, self.spans.0.get(path)) {
+            (Some(src), Some(span)) => {
+                let (l, c) = line_col(src, span.start);
+                (Some(l), Some(c))
+            }
+            _ => (None, None),
+        };
+        PlanError::Invalid {
+            location: Location {
+                file: self.origin.to_path_buf(),
+                line,
+                column,
+            },
+            section: section.to_string(),
+            key: key.to_string(),
+            message,
+        }
+    }
+
+    fn has(&self, path: &str) -> bool {
+        self.spans.0.contains_key(path)
+    }
+
+    fn finite(&self, path: &str, v: f64) -> Result<f64, PlanError> {
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(self.err(path, format!("must be finite (got {v})")))
+        }
+    }
+
+    fn one_of_f64(&self, path: &str, v: f64, allowed: &[f64]) -> Result<f64, PlanError> {
+        // Exact comparison is intended: TOML `0.02` and the constant 0.02 are the same double.
+        if allowed.contains(&v) {
+            Ok(v)
+        } else {
+            Err(self.err(path, format!("must be one of {allowed:?} (got {v})")))
+        }
+    }
+
+    fn one_of_u32(&self, path: &str, v: u32, allowed: &[u32]) -> Result<u32, PlanError> {
+        if allowed.contains(&v) {
+            Ok(v)
+        } else {
+            Err(self.err(path, format!("must be one of {allowed:?} (got {v})")))
+        }
+    }
+
+    fn duration(&self, path: &str, v: f64, min_exclusive: bool) -> Result<Duration, PlanError> {
+        let v = self.finite(path, v)?;
+        if v < 0.0 || (min_exclusive && v == 0.0) {
+            let op = if min_exclusive { ">" } else { ">=" };
+            return Err(self.err(path, format!("must be {op} 0 (got {v})")));
+        }
+        if v > MAX_DURATION_S {
+            return Err(self.err(path, format!("must be <= {MAX_DURATION_S} s (got {v})")));
+        }
+        Ok(Duration::from_secs_f64(v))
+    }
+
+    fn port(&self, path: &str, v: &str) -> Result<Port, PlanError> {
+        Port::parse(v).map_err(|m| self.err(path, m))
+    }
+}
+
+fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
+    let PlanDoc {
+        plan: p,
+        table: t,
+        dmm: m,
+        simulation: s,
+    } = doc;
+
+    // [table] first: the rates are checked against its limits.
+    let dialect = match t.dialect.to_ascii_lowercase().as_str() {
+        "acl" => TableDialect::Acl,
+        _ => {
+            return Err(cx.err(
+                "table.dialect",
+                format!("must be \"acl\" (got {:?})", t.dialect),
+            ));
+        }
+    };
+    let table_port = cx.port("table.port", &t.port)?;
+    let table_baud = cx.one_of_u32("table.baud", t.baud, &BAUD_RATES)?;
+    let max_rate = cx.finite("table.max_rate_dps", t.max_rate_dps)?;
+    if max_rate <= 0.0 || max_rate > HARD_MAX_RATE_DPS {
+        return Err(cx.err(
+            "table.max_rate_dps",
+            format!("must be > 0 and <= {HARD_MAX_RATE_DPS} (got {max_rate})"),
+        ));
+    }
+    let acc = cx.finite("table.acceleration_dps2", t.acceleration_dps2)?;
+    if acc <= 0.0 {
+        return Err(cx.err(
+            "table.acceleration_dps2",
+            format!("must be > 0 (got {acc})"),
+        ));
+    }
+    if acc > HARD_MAX_ACCELERATION_DPS2 {
+        return Err(cx.err(
+            "table.acceleration_dps2",
+            format!("must be <= {HARD_MAX_ACCELERATION_DPS2} (got {acc})"),
+        ));
+    }
+    let tol = cx.finite("table.rate_tolerance_dps", t.rate_tolerance_dps)?;
+    if tol <= 0.0 || tol > max_rate {
+        return Err(cx.err(
+            "table.rate_tolerance_dps",
+            format!("must be > 0 and <= max_rate_dps {max_rate} (got {tol})"),
+        ));
+    }
+    let window = cx.duration("table.stability_window_s", t.stability_window_s, true)?;
+    let timeout = cx.duration("table.at_rate_timeout_s", t.at_rate_timeout_s, true)?;
+    if timeout <= window {
+        let key = if cx.has("table.at_rate_timeout_s") || !cx.has("table.stability_window_s") {
+            "table.at_rate_timeout_s"
+        } else {
+            "table.stability_window_s"
+        };
+        return Err(cx.err(
+            key,
+            format!(
+                "at_rate_timeout_s ({}) must be > stability_window_s ({})",
+                t.at_rate_timeout_s, t.stability_window_s
+            ),
+        ));
+    }
+
+    // [plan]
+    let mut rates = Vec::with_capacity(p.rates_dps.len());
+    for (i, &r) in p.rates_dps.iter().enumerate() {
+        let key = format!("plan.rates_dps[{i}]");
+        let r = cx.finite(&key, r)?;
+        if r.abs() > max_rate {
+            return Err(cx.err(
+                &key,
+                format!("|{r}| exceeds [table] max_rate_dps = {max_rate}"),
+            ));
+        }
+        if p.whole_revolutions > 0 && r != 0.0 {
+            let span = f64::from(p.whole_revolutions) * 360.0 / r.abs();
+            if span > MAX_DURATION_S {
+                return Err(cx.err(
+                    &key,
+                    format!(
+                        "{r} deg/s needs {span:.0} s for {} whole revolution(s), over the \
+                         {MAX_DURATION_S} s limit of one step",
+                        p.whole_revolutions
+                    ),
+                ));
+            }
+        }
+        rates.push(if r == 0.0 { 0.0 } else { r }); // -0 is 0
+    }
+    let mut distinct = rates.clone();
+    distinct.sort_by(f64::total_cmp);
+    distinct.dedup();
+    if distinct.len() < 2 {
+        return Err(cx.err(
+            "plan.rates_dps",
+            format!(
+                "needs at least two distinct rates to fit a line (got {})",
+                distinct.len()
+            ),
+        ));
+    }
+    if p.samples_per_rate == 0 || p.samples_per_rate > MAX_SAMPLES_PER_RATE {
+        return Err(cx.err(
+            "plan.samples_per_rate",
+            format!(
+                "must be in 1..={MAX_SAMPLES_PER_RATE} (got {})",
+                p.samples_per_rate
+            ),
+        ));
+    }
+    let settle = cx.duration("plan.settle_s", p.settle_s, false)?;
+    if p.repeat == 0 || p.repeat > MAX_REPEAT {
+        return Err(cx.err(
+            "plan.repeat",
+            format!("must be in 1..={MAX_REPEAT} (got {})", p.repeat),
+        ));
+    }
+    if p.whole_revolutions > MAX_WHOLE_REVOLUTIONS {
+        return Err(cx.err(
+            "plan.whole_revolutions",
+            format!(
+                "must be in 0..={MAX_WHOLE_REVOLUTIONS} (got {})",
+                p.whole_revolutions
+            ),
+        ));
+    }
+
+    // [dmm]
+    let dmm_port = cx.port("dmm.port", &m.port)?;
+    if dmm_port == table_port {
+        return Err(cx.err(
+            "dmm.port",
+            format!("is the same as [table] port ({dmm_port})"),
+        ));
+    }
+    let dmm_baud = cx.one_of_u32("dmm.baud", m.baud, &BAUD_RATES)?;
+    let framing = match m.framing.to_ascii_uppercase().as_str() {
+        "8N2" => Framing::N8,
+        "7E2" => Framing::E7,
+        "7O2" => Framing::O7,
+        _ => {
+            return Err(cx.err(
+                "dmm.framing",
+                format!("must be \"8N2\", \"7E2\" or \"7O2\" (got {:?})", m.framing),
+            ));
+        }
+    };
+    let range_v = cx.one_of_f64("dmm.range_v", m.range_v, &RANGES_V)?;
+    let nplc = cx.one_of_f64("dmm.nplc", m.nplc, &NPLC_VALUES)?;
+    let line_hz = cx.one_of_u32("dmm.line_hz", m.line_hz, &LINE_HZ)?;
+    let acquisition = match m.acquisition.to_ascii_lowercase().as_str() {
+        "auto" => Acquisition::Auto,
+        "stream" => Acquisition::Stream,
+        "memory" => Acquisition::Memory,
+        "poll" => Acquisition::Poll,
+        _ => {
+            return Err(cx.err(
+                "dmm.acquisition",
+                format!(
+                    "must be auto, stream, memory or poll (got {:?})",
+                    m.acquisition
+                ),
+            ));
+        }
+    };
+
+    // [simulation]
+    let scale_factor = cx.finite("simulation.scale_factor", s.scale_factor)?;
+    if scale_factor == 0.0 {
+        return Err(cx.err("simulation.scale_factor", "must be non-zero (got 0)".into()));
+    }
+    cx.finite("simulation.bias", s.bias)?;
+    cx.finite("simulation.k2", s.k2)?;
+    cx.finite("simulation.k3", s.k3)?;
+    let asym = cx.finite("simulation.asymmetry", s.asymmetry)?;
+    if asym.abs() >= 0.1 {
+        return Err(cx.err(
+            "simulation.asymmetry",
+            format!("must be within ±0.1 (got {asym})"),
+        ));
+    }
+    for (key, v) in [
+        ("simulation.noise_v", s.noise_v),
+        ("simulation.bias_walk", s.bias_walk),
+        ("simulation.rate_noise_dps", s.rate_noise_dps),
+        ("simulation.ripple_dps", s.ripple_dps),
+    ] {
+        let v = cx.finite(key, v)?;
+        if v < 0.0 {
+            return Err(cx.err(key, format!("must be >= 0 (got {v})")));
+        }
+    }
+    let lat = cx.finite("simulation.latitude_deg", s.latitude_deg)?;
+    if lat.abs() > 90.0 {
+        return Err(cx.err(
+            "simulation.latitude_deg",
+            format!("must be within ±90 (got {lat})"),
+        ));
+    }
+
+    Ok(Plan {
+        name: p.name,
+        rates_dps: rates,
+        samples_per_rate: p.samples_per_rate,
+        settle,
+        repeat: p.repeat,
+        whole_revolutions: p.whole_revolutions,
+        table: TableSettings {
+            dialect,
+            port: table_port,
+            baud: table_baud,
+            max_rate_dps: max_rate,
+            acceleration_dps2: acc,
+            rate_tolerance_dps: tol,
+            stability_window: window,
+            at_rate_timeout: timeout,
+        },
+        dmm: DmmSettings {
+            port: dmm_port,
+            baud: dmm_baud,
+            framing,
+            range_v,
+            nplc,
+            autozero: m.autozero,
+            line_hz,
+            acquisition,
+        },
+        simulation: s,
+    })
+}
