@@ -1,0 +1,211 @@
+//! The whole analysis of a data set: the document `gyrocal fit --json` prints.
+
+use serde::{Deserialize, Serialize};
+
+use crate::data::{Dataset, Weighting};
+use crate::error::FitError;
+use crate::lsq::{assemble, check, fit_least_squares};
+use crate::metrics::{Metrics, repeatability_ppm};
+use crate::model::{Coefficients, Fit, Method, Model, NeuronTrace};
+use crate::neuron::{NeuronOptions, train};
+use crate::surface::ErrorSurface;
+
+/// What to compute.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct Options {
+    /// Models to fit (default: all four).
+    pub models: Vec<Model>,
+    /// Methods to use (default: least squares and the neuron). Least squares fits every model;
+    /// the neuron fits the linear model only, and only when `models` contains it.
+    pub methods: Vec<Method>,
+    /// Neuron settings.
+    pub neuron: NeuronOptions,
+    /// Point weighting.
+    pub weighting: Weighting,
+    /// Side of the error-surface grid (0: no surface).
+    pub surface_size: usize,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            models: Model::ALL.to_vec(),
+            methods: vec![Method::LeastSquares, Method::Neuron],
+            neuron: NeuronOptions::default(),
+            weighting: Weighting::Auto,
+            surface_size: 41,
+        }
+    }
+}
+
+/// The analysis of one data set.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Analysis {
+    /// Where the data came from.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source: Option<String>,
+    /// Number of points.
+    pub points: usize,
+    /// The fits, least squares first (in model order), then the neuron.
+    pub fits: Vec<Fit>,
+    /// The model with the smallest residual standard error `sqrt(SSE/(N − p))` among the
+    /// least-squares fits (which penalises extra coefficients), when there is one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub best_model: Option<Model>,
+    /// Metrics from least-squares fits.
+    pub metrics: Metrics,
+    /// SSE of the linear model over (weight, threshold) around the least-squares optimum.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error_surface: Option<ErrorSurface>,
+}
+
+impl Analysis {
+    /// The fit of `model` by `method`, if it was computed.
+    pub fn fit(&self, method: Method, model: Model) -> Option<&Fit> {
+        self.fits
+            .iter()
+            .find(|f| f.method == method && f.model == model)
+    }
+}
+
+/// The analyses of several data sets (runs of the same gyro) and the repeatability across them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MultiAnalysis {
+    /// One analysis per data set, in the order given; each one's `metrics.repeatability_ppm`
+    /// holds the repeatability across the set.
+    pub files: Vec<Analysis>,
+    /// The least-squares linear scale factor of each data set, V/(°/s).
+    pub scale_factors: Vec<f64>,
+    /// `std(K_i, ddof=1)/mean(K_i)`, ppm; null for one data set.
+    pub repeatability_ppm: Option<f64>,
+}
+
+/// Fits the requested models by the requested methods and computes the metrics.
+///
+/// Errors when a requested model cannot be fitted to the data (too few points, too few distinct
+/// rates, split model without both directions), or when the options select nothing (e.g. only
+/// the neuron, which fits the linear model, with only the quadratic model).
+pub fn analyze(data: &Dataset, opts: &Options) -> Result<Analysis, FitError> {
+    let _span =
+        tracing::debug_span!("analyze", source = ?data.source, points = data.len()).entered();
+    let mut models = opts.models.clone();
+    models.sort();
+    models.dedup();
+    let ls = opts.methods.contains(&Method::LeastSquares);
+    let neuron = opts.methods.contains(&Method::Neuron) && models.contains(&Model::Linear);
+    if !ls && !neuron {
+        return Err(FitError::Unsupported(
+            "nothing to fit: the neuron fits only the linear model; add --model linear or --method least-squares"
+                .to_string(),
+        ));
+    }
+    // The linear model underlies the metrics, so the data must support it in any case.
+    check(data, Model::Linear)?;
+    let mut fits = Vec::new();
+    if ls {
+        for &m in &models {
+            fits.push(fit_least_squares(data, m, opts.weighting)?);
+        }
+    }
+    if neuron {
+        fits.push(fit_neuron(data, &opts.neuron, opts.weighting)?);
+    }
+    let best_model = fits
+        .iter()
+        .filter(|f| f.method == Method::LeastSquares)
+        .filter_map(|f| f.residual_std_error.map(|s| (s, f.model)))
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, m)| m);
+    let metrics = Metrics::compute(data, opts.weighting)?;
+    let error_surface = (opts.surface_size > 0).then(|| {
+        ErrorSurface::around(
+            data,
+            metrics.scale_factor,
+            metrics.bias_volts,
+            opts.surface_size,
+        )
+    });
+    for f in &fits {
+        tracing::debug!(method = %f.method, model = %f.model, k = f.scale_factor, k0 = f.bias, sse = f.sse, "fit");
+    }
+    Ok(Analysis {
+        source: data.source.clone(),
+        points: data.len(),
+        fits,
+        best_model,
+        metrics,
+        error_surface,
+    })
+}
+
+/// Fits the linear model with the paper's neuron (see [`crate::neuron`]).
+pub fn fit_neuron(
+    data: &Dataset,
+    opts: &NeuronOptions,
+    weighting: Weighting,
+) -> Result<Fit, FitError> {
+    check(data, Model::Linear)?;
+    let sigmas = data.sigmas(weighting);
+    let t = train(&data.rates(), &data.volts(), sigmas.as_deref(), opts);
+    match t.status {
+        crate::neuron::NeuronStatus::Converged => {}
+        status => tracing::warn!(
+            ?status,
+            passes = t.online_passes + t.batch_passes,
+            "neuron did not converge"
+        ),
+    }
+    let coefficients = Coefficients {
+        k0: Some(t.threshold),
+        k1: Some(t.weight),
+        ..Coefficients::default()
+    };
+    let trace = NeuronTrace {
+        status: t.status,
+        online_passes: t.online_passes,
+        batch_passes: t.batch_passes,
+        pass_errors: t.pass_errors,
+        eta: opts.eta,
+        alpha: opts.alpha,
+        seed: opts.seed,
+        initial_weight: t.initial_weight,
+        initial_threshold: t.initial_threshold,
+    };
+    Ok(assemble(
+        data,
+        Method::Neuron,
+        Model::Linear,
+        coefficients,
+        Coefficients::default(),
+        sigmas.as_deref(),
+        Some(trace),
+    ))
+}
+
+/// Analyses several data sets and adds the repeatability of the least-squares linear scale
+/// factor across them (also copied into each analysis's metrics).
+pub fn analyze_many(data: &[Dataset], opts: &Options) -> Result<MultiAnalysis, FitError> {
+    let files = data
+        .iter()
+        .map(|d| analyze(d, opts))
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(MultiAnalysis::from_analyses(files))
+}
+
+impl MultiAnalysis {
+    /// Combines analyses made one by one (e.g. to report which file failed) and adds the
+    /// repeatability across them.
+    pub fn from_analyses(mut files: Vec<Analysis>) -> Self {
+        let scale_factors: Vec<f64> = files.iter().map(|a| a.metrics.scale_factor).collect();
+        let repeatability = repeatability_ppm(&scale_factors);
+        for a in &mut files {
+            a.metrics.repeatability_ppm = repeatability;
+        }
+        MultiAnalysis {
+            files,
+            scale_factors,
+            repeatability_ppm: repeatability,
+        }
+    }
+}

@@ -1,0 +1,59 @@
+//! Pure numerics for calibrating a gyroscope's scale factor on a rate table.
+//!
+//! A rate table turns the gyro at known rates `ω` (°/s) and a multimeter records the mean output
+//! `D` (V) at each rate. This crate turns those pairs into the numbers a lab reports: the scale
+//! factor `K` (V/(°/s)), the bias `K0` (V), their uncertainties, how well the model fits, and the
+//! standard metrics (nonlinearity, asymmetry, bias as a rate, repeatability).
+//!
+//! # Why it is shaped this way
+//!
+//! * **Least squares is the reference.** The paper this project follows (Li, Liu, Zhang, *The
+//!   Identification Method of HRG Scale Factor Based on Neural Network*) fits a straight line two
+//!   ways, least squares and a single neuron trained by gradient descent with momentum, and claims
+//!   the neuron is better. A linear neuron trained to the minimum of the squared error converges
+//!   to the least-squares line, by construction. So [`neuron`] implements the paper's update rule
+//!   faithfully (online, with momentum), but finishes with full-batch gradient passes so it really
+//!   reaches the minimum, and every report shows both estimators with the same figures
+//!   (SSE, RMS, max |residual|, per-rate residuals) so neither can be presented as better than it
+//!   is.
+//! * **Better models, not a different optimiser.** Residuals positive at both ends and negative
+//!   in the middle are an even-order nonlinearity; [`Model::Quadratic`], [`Model::Cubic`] and
+//!   [`Model::Split`] (separate scale factors for the two turning directions) capture it.
+//! * **Numerically sound.** Least squares is solved by a Householder QR of the column-scaled
+//!   design matrix (`ω/ω_max`), never by inverting `AᵀA`; the coefficient covariance comes from
+//!   the triangular factor, `(RᵀR)⁻¹ = R⁻¹R⁻ᵀ`. The neuron normalises its inputs and outputs.
+//!   Nothing here returns NaN: bad data is an error ([`FitError`]), a diverging neuron is a
+//!   status ([`NeuronStatus::Diverged`]).
+//! * **No I/O.** [`input`] parses CSV from any [`std::io::Read`]; opening files is the caller's
+//!   job. Every result type is `Serialize + Deserialize`, so the run sequencer can write
+//!   `fit.json` and the report can read it back with these same types.
+//!
+//! # Entry points
+//!
+//! * [`input::parse_csv`] reads a data set.
+//! * [`analyze`] fits the requested models and methods and computes the metrics; the result is
+//!   the JSON document `gyrocal fit --json` prints. [`analyze_many`] does the same for several
+//!   data sets and adds the repeatability.
+//! * [`fit_least_squares`] and [`neuron::train`] are the individual estimators;
+//!   [`Fit::compensate`] turns an output voltage back into a rate.
+
+#![deny(missing_docs)]
+
+mod analysis;
+mod data;
+mod error;
+pub mod input;
+mod lsq;
+pub mod metrics;
+mod model;
+pub mod neuron;
+mod surface;
+
+pub use analysis::{Analysis, MultiAnalysis, Options, analyze, analyze_many, fit_neuron};
+pub use data::{Dataset, Point, Weighting};
+pub use error::FitError;
+pub use lsq::fit_least_squares;
+pub use metrics::{Metrics, NONLINEARITY_NORMALISATION, repeatability_ppm};
+pub use model::{Coefficients, Fit, Method, Model, NeuronTrace, Residual};
+pub use neuron::{NeuronOptions, NeuronStatus};
+pub use surface::ErrorSurface;

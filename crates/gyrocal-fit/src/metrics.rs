@@ -1,0 +1,104 @@
+//! The standard scale-factor metrics (IEEE 1431, IEEE 952, GJB 2426A).
+
+use serde::{Deserialize, Serialize};
+
+use crate::data::{Dataset, Weighting};
+use crate::error::FitError;
+use crate::lsq::fit_least_squares;
+use crate::model::Model;
+
+/// How [`Metrics::nonlinearity_ppm`] is normalised (also written into the JSON).
+pub const NONLINEARITY_NORMALISATION: &str = "max_j |K*W_j + F0 - F_j| / max_j |F_j| (least-squares line K, F0; largest absolute output in the range)";
+
+/// Seconds per hour: converts °/s to °/h.
+const SECONDS_PER_HOUR: f64 = 3600.0;
+
+/// The metrics of one data set, from least-squares fits.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Metrics {
+    /// Scale factor K of the least-squares line, V/(°/s).
+    pub scale_factor: f64,
+    /// Bias F0 of the least-squares line, V.
+    pub bias_volts: f64,
+    /// Nonlinearity: the largest absolute deviation from the least-squares line divided by the
+    /// largest absolute output `F_m`, in ppm.
+    pub nonlinearity_ppm: f64,
+    /// The normalisation of `nonlinearity_ppm`, in words ([`NONLINEARITY_NORMALISATION`]).
+    pub nonlinearity_normalisation: String,
+    /// `F_m`, the largest absolute output, V.
+    pub full_scale_output: f64,
+    /// Asymmetry `|K+ − K−| / ((K+ + K−)/2)`, ppm; null when the data lacks one direction.
+    pub asymmetry_ppm: Option<f64>,
+    /// K+ from the `ω ≥ 0` points, V/(°/s).
+    pub scale_factor_positive: Option<f64>,
+    /// K− from the `ω ≤ 0` points, V/(°/s).
+    pub scale_factor_negative: Option<f64>,
+    /// Bias as a rate, `F0/K`, °/s.
+    pub bias_dps: f64,
+    /// Bias as a rate, °/h.
+    pub bias_dph: f64,
+    /// Repeatability `std(K_i, ddof=1)/mean(K_i)` over several data sets, ppm; null for one.
+    pub repeatability_ppm: Option<f64>,
+}
+
+impl Metrics {
+    /// Computes the metrics of one data set (repeatability is left `None`; see
+    /// [`repeatability_ppm`]).
+    ///
+    /// The line and the two half-lines are least-squares fits with the given weighting. The
+    /// asymmetry is `None` when the split model cannot be fitted (one direction missing).
+    pub fn compute(data: &Dataset, weighting: Weighting) -> Result<Self, FitError> {
+        let line = fit_least_squares(data, Model::Linear, weighting)?;
+        let k = line.scale_factor;
+        let f0 = line.bias;
+        let fm = data
+            .points
+            .iter()
+            .fold(0.0_f64, |m, p| m.max(p.volts.abs()));
+        let max_dev = line.max_abs_residual;
+        let nonlinearity_ppm = if fm > 0.0 { max_dev / fm * 1e6 } else { 0.0 };
+        let split = fit_least_squares(data, Model::Split, weighting).ok();
+        let (kp, kn) = match &split {
+            Some(s) => (s.coefficients.k_pos, s.coefficients.k_neg),
+            None => (None, None),
+        };
+        let asymmetry_ppm = match (kp, kn) {
+            (Some(p), Some(n)) if p + n != 0.0 => Some((p - n).abs() / ((p + n) / 2.0).abs() * 1e6),
+            _ => None,
+        };
+        let bias_dps = if k != 0.0 { f0 / k } else { 0.0 };
+        Ok(Self {
+            scale_factor: k,
+            bias_volts: f0,
+            nonlinearity_ppm,
+            nonlinearity_normalisation: NONLINEARITY_NORMALISATION.to_string(),
+            full_scale_output: fm,
+            asymmetry_ppm,
+            scale_factor_positive: kp,
+            scale_factor_negative: kn,
+            bias_dps,
+            bias_dph: bias_dps * SECONDS_PER_HOUR,
+            repeatability_ppm: None,
+        })
+    }
+}
+
+/// Repeatability of the scale factor over several runs: `std(K_i, ddof=1) / mean(K_i)` in ppm.
+///
+/// `None` for fewer than two values or a zero mean.
+pub fn repeatability_ppm(scale_factors: &[f64]) -> Option<f64> {
+    let q = scale_factors.len();
+    if q < 2 {
+        return None;
+    }
+    let mean = scale_factors.iter().sum::<f64>() / q as f64;
+    if mean == 0.0 || !mean.is_finite() {
+        return None;
+    }
+    let var = scale_factors
+        .iter()
+        .map(|k| (k - mean).powi(2))
+        .sum::<f64>()
+        / (q - 1) as f64;
+    Some(var.sqrt() / mean.abs() * 1e6)
+}

@@ -1,0 +1,406 @@
+//! `gyrocal fit`: fit models to measured data files and report them.
+
+use std::fmt::Write as _;
+use std::fs::File;
+use std::io::{BufReader, Write as _};
+use std::path::PathBuf;
+
+use anyhow::Context as _;
+use clap::{Args, ValueEnum};
+use gyrocal_fit::{
+    Analysis, Dataset, Fit, Method, Model, MultiAnalysis, NeuronOptions, NeuronStatus, Options,
+    Weighting, analyze, input,
+};
+
+use crate::BadInput;
+
+/// A model, as spelled on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ModelArg {
+    /// D = K0 + K1·ω
+    Linear,
+    /// D = K0 + K1·ω + K2·ω²
+    Quadratic,
+    /// D = K0 + K1·ω + K2·ω² + K3·ω³
+    Cubic,
+    /// separate lines for ω ≥ 0 and ω ≤ 0
+    Split,
+}
+
+impl From<ModelArg> for Model {
+    fn from(m: ModelArg) -> Self {
+        match m {
+            ModelArg::Linear => Model::Linear,
+            ModelArg::Quadratic => Model::Quadratic,
+            ModelArg::Cubic => Model::Cubic,
+            ModelArg::Split => Model::Split,
+        }
+    }
+}
+
+/// A method, as spelled on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum MethodArg {
+    /// least squares (QR), every model
+    LeastSquares,
+    /// the paper's neuron (gradient descent with momentum), linear model only
+    Neuron,
+}
+
+impl From<MethodArg> for Method {
+    fn from(m: MethodArg) -> Self {
+        match m {
+            MethodArg::LeastSquares => Method::LeastSquares,
+            MethodArg::Neuron => Method::Neuron,
+        }
+    }
+}
+
+/// Arguments of `gyrocal fit`.
+#[derive(Debug, Args)]
+pub struct FitArgs {
+    /// CSV files with columns rate_dps and volts (optional volts_std, n). Several files: each is
+    /// fitted, and the repeatability across them is reported.
+    #[arg(required = true, value_name = "FILE")]
+    pub files: Vec<PathBuf>,
+    /// Print exactly one JSON document on stdout instead of the human report.
+    #[arg(long)]
+    pub json: bool,
+    /// Model to fit (repeatable). Default: all.
+    #[arg(long = "model", value_enum, value_name = "MODEL")]
+    pub models: Vec<ModelArg>,
+    /// Method to use (repeatable). Default: least squares for every model plus the neuron on the
+    /// linear model.
+    #[arg(long = "method", value_enum, value_name = "METHOD")]
+    pub methods: Vec<MethodArg>,
+    /// Ignore volts_std/n and weight every point equally.
+    #[arg(long)]
+    pub unweighted: bool,
+    /// Neuron: learning rate η of the online passes (normalised units).
+    #[arg(long, default_value_t = NeuronOptions::default().eta)]
+    pub eta: f64,
+    /// Neuron: momentum α.
+    #[arg(long, default_value_t = NeuronOptions::default().alpha)]
+    pub alpha: f64,
+    /// Neuron: tolerance ε on the relative change of the pass error (ends the online passes).
+    #[arg(long, default_value_t = NeuronOptions::default().epsilon)]
+    pub epsilon: f64,
+    /// Neuron: maximum number of passes.
+    #[arg(long, default_value_t = NeuronOptions::default().max_passes)]
+    pub max_passes: u64,
+    /// Neuron: seed of the random initial weight and threshold.
+    #[arg(long, default_value_t = NeuronOptions::default().seed)]
+    pub seed: u64,
+    /// Neuron: online passes only, as in the paper (stops near, not at, the minimum).
+    #[arg(long)]
+    pub no_batch_finish: bool,
+}
+
+impl FitArgs {
+    fn options(&self) -> anyhow::Result<Options> {
+        for (name, v) in [
+            ("--eta", self.eta),
+            ("--alpha", self.alpha),
+            ("--epsilon", self.epsilon),
+        ] {
+            if !v.is_finite() || v < 0.0 {
+                return Err(
+                    BadInput(format!("{name} must be a finite non-negative number")).into(),
+                );
+            }
+        }
+        let defaults = Options::default();
+        Ok(Options {
+            models: if self.models.is_empty() {
+                defaults.models
+            } else {
+                self.models.iter().map(|&m| m.into()).collect()
+            },
+            methods: if self.methods.is_empty() {
+                defaults.methods
+            } else {
+                self.methods.iter().map(|&m| m.into()).collect()
+            },
+            neuron: NeuronOptions {
+                eta: self.eta,
+                alpha: self.alpha,
+                epsilon: self.epsilon,
+                max_passes: self.max_passes,
+                seed: self.seed,
+                batch_finish: !self.no_batch_finish,
+                ..NeuronOptions::default()
+            },
+            weighting: if self.unweighted {
+                Weighting::Unweighted
+            } else {
+                Weighting::Auto
+            },
+            ..defaults
+        })
+    }
+}
+
+/// Reads one file into a data set; errors name the file (and the line, from the parser).
+fn read(path: &PathBuf) -> anyhow::Result<Dataset> {
+    let name = path.display().to_string();
+    let file = File::open(path).map_err(|e| BadInput(format!("{name}: cannot open: {e}")))?;
+    input::parse_csv(BufReader::new(file), &name).map_err(|e| BadInput(e.to_string()).into())
+}
+
+/// Runs `gyrocal fit`.
+pub fn run(args: &FitArgs) -> anyhow::Result<()> {
+    let opts = args.options()?;
+    let mut analyses = Vec::new();
+    for path in &args.files {
+        let data = read(path)?;
+        let _span = tracing::info_span!("fit", file = %path.display()).entered();
+        let analysis = analyze(&data, &opts).map_err(|e| {
+            let name = path.display();
+            let place = match data.last_line() {
+                Some(l) => format!("line {l} (end of data)"),
+                None => "no data rows".to_string(),
+            };
+            BadInput(format!("{name}: {place}: {e}"))
+        })?;
+        analyses.push(analysis);
+    }
+    let mut out = String::new();
+    if args.json {
+        let json = if analyses.len() == 1 {
+            serde_json::to_string_pretty(&analyses[0])
+        } else {
+            serde_json::to_string_pretty(&MultiAnalysis::from_analyses(analyses))
+        }
+        .context("serialising the result")?;
+        out.push_str(&json);
+        out.push('\n');
+    } else {
+        let multi = MultiAnalysis::from_analyses(analyses);
+        for a in &multi.files {
+            human(&mut out, a);
+        }
+        if multi.files.len() > 1 {
+            let _ = writeln!(out, "== repeatability over {} files", multi.files.len());
+            let ks: Vec<String> = multi
+                .scale_factors
+                .iter()
+                .map(|k| format!("{k:.7}"))
+                .collect();
+            let _ = writeln!(
+                out,
+                "K_i (least-squares linear) [V/(°/s)]: {}",
+                ks.join(", ")
+            );
+            if let Some(r) = multi.repeatability_ppm {
+                let _ = writeln!(out, "repeatability std(K_i)/mean(K_i): {r:.1} ppm");
+            }
+        }
+    }
+    let mut stdout = std::io::stdout().lock();
+    stdout
+        .write_all(out.as_bytes())
+        .context("writing to stdout")?;
+    stdout.flush().context("writing to stdout")?;
+    Ok(())
+}
+
+fn pm(v: Option<f64>, se: Option<f64>, digits: usize) -> String {
+    match (v, se) {
+        (Some(v), Some(se)) => format!("{v:.digits$} ± {se:.1e}"),
+        (Some(v), None) => format!("{v:.digits$}"),
+        _ => "-".to_string(),
+    }
+}
+
+fn fit_label(f: &Fit) -> String {
+    format!("{} {}", f.method, f.model)
+}
+
+fn human(out: &mut String, a: &Analysis) {
+    let source = a.source.as_deref().unwrap_or("<data>");
+    let weighted = a.fits.first().is_some_and(|f| f.weighted);
+    let _ = writeln!(
+        out,
+        "== {source}: {} points, {}",
+        a.points,
+        if weighted {
+            "weighted by 1/σ² (σ = volts_std/√n)"
+        } else {
+            "unweighted"
+        }
+    );
+    let _ = writeln!(out);
+    let _ = writeln!(out, "fits (K [V/(°/s)], K0 [V]; ± one standard error)");
+    for f in &a.fits {
+        let c = &f.coefficients;
+        let s = &f.std_errors;
+        let mut line = format!("  {:<24}", fit_label(f));
+        match f.model {
+            Model::Split => {
+                let _ = write!(
+                    line,
+                    " K+ = {}  K- = {}  K0 = {}",
+                    pm(c.k_pos, s.k_pos, 7),
+                    pm(c.k_neg, s.k_neg, 7),
+                    pm(c.k0, s.k0, 6)
+                );
+            }
+            _ => {
+                let _ = write!(
+                    line,
+                    " K = {}  K0 = {}",
+                    pm(c.k1, s.k1, 7),
+                    pm(c.k0, s.k0, 6)
+                );
+                if c.k2.is_some() {
+                    let _ = write!(line, "  K2 = {}", pm(c.k2, s.k2, 9));
+                }
+                if c.k3.is_some() {
+                    let _ = write!(line, "  K3 = {}", pm(c.k3, s.k3, 11));
+                }
+            }
+        }
+        let _ = writeln!(out, "{line}");
+        let _ = writeln!(
+            out,
+            "  {:<24} SSE {:.4e} V²  RMS {:.4} mV  max|r| {:.4} mV  R² {:.10}",
+            "",
+            f.sse,
+            f.rms_residual * 1e3,
+            f.max_abs_residual * 1e3,
+            f.r_squared
+        );
+        if let Some(t) = &f.neuron {
+            let status = match t.status {
+                NeuronStatus::Converged => format!(
+                    "converged after {} passes ({} online with momentum, {} full-batch)",
+                    t.online_passes + t.batch_passes,
+                    t.online_passes,
+                    t.batch_passes
+                ),
+                NeuronStatus::MaxPasses => format!(
+                    "NOT CONVERGED: stopped at the limit of {} passes",
+                    t.online_passes + t.batch_passes
+                ),
+                NeuronStatus::Diverged { pass } => format!(
+                    "DIVERGED at pass {pass} (η = {}): the result is the last finite weights, not a fit",
+                    t.eta
+                ),
+            };
+            let _ = writeln!(out, "  {:<24} {status}", "");
+        }
+    }
+    let _ = writeln!(out);
+
+    let ls = a.fit(Method::LeastSquares, Model::Linear);
+    let nn = a.fit(Method::Neuron, Model::Linear);
+    if let (Some(ls), Some(nn)) = (ls, nn) {
+        let rel = if ls.sse > 0.0 {
+            (nn.sse - ls.sse) / ls.sse
+        } else {
+            nn.sse - ls.sse
+        };
+        let verdict = if !nn.converged {
+            format!(
+                "the neuron did not converge; its SSE is {:.3}× that of least squares",
+                nn.sse / ls.sse.max(f64::MIN_POSITIVE)
+            )
+        } else if rel.abs() <= 1e-9 {
+            "the neuron reaches the least-squares line (SSE equal within 1e-9 relative): \
+             it is the same estimate, not a better one"
+                .to_string()
+        } else if rel > 0.0 {
+            format!(
+                "the neuron's SSE is larger by {:.3e} relative: least squares fits better",
+                rel
+            )
+        } else {
+            "the neuron's SSE is below least squares only by rounding: the same estimate"
+                .to_string()
+        };
+        let dk = (nn.scale_factor - ls.scale_factor) / ls.scale_factor;
+        let _ = writeln!(
+            out,
+            "neuron vs least squares (linear): {verdict}; ΔK/K = {dk:.2e}"
+        );
+        let _ = writeln!(out);
+    }
+    if let Some(best) = a.best_model {
+        let _ = writeln!(
+            out,
+            "best model: {best} (smallest residual standard error sqrt(SSE/(N−p)) among the least-squares fits)"
+        );
+        if let (Some(lin), Some(b)) = (ls, a.fit(Method::LeastSquares, best))
+            && best != Model::Linear
+            && b.sse > 0.0
+        {
+            let _ = writeln!(
+                out,
+                "  it reduces the SSE of the line {:.1}-fold",
+                lin.sse / b.sse
+            );
+        }
+        let _ = writeln!(out);
+    }
+
+    // Per-rate table in the paper's layout.
+    let best_fit = a.best_model.and_then(|m| a.fit(Method::LeastSquares, m));
+    let mut header = format!("{:>10} {:>14}", "rate [°/s]", "measured [V]");
+    if ls.is_some() {
+        let _ = write!(header, " {:>17}", "LS resid. [mV]");
+    }
+    if nn.is_some() {
+        let _ = write!(header, " {:>17}", "neuron resid. [mV]");
+    }
+    if let Some(b) = best_fit {
+        let _ = write!(header, " {:>17}", format!("{} resid. [mV]", b.model));
+    }
+    let _ = writeln!(out, "{header}");
+    for i in 0..a.points {
+        let Some(r) = a.fits.first().and_then(|f| f.residuals.get(i)) else {
+            break;
+        };
+        let mut row = format!("{:>10} {:>14.7}", r.rate_dps, r.volts);
+        for f in [ls, nn, best_fit].into_iter().flatten() {
+            let _ = write!(row, " {:>+17.4}", f.residuals[i].residual * 1e3);
+        }
+        let _ = writeln!(out, "{row}");
+    }
+    let _ = writeln!(out);
+
+    let m = &a.metrics;
+    let _ = writeln!(out, "metrics (least squares)");
+    let _ = writeln!(out, "  scale factor K        {:.7} V/(°/s)", m.scale_factor);
+    let _ = writeln!(
+        out,
+        "  bias K0               {:.6} V = {:.4} °/s = {:.1} °/h",
+        m.bias_volts, m.bias_dps, m.bias_dph
+    );
+    let _ = writeln!(
+        out,
+        "  nonlinearity          {:.1} ppm of F_m = {:.4} V (max |line − F_j| / max |F_j|)",
+        m.nonlinearity_ppm, m.full_scale_output
+    );
+    match (
+        m.asymmetry_ppm,
+        m.scale_factor_positive,
+        m.scale_factor_negative,
+    ) {
+        (Some(asym), Some(kp), Some(kn)) => {
+            let _ = writeln!(
+                out,
+                "  asymmetry             {asym:.1} ppm (K+ = {kp:.7}, K- = {kn:.7} V/(°/s))"
+            );
+        }
+        _ => {
+            let _ = writeln!(
+                out,
+                "  asymmetry             n/a (needs both turning directions)"
+            );
+        }
+    }
+    if let Some(r) = m.repeatability_ppm {
+        let _ = writeln!(out, "  repeatability         {r:.1} ppm");
+    }
+    let _ = writeln!(out);
+}

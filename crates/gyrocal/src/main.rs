@@ -1,0 +1,64 @@
+//! `gyrocal`: calibrate a gyroscope's scale factor on a rate table.
+//!
+//! Each subcommand lives in its own module under [`cmd`]; this file holds the argument
+//! definitions and the dispatch. Errors the user can fix (a missing file, a bad value at some
+//! line) are reported on one line with exit code 2; anything else exits with 1.
+
+mod cmd;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// Calibrate a gyroscope's scale factor on a rate table.
+#[derive(Debug, Parser)]
+#[command(name = "gyrocal", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Fit scale factor and bias to measured (rate, volts) data and report the metrics.
+    Fit(cmd::fit::FitArgs),
+}
+
+/// An error caused by the user's input (file, values, options): exit code 2.
+#[derive(Debug)]
+pub struct BadInput(pub String);
+
+impl std::fmt::Display for BadInput {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for BadInput {}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+        )
+        .init();
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Fit(args) => cmd::fit::run(&args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            let message = format!("{err:#}").replace('\n', " ");
+            eprintln!("gyrocal: error: {message}");
+            if err.downcast_ref::<BadInput>().is_some() {
+                ExitCode::from(2)
+            } else {
+                ExitCode::FAILURE
+            }
+        }
+    }
+}
