@@ -12,5 +12,7 @@
 //! open is configurable, with the default documented on the configuration field.
 
 pub mod signal;
+pub mod table;
+pub mod gyro;
 
 pub use signal::SignalSource;

@@ -1,0 +1,726 @@
+//! The ACUTROL command language (ACL), in gyrocal's serial dialect.
+//!
+//! One line per message ending in LF; commands get no reply; queries get exactly one line;
+//! numbers are plain decimals with six digits after the point; errors are read from the
+//! `:System:Error?` queue after every command batch. The driver sends the long forms of the
+//! headers so transcripts read like the manual.
+//!
+//! ```text
+//! connect:    *IDN?   :System:Error? (until 0)   :Mode? 1
+//! enable:     :Interlock:Reset  :Interlock:Close 1  :Limit:Rate R,1,<max>  :Mode:Rate 1  :System:Error?
+//! set_rate:   [:Mode:Rate 1]  :Limit:Acceleration R,1,<a>  :Demand:Rate 1,<w>  :System:Error?
+//! sample:     :Read:Rate? 1  *STB?  [:System:Error? ... when bit 0 or 7 is set]
+//! stop:       :Mode:Off 1            emergency: :Interlock:Open 1
+//! ```
+
+use std::future::Future;
+use std::pin::Pin;
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Duration;
+
+use gyrocal_link::{LinkError, Transport, show_bytes};
+use tokio::time::Instant;
+
+use crate::{
+    Capabilities, Identity, Limits, RateAccumulator, RateStats, RateTable, SettleCriteria,
+    SettleReport, StopHandle, StopKind, StopPath, TableError, TableMode, TableState, TableStatus,
+};
+
+/// Most errors read from the queue in one go (the queue is finite; a table that keeps
+/// answering errors is broken, not informative).
+const MAX_QUEUE_READS: usize = 32;
+
+/// Configuration of the ACL driver.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AclConfig {
+    /// Client-side limits.
+    pub limits: Limits,
+    /// The axis driven. Default 1.
+    pub axis: u8,
+    /// Reply timeout of ordinary queries. Default 1 s.
+    pub reply_timeout: Duration,
+    /// Reply deadline of monitoring samples and heartbeats; a table silent for longer is a
+    /// fault. Default 2 s.
+    pub heartbeat_deadline: Duration,
+    /// |rate| below which [`RateTable::wait_stopped`] considers the table stopped, deg/s.
+    /// Default 0.01.
+    pub stop_tolerance: f64,
+    /// Sampling interval of [`RateTable::wait_stopped`]. Default 100 ms.
+    pub stop_poll_interval: Duration,
+}
+
+impl Default for AclConfig {
+    fn default() -> Self {
+        AclConfig {
+            limits: Limits::default(),
+            axis: 1,
+            reply_timeout: Duration::from_secs(1),
+            heartbeat_deadline: Duration::from_secs(2),
+            stop_tolerance: 0.01,
+            stop_poll_interval: Duration::from_millis(100),
+        }
+    }
+}
+
+struct Link<T> {
+    transport: T,
+    /// A query was started and its reply not consumed (timeout or cancelled future): a late
+    /// reply may be waiting, so the next query clears the input first.
+    dirty: bool,
+}
+
+#[derive(Debug, Clone)]
+struct Status {
+    state: TableState,
+    interlock_closed: bool,
+    rate_mode: bool,
+    /// We opened the interlock ourselves: the interlock-event bit is expected.
+    opened_by_us: bool,
+    fault: Option<String>,
+}
+
+struct Shared<T> {
+    device: String,
+    axis: u8,
+    reply_timeout: Duration,
+    link: tokio::sync::Mutex<Link<T>>,
+    status: Mutex<Status>,
+}
+
+impl<T: Transport> Shared<T> {
+    fn status(&self) -> MutexGuard<'_, Status> {
+        // A poisoned lock only means another thread panicked while holding plain data.
+        self.status.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    fn stop_line(&self, kind: StopKind) -> String {
+        match kind {
+            StopKind::Controlled => format!(":Mode:Off {}", self.axis),
+            StopKind::Emergency => format!(":Interlock:Open {}", self.axis),
+        }
+    }
+
+    fn note_stop(&self, kind: StopKind) {
+        let mut st = self.status();
+        st.rate_mode = false;
+        if kind == StopKind::Emergency {
+            st.interlock_closed = false;
+            st.opened_by_us = true;
+        }
+        if !matches!(st.state, TableState::Faulted | TableState::Disconnected) {
+            st.state = TableState::Stopping;
+        }
+    }
+
+    /// Sends a stop line, waiting at most a little over one exchange for the link.
+    async fn stop(&self, kind: StopKind) -> Result<(), TableError> {
+        let line = self.stop_line(kind);
+        let wait = self.reply_timeout * 2 + Duration::from_millis(500);
+        let mut link = tokio::time::timeout(wait, self.link.lock()).await.map_err(|_| {
+            TableError::Fault {
+                device: self.device.clone(),
+                reason: format!("could not get the link within {wait:?} to send `{line}`"),
+            }
+        })?;
+        tracing::info!(device = %self.device, "{line}");
+        let sent = tokio::time::timeout(self.reply_timeout, link.transport.send_line(&line)).await;
+        drop(link);
+        self.note_stop(kind);
+        match sent {
+            Ok(r) => r.map_err(|e| TableError::from_link(&self.device, &line, e)),
+            Err(_) => Err(TableError::Fault {
+                device: self.device.clone(),
+                reason: format!("`{line}` could not be written within {:?}", self.reply_timeout),
+            }),
+        }
+    }
+
+    /// Marks the driver faulted and tries a controlled stop (the link may be dead: errors are
+    /// logged, not returned).
+    async fn fault(&self, reason: String) -> TableError {
+        {
+            let mut st = self.status();
+            st.state = TableState::Faulted;
+            st.fault = Some(reason.clone());
+        }
+        tracing::error!(device = %self.device, "fault: {reason}; sending a controlled stop");
+        if let Err(e) = self.stop(StopKind::Controlled).await {
+            tracing::error!(device = %self.device, "controlled stop after the fault failed: {e}");
+        }
+        TableError::Fault { device: self.device.clone(), reason }
+    }
+}
+
+impl<T: Transport + 'static> StopPath for Shared<T> {
+    fn describe(&self) -> &str {
+        &self.device
+    }
+
+    fn send_stop(
+        &self,
+        kind: StopKind,
+    ) -> Pin<Box<dyn Future<Output = Result<(), TableError>> + Send + '_>> {
+        Box::pin(self.stop(kind))
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Ramp {
+    start: Instant,
+    from: f64,
+    target: f64,
+    acceleration: f64,
+}
+
+impl Ramp {
+    fn duration(&self) -> Duration {
+        Duration::try_from_secs_f64((self.target - self.from).abs() / self.acceleration)
+            .unwrap_or(Duration::ZERO)
+    }
+}
+
+/// An ACUTROL-family rate table over any line transport.
+///
+/// ```no_run
+/// # async fn demo() -> Result<(), gyrocal_table::TableError> {
+/// use gyrocal_table::{RateTable, SettleCriteria, acl::{AclConfig, AclTable}};
+/// let (transport, _device) = gyrocal_link::memory_pair("table");
+/// let mut table = AclTable::new(transport, AclConfig::default());
+/// table.connect().await?;
+/// table.enable().await?;
+/// table.set_rate(10.0, 5.0).await?;
+/// table.wait_at_rate(&SettleCriteria::default()).await?;
+/// table.stop().await?;
+/// # Ok(()) }
+/// ```
+pub struct AclTable<T> {
+    shared: Arc<Shared<T>>,
+    config: AclConfig,
+    demand: f64,
+    ramp: Option<Ramp>,
+    recorder: Option<RateAccumulator>,
+}
+
+impl<T: Transport> std::fmt::Debug for AclTable<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("AclTable")
+            .field("device", &self.shared.device)
+            .field("state", &self.shared.status().state)
+            .field("demand", &self.demand)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<T: Transport + 'static> AclTable<T> {
+    /// Takes the transport by value; nothing is sent until [`RateTable::connect`].
+    pub fn new(transport: T, config: AclConfig) -> Self {
+        let device = transport.describe().to_string();
+        AclTable {
+            shared: Arc::new(Shared {
+                device,
+                axis: config.axis,
+                reply_timeout: config.reply_timeout,
+                link: tokio::sync::Mutex::new(Link { transport, dirty: false }),
+                status: Mutex::new(Status {
+                    state: TableState::Disconnected,
+                    interlock_closed: false,
+                    rate_mode: false,
+                    opened_by_us: false,
+                    fault: None,
+                }),
+            }),
+            config,
+            demand: 0.0,
+            ramp: None,
+            recorder: None,
+        }
+    }
+
+    /// The configuration in force.
+    pub fn config(&self) -> &AclConfig {
+        &self.config
+    }
+
+    /// The last demanded rate, deg/s (0 after a stop).
+    pub fn demand(&self) -> f64 {
+        self.demand
+    }
+
+    /// The reason of the last fault, if the driver faulted since the last `enable`.
+    pub fn last_fault(&self) -> Option<String> {
+        self.shared.status().fault.clone()
+    }
+
+    fn device(&self) -> &str {
+        &self.shared.device
+    }
+
+    fn set_state(&self, state: TableState) {
+        self.shared.status().state = state;
+    }
+
+    fn state_error(&self, action: &str) -> TableError {
+        TableError::State {
+            device: self.device().to_string(),
+            action: action.to_string(),
+            state: self.state(),
+        }
+    }
+
+    /// Sends command lines (no reply expected).
+    async fn commands(&self, lines: &[String]) -> Result<(), TableError> {
+        let mut link = self.shared.link.lock().await;
+        for line in lines {
+            tracing::debug!(device = %self.shared.device, "> {line}");
+            if let Err(e) = link.transport.send_line(line).await {
+                drop(link);
+                return Err(self.lost(line, e).await);
+            }
+        }
+        Ok(())
+    }
+
+    /// Sends a query and returns its one-line reply.
+    async fn query(&self, line: &str, timeout: Duration) -> Result<String, TableError> {
+        let mut link = self.shared.link.lock().await;
+        if link.dirty {
+            let dropped = link.transport.discard_input().await.unwrap_or(0);
+            tracing::debug!(device = %self.shared.device, "cleared {dropped} stale bytes");
+        }
+        link.dirty = true;
+        let res = async {
+            link.transport.send_line(line).await?;
+            link.transport.read_line(Some(timeout)).await
+        }
+        .await;
+        match res {
+            Ok(reply) => {
+                link.dirty = false;
+                tracing::trace!(device = %self.shared.device, "> {line} < {reply}");
+                Ok(reply)
+            }
+            Err(e) => {
+                drop(link);
+                Err(self.lost(line, e).await)
+            }
+        }
+    }
+
+    /// A link failure during an exchange: the table's motion is now unknown, so the driver
+    /// faults (after a best-effort stop), except before it ever identified the table.
+    async fn lost(&self, line: &str, e: LinkError) -> TableError {
+        let err = TableError::from_link(self.device(), line, e);
+        if self.state() != TableState::Disconnected {
+            // The returned Fault is replaced by the more precise link error.
+            let _ = self.shared.fault(err.to_string()).await;
+        }
+        err
+    }
+
+    fn reply_error(&self, command: &str, reply: &str, reason: &str) -> TableError {
+        TableError::Reply {
+            device: self.device().to_string(),
+            command: command.to_string(),
+            reason: reason.to_string(),
+            bytes: show_bytes(reply.as_bytes()),
+        }
+    }
+
+    async fn query_number(&self, line: &str, timeout: Duration) -> Result<f64, TableError> {
+        let reply = self.query(line, timeout).await?;
+        match reply.trim().parse::<f64>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            _ => Err(self.reply_error(line, &reply, "not a finite decimal number")),
+        }
+    }
+
+    async fn query_stb(&self, timeout: Duration) -> Result<u8, TableError> {
+        let reply = self.query("*STB?", timeout).await?;
+        reply
+            .trim()
+            .parse::<u8>()
+            .map_err(|_| self.reply_error("*STB?", &reply, "not a status byte (0..=255)"))
+    }
+
+    /// Reads the error queue until `0,"No error"`; returns every (code, text) read.
+    async fn drain_errors(&self) -> Result<Vec<(i32, String)>, TableError> {
+        let mut errors = Vec::new();
+        for _ in 0..MAX_QUEUE_READS {
+            let line = ":System:Error?";
+            let reply = self.query(line, self.config.reply_timeout).await?;
+            let parsed = reply.split_once(',').and_then(|(code, text)| {
+                let code = code.trim().parse::<i32>().ok()?;
+                let text = text.trim();
+                let text = text.strip_prefix('"')?.strip_suffix('"')?;
+                Some((code, text.to_string()))
+            });
+            match parsed {
+                Some((0, _)) => return Ok(errors),
+                Some(e) => errors.push(e),
+                None => return Err(self.reply_error(line, &reply, "not `<code>,\"<text>\"`")),
+            }
+        }
+        Err(TableError::Reply {
+            device: self.device().to_string(),
+            command: ":System:Error?".into(),
+            reason: format!("error queue not empty after {MAX_QUEUE_READS} reads"),
+            bytes: String::new(),
+        })
+    }
+
+    /// Reads the queue after a command batch; the first error is returned with its text.
+    async fn check_errors(&self, after: &[String]) -> Result<(), TableError> {
+        let errors = self.drain_errors().await?;
+        let mut errors = errors.into_iter();
+        match errors.next() {
+            None => Ok(()),
+            Some((code, text)) => {
+                for (c, t) in errors {
+                    tracing::warn!(device = %self.shared.device, "further table error: {c},\"{t}\"");
+                }
+                Err(TableError::Table {
+                    device: self.device().to_string(),
+                    command: after.join("; "),
+                    code,
+                    text,
+                })
+            }
+        }
+    }
+
+    /// Acts on a status byte: a latched fault is a driver fault with the table's text; a
+    /// queued error outside a command batch is reported.
+    async fn check_stb(&mut self, stb: u8) -> Result<(), TableError> {
+        if stb & 0x81 == 0 {
+            return Ok(());
+        }
+        let errors = self.drain_errors().await?;
+        let text = errors.iter().map(|(c, t)| format!("{c},\"{t}\"")).collect::<Vec<_>>();
+        let expected_event = self.shared.status().opened_by_us;
+        if stb & 0x01 != 0 && !expected_event {
+            let reason = if text.is_empty() {
+                format!("interlock event (status byte {stb}), no error text")
+            } else {
+                format!("table reports {}", text.join("; "))
+            };
+            self.demand = 0.0;
+            self.ramp = None;
+            return Err(self.shared.fault(reason).await);
+        }
+        match errors.into_iter().next() {
+            Some((code, text)) => Err(TableError::Table {
+                device: self.device().to_string(),
+                command: "(status poll)".into(),
+                code,
+                text,
+            }),
+            None => Ok(()),
+        }
+    }
+
+    fn check_limits(&self, rate: f64, acceleration: f64) -> Result<(), TableError> {
+        let l = &self.config.limits;
+        let what = if !rate.is_finite() {
+            Some(format!("rate {rate} is not a number"))
+        } else if rate.abs() > l.max_rate {
+            Some(format!("|rate| {} deg/s above the maximum {} deg/s", rate.abs(), l.max_rate))
+        } else if !acceleration.is_finite() || acceleration <= 0.0 {
+            Some(format!("acceleration {acceleration} deg/s^2 must be positive"))
+        } else if acceleration > l.max_acceleration {
+            Some(format!(
+                "acceleration {acceleration} deg/s^2 above the maximum {} deg/s^2",
+                l.max_acceleration
+            ))
+        } else {
+            None
+        };
+        match what {
+            Some(what) => Err(TableError::Limit { device: self.device().to_string(), what }),
+            None => Ok(()),
+        }
+    }
+
+    fn record(&mut self, rate: f64) {
+        if let Some(acc) = self.recorder.as_mut() {
+            acc.push(rate);
+        }
+    }
+
+    fn num(v: f64) -> String {
+        format!("{v:.6}")
+    }
+}
+
+fn parse_mode(reply: &str) -> Option<TableMode> {
+    match reply.trim().to_ascii_uppercase().as_str() {
+        "OFF" => Some(TableMode::Off),
+        "RATE" => Some(TableMode::Rate),
+        "POSITION" | "POS" => Some(TableMode::Position),
+        "ABORT" => Some(TableMode::Abort),
+        _ => None,
+    }
+}
+
+impl<T: Transport + 'static> RateTable for AclTable<T> {
+    fn describe(&self) -> &str {
+        self.device()
+    }
+
+    fn state(&self) -> TableState {
+        self.shared.status().state
+    }
+
+    fn capabilities(&self) -> Capabilities {
+        Capabilities {
+            dialect: "acl",
+            axes: 1,
+            max_rate: self.config.limits.max_rate,
+            max_acceleration: self.config.limits.max_acceleration,
+            position_readback: true,
+        }
+    }
+
+    async fn connect(&mut self) -> Result<Identity, TableError> {
+        {
+            let mut link = self.shared.link.lock().await;
+            let dropped = link.transport.discard_input().await.map_err(|e| {
+                TableError::from_link(&self.shared.device, "(clear input)", e)
+            })?;
+            link.dirty = false;
+            if dropped > 0 {
+                tracing::info!(device = %self.shared.device, "cleared {dropped} stale bytes");
+            }
+        }
+        let reply = self.query("*IDN?", self.config.reply_timeout).await?;
+        let fields: Vec<&str> = reply.split(',').map(str::trim).collect();
+        let [manufacturer, model, serial, version] = fields[..] else {
+            return Err(self.reply_error("*IDN?", &reply, "expected 4 comma-separated fields"));
+        };
+        let identity = Identity {
+            manufacturer: manufacturer.to_string(),
+            model: model.to_string(),
+            serial: serial.to_string(),
+            version: version.to_string(),
+        };
+        for (code, text) in self.drain_errors().await? {
+            tracing::warn!(device = %self.shared.device, "stale table error: {code},\"{text}\"");
+        }
+        let line = format!(":Mode? {}", self.config.axis);
+        let reply = self.query(&line, self.config.reply_timeout).await?;
+        let mode =
+            parse_mode(&reply).ok_or_else(|| self.reply_error(&line, &reply, "unknown mode"))?;
+        {
+            let mut st = self.shared.status();
+            st.fault = None;
+            st.opened_by_us = false;
+            st.rate_mode = mode == TableMode::Rate;
+            st.interlock_closed = matches!(mode, TableMode::Rate | TableMode::Position);
+            st.state = match mode {
+                TableMode::Off => TableState::Connected,
+                TableMode::Abort => TableState::Stopping,
+                // Servo on and possibly turning (left so by an earlier program): the driver
+                // does not know the demand, so it treats the table as servoed; the caller
+                // should stop it or set a rate.
+                TableMode::Rate | TableMode::Position => TableState::Servoed,
+            };
+        }
+        if mode != TableMode::Off {
+            tracing::warn!(device = %self.shared.device, "table found in mode {mode:?}");
+        }
+        tracing::info!(device = %self.shared.device, "connected to {reply}");
+        Ok(identity)
+    }
+
+    async fn enable(&mut self) -> Result<(), TableError> {
+        match self.state() {
+            TableState::Disconnected | TableState::Ramping { .. } | TableState::AtRate { .. } => {
+                return Err(self.state_error("enable the servo"));
+            }
+            _ => {}
+        }
+        let axis = self.config.axis;
+        let lines = vec![
+            ":Interlock:Reset".to_string(),
+            format!(":Interlock:Close {axis}"),
+            format!(":Limit:Rate R,{axis},{}", Self::num(self.config.limits.max_rate)),
+            format!(":Mode:Rate {axis}"),
+        ];
+        self.commands(&lines).await?;
+        self.check_errors(&lines).await?;
+        let mut st = self.shared.status();
+        st.state = TableState::Servoed;
+        st.interlock_closed = true;
+        st.rate_mode = true;
+        st.opened_by_us = false;
+        st.fault = None;
+        drop(st);
+        self.demand = 0.0;
+        self.ramp = None;
+        Ok(())
+    }
+
+    async fn set_rate(&mut self, rate: f64, acceleration: f64) -> Result<(), TableError> {
+        self.check_limits(rate, acceleration)?;
+        let (state, interlock_closed, rate_mode) = {
+            let st = self.shared.status();
+            (st.state, st.interlock_closed, st.rate_mode)
+        };
+        let allowed = match state {
+            TableState::Servoed | TableState::Ramping { .. } | TableState::AtRate { .. } => true,
+            TableState::Stopping => interlock_closed,
+            _ => false,
+        };
+        if !allowed {
+            return Err(self.state_error(&format!("demand {rate} deg/s")));
+        }
+        let axis = self.config.axis;
+        let mut lines = Vec::with_capacity(3);
+        if !rate_mode {
+            lines.push(format!(":Mode:Rate {axis}"));
+        }
+        lines.push(format!(":Limit:Acceleration R,{axis},{}", Self::num(acceleration)));
+        lines.push(format!(":Demand:Rate {axis},{}", Self::num(rate)));
+        let start = Instant::now();
+        self.commands(&lines).await?;
+        self.shared.status().rate_mode = true;
+        self.check_errors(&lines).await?;
+        self.ramp = Some(Ramp { start, from: self.demand, target: rate, acceleration });
+        self.demand = rate;
+        self.set_state(TableState::Ramping { target: rate });
+        Ok(())
+    }
+
+    async fn read_rate(&mut self) -> Result<f64, TableError> {
+        let line = format!(":Read:Rate? {}", self.config.axis);
+        self.query_number(&line, self.config.reply_timeout).await
+    }
+
+    async fn read_position(&mut self) -> Result<f64, TableError> {
+        let line = format!(":Read:Position? {}", self.config.axis);
+        let p = self.query_number(&line, self.config.reply_timeout).await?;
+        Ok(p.rem_euclid(360.0))
+    }
+
+    async fn status(&mut self) -> Result<TableStatus, TableError> {
+        let line = format!(":Mode? {}", self.config.axis);
+        let reply = self.query(&line, self.config.reply_timeout).await?;
+        let mode =
+            parse_mode(&reply).ok_or_else(|| self.reply_error(&line, &reply, "unknown mode"))?;
+        let status_byte = self.query_stb(self.config.reply_timeout).await?;
+        Ok(TableStatus { mode, status_byte })
+    }
+
+    async fn sample(&mut self) -> Result<f64, TableError> {
+        let line = format!(":Read:Rate? {}", self.config.axis);
+        let rate = self.query_number(&line, self.config.heartbeat_deadline).await?;
+        let stb = self.query_stb(self.config.heartbeat_deadline).await?;
+        self.check_stb(stb).await?;
+        self.record(rate);
+        Ok(rate)
+    }
+
+    async fn wait_at_rate(&mut self, criteria: &SettleCriteria) -> Result<SettleReport, TableError> {
+        match self.state() {
+            TableState::Servoed | TableState::Ramping { .. } | TableState::AtRate { .. } => {}
+            _ => return Err(self.state_error("wait for the rate")),
+        }
+        let now = Instant::now();
+        let demand = self.demand;
+        let (start, ramp_time) = match self.ramp {
+            Some(r) => (r.start, r.duration()),
+            None => (now, Duration::ZERO),
+        };
+        let ramp_end = start + ramp_time;
+        let deadline = ramp_end.max(now) + criteria.timeout;
+        let tolerance = criteria.tolerance_at(demand);
+        let mut since: Option<Instant> = None;
+        let mut window = RateAccumulator::default();
+        let mut last = f64::NAN;
+        let mut next = now;
+        loop {
+            let rate = self.sample().await?;
+            last = if rate.is_finite() { rate } else { last };
+            let t = Instant::now();
+            if t >= ramp_end && (rate - demand).abs() <= tolerance {
+                let t0 = *since.get_or_insert(t);
+                window.push(rate);
+                if t - t0 >= criteria.window {
+                    self.set_state(TableState::AtRate { rate: demand });
+                    return Ok(SettleReport {
+                        demand,
+                        ramp_time,
+                        settled_after: t - start,
+                        window: window.stats(),
+                    });
+                }
+            } else {
+                since = None;
+                window = RateAccumulator::default();
+            }
+            if t >= deadline {
+                self.demand = 0.0;
+                self.ramp = None;
+                let reason = format!(
+                    "rate not settled within {:?} after the {:?} ramp: demand {demand} deg/s, \
+                     tolerance {tolerance} deg/s, last measured {last} deg/s",
+                    criteria.timeout, ramp_time
+                );
+                return Err(self.shared.fault(reason).await);
+            }
+            next = (next + criteria.interval).max(Instant::now());
+            tokio::time::sleep_until(next.min(deadline)).await;
+        }
+    }
+
+    fn start_recording(&mut self) {
+        self.recorder = Some(RateAccumulator::default());
+    }
+
+    fn stop_recording(&mut self) -> RateStats {
+        self.recorder.take().map(|a| a.stats()).unwrap_or(RateStats::EMPTY)
+    }
+
+    async fn heartbeat(&mut self) -> Result<(), TableError> {
+        let stb = self.query_stb(self.config.heartbeat_deadline).await?;
+        self.check_stb(stb).await
+    }
+
+    async fn stop(&mut self) -> Result<(), TableError> {
+        self.demand = 0.0;
+        self.ramp = None;
+        self.shared.stop(StopKind::Controlled).await
+    }
+
+    async fn emergency_stop(&mut self) -> Result<(), TableError> {
+        self.demand = 0.0;
+        self.ramp = None;
+        self.shared.stop(StopKind::Emergency).await
+    }
+
+    async fn wait_stopped(&mut self, timeout: Duration) -> Result<(), TableError> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            let rate = self.read_rate().await?;
+            if rate.abs() <= self.config.stop_tolerance {
+                let mut st = self.shared.status();
+                if st.state != TableState::Faulted {
+                    st.state = if st.interlock_closed {
+                        TableState::Servoed
+                    } else {
+                        TableState::Connected
+                    };
+                }
+                return Ok(());
+            }
+            if Instant::now() >= deadline {
+                let reason = format!("table still turning at {rate} deg/s {timeout:?} after stop");
+                return Err(self.shared.fault(reason).await);
+            }
+            tokio::time::sleep(self.config.stop_poll_interval).await;
+        }
+    }
+
+    fn stop_handle(&self) -> StopHandle {
+        StopHandle::new(self.shared.clone())
+    }
+}

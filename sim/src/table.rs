@@ -1,0 +1,689 @@
+//! A simulated ACUTROL-style single-axis rate table speaking gyrocal's serial ACL dialect
+//! (`shared/docs/rate-table.md`).
+//!
+//! The table runs as a tokio task serving a byte stream (an in-memory pipe or a pseudo-terminal).
+//! Its motion is not ticked: the state holds the current profile [`Segment`] (start time, start
+//! rate and position, target, acceleration) and every observation evaluates it in closed form at
+//! the observing instant on tokio's clock. Virtual time therefore stays exact and costs nothing
+//! while the table "turns" for an hour. Latched faults that depend on the motion (rate trip, a
+//! fault injected at a rate) are found analytically too, at the instant they happen.
+//!
+//! What it models: interlock reset/close/open with an abort profile, latched faults (rate trip,
+//! injected fault, a table that stops answering), RATE and OFF modes with the acceleration and
+//! rate limits of RATE mode (an acceleration limit of 0 refuses demands, as on the real table),
+//! the error queue and `*STB?`, rate noise on the readback and a once-per-revolution ripple on
+//! the actual rate, position integrating the rate and wrapping at 360°.
+
+mod profile;
+
+use std::collections::VecDeque;
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use rand::rngs::StdRng;
+use rand::{RngExt, SeedableRng};
+use rand_distr::StandardNormal;
+use serde::{Deserialize, Serialize};
+use tokio::io::{AsyncBufReadExt, AsyncRead, AsyncWrite, AsyncWriteExt, BufReader};
+use tokio::sync::watch;
+use tokio::time::Instant;
+
+use profile::Segment;
+
+/// Longest error queue; further errors replace the last one with `-350,"Queue overflow"`.
+const QUEUE_LEN: usize = 16;
+
+/// Amplitude (deg/s) and period (s) of the wobble of a table told never to settle.
+const NEVER_SETTLE_WOBBLE: (f64, f64) = (0.5, 2.0);
+
+/// Faults injected by configuration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TableFaults {
+    /// Latch an injected fault the first time |rate| reaches this value, deg/s (mid-ramp if it
+    /// is below the demand). Default none.
+    pub inject_at_rate: Option<f64>,
+    /// Latch an injected fault this many seconds (sim time) after start. Default none.
+    pub inject_after: Option<f64>,
+    /// The table's text for an injected fault (error code 220). Default
+    /// `"Tracking error limit exceeded"`.
+    pub message: String,
+    /// Stop answering (and executing) anything this many seconds (sim time) after start.
+    /// Default none.
+    pub silent_after: Option<f64>,
+}
+
+impl Default for TableFaults {
+    fn default() -> Self {
+        TableFaults {
+            inject_at_rate: None,
+            inject_after: None,
+            message: "Tracking error limit exceeded".into(),
+            silent_after: None,
+        }
+    }
+}
+
+/// Configuration of the simulated table. Every field has a default; unknown fields are errors.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TableConfig {
+    /// `*IDN?` reply. Default `"ACUTRONIC,ACUTROL3000,SIM0001,1.0"`.
+    pub identity: String,
+    /// Largest rate limit the table accepts (`:Limit:Rate`), deg/s. Default 1000.
+    pub max_rate: f64,
+    /// Largest acceleration limit the table accepts, deg/s²; also the abort deceleration.
+    /// Default 100.
+    pub max_acceleration: f64,
+    /// Rate-trip limit on the actual |rate|, deg/s: above it the table latches a fault.
+    /// Default 1100.
+    pub trip_rate: f64,
+    /// Jerk limit of RATE-mode ramps, deg/s³; none means acceleration steps. Default none.
+    pub jerk: Option<f64>,
+    /// Standard deviation of the white noise on `:Read:Rate?`, deg/s. Default 0.0005.
+    pub rate_noise_std: f64,
+    /// Amplitude of the once-per-revolution ripple on the actual rate
+    /// (`amplitude·sin(position)`), deg/s. Default 0.0002.
+    pub ripple_amplitude: f64,
+    /// Sim seconds per real second: 1.0 is real time; above 1 speeds up the dynamics for
+    /// real-time tests over pseudo-terminals. Default 1.0.
+    pub time_scale: f64,
+    /// Never settle: in RATE mode the actual rate wobbles ±0.5 deg/s (2 s period) around the
+    /// profile for ever. Default false.
+    pub never_settle: bool,
+    /// Faults injected by configuration. Default none.
+    pub faults: TableFaults,
+}
+
+impl Default for TableConfig {
+    fn default() -> Self {
+        TableConfig {
+            identity: "ACUTRONIC,ACUTROL3000,SIM0001,1.0".into(),
+            max_rate: 1000.0,
+            max_acceleration: 100.0,
+            trip_rate: 1100.0,
+            jerk: None,
+            rate_noise_std: 0.0005,
+            ripple_amplitude: 0.0002,
+            time_scale: 1.0,
+            never_settle: false,
+            faults: TableFaults::default(),
+        }
+    }
+}
+
+/// The table's mode, as `:Mode? 1` reports it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum SimMode {
+    /// Zero-rate hold (or servo off with the interlock open).
+    Off,
+    /// Rate mode.
+    Rate,
+    /// Abort profile to zero after a fault or `:Interlock:Open`.
+    Abort,
+}
+
+impl SimMode {
+    fn reply(self) -> &'static str {
+        match self {
+            SimMode::Off => "OFF",
+            SimMode::Rate => "RATE",
+            SimMode::Abort => "ABORT",
+        }
+    }
+}
+
+struct State {
+    config: TableConfig,
+    origin: Instant,
+    seg: Segment,
+    mode: SimMode,
+    abort_end: f64,
+    interlock_closed: bool,
+    fault: Option<String>,
+    interlock_event: bool,
+    accel_limit: f64,
+    rate_limit: f64,
+    demand: f64,
+    errors: VecDeque<(i32, String)>,
+    silent: bool,
+    inject_at_rate: Option<f64>,
+    inject_after: Option<f64>,
+    rng: StdRng,
+}
+
+impl State {
+    fn sim_time(&self, at: Instant) -> f64 {
+        at.saturating_duration_since(self.origin).as_secs_f64() * self.config.time_scale
+    }
+
+    fn push_error(&mut self, code: i32, text: impl Into<String>) {
+        let text = text.into();
+        tracing::debug!("sim table error {code},\"{text}\"");
+        if self.errors.len() >= QUEUE_LEN {
+            self.errors.pop_back();
+            self.errors.push_back((-350, "Queue overflow".into()));
+        } else {
+            self.errors.push_back((code, text));
+        }
+    }
+
+    fn servo_on(&self) -> bool {
+        self.interlock_closed || self.mode == SimMode::Abort
+    }
+
+    /// Actual rate at sim time `t` (profile + ripple + wobble); valid after `advance(t)`.
+    fn actual(&self, t: f64) -> f64 {
+        let base = self.seg.rate(t);
+        if !self.servo_on() && base == 0.0 {
+            return 0.0;
+        }
+        let ripple = self.config.ripple_amplitude * self.seg.position(t).to_radians().sin();
+        let wobble = if self.config.never_settle && self.mode == SimMode::Rate {
+            let (amp, period) = NEVER_SETTLE_WOBBLE;
+            amp * (std::f64::consts::TAU * t / period).sin()
+        } else {
+            0.0
+        };
+        base + ripple + wobble
+    }
+
+    /// Starts a new profile segment at `t` towards `target`.
+    fn ramp_to(&mut self, t: f64, target: f64, accel: f64, jerk: Option<f64>) {
+        self.seg = Segment {
+            t0: t,
+            p0: self.seg.position(t),
+            w0: self.seg.rate(t),
+            target,
+            accel,
+            jerk,
+        };
+    }
+
+    fn latch(&mut self, t: f64, code: i32, text: String) {
+        if self.fault.is_some() {
+            return;
+        }
+        tracing::info!("sim table latched fault at t={t:.3}: {text}");
+        self.push_error(code, text.clone());
+        self.fault = Some(text);
+        self.interlock_event = true;
+        self.abort(t);
+    }
+
+    fn abort(&mut self, t: f64) {
+        if self.servo_on() {
+            self.ramp_to(t, 0.0, self.config.max_acceleration, None);
+            self.mode = SimMode::Abort;
+            self.abort_end = self.seg.end();
+        }
+        self.interlock_closed = false;
+        self.demand = 0.0;
+    }
+
+    /// Brings latched events up to sim time `t`, in order.
+    fn advance(&mut self, t: f64) {
+        for _ in 0..8 {
+            if self.mode == SimMode::Abort && t >= self.abort_end {
+                let end = self.abort_end;
+                self.seg = Segment::hold(end, self.seg.position(end), 0.0);
+                self.mode = SimMode::Off;
+            }
+            if let Some(s) = self.config.faults.silent_after
+                && t >= s
+            {
+                self.silent = true;
+            }
+            if !self.interlock_closed {
+                return;
+            }
+            let mut first: Option<(f64, i32, String)> = None;
+            let mut consider = |when: Option<f64>, code: i32, text: &dyn Fn(f64) -> String| {
+                if let Some(w) = when
+                    && w <= t
+                    && first.as_ref().is_none_or(|f| w < f.0)
+                {
+                    first = Some((w, code, text(w)));
+                }
+            };
+            let seg = self.seg;
+            let message = self.config.faults.message.clone();
+            consider(self.inject_after.map(|a| a.max(seg.t0)), 220, &|_| message.clone());
+            consider(self.inject_at_rate.and_then(|r| seg.first_crossing(r)), 220, &|_| {
+                message.clone()
+            });
+            let trip = self.config.trip_rate;
+            consider(seg.first_crossing(trip), 210, &|w| {
+                format!("Rate trip: {:.3} deg/s above the trip limit {trip} deg/s", seg.rate(w).abs())
+            });
+            let Some((when, code, text)) = first else {
+                let now_rate = self.actual(t).abs();
+                if now_rate > trip {
+                    self.latch(t, 210, format!("Rate trip: {now_rate:.3} deg/s above the trip limit {trip} deg/s"));
+                    continue;
+                }
+                return;
+            };
+            if code == 220 {
+                self.inject_after = None;
+                self.inject_at_rate = None;
+            }
+            self.latch(when, code, text);
+        }
+    }
+
+    fn status_byte(&self) -> u8 {
+        u8::from(self.interlock_event) | if self.errors.is_empty() { 0 } else { 0x80 }
+    }
+}
+
+/// A running simulated table. See [`SimTable::spawn`].
+#[derive(Debug)]
+pub struct SimTable;
+
+impl SimTable {
+    /// Serves the ACL dialect on `stream` as a tokio task (on tokio's clock: fine in paused
+    /// virtual time) until the stream closes or [`TableHandle::shutdown`]. `seed` seeds the
+    /// readback noise.
+    pub fn spawn<S>(stream: S, config: TableConfig, seed: u64) -> TableHandle
+    where
+        S: AsyncRead + AsyncWrite + Send + Unpin + 'static,
+    {
+        let handle = TableHandle::new(config, seed);
+        let task = handle.clone();
+        tokio::spawn(async move { task.serve(stream).await });
+        handle
+    }
+}
+
+/// A cloneable view of a simulated table: the truth (actual rate, mode, demand), fault
+/// injection and shutdown. `Send + Sync`; every call evaluates the table at the current instant.
+#[derive(Clone)]
+pub struct TableHandle {
+    state: Arc<Mutex<State>>,
+    shutdown: Arc<watch::Sender<bool>>,
+}
+
+impl std::fmt::Debug for TableHandle {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TableHandle")
+            .field("mode", &self.mode())
+            .field("demanded_rate", &self.demanded_rate())
+            .finish_non_exhaustive()
+    }
+}
+
+impl TableHandle {
+    fn new(config: TableConfig, seed: u64) -> Self {
+        let faults = config.faults.clone();
+        let rate_limit = config.max_rate;
+        TableHandle {
+            state: Arc::new(Mutex::new(State {
+                config,
+                origin: Instant::now(),
+                seg: Segment::hold(0.0, 0.0, 0.0),
+                mode: SimMode::Off,
+                abort_end: 0.0,
+                interlock_closed: false,
+                fault: None,
+                interlock_event: false,
+                accel_limit: 0.0,
+                rate_limit,
+                demand: 0.0,
+                errors: VecDeque::new(),
+                silent: false,
+                inject_at_rate: faults.inject_at_rate,
+                inject_after: faults.inject_after,
+                rng: StdRng::seed_from_u64(seed),
+            })),
+            shutdown: Arc::new(watch::channel(false).0),
+        }
+    }
+
+    fn lock(&self) -> MutexGuard<'_, State> {
+        self.state.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// Locks the state brought up to `at`; returns it with the sim time of `at`.
+    ///
+    /// Latched events are brought up to `min(at, now)` only: evaluating a future instant (a
+    /// multimeter asking for a window that has not ended) must not latch a fault early.
+    fn at(&self, at: Instant) -> (MutexGuard<'_, State>, f64) {
+        let mut st = self.lock();
+        let t = st.sim_time(at);
+        let now = st.sim_time(Instant::now());
+        st.advance(t.min(now));
+        (st, t)
+    }
+
+    /// Sim seconds elapsed at `at` since the table started (scaled by `time_scale`).
+    pub fn sim_time(&self, at: Instant) -> f64 {
+        self.lock().sim_time(at)
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> TableConfig {
+        self.lock().config.clone()
+    }
+
+    /// The actual rate at `at` (what a gyro on the table senses), deg/s: the profile plus the
+    /// once-per-revolution ripple (and the wobble of a never-settling table), without readback
+    /// noise. Instants before "now" are fine as long as no command changed the profile since.
+    pub fn actual_rate(&self, at: Instant) -> f64 {
+        let (st, t) = self.at(at);
+        st.actual(t)
+    }
+
+    /// The position at `at`, degrees in `[0, 360)`.
+    pub fn position(&self, at: Instant) -> f64 {
+        let (st, t) = self.at(at);
+        st.seg.position(t).rem_euclid(360.0)
+    }
+
+    /// The mode now.
+    pub fn mode(&self) -> SimMode {
+        self.at(Instant::now()).0.mode
+    }
+
+    /// The demanded rate now, deg/s (0 unless in RATE mode with a demand).
+    pub fn demanded_rate(&self) -> f64 {
+        let (st, _) = self.at(Instant::now());
+        if st.mode == SimMode::Rate { st.demand } else { 0.0 }
+    }
+
+    /// True when the table is not commanded to turn and its profile has reached zero: what
+    /// a program must leave behind.
+    pub fn is_stopped(&self) -> bool {
+        let (st, t) = self.at(Instant::now());
+        st.mode != SimMode::Abort && st.demand == 0.0 && st.seg.rate(t) == 0.0
+    }
+
+    /// Whether the interlock is closed (servo on).
+    pub fn interlock_closed(&self) -> bool {
+        self.at(Instant::now()).0.interlock_closed
+    }
+
+    /// The latched fault's text, if any.
+    pub fn fault(&self) -> Option<String> {
+        self.at(Instant::now()).0.fault.clone()
+    }
+
+    /// Latches an injected fault now (error 220 with `message`): abort profile, interlock open.
+    pub fn inject_fault(&self, message: &str) {
+        let (mut st, t) = self.at(Instant::now());
+        st.latch(t, 220, message.to_string());
+    }
+
+    /// Latches a rate trip now (error 210), whatever the rate.
+    pub fn trip(&self) {
+        let (mut st, t) = self.at(Instant::now());
+        let rate = st.actual(t).abs();
+        st.latch(t, 210, format!("Rate trip: {rate:.3} deg/s (forced)"));
+    }
+
+    /// Arms an injected fault at |rate| ≥ `rate` (latched at the exact instant, mid-ramp).
+    pub fn inject_fault_at_rate(&self, rate: f64) {
+        self.at(Instant::now()).0.inject_at_rate = Some(rate);
+    }
+
+    /// Stops (true) or resumes (false) answering and executing anything.
+    pub fn set_silent(&self, silent: bool) {
+        let mut st = self.lock();
+        st.silent = silent;
+        if !silent {
+            st.config.faults.silent_after = None;
+        }
+    }
+
+    /// Ends the simulator task; the stream is closed.
+    pub fn shutdown(&self) {
+        self.shutdown.send_replace(true);
+    }
+
+    async fn serve<S>(self, stream: S)
+    where
+        S: AsyncRead + AsyncWrite + Send + Unpin + 'static,
+    {
+        let (read, mut write) = tokio::io::split(stream);
+        let mut read = BufReader::new(read);
+        let mut stop = self.shutdown.subscribe();
+        let mut line = Vec::new();
+        loop {
+            line.clear();
+            let n = tokio::select! {
+                _ = stop.wait_for(|s| *s) => break,
+                n = read.read_until(b'\n', &mut line) => n,
+            };
+            match n {
+                Ok(0) | Err(_) => break,
+                Ok(_) => {}
+            }
+            let text = String::from_utf8_lossy(&line);
+            let text = text.trim_end_matches(['\n', '\r']);
+            let replies = self.execute(text, Instant::now());
+            for r in replies {
+                if write.write_all(format!("{r}\n").as_bytes()).await.is_err() {
+                    return;
+                }
+            }
+            if write.flush().await.is_err() {
+                return;
+            }
+        }
+        tracing::debug!("sim table stopped");
+    }
+
+    /// Executes one input line at `now`; returns the reply lines.
+    fn execute(&self, line: &str, now: Instant) -> Vec<String> {
+        let (mut st, t) = self.at(now);
+        if st.silent {
+            return Vec::new();
+        }
+        let mut replies = Vec::new();
+        let mut base: Vec<String> = Vec::new();
+        for part in line.split(';') {
+            let part = part.trim();
+            if part.is_empty() {
+                continue;
+            }
+            let (header, args) = match part.split_once(char::is_whitespace) {
+                Some((h, a)) => (h, a.trim()),
+                None => (part, ""),
+            };
+            let header = header.to_ascii_uppercase();
+            let (query, header) = match header.strip_suffix('?') {
+                Some(h) => (true, h.to_string()),
+                None => (false, header),
+            };
+            let nodes: Vec<String> = if header.starts_with('*') {
+                vec![header.clone()]
+            } else if let Some(abs) = header.strip_prefix(':') {
+                abs.split(':').map(str::to_string).collect()
+            } else {
+                base.iter().cloned().chain(header.split(':').map(str::to_string)).collect()
+            };
+            if nodes.len() > 1 {
+                base = nodes[..nodes.len() - 1].to_vec();
+            }
+            let args: Vec<&str> =
+                if args.is_empty() { Vec::new() } else { args.split(',').map(str::trim).collect() };
+            if let Some(r) = command(&mut st, t, &nodes, query, &args) {
+                replies.push(r);
+            }
+        }
+        replies
+    }
+}
+
+/// Whether a header node matches a mixed-case name in long form or short form (its capitals).
+fn node_is(node: &str, name: &str) -> bool {
+    let short: String = name.chars().filter(char::is_ascii_uppercase).collect();
+    node == name.to_ascii_uppercase() || node == short
+}
+
+fn path_is(nodes: &[String], names: &[&str]) -> bool {
+    nodes.len() == names.len() && nodes.iter().zip(names).all(|(n, m)| node_is(n, m))
+}
+
+fn parse_axis(st: &mut State, arg: Option<&&str>) -> Option<()> {
+    match arg {
+        None => {
+            st.push_error(-109, "Missing parameter");
+            None
+        }
+        Some(a) if a.parse::<u32>() == Ok(1) => Some(()),
+        Some(_) => {
+            st.push_error(-222, "Data out of range");
+            None
+        }
+    }
+}
+
+fn parse_value(st: &mut State, arg: Option<&&str>) -> Option<f64> {
+    match arg.map(|a| a.parse::<f64>()) {
+        None => {
+            st.push_error(-109, "Missing parameter");
+            None
+        }
+        Some(Ok(v)) if v.is_finite() => Some(v),
+        Some(_) => {
+            st.push_error(-104, "Data type error");
+            None
+        }
+    }
+}
+
+/// `R,<axis>,<value>` of the `:Limit` commands.
+fn parse_limit(st: &mut State, args: &[&str]) -> Option<f64> {
+    match args.first() {
+        Some(m) if m.eq_ignore_ascii_case("R") => {}
+        Some(_) => {
+            st.push_error(-224, "Illegal parameter value");
+            return None;
+        }
+        None => {
+            st.push_error(-109, "Missing parameter");
+            return None;
+        }
+    }
+    parse_axis(st, args.get(1))?;
+    parse_value(st, args.get(2))
+}
+
+fn num(v: f64) -> String {
+    format!("{v:.6}")
+}
+
+fn command(st: &mut State, t: f64, nodes: &[String], query: bool, args: &[&str]) -> Option<String> {
+    if query {
+        if path_is(nodes, &["*IDN"]) {
+            return Some(st.config.identity.clone());
+        }
+        if path_is(nodes, &["*STB"]) {
+            return Some(st.status_byte().to_string());
+        }
+        if path_is(nodes, &["System", "Error"]) {
+            return Some(match st.errors.pop_front() {
+                Some((code, text)) => format!("{code},\"{text}\""),
+                None => "0,\"No error\"".into(),
+            });
+        }
+        if path_is(nodes, &["Mode"]) {
+            parse_axis(st, args.first())?;
+            return Some(st.mode.reply().into());
+        }
+        if path_is(nodes, &["Read", "Rate"]) {
+            parse_axis(st, args.first())?;
+            let noise: f64 = st.rng.sample(StandardNormal);
+            let v = st.actual(t) + st.config.rate_noise_std * noise;
+            return Some(num(v));
+        }
+        if path_is(nodes, &["Read", "Position"]) {
+            parse_axis(st, args.first())?;
+            return Some(num(st.seg.position(t).rem_euclid(360.0)));
+        }
+        st.push_error(-113, "Undefined header");
+        return None;
+    }
+    if path_is(nodes, &["*CLS"]) {
+        st.errors.clear();
+    } else if path_is(nodes, &["Interlock", "Reset"]) {
+        st.fault = None;
+        st.interlock_event = false;
+    } else if path_is(nodes, &["Interlock", "Close"]) {
+        parse_axis(st, args.first())?;
+        if let Some(f) = st.fault.clone() {
+            st.push_error(203, format!("Fault latched: {f}"));
+        } else if st.mode == SimMode::Abort {
+            st.push_error(204, "Axis moving");
+        } else if !st.interlock_closed {
+            st.interlock_closed = true;
+            st.mode = SimMode::Off;
+            st.demand = 0.0;
+            st.seg = Segment::hold(t, st.seg.position(t), 0.0);
+        }
+    } else if path_is(nodes, &["Interlock", "Open"]) {
+        parse_axis(st, args.first())?;
+        if st.interlock_closed {
+            st.interlock_event = true;
+            st.abort(t);
+        }
+    } else if path_is(nodes, &["Mode", "Rate"]) {
+        parse_axis(st, args.first())?;
+        if !st.interlock_closed {
+            st.push_error(201, "Interlock open");
+        } else if st.mode != SimMode::Rate {
+            st.mode = SimMode::Rate;
+            st.demand = st.seg.target;
+        }
+    } else if path_is(nodes, &["Mode", "Off"]) {
+        parse_axis(st, args.first())?;
+        if st.interlock_closed {
+            let accel =
+                if st.accel_limit > 0.0 { st.accel_limit } else { st.config.max_acceleration };
+            let jerk = st.config.jerk;
+            st.ramp_to(t, 0.0, accel, jerk);
+            st.mode = SimMode::Off;
+            st.demand = 0.0;
+        }
+    } else if path_is(nodes, &["Mode", "Position"]) {
+        parse_axis(st, args.first())?;
+        st.push_error(205, "Mode not available");
+    } else if path_is(nodes, &["Limit", "Acceleration"]) {
+        let v = parse_limit(st, args)?;
+        if v <= 0.0 {
+            st.push_error(202, "Acceleration limit must be positive");
+        } else if v > st.config.max_acceleration {
+            st.push_error(-222, "Data out of range");
+        } else {
+            st.accel_limit = v;
+        }
+    } else if path_is(nodes, &["Limit", "Rate"]) {
+        let v = parse_limit(st, args)?;
+        if v <= 0.0 || v > st.config.max_rate {
+            st.push_error(-222, "Data out of range");
+        } else {
+            st.rate_limit = v;
+        }
+    } else if path_is(nodes, &["Demand", "Rate"]) {
+        parse_axis(st, args.first())?;
+        let v = parse_value(st, args.get(1))?;
+        if !st.interlock_closed {
+            st.push_error(201, "Interlock open");
+        } else if st.mode != SimMode::Rate {
+            st.push_error(-221, "Settings conflict");
+        } else if st.accel_limit <= 0.0 {
+            st.push_error(202, "Acceleration limit must be positive");
+        } else if v.abs() > st.rate_limit {
+            st.push_error(-222, "Data out of range");
+        } else {
+            let (accel, jerk) = (st.accel_limit, st.config.jerk);
+            st.ramp_to(t, v, accel, jerk);
+            st.demand = v;
+            // a fault injected at a rate may now be reached on this ramp
+            st.advance(t);
+        }
+    } else {
+        st.push_error(-113, "Undefined header");
+    }
+    None
+}
