@@ -1,0 +1,406 @@
+//! Plan parsing, validation, schedule and hash.
+
+// Test helpers outside #[test] functions may unwrap too: a panic is a failed test.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use gyrocal_run::plan::{Acquire, Acquisition, Framing, Plan, PlanError, Port};
+
+fn configs_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs")
+}
+
+const GOOD: &str = r#"[plan]
+name = "t"
+rates_dps = [0, 1, -1]
+samples_per_rate = 10
+[table]
+port = "/dev/ttyUSB1"
+max_rate_dps = 20
+acceleration_dps2 = 10
+[dmm]
+port = "/dev/ttyUSB0"
+"#;
+
+fn parse(src: &str) -> Result<Plan, PlanError> {
+    Plan::from_toml_str(src, Path::new("configs/bad.toml"))
+}
+
+/// Replaces `from` (which must occur) in GOOD.
+fn bad(from: &str, to: &str) -> PlanError {
+    assert!(GOOD.contains(from), "{from}");
+    parse(&GOOD.replace(from, to)).expect_err("must be refused")
+}
+
+fn assert_at(err: &PlanError, line: u32, key: &str) {
+    let msg = err.to_string();
+    let loc = err.location().expect("located");
+    assert_eq!(loc.line, Some(line), "{msg}");
+    assert!(
+        msg.starts_with(&format!("configs/bad.toml:{line}:")),
+        "{msg}"
+    );
+    assert!(msg.contains(key), "{msg} should name {key}");
+}
+
+#[test]
+fn every_config_parses() {
+    let mut n = 0;
+    for entry in std::fs::read_dir(configs_dir()).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            let plan = Plan::from_file(&path).unwrap_or_else(|e| panic!("{e}"));
+            assert!(plan.step_count() >= 2, "{}", path.display());
+            n += 1;
+        }
+    }
+    assert!(n >= 3, "expected paper, quick and ieee, found {n}");
+}
+
+#[test]
+fn paper_plan_is_the_published_schedule() {
+    let plan = Plan::from_file(&configs_dir().join("paper.toml")).unwrap();
+    let mut rates = plan.rates_dps().to_vec();
+    assert_eq!(rates.len(), 19);
+    rates.sort_by(f64::total_cmp);
+    let want = [
+        -20.0, -15.0, -10.0, -7.0, -3.0, -1.0, -0.7, -0.3, -0.1, 0.0, 0.1, 0.3, 0.7, 1.0, 3.0, 7.0,
+        10.0, 15.0, 20.0,
+    ];
+    assert_eq!(rates, want);
+    assert_eq!(plan.samples_per_rate(), 500);
+    assert_eq!(plan.dmm().nplc, 1.0);
+    assert!(plan.dmm().autozero);
+    assert_eq!(plan.dmm().line_hz, 50);
+    assert_eq!(plan.dmm().acquisition, Acquisition::Auto);
+    assert_eq!(plan.dmm().framing, Framing::N8);
+    assert_eq!(plan.table().max_rate_dps, 20.0);
+    assert_eq!(plan.table().acceleration_dps2, 10.0);
+    assert_eq!(plan.dmm().port, Port::Serial("/dev/ttyUSB0".into()));
+    assert_eq!(plan.table().port, Port::Serial("/dev/ttyUSB1".into()));
+    assert_eq!(plan.simulation().scale_factor, 0.3612);
+    assert_eq!(plan.simulation().bias, 0.0088);
+    let sched = plan.schedule();
+    assert_eq!(sched.len(), 19);
+    assert!(sched.iter().all(|s| s.acquire == Acquire::Samples(500)));
+}
+
+#[test]
+fn ieee_plan_uses_whole_turns_and_zero_at_both_ends() {
+    let plan = Plan::from_file(&configs_dir().join("ieee.toml")).unwrap();
+    let sched = plan.schedule();
+    assert_eq!(sched.first().unwrap().rate_dps, 0.0);
+    assert_eq!(sched.last().unwrap().rate_dps, 0.0);
+    let mut total = 0.0;
+    for s in &sched {
+        match s.acquire {
+            Acquire::Samples(n) => {
+                assert_eq!(s.rate_dps, 0.0);
+                assert_eq!(n, plan.samples_per_rate());
+            }
+            Acquire::Span {
+                duration,
+                revolutions,
+            } => {
+                assert_eq!(revolutions, 1);
+                let turns = duration.as_secs_f64() * s.rate_dps.abs() / 360.0;
+                assert!((turns - 1.0).abs() < 1e-9, "{turns}");
+                total += duration.as_secs_f64();
+            }
+        }
+    }
+    assert!(sched.iter().any(|s| s.rate_dps > 0.0) && sched.iter().any(|s| s.rate_dps < 0.0));
+    assert!(total < 2.0 * 3600.0, "acquisition alone takes {total} s");
+}
+
+#[test]
+fn schedule_repeats_with_stable_indices_and_passes() {
+    let plan =
+        parse(&GOOD.replace("samples_per_rate = 10", "samples_per_rate = 10\nrepeat = 3")).unwrap();
+    let s = plan.schedule();
+    assert_eq!(s.len(), 9);
+    for (i, step) in s.iter().enumerate() {
+        assert_eq!(step.index, i);
+        assert_eq!(step.pass as usize, i / 3);
+        assert_eq!(step.rate_dps, [0.0, 1.0, -1.0][i % 3]);
+    }
+}
+
+#[test]
+fn whole_revolutions_gives_a_duration_and_a_sample_count() {
+    let plan = parse(&GOOD.replace(
+        "samples_per_rate = 10",
+        "samples_per_rate = 10\nwhole_revolutions = 2",
+    ))
+    .unwrap();
+    let s = plan.schedule();
+    assert_eq!(s[0].acquire, Acquire::Samples(10));
+    assert_eq!(s[1].span(), Some(Duration::from_secs(720)));
+    // 720 s at 41.5 ms per reading
+    assert_eq!(s[1].sample_count(Duration::from_micros(41_500)), 17349);
+    assert_eq!(s[0].sample_count(Duration::from_micros(41_500)), 10);
+}
+
+#[test]
+fn defaults_are_filled_in() {
+    let plan = parse(GOOD).unwrap();
+    assert_eq!(plan.settle(), Duration::from_secs(10));
+    assert_eq!(plan.repeat(), 1);
+    assert_eq!(plan.dmm().baud, 9600);
+    assert_eq!(plan.dmm().range_v, 10.0);
+    assert_eq!(plan.table().stability_window, Duration::from_secs(2));
+    assert_eq!(plan.table().at_rate_timeout, Duration::from_secs(60));
+    assert_eq!(plan.simulation().scale_factor, 0.3612);
+}
+
+#[test]
+fn syntax_error_names_the_line() {
+    let e = bad("max_rate_dps = 20", "max_rate_dps = = 20");
+    assert!(matches!(e, PlanError::Syntax { .. }), "{e}");
+    assert_at(&e, 7, "[table]");
+}
+
+#[test]
+fn unknown_key_names_the_line_and_key() {
+    let e = bad(
+        "acceleration_dps2 = 10",
+        "acceleration_dps2 = 10\naccel = 3",
+    );
+    assert!(matches!(e, PlanError::Syntax { .. }), "{e}");
+    assert_at(&e, 9, "accel");
+    assert!(e.to_string().contains("[table]"), "{e}");
+}
+
+#[test]
+fn missing_key_is_named() {
+    let e = bad("samples_per_rate = 10\n", "");
+    assert!(e.to_string().contains("samples_per_rate"), "{e}");
+}
+
+#[test]
+fn wrong_type_names_the_line() {
+    let e = bad("samples_per_rate = 10", "samples_per_rate = \"ten\"");
+    assert_at(&e, 4, "");
+}
+
+#[test]
+fn rate_above_max_names_the_rate() {
+    let e = bad("rates_dps = [0, 1, -1]", "rates_dps = [0, 1, -21]");
+    assert!(matches!(e, PlanError::Invalid { .. }), "{e}");
+    assert_at(&e, 3, "rates_dps[2]");
+    // the column points at the offending element
+    assert_eq!(e.location().unwrap().column, Some(20));
+    assert!(e.to_string().contains("max_rate_dps"), "{e}");
+}
+
+#[test]
+fn zero_acceleration_is_refused() {
+    let e = bad("acceleration_dps2 = 10", "acceleration_dps2 = 0");
+    assert_at(&e, 8, "acceleration_dps2");
+    assert_eq!(
+        e.to_string(),
+        "configs/bad.toml:8:21: [table] acceleration_dps2 must be > 0 (got 0)"
+    );
+}
+
+#[test]
+fn illegal_nplc_is_refused() {
+    let e = bad(
+        "port = \"/dev/ttyUSB0\"",
+        "port = \"/dev/ttyUSB0\"\nnplc = 5",
+    );
+    assert_at(&e, 11, "nplc");
+    assert!(e.to_string().contains("[dmm]"), "{e}");
+}
+
+#[test]
+fn bad_port_strings_are_refused() {
+    for port in [
+        "tcp://host",
+        "tcp://:9878",
+        "tcp://host:0",
+        "tcp://host:http",
+        "udp://h:1",
+        "",
+    ] {
+        let e = bad("port = \"/dev/ttyUSB1\"", &format!("port = \"{port}\""));
+        assert_at(&e, 6, "port");
+        assert!(e.to_string().contains("[table]"), "{port}: {e}");
+    }
+}
+
+#[test]
+fn tcp_ports_parse() {
+    assert_eq!(
+        Port::parse("tcp://192.168.1.5:9878").unwrap(),
+        Port::Tcp {
+            host: "192.168.1.5".into(),
+            port: 9878
+        }
+    );
+    let v6 = Port::parse("tcp://[::1]:9878").unwrap();
+    assert_eq!(
+        v6,
+        Port::Tcp {
+            host: "::1".into(),
+            port: 9878
+        }
+    );
+    assert_eq!(v6.to_string(), "tcp://[::1]:9878");
+}
+
+#[test]
+fn other_semantic_rules() {
+    let cases: &[(&str, &str, u32, &str)] = &[
+        (
+            "rates_dps = [0, 1, -1]",
+            "rates_dps = [1, 1]",
+            3,
+            "rates_dps",
+        ),
+        (
+            "rates_dps = [0, 1, -1]",
+            "rates_dps = [0, nan]",
+            3,
+            "rates_dps[1]",
+        ),
+        (
+            "samples_per_rate = 10",
+            "samples_per_rate = 0",
+            4,
+            "samples_per_rate",
+        ),
+        (
+            "samples_per_rate = 10",
+            "samples_per_rate = 2000000",
+            4,
+            "samples_per_rate",
+        ),
+        (
+            "max_rate_dps = 20",
+            "max_rate_dps = 5000",
+            7,
+            "max_rate_dps",
+        ),
+        ("max_rate_dps = 20", "max_rate_dps = -1", 7, "max_rate_dps"),
+        (
+            "acceleration_dps2 = 10",
+            "acceleration_dps2 = -3",
+            8,
+            "acceleration_dps2",
+        ),
+        (
+            "port = \"/dev/ttyUSB0\"",
+            "port = \"/dev/ttyUSB0\"\nbaud = 19200",
+            11,
+            "baud",
+        ),
+        (
+            "port = \"/dev/ttyUSB0\"",
+            "port = \"/dev/ttyUSB0\"\nline_hz = 55",
+            11,
+            "line_hz",
+        ),
+        (
+            "port = \"/dev/ttyUSB0\"",
+            "port = \"/dev/ttyUSB0\"\nrange_v = 3",
+            11,
+            "range_v",
+        ),
+        (
+            "port = \"/dev/ttyUSB0\"",
+            "port = \"/dev/ttyUSB0\"\nframing = \"8N1\"",
+            11,
+            "framing",
+        ),
+        (
+            "port = \"/dev/ttyUSB0\"",
+            "port = \"/dev/ttyUSB0\"\nacquisition = \"x\"",
+            11,
+            "acquisition",
+        ),
+        (
+            "samples_per_rate = 10",
+            "samples_per_rate = 10\nsettle_s = -1",
+            5,
+            "settle_s",
+        ),
+        (
+            "samples_per_rate = 10",
+            "samples_per_rate = 10\nrepeat = 0",
+            5,
+            "repeat",
+        ),
+        (
+            "acceleration_dps2 = 10",
+            "acceleration_dps2 = 10\nstability_window_s = 5\nat_rate_timeout_s = 5",
+            10,
+            "at_rate_timeout_s",
+        ),
+        (
+            "acceleration_dps2 = 10",
+            "acceleration_dps2 = 10\nrate_tolerance_dps = 0",
+            9,
+            "rate_tolerance_dps",
+        ),
+        (
+            "port = \"/dev/ttyUSB0\"",
+            "port = \"/dev/ttyUSB1\"",
+            10,
+            "port",
+        ),
+    ];
+    for (from, to, line, key) in cases {
+        let e = bad(from, to);
+        assert!(matches!(e, PlanError::Invalid { .. }), "{to}: {e}");
+        assert_at(&e, *line, key);
+    }
+    let sim = format!("{GOOD}[simulation]\nnoise_v = -1\n");
+    assert_at(&parse(&sim).unwrap_err(), 12, "noise_v");
+    let sim = format!("{GOOD}[simulation]\nscale_factor = 0\n");
+    assert_at(&parse(&sim).unwrap_err(), 12, "scale_factor");
+    let sim = format!("{GOOD}[simulation]\nwhat = 0\n");
+    assert_at(&parse(&sim).unwrap_err(), 12, "what");
+}
+
+#[test]
+fn hash_ignores_comments_whitespace_and_spelling() {
+    let a = parse(GOOD).unwrap();
+    let b = parse(
+        "# a comment\n[dmm]\nport   =   '/dev/ttyUSB0'  # meter\nnplc = 1.0\n\n[table]\n\
+         acceleration_dps2 = 10.0\nmax_rate_dps = 20\nport = \"/dev/ttyUSB1\"\n\
+         [plan]\nsamples_per_rate = 10\nrates_dps = [ 0.0,\n 1.0, -1 ]  \nname = \"t\"\nsettle_s = 10\n",
+    )
+    .unwrap();
+    assert_eq!(a.hash(), b.hash());
+    assert_eq!(a.hash().len(), 64);
+    assert!(a.hash().chars().all(|c| c.is_ascii_hexdigit()));
+}
+
+#[test]
+fn hash_changes_with_a_rate_but_not_with_a_port() {
+    let a = parse(GOOD).unwrap();
+    let b = parse(&GOOD.replace("[0, 1, -1]", "[0, 1, -1.5]")).unwrap();
+    assert_ne!(a.hash(), b.hash());
+    let c = parse(&GOOD.replace("/dev/ttyUSB1", "tcp://table:9878")).unwrap();
+    assert_eq!(a.hash(), c.hash());
+    let d = parse(&format!("{GOOD}[simulation]\nseed = 2\n")).unwrap();
+    assert_ne!(a.hash(), d.hash());
+}
+
+#[test]
+fn plan_round_trips_through_json() {
+    let plan = Plan::from_file(&configs_dir().join("paper.toml")).unwrap();
+    let json = serde_json::to_string(&plan).unwrap();
+    assert!(json.contains("\"acceleration_dps2\":10.0"), "{json}");
+    assert!(json.contains("\"acquisition\":\"auto\""), "{json}");
+    let back: Plan = serde_json::from_str(&json).unwrap();
+    assert_eq!(back, plan);
+    assert_eq!(back.hash(), plan.hash());
+    // JSON read back is validated again
+    let tampered = json.replace("\"acceleration_dps2\":10.0", "\"acceleration_dps2\":0.0");
+    let err = serde_json::from_str::<Plan>(&tampered).unwrap_err();
+    assert!(err.to_string().contains("acceleration_dps2"), "{err}");
+}

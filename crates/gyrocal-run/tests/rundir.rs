@@ -1,0 +1,442 @@
+//! The run directory: writing, torn tails, resume, manifest atomicity, fit compatibility.
+
+// Test helpers outside #[test] functions may unwrap too: a panic is a failed test.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::fs::{self, OpenOptions};
+use std::io::Write;
+use std::path::Path;
+
+use gyrocal_run::rundir::{MANIFEST_JSON, SAMPLES_CSV, STEPS_CSV};
+use gyrocal_run::{
+    Instruments, Plan, Retry, RunDir, RunError, RunMeta, Sample, Status, StepRecord, load,
+    load_samples,
+};
+
+const PLAN: &str = r#"[plan]
+name = "rundir test"
+rates_dps = [0, 1, -1, 2, -2]
+samples_per_rate = 7
+[table]
+port = "/dev/ttyUSB1"
+max_rate_dps = 20
+acceleration_dps2 = 10
+[dmm]
+port = "/dev/ttyUSB0"
+"#;
+
+fn plan() -> Plan {
+    Plan::from_toml_str(PLAN, Path::new("test.toml")).unwrap()
+}
+
+fn meta() -> RunMeta {
+    RunMeta {
+        gyrocal_version: "0.1.0-test".into(),
+        ..RunMeta::default()
+    }
+}
+
+fn volts(step: usize, i: u64) -> f64 {
+    0.0088 + 0.3612 * [0.0, 1.0, -1.0, 2.0, -2.0][step] + (i as f64) * 1e-6
+}
+
+/// Writes all samples of `step` in chunks of 3 (with an overload at index 4) and its record.
+fn run_step(rd: &mut RunDir, step: usize, record: bool) {
+    let n = 7u64;
+    let samples: Vec<Sample> = (0..n)
+        .map(|i| Sample {
+            index: i,
+            t_s: step as f64 * 10.0 + i as f64 * 0.0415,
+            volts: (i != 4).then(|| volts(step, i)),
+        })
+        .collect();
+    for chunk in samples.chunks(3) {
+        rd.append_samples(step, chunk).unwrap();
+    }
+    if record {
+        let s = rd.schedule()[step];
+        let good: Vec<f64> = samples.iter().filter_map(|s| s.volts).collect();
+        let mean = good.iter().sum::<f64>() / good.len() as f64;
+        rd.append_step(StepRecord {
+            step,
+            pass: s.pass,
+            rate_dps: s.rate_dps,
+            rate_meas_dps: Some(s.rate_dps + 1e-5),
+            rate_meas_std_dps: Some(1e-4),
+            rate_meas_min_dps: Some(s.rate_dps - 2e-4),
+            rate_meas_max_dps: Some(s.rate_dps + 2e-4),
+            volts: mean,
+            volts_std: Some(1e-6),
+            n: good.len() as u64,
+            overloads: 1,
+            retries: 0,
+            t_start_s: step as f64 * 10.0,
+            t_end_s: step as f64 * 10.0 + 0.3,
+        })
+        .unwrap();
+    }
+}
+
+fn append_raw(path: &Path, bytes: &[u8]) {
+    OpenOptions::new()
+        .append(true)
+        .open(path)
+        .unwrap()
+        .write_all(bytes)
+        .unwrap();
+}
+
+#[test]
+fn create_refuses_a_non_empty_directory() {
+    let tmp = tempfile::tempdir().unwrap();
+    fs::write(tmp.path().join("x"), b"x").unwrap();
+    let err = RunDir::create(tmp.path(), &plan(), meta()).unwrap_err();
+    assert!(matches!(err, RunError::NotEmpty { .. }), "{err}");
+    // an empty existing directory is fine
+    let empty = tmp.path().join("empty");
+    fs::create_dir(&empty).unwrap();
+    RunDir::create(&empty, &plan(), meta()).unwrap();
+}
+
+#[test]
+fn a_full_run_writes_what_the_fit_needs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let p = plan();
+    let mut rd = RunDir::create(&dir, &p, meta()).unwrap();
+    rd.set_instruments(Instruments {
+        dmm: Some("HEWLETT-PACKARD,34401A,0,11-5-2".into()),
+        table: Some("ACUTRONIC,ACUTROL3000,1,1.0".into()),
+    })
+    .unwrap();
+    for step in 0..5 {
+        run_step(&mut rd, step, true);
+    }
+    rd.log_retry(Retry {
+        t_s: 3.0,
+        step: Some(2),
+        instrument: "dmm".into(),
+        message: "timeout".into(),
+    })
+    .unwrap();
+    rd.set_fit(serde_json::json!({"scale_factor": 0.3612}))
+        .unwrap();
+    rd.finish(Status::Complete, None, 51.5).unwrap();
+
+    // steps.csv: the columns `gyrocal fit` reads by name, with numbers in them
+    let mut rdr = csv::Reader::from_path(dir.join(STEPS_CSV)).unwrap();
+    let headers = rdr.headers().unwrap().clone();
+    for col in ["rate_dps", "volts", "volts_std", "n"] {
+        assert!(
+            headers.iter().any(|h| h == col),
+            "steps.csv lacks {col}: {headers:?}"
+        );
+    }
+    let idx = |c: &str| headers.iter().position(|h| h == c).unwrap();
+    let rows: Vec<csv::StringRecord> = rdr.records().map(Result::unwrap).collect();
+    assert_eq!(rows.len(), 5);
+    for (i, row) in rows.iter().enumerate() {
+        let rate: f64 = row[idx("rate_dps")].parse().unwrap();
+        let v: f64 = row[idx("volts")].parse().unwrap();
+        let n: u64 = row[idx("n")].parse().unwrap();
+        assert_eq!(rate, p.rates_dps()[i]);
+        assert!((v - 0.3612 * rate - 0.0088).abs() < 1e-4, "{v}");
+        assert_eq!(n, 6);
+    }
+
+    // samples.csv: one row per reading, overload marked and its volts empty
+    let samples = load_samples(&dir).unwrap();
+    assert_eq!(samples.len(), 35);
+    let ov: Vec<_> = samples.iter().filter(|s| s.overload == 1).collect();
+    assert_eq!(ov.len(), 5);
+    assert!(ov.iter().all(|s| s.volts.is_none() && s.index == 4));
+    let text = fs::read_to_string(dir.join(SAMPLES_CSV)).unwrap();
+    assert!(
+        text.starts_with("step,index,t_s,rate_dps,volts,overload\n"),
+        "{text}"
+    );
+    assert!(
+        text.lines()
+            .any(|l| l.starts_with("0,4,") && l.ends_with(",,1")),
+        "{text}"
+    );
+
+    // manifest
+    let data = load(&dir).unwrap();
+    let m = &data.manifest;
+    assert_eq!(m.status, Status::Complete);
+    assert_eq!(m.steps_done, vec![0, 1, 2, 3, 4]);
+    assert_eq!(m.plan_hash, p.hash());
+    assert_eq!(m.plan, p);
+    assert_eq!(m.elapsed_s, 51.5);
+    assert_eq!(m.retries.len(), 1);
+    assert!(m.ended_utc.as_deref().is_some_and(|t| t.ends_with('Z')));
+    assert_eq!(
+        m.instruments.dmm.as_deref(),
+        Some("HEWLETT-PACKARD,34401A,0,11-5-2")
+    );
+    assert_eq!(m.fit, Some(serde_json::json!({"scale_factor": 0.3612})));
+    assert!(dir.join("fit.json").exists());
+    assert_eq!(data.steps.len(), 5);
+    // no temp file left behind
+    let leftovers: Vec<_> = fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.') || n.ends_with(".tmp"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
+#[test]
+fn resume_after_a_torn_tail_keeps_exactly_the_finished_steps() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let p = plan();
+    {
+        let mut rd = RunDir::create(&dir, &p, meta()).unwrap();
+        run_step(&mut rd, 0, true);
+        run_step(&mut rd, 1, true);
+        run_step(&mut rd, 2, false); // partial: samples but no row
+        // the program is killed in the middle of a write: half a row in each file
+        drop(rd);
+    }
+    append_raw(&dir.join(SAMPLES_CSV), b"2,7,20.29,-1.0,-0.35");
+    append_raw(&dir.join(STEPS_CSV), b"2,0,-1.0,-1.00001,0.0001");
+
+    let mut rd = RunDir::open_for_resume(&dir, &p).unwrap();
+    assert_eq!(
+        rd.done_steps().iter().copied().collect::<Vec<_>>(),
+        vec![0, 1]
+    );
+    assert_eq!(
+        rd.remaining_steps()
+            .iter()
+            .map(|s| s.index)
+            .collect::<Vec<_>>(),
+        vec![2, 3, 4]
+    );
+    let m = rd.manifest();
+    assert_eq!(m.status, Status::Running);
+    assert_eq!(m.resumes.len(), 1);
+    assert_eq!(m.resumes[0].from_step, Some(2));
+    assert_eq!(m.resumes[0].samples_dropped, 7);
+    assert!(m.resumes[0].torn_bytes_dropped > 0);
+
+    // only the finished steps' samples are left, and the file ends with a newline
+    let text = fs::read_to_string(dir.join(SAMPLES_CSV)).unwrap();
+    assert!(text.ends_with('\n'));
+    let rows = load_samples(&dir).unwrap();
+    assert_eq!(rows.len(), 14);
+    assert!(rows.iter().all(|r| r.step < 2));
+
+    // finish the run; every step once, every sample once
+    for step in 2..5 {
+        run_step(&mut rd, step, true);
+    }
+    rd.finish(Status::Complete, None, 60.0).unwrap();
+    drop(rd);
+    let rows = load_samples(&dir).unwrap();
+    assert_eq!(rows.len(), 35);
+    let mut keys: Vec<(usize, u64)> = rows.iter().map(|r| (r.step, r.index)).collect();
+    keys.sort_unstable();
+    keys.dedup();
+    assert_eq!(keys.len(), 35, "duplicated samples");
+    let data = load(&dir).unwrap();
+    assert_eq!(
+        data.steps.iter().map(|s| s.step).collect::<Vec<_>>(),
+        vec![0, 1, 2, 3, 4]
+    );
+
+    // a complete run is not resumed
+    let err = RunDir::open_for_resume(&dir, &p).unwrap_err();
+    assert!(matches!(err, RunError::AlreadyComplete { .. }), "{err}");
+}
+
+#[test]
+fn resume_of_a_run_killed_before_any_row_and_twice() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let p = plan();
+    let mut rd = RunDir::create(&dir, &p, meta()).unwrap();
+    rd.append_samples(
+        0,
+        &[Sample {
+            index: 0,
+            t_s: 0.0,
+            volts: Some(0.01),
+        }],
+    )
+    .unwrap();
+    drop(rd);
+    let rd = RunDir::open_for_resume(&dir, &p).unwrap();
+    assert!(rd.done_steps().is_empty());
+    drop(rd);
+    let rd = RunDir::open_for_resume(&dir, &p).unwrap();
+    assert_eq!(rd.manifest().resumes.len(), 2);
+    assert_eq!(load_samples(&dir).unwrap().len(), 0);
+}
+
+#[test]
+fn resume_with_a_changed_plan_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let p = plan();
+    let mut rd = RunDir::create(&dir, &p, meta()).unwrap();
+    run_step(&mut rd, 0, true);
+    rd.finish(Status::Aborted, Some("SIGINT".into()), 5.0)
+        .unwrap();
+    drop(rd);
+    let changed = Plan::from_toml_str(
+        &PLAN.replace("[0, 1, -1, 2, -2]", "[0, 1, -1, 3, -3]"),
+        Path::new("c"),
+    )
+    .unwrap();
+    let err = RunDir::open_for_resume(&dir, &changed).unwrap_err();
+    let msg = err.to_string();
+    assert!(matches!(err, RunError::PlanChanged { .. }), "{msg}");
+    assert!(
+        msg.contains(&p.hash()) && msg.contains(&changed.hash()),
+        "{msg}"
+    );
+    // nothing was touched: the original plan still resumes, and the abort is recorded
+    let rd = RunDir::open_for_resume(&dir, &p).unwrap();
+    assert_eq!(rd.manifest().resumes[0].previous_status, Status::Aborted);
+    assert_eq!(
+        rd.manifest().resumes[0].previous_reason.as_deref(),
+        Some("SIGINT")
+    );
+}
+
+#[test]
+fn manifest_is_replaced_atomically() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let mut rd = RunDir::create(&dir, &plan(), meta()).unwrap();
+    // a stale temp file from an earlier crash does not matter
+    fs::write(dir.join(".manifest.json.tmp"), b"{garbage").unwrap();
+    for i in 0..20 {
+        rd.set_elapsed(f64::from(i)).unwrap();
+        let text = fs::read_to_string(dir.join(MANIFEST_JSON)).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        assert_eq!(v["elapsed_s"], serde_json::json!(f64::from(i)));
+        assert!(!dir.join(".manifest.json.tmp").exists());
+    }
+    assert_eq!(load(&dir).unwrap().manifest.status, Status::Running);
+}
+
+#[test]
+fn protocol_violations_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let mut rd = RunDir::create(&dir, &plan(), meta()).unwrap();
+    let s = |index| Sample {
+        index,
+        t_s: 0.0,
+        volts: Some(1.0),
+    };
+    // index gap
+    assert!(rd.append_samples(0, &[s(1)]).is_err());
+    rd.append_samples(0, &[s(0), s(1)]).unwrap();
+    // duplicate index
+    assert!(rd.append_samples(0, &[s(1)]).is_err());
+    // another step while step 0 is in progress
+    assert!(rd.append_samples(1, &[s(0)]).is_err());
+    // NaN is not an overload
+    assert!(
+        rd.append_samples(
+            0,
+            &[Sample {
+                index: 2,
+                t_s: 0.0,
+                volts: Some(f64::NAN)
+            }]
+        )
+        .is_err()
+    );
+    // record with the wrong count
+    let rec = StepRecord {
+        step: 0,
+        pass: 0,
+        rate_dps: 0.0,
+        rate_meas_dps: None,
+        rate_meas_std_dps: None,
+        rate_meas_min_dps: None,
+        rate_meas_max_dps: None,
+        volts: 1.0,
+        volts_std: None,
+        n: 3,
+        overloads: 0,
+        retries: 0,
+        t_start_s: 0.0,
+        t_end_s: 1.0,
+    };
+    assert!(rd.append_step(rec.clone()).is_err());
+    // wrong rate for the step
+    assert!(
+        rd.append_step(StepRecord {
+            n: 2,
+            rate_dps: 1.0,
+            ..rec.clone()
+        })
+        .is_err()
+    );
+    // restart drops the step's samples; it starts again at 0
+    rd.restart_step(0).unwrap();
+    rd.append_samples(0, &[s(0)]).unwrap();
+    rd.append_step(StepRecord {
+        n: 1,
+        ..rec.clone()
+    })
+    .unwrap();
+    assert!(
+        rd.append_step(StepRecord { n: 1, ..rec }).is_err(),
+        "recorded twice"
+    );
+    // complete refused while steps remain
+    assert!(rd.finish(Status::Complete, None, 1.0).is_err());
+    assert_eq!(load_samples(&dir).unwrap().len(), 1);
+}
+
+#[test]
+fn corrupt_files_are_reported_with_file_and_line() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let p = plan();
+    let mut rd = RunDir::create(&dir, &p, meta()).unwrap();
+    run_step(&mut rd, 0, true);
+    drop(rd);
+    // a garbage (complete) line in steps.csv
+    append_raw(&dir.join(STEPS_CSV), b"1,0,one,,,,,0.37,,7,0,0,1,2\n");
+    let err = RunDir::open_for_resume(&dir, &p).unwrap_err();
+    let msg = err.to_string();
+    assert!(msg.contains("steps.csv:3:"), "{msg}");
+    let err = load(&dir).unwrap_err();
+    assert!(err.to_string().contains("steps.csv:3:"), "{err}");
+
+    // a manifest that does not parse names its line
+    fs::write(
+        dir.join(MANIFEST_JSON),
+        b"{\n\"status\": \"running\",\n  oops\n}",
+    )
+    .unwrap();
+    let err = load(&dir).unwrap_err();
+    assert!(err.to_string().contains("manifest.json:3:"), "{err}");
+}
+
+#[test]
+fn a_step_row_without_its_samples_is_refused_on_resume() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let p = plan();
+    let mut rd = RunDir::create(&dir, &p, meta()).unwrap();
+    run_step(&mut rd, 0, true);
+    drop(rd);
+    // lose the last sample row of step 0 (not something this crate ever writes)
+    let text = fs::read_to_string(dir.join(SAMPLES_CSV)).unwrap();
+    let mut lines: Vec<&str> = text.lines().collect();
+    lines.pop();
+    fs::write(dir.join(SAMPLES_CSV), lines.join("\n") + "\n").unwrap();
+    let err = RunDir::open_for_resume(&dir, &p).unwrap_err();
+    assert!(matches!(err, RunError::Inconsistent { .. }), "{err}");
+    assert!(err.to_string().contains("samples.csv"), "{err}");
+}
