@@ -85,16 +85,51 @@ impl InputError {
 /// assert_eq!(data.points[1].rate_dps, 1.0);
 /// assert_eq!(data.points[1].line, Some(4));
 /// ```
-pub fn parse_csv<R: Read>(reader: R, source: &str) -> Result<Dataset, InputError> {
+pub fn parse_csv<R: Read>(mut reader: R, source: &str) -> Result<Dataset, InputError> {
     let file = source.to_string();
+    // The csv reader's own line count skips comment lines after the header, so lines are
+    // computed from byte offsets over the whole input (calibration files are small).
+    let mut bytes = Vec::new();
+    reader
+        .read_to_end(&mut bytes)
+        .map_err(|e| InputError::Csv {
+            file: file.clone(),
+            line: 1,
+            message: format!("cannot read: {e}"),
+        })?;
+    let newlines: Vec<u64> = bytes
+        .iter()
+        .enumerate()
+        .filter(|(_, b)| **b == b'\n')
+        .map(|(i, _)| i as u64)
+        .collect();
+    // A record's position is where the reader started looking for it, which may be a comment
+    // or blank line before it: skip those to reach the record's own line.
+    let line_of = |pos: &csv::Position| -> u64 {
+        let mut line = newlines.partition_point(|&nl| nl < pos.byte());
+        loop {
+            let start = if line == 0 {
+                0
+            } else {
+                newlines[line - 1] as usize + 1
+            };
+            let end = newlines.get(line).map_or(bytes.len(), |&nl| nl as usize);
+            let text = bytes.get(start..end).unwrap_or(&[]);
+            let skip = text.first() == Some(&b'#') || text.iter().all(u8::is_ascii_whitespace);
+            if !skip || line >= newlines.len() {
+                return line as u64 + 1;
+            }
+            line += 1;
+        }
+    };
     let mut rdr = csv::ReaderBuilder::new()
         .has_headers(true)
         .comment(Some(b'#'))
         .trim(csv::Trim::All)
         .flexible(false)
-        .from_reader(reader);
+        .from_reader(bytes.as_slice());
     let csv_err = |e: csv::Error, fallback_line: u64| {
-        let line = e.position().map_or(fallback_line, |p| p.line());
+        let line = e.position().map_or(fallback_line, line_of);
         let message = match e.kind() {
             csv::ErrorKind::UnequalLengths {
                 expected_len, len, ..
@@ -114,7 +149,7 @@ pub fn parse_csv<R: Read>(reader: R, source: &str) -> Result<Dataset, InputError
     if headers.is_empty() || (headers.len() == 1 && headers[0].is_empty()) {
         return Err(InputError::NoHeader { file });
     }
-    let header_line = headers.position().map_or(1, |p| p.line());
+    let header_line = headers.position().map_or(1, line_of);
     let find = |name: &str| headers.iter().position(|h| h.eq_ignore_ascii_case(name));
     let found = headers.iter().collect::<Vec<_>>().join(", ");
     let missing = |column| InputError::MissingColumn {
@@ -137,7 +172,7 @@ pub fn parse_csv<R: Read>(reader: R, source: &str) -> Result<Dataset, InputError
             Ok(true) => {}
             Err(e) => return Err(csv_err(e, last_line + 1)),
         }
-        let line = record.position().map_or(last_line + 1, |p| p.line());
+        let line = record.position().map_or(last_line + 1, line_of);
         last_line = line;
         // A row of empty cells (e.g. a trailing ",,") is skipped like a blank line.
         if record.iter().all(str::is_empty) {

@@ -219,7 +219,8 @@ impl Fit {
 
     /// Compensation: the rate (°/s) that produces output `volts` according to this fit.
     ///
-    /// Linear: `(D − K0)/K`. Split: the line of the side given by the sign of `D − K0`.
+    /// Linear: `(D − K0)/K`. Split: the line whose side of zero the output falls on; outputs
+    /// between the two lines' intercepts map to 0.
     /// Quadratic and cubic: Newton's method on the polynomial from the linear guess, which finds
     /// the root on the calibrated branch. `None` when no root is found (e.g. `D` outside the
     /// range a quadratic can produce) or the scale factor is zero.
@@ -250,15 +251,16 @@ pub(crate) fn compensate(model: Model, c: &Coefficients, d: f64) -> Option<f64> 
     let finite = |x: f64| if x.is_finite() { Some(x) } else { None };
     match model {
         Model::Split => {
-            let (k0, k) = if d >= c.k0? {
-                (c.k0_pos?, c.k_pos?)
-            } else {
-                (c.k0_neg?, c.k_neg?)
-            };
-            if k == 0.0 {
+            let (k0p, kp, k0n, kn) = (c.k0_pos?, c.k_pos?, c.k0_neg?, c.k_neg?);
+            if kp == 0.0 || kn == 0.0 {
                 return None;
             }
-            finite((d - k0) / k)
+            // Outputs between the two intercepts belong to neither line away from zero.
+            if d >= k0p.min(k0n) && d <= k0p.max(k0n) {
+                return Some(0.0);
+            }
+            let wp = (d - k0p) / kp;
+            finite(if wp > 0.0 { wp } else { (d - k0n) / kn })
         }
         _ => {
             let [k0, k1, k2, k3] = c.polynomial();
