@@ -1,0 +1,192 @@
+//! Transcript tests: the exact bytes the ACL driver writes and how it reads the replies.
+
+use std::time::Duration;
+
+use gyrocal_link::ScriptedTransport;
+use gyrocal_table::acl::{AclConfig, AclTable};
+use gyrocal_table::{RateTable, TableErrorKind, TableState};
+
+const NO_ERROR: &str = "0,\"No error\"";
+
+fn connected(script: ScriptedTransport) -> ScriptedTransport {
+    script
+        .query("*IDN?", "ACUTRONIC,ACUTROL3000,1234,3.1")
+        .query(":System:Error?", NO_ERROR)
+        .query(":Mode? 1", "OFF")
+}
+
+fn enabled(script: ScriptedTransport) -> ScriptedTransport {
+    connected(script)
+        .expect_line(":Interlock:Reset")
+        .expect_line(":Interlock:Close 1")
+        .expect_line(":Limit:Rate R,1,30.000000")
+        .expect_line(":Mode:Rate 1")
+        .query(":System:Error?", NO_ERROR)
+}
+
+#[tokio::test]
+async fn table_transcript_connect_enable_rate_stop() {
+    let script = enabled(ScriptedTransport::new("table"))
+        .expect_line(":Limit:Acceleration R,1,5.000000")
+        .expect_line(":Demand:Rate 1,-0.100000")
+        .query(":System:Error?", NO_ERROR)
+        .query(":Read:Rate? 1", "-0.100012")
+        .query(":Read:Position? 1", "359.500000")
+        .query(":Mode? 1", "RATE")
+        .query("*STB?", "0")
+        .expect_line(":Mode:Off 1")
+        // after a controlled stop the next demand re-enters rate mode first
+        .expect_line(":Mode:Rate 1")
+        .expect_line(":Limit:Acceleration R,1,2.500000")
+        .expect_line(":Demand:Rate 1,10.000000")
+        .query(":System:Error?", NO_ERROR)
+        .expect_line(":Interlock:Open 1");
+    let mut table = AclTable::new(script, AclConfig::default());
+    assert_eq!(table.state(), TableState::Disconnected);
+    let id = table.connect().await.unwrap();
+    assert_eq!((id.manufacturer.as_str(), id.serial.as_str()), ("ACUTRONIC", "1234"));
+    assert_eq!(table.state(), TableState::Connected);
+    table.enable().await.unwrap();
+    assert_eq!(table.state(), TableState::Servoed);
+    table.set_rate(-0.1, 5.0).await.unwrap();
+    assert_eq!(table.state(), TableState::Ramping { target: -0.1 });
+    assert_eq!(table.read_rate().await.unwrap(), -0.100012);
+    assert_eq!(table.read_position().await.unwrap(), 359.5);
+    let status = table.status().await.unwrap();
+    assert!(!status.interlock_event() && !status.error_queued());
+    table.stop().await.unwrap();
+    assert_eq!(table.state(), TableState::Stopping);
+    table.set_rate(10.0, 2.5).await.unwrap();
+    table.emergency_stop().await.unwrap();
+    assert_eq!(table.state(), TableState::Stopping);
+}
+
+#[tokio::test]
+async fn table_limits_are_refused_before_anything_is_sent() {
+    // An empty script: any byte written fails the test.
+    let mut table = AclTable::new(ScriptedTransport::new("table"), AclConfig::default());
+    for (rate, acc) in [(30.001, 1.0), (-31.0, 1.0), (10.0, 0.0), (10.0, -1.0), (10.0, 10.5)] {
+        let err = table.set_rate(rate, acc).await.unwrap_err();
+        assert_eq!(err.kind(), TableErrorKind::Limit, "{err}");
+        assert!(err.to_string().contains("table: refused before sending"), "{err}");
+    }
+    let err = table.set_rate(f64::NAN, 1.0).await.unwrap_err();
+    assert_eq!(err.kind(), TableErrorKind::Limit);
+    // inside the limits but not enabled: a state error, still nothing sent
+    let err = table.set_rate(10.0, 1.0).await.unwrap_err();
+    assert_eq!(err.kind(), TableErrorKind::State, "{err}");
+}
+
+#[tokio::test]
+async fn table_errors_are_surfaced_with_the_tables_text() {
+    let script = connected(ScriptedTransport::new("table"))
+        .expect_line(":Interlock:Reset")
+        .expect_line(":Interlock:Close 1")
+        .expect_line(":Limit:Rate R,1,30.000000")
+        .expect_line(":Mode:Rate 1")
+        .query(":System:Error?", "203,\"Fault latched: Rate trip\"")
+        .query(":System:Error?", "201,\"Interlock open\"")
+        .query(":System:Error?", NO_ERROR);
+    let mut table = AclTable::new(script, AclConfig::default());
+    table.connect().await.unwrap();
+    let err = table.enable().await.unwrap_err();
+    assert_eq!(err.kind(), TableErrorKind::Table);
+    let msg = err.to_string();
+    assert!(msg.contains("203,\"Fault latched: Rate trip\""), "{msg}");
+    assert!(msg.contains(":Interlock:Close 1"), "{msg}");
+    assert_eq!(table.state(), TableState::Connected);
+}
+
+#[tokio::test]
+async fn table_latched_fault_in_a_sample_faults_the_driver_and_stops() {
+    let script = enabled(ScriptedTransport::new("table"))
+        .expect_line(":Limit:Acceleration R,1,5.000000")
+        .expect_line(":Demand:Rate 1,20.000000")
+        .query(":System:Error?", NO_ERROR)
+        .query(":Read:Rate? 1", "9.990000")
+        .query("*STB?", "129")
+        .query(":System:Error?", "220,\"Tracking error limit exceeded\"")
+        .query(":System:Error?", NO_ERROR)
+        .expect_line(":Mode:Off 1");
+    let mut table = AclTable::new(script, AclConfig::default());
+    table.connect().await.unwrap();
+    table.enable().await.unwrap();
+    table.set_rate(20.0, 5.0).await.unwrap();
+    table.start_recording();
+    let err = table.sample().await.unwrap_err();
+    assert_eq!(err.kind(), TableErrorKind::Fault);
+    assert!(err.to_string().contains("220,\"Tracking error limit exceeded\""), "{err}");
+    assert_eq!(table.state(), TableState::Faulted);
+    assert_eq!(table.stop_recording().count, 0, "a faulted sample is not recorded");
+    assert!(table.last_fault().is_some());
+}
+
+#[tokio::test]
+async fn table_silent_heartbeat_is_a_fault_after_a_stop_attempt() {
+    let script = connected(ScriptedTransport::new("table"))
+        .expect_line("*STB?")
+        .silence()
+        .expect_line(":Mode:Off 1")
+        // the next query clears whatever late reply may have arrived, then asks again
+        .query("*STB?", "0");
+    let mut table = AclTable::new(script, AclConfig::default());
+    table.connect().await.unwrap();
+    let err = table.heartbeat().await.unwrap_err();
+    assert_eq!(err.kind(), TableErrorKind::Timeout, "{err}");
+    assert!(err.ends_run());
+    assert_eq!(table.state(), TableState::Faulted);
+    table.heartbeat().await.unwrap();
+}
+
+#[tokio::test]
+async fn table_garbled_replies_name_the_bytes() {
+    let script = connected(ScriptedTransport::new("table"))
+        .query(":Read:Rate? 1", "1.0e\u{1}")
+        .query("*IDN?", "ACUTRONIC,ACUTROL3000");
+    let mut table = AclTable::new(script, AclConfig::default());
+    table.connect().await.unwrap();
+    let err = table.read_rate().await.unwrap_err();
+    assert_eq!(err.kind(), TableErrorKind::Link);
+    assert!(err.to_string().contains("\"1.0e\\x01\""), "{err}");
+    let err = table.connect().await.unwrap_err();
+    assert!(err.to_string().contains("4 comma-separated"), "{err}");
+    // the stale error queue is drained on connect: an unreadable entry is an error too
+    let mut t2 = AclTable::new(
+        ScriptedTransport::new("t2")
+            .query("*IDN?", "A,B,C,D")
+            .query(":System:Error?", "oops"),
+        AclConfig::default(),
+    );
+    let err = t2.connect().await.unwrap_err();
+    assert!(err.to_string().contains("\"oops\""), "{err}");
+    drop(table);
+}
+
+#[tokio::test]
+async fn table_stop_handle_is_idempotent_and_works_from_another_task() {
+    let script = enabled(ScriptedTransport::new("table"))
+        .expect_line(":Mode:Off 1")
+        .expect_line(":Mode:Off 1")
+        .expect_line(":Interlock:Open 1")
+        .expect_line(":Interlock:Open 1")
+        .expect_line(":Mode:Off 1");
+    let mut table = AclTable::new(script, AclConfig::default());
+    table.connect().await.unwrap();
+    table.enable().await.unwrap();
+    let handle = table.stop_handle();
+    let h2 = handle.clone();
+    tokio::spawn(async move {
+        h2.stop().await.unwrap();
+        h2.stop().await.unwrap();
+        h2.emergency_stop().await.unwrap();
+    })
+    .await
+    .unwrap();
+    assert_eq!(table.state(), TableState::Stopping);
+    table.emergency_stop().await.unwrap();
+    // a guard dropped without disarm stops the table (spawned on the runtime)
+    let guard = handle.guard();
+    drop(guard);
+    tokio::time::sleep(Duration::from_millis(10)).await;
+    handle.guard().disarm();
+}
