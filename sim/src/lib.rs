@@ -11,6 +11,7 @@
 //! Fidelity follows `shared/docs/hp34401a.md` and `shared/docs/rate-table.md`; what those leave
 //! open is configurable, with the default documented on the configuration field.
 
+pub mod dmm;
 pub mod signal;
 pub mod table;
 pub mod gyro;

@@ -72,8 +72,16 @@ impl LinkError {
     }
 
     /// Builds an [`LinkError::Io`] with context.
-    pub fn io(device: impl Into<String>, context: impl Into<String>, source: std::io::Error) -> Self {
-        LinkError::Io { device: device.into(), context: context.into(), source }
+    pub fn io(
+        device: impl Into<String>,
+        context: impl Into<String>,
+        source: std::io::Error,
+    ) -> Self {
+        LinkError::Io {
+            device: device.into(),
+            context: context.into(),
+            source,
+        }
     }
 }
 

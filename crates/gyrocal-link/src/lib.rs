@@ -12,14 +12,26 @@
 //! Why lines are cut here and not in the drivers: a reply that arrives in pieces (a serial port
 //! hands over bytes as they come) must never be mistaken for a whole reply, and every driver would
 //! otherwise re-implement the same buffering, CR stripping and timeout handling.
+//!
+//! Opening: [`open`] takes a port string (`/dev/ttyUSB0`, `COM3`, a pseudo-terminal path, or
+//! `tcp://host:port`) and [`LinkOptions`] (baud 300–9600, framing 8N2/7E2/7O2) and returns a
+//! type-erased [`StreamTransport<DynStream>`]. [`memory_pair`] gives an in-memory link for tests in
+//! virtual time, [`pseudo_terminal`] a pseudo-terminal pair for tests through the serial code.
 
 mod error;
+mod open;
 mod scripted;
+mod serial;
 mod stream;
 
 pub use error::{ErrorKind, LinkError, show_bytes};
+pub use open::{TCP_SCHEME, open, open_tcp};
 pub use scripted::{ScriptStep, ScriptedTransport};
+#[cfg(unix)]
+pub use serial::pseudo_terminal;
+pub use serial::{Framing, LinkOptions, SUPPORTED_BAUDS, open_serial};
 pub use stream::{AsyncStream, DynStream, StreamTransport, memory_pair};
+pub use tokio_serial::SerialStream;
 
 use std::future::Future;
 use std::time::Duration;
@@ -57,6 +69,36 @@ pub trait Transport: Send {
     /// Throws away everything received and not yet read (buffered here and already waiting on
     /// the link). Returns how many bytes were dropped. Never waits for more to arrive.
     fn discard_input(&mut self) -> impl Future<Output = Result<usize, LinkError>> + Send;
+
+    /// Reads the next piece of a line: the text up to `sep` or the end of the line, whichever
+    /// comes first (neither included; a CR before the LF is stripped). Lets a driver parse a long
+    /// reply (thousands of comma-separated readings on one line) as it arrives. `timeout` applies
+    /// to this piece.
+    ///
+    /// The provided implementation returns the whole line as one piece; [`StreamTransport`] and
+    /// [`ScriptedTransport`] split it, so callers must accept either (split every piece on `sep`).
+    fn read_field(
+        &mut self,
+        sep: u8,
+        timeout: Option<Duration>,
+    ) -> impl Future<Output = Result<Field, LinkError>> + Send {
+        let _ = sep;
+        async move {
+            Ok(Field {
+                text: self.read_line(timeout).await?,
+                end_of_line: true,
+            })
+        }
+    }
+}
+
+/// A piece of a line returned by [`Transport::read_field`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Field {
+    /// The text, without the separator or the line terminator.
+    pub text: String,
+    /// True when the piece ended the line (LF), false when it ended at the separator.
+    pub end_of_line: bool,
 }
 
 impl<T: Transport + ?Sized> Transport for &mut T {
@@ -77,5 +119,12 @@ impl<T: Transport + ?Sized> Transport for &mut T {
     }
     fn discard_input(&mut self) -> impl Future<Output = Result<usize, LinkError>> + Send {
         (**self).discard_input()
+    }
+    fn read_field(
+        &mut self,
+        sep: u8,
+        timeout: Option<Duration>,
+    ) -> impl Future<Output = Result<Field, LinkError>> + Send {
+        (**self).read_field(sep, timeout)
     }
 }

@@ -9,7 +9,7 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use crate::{LinkError, Transport};
+use crate::{Field, LinkError, Transport};
 
 /// One step of a transcript.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -36,12 +36,18 @@ pub struct ScriptedTransport {
 impl ScriptedTransport {
     /// An empty script.
     pub fn new(name: impl Into<String>) -> Self {
-        ScriptedTransport { name: name.into(), steps: VecDeque::new(), log: Vec::new(), checked: false }
+        ScriptedTransport {
+            name: name.into(),
+            steps: VecDeque::new(),
+            log: Vec::new(),
+            checked: false,
+        }
     }
 
     /// Expects the driver to send `line` followed by LF.
     pub fn expect_line(mut self, line: &str) -> Self {
-        self.steps.push_back(ScriptStep::Write(format!("{line}\n").into_bytes()));
+        self.steps
+            .push_back(ScriptStep::Write(format!("{line}\n").into_bytes()));
         self
     }
 
@@ -107,7 +113,11 @@ impl ScriptedTransport {
 
     fn fail(&mut self, what: String) -> ! {
         self.checked = true;
-        panic!("{}: {what}\ntranscript:\n{}", self.name, self.log.join("\n"));
+        panic!(
+            "{}: {what}\ntranscript:\n{}",
+            self.name,
+            self.log.join("\n")
+        );
     }
 }
 
@@ -133,7 +143,10 @@ impl Transport for ScriptedTransport {
             }
             Some(ScriptStep::Disconnect) => {
                 self.log.push(format!("> {shown} (disconnected)"));
-                Err(LinkError::Disconnected { device: self.name.clone(), partial: Vec::new() })
+                Err(LinkError::Disconnected {
+                    device: self.name.clone(),
+                    partial: Vec::new(),
+                })
             }
             Some(ScriptStep::Write(expected)) => self.fail(format!(
                 "driver wrote {shown}, script expected {}",
@@ -164,11 +177,16 @@ impl Transport for ScriptedTransport {
             Some(ScriptStep::Disconnect) => {
                 self.steps.pop_front();
                 self.log.push("< (disconnected)".into());
-                Err(LinkError::Disconnected { device: self.name.clone(), partial: Vec::new() })
+                Err(LinkError::Disconnected {
+                    device: self.name.clone(),
+                    partial: Vec::new(),
+                })
             }
             Some(ScriptStep::Write(w)) => {
                 let w = crate::show_bytes(w);
-                self.fail(format!("driver read a reply, script expected it to write {w}"))
+                self.fail(format!(
+                    "driver read a reply, script expected it to write {w}"
+                ))
             }
             None => self.fail("driver read a reply after the end of the script".into()),
         }
@@ -177,6 +195,27 @@ impl Transport for ScriptedTransport {
     async fn discard_input(&mut self) -> Result<usize, LinkError> {
         self.log.push("(discard input)".into());
         Ok(0)
+    }
+
+    /// Splits the next reply at `sep`: the rest stays in the script as the next reply piece.
+    async fn read_field(&mut self, sep: u8, timeout: Option<Duration>) -> Result<Field, LinkError> {
+        if let Some(ScriptStep::Reply(line)) = self.steps.front_mut()
+            && let Some(pos) = line.bytes().position(|b| b == sep)
+        {
+            let rest = line.split_off(pos + 1);
+            line.pop();
+            let text = std::mem::replace(line, rest);
+            self.log.push(format!("< {text:?} (piece)"));
+            return Ok(Field {
+                text,
+                end_of_line: false,
+            });
+        }
+        let text = self.read_line(timeout).await?;
+        Ok(Field {
+            text,
+            end_of_line: true,
+        })
     }
 }
 
@@ -187,12 +226,33 @@ mod tests {
 
     #[tokio::test]
     async fn replays_and_checks() {
-        let mut t = ScriptedTransport::new("dmm").query("*IDN?", "HP").silence().expect_raw(&[3]);
+        let mut t = ScriptedTransport::new("dmm")
+            .query("*IDN?", "HP")
+            .silence()
+            .expect_raw(&[3]);
         t.send_line("*IDN?").await.unwrap();
         assert_eq!(t.read_line(None).await.unwrap(), "HP");
-        assert_eq!(t.read_line(None).await.unwrap_err().kind(), ErrorKind::Timeout);
+        assert_eq!(
+            t.read_line(None).await.unwrap_err().kind(),
+            ErrorKind::Timeout
+        );
         t.write_raw(&[3]).await.unwrap();
         t.done();
+    }
+
+    #[tokio::test]
+    async fn fields_are_split_from_replies() {
+        let mut t = ScriptedTransport::new("dmm").query("FETC?", "+1,+2,+3");
+        t.send_line("FETC?").await.unwrap();
+        let mut got = Vec::new();
+        loop {
+            let f = t.read_field(b',', None).await.unwrap();
+            got.push(f.text);
+            if f.end_of_line {
+                break;
+            }
+        }
+        assert_eq!(got, ["+1", "+2", "+3"]);
     }
 
     #[tokio::test]

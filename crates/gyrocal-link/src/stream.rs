@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, DuplexStream};
 
-use crate::{LinkError, Transport};
+use crate::{Field, LinkError, Transport};
 
 /// Any bidirectional async byte stream that can back a [`StreamTransport`].
 pub trait AsyncStream: AsyncRead + AsyncWrite + Send + Unpin {}
@@ -31,7 +31,12 @@ pub struct StreamTransport<S> {
 impl<S: AsyncStream> StreamTransport<S> {
     /// Wraps `stream`; `name` is what error messages call the link.
     pub fn new(stream: S, name: impl Into<String>) -> Self {
-        StreamTransport { stream, name: name.into(), buf: Vec::new(), max_line: DEFAULT_MAX_LINE }
+        StreamTransport {
+            stream,
+            name: name.into(),
+            buf: Vec::new(),
+            max_line: DEFAULT_MAX_LINE,
+        }
     }
 
     /// Sets the longest line accepted before the input is declared garbled.
@@ -78,45 +83,36 @@ impl<S: AsyncStream> StreamTransport<S> {
         }))
     }
 
-    async fn fill(&mut self) -> Result<usize, LinkError> {
-        let mut chunk = [0u8; 4096];
-        let n = self
-            .stream
-            .read(&mut chunk)
-            .await
-            .map_err(|e| LinkError::io(&self.name, "reading", e))?;
-        self.buf.extend_from_slice(&chunk[..n]);
-        Ok(n)
-    }
-}
-
-impl<S: AsyncStream> Transport for StreamTransport<S> {
-    fn describe(&self) -> &str {
-        &self.name
-    }
-
-    async fn write_raw(&mut self, bytes: &[u8]) -> Result<(), LinkError> {
-        let res = async {
-            self.stream.write_all(bytes).await?;
-            self.stream.flush().await
+    /// Takes one piece (up to `sep` or LF) out of the buffer, if there is one.
+    fn take_field(&mut self, sep: u8) -> Option<Result<Field, LinkError>> {
+        let pos = self.buf.iter().position(|&b| b == b'\n' || b == sep)?;
+        let end_of_line = self.buf[pos] == b'\n';
+        let mut text: Vec<u8> = self.buf.drain(..=pos).collect();
+        text.pop();
+        if end_of_line && text.last() == Some(&b'\r') {
+            text.pop();
         }
-        .await;
-        res.map_err(|e| match e.kind() {
-            std::io::ErrorKind::BrokenPipe
-            | std::io::ErrorKind::ConnectionReset
-            | std::io::ErrorKind::ConnectionAborted
-            | std::io::ErrorKind::NotConnected => {
-                LinkError::Disconnected { device: self.name.clone(), partial: Vec::new() }
-            }
-            _ => LinkError::io(&self.name, "writing", e),
-        })
+        Some(
+            String::from_utf8(text)
+                .map(|text| Field { text, end_of_line })
+                .map_err(|e| LinkError::Garbled {
+                    device: self.name.clone(),
+                    reason: "reply is not valid text".into(),
+                    bytes: e.into_bytes(),
+                }),
+        )
     }
 
-    async fn read_line(&mut self, timeout: Option<Duration>) -> Result<String, LinkError> {
+    /// Reads until `take` yields something, the deadline passes or the peer goes away.
+    async fn read_with<R>(
+        &mut self,
+        timeout: Option<Duration>,
+        mut take: impl FnMut(&mut Self) -> Option<Result<R, LinkError>>,
+    ) -> Result<R, LinkError> {
         let deadline = timeout.map(|t| tokio::time::Instant::now() + t);
         loop {
-            if let Some(line) = self.take_line() {
-                return line;
+            if let Some(item) = take(self) {
+                return item;
             }
             if self.buf.len() > self.max_line {
                 let bytes = std::mem::take(&mut self.buf);
@@ -146,6 +142,49 @@ impl<S: AsyncStream> Transport for StreamTransport<S> {
                 });
             }
         }
+    }
+
+    async fn fill(&mut self) -> Result<usize, LinkError> {
+        let mut chunk = [0u8; 4096];
+        let n = self
+            .stream
+            .read(&mut chunk)
+            .await
+            .map_err(|e| LinkError::io(&self.name, "reading", e))?;
+        self.buf.extend_from_slice(&chunk[..n]);
+        Ok(n)
+    }
+}
+
+impl<S: AsyncStream> Transport for StreamTransport<S> {
+    fn describe(&self) -> &str {
+        &self.name
+    }
+
+    async fn write_raw(&mut self, bytes: &[u8]) -> Result<(), LinkError> {
+        let res = async {
+            self.stream.write_all(bytes).await?;
+            self.stream.flush().await
+        }
+        .await;
+        res.map_err(|e| match e.kind() {
+            std::io::ErrorKind::BrokenPipe
+            | std::io::ErrorKind::ConnectionReset
+            | std::io::ErrorKind::ConnectionAborted
+            | std::io::ErrorKind::NotConnected => LinkError::Disconnected {
+                device: self.name.clone(),
+                partial: Vec::new(),
+            },
+            _ => LinkError::io(&self.name, "writing", e),
+        })
+    }
+
+    async fn read_line(&mut self, timeout: Option<Duration>) -> Result<String, LinkError> {
+        self.read_with(timeout, Self::take_line).await
+    }
+
+    async fn read_field(&mut self, sep: u8, timeout: Option<Duration>) -> Result<Field, LinkError> {
+        self.read_with(timeout, |s| s.take_field(sep)).await
     }
 
     async fn discard_input(&mut self) -> Result<usize, LinkError> {
@@ -182,14 +221,23 @@ mod tests {
     async fn lines_are_split_and_cr_stripped() {
         let (mut t, mut dev) = memory_pair("mem");
         dev.write_all(b"+1.0E+00\r\nNEXT\npart").await.unwrap();
-        assert_eq!(t.read_line(Some(Duration::from_secs(1))).await.unwrap(), "+1.0E+00");
-        assert_eq!(t.read_line(Some(Duration::from_secs(1))).await.unwrap(), "NEXT");
+        assert_eq!(
+            t.read_line(Some(Duration::from_secs(1))).await.unwrap(),
+            "+1.0E+00"
+        );
+        assert_eq!(
+            t.read_line(Some(Duration::from_secs(1))).await.unwrap(),
+            "NEXT"
+        );
         let err = t.read_line(Some(Duration::from_secs(1))).await.unwrap_err();
         assert_eq!(err.kind(), ErrorKind::Timeout);
         assert!(err.to_string().contains("part"), "{err}");
         // the partial line is kept and completed by later bytes
         dev.write_all(b"ial\n").await.unwrap();
-        assert_eq!(t.read_line(Some(Duration::from_secs(1))).await.unwrap(), "partial");
+        assert_eq!(
+            t.read_line(Some(Duration::from_secs(1))).await.unwrap(),
+            "partial"
+        );
     }
 
     #[tokio::test(start_paused = true)]
@@ -217,5 +265,25 @@ mod tests {
         dev.write_all(&[b'x'; 40]).await.unwrap();
         let err = t.read_line(Some(Duration::from_secs(1))).await.unwrap_err();
         assert_eq!(err.kind(), ErrorKind::Garbled);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn fields_split_on_separator_and_line_end() {
+        let (mut t, mut dev) = memory_pair("mem");
+        dev.write_all(b"+1.0E+00,+2.0E+00,+3.0").await.unwrap();
+        let s = Some(Duration::from_secs(1));
+        let f = t.read_field(b',', s).await.unwrap();
+        assert_eq!((f.text.as_str(), f.end_of_line), ("+1.0E+00", false));
+        let f = t.read_field(b',', s).await.unwrap();
+        assert_eq!((f.text.as_str(), f.end_of_line), ("+2.0E+00", false));
+        // an unterminated last piece is not returned
+        assert_eq!(
+            t.read_field(b',', s).await.unwrap_err().kind(),
+            ErrorKind::Timeout
+        );
+        dev.write_all(b"E+00\r\nNEXT\n").await.unwrap();
+        let f = t.read_field(b',', s).await.unwrap();
+        assert_eq!((f.text.as_str(), f.end_of_line), ("+3.0E+00", true));
+        assert_eq!(t.read_line(s).await.unwrap(), "NEXT");
     }
 }

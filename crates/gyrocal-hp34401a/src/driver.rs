@@ -1,0 +1,612 @@
+//! [`Hp34401a`]: the driver proper.
+
+use std::time::Duration;
+
+use gyrocal_link::{DEVICE_CLEAR, Transport};
+use tokio::time::Instant;
+
+use crate::timing::{MAX_SAMPLE_COUNT, MEMORY_READINGS, Strategy, Timing};
+use crate::{DcvConfig, Error, InstrumentError, Reading, TriggerSource, parse_reading};
+
+/// Driver settings that are not the meter's measurement configuration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DriverOptions {
+    /// How many times an acquisition step (a stream, a burst, a polled reading) is retried after
+    /// a timeout or a garbled reply, with a device clear before each retry. Default 2.
+    pub retries: u32,
+    /// Timeout for short replies (`*IDN?`, `SYST:ERR?`, `*OPC?` after commands). Default 3 s,
+    /// enough for `*IDN?` at 300 baud.
+    pub query_timeout: Duration,
+    /// Acquisition timeouts are `factor * expected + slack`, the expected time from the timing
+    /// model. Default factor 1.5.
+    pub timeout_factor: f64,
+    /// See `timeout_factor`. Default 1 s.
+    pub timeout_slack: Duration,
+    /// Send `SYST:RWL` (also locks the front panel's LOCAL key) instead of `SYST:REM`.
+    /// Default false.
+    pub lock_front_panel: bool,
+    /// Pause after a device clear before stale input is thrown away. Default 100 ms.
+    pub clear_settle: Duration,
+    /// Most characters of commands sent without a reply read in between; past it the driver
+    /// inserts `*OPC?` and waits for its `1`. The meter's input buffer holds about 100.
+    /// Default 80.
+    pub in_flight_budget: usize,
+}
+
+impl Default for DriverOptions {
+    fn default() -> Self {
+        DriverOptions {
+            retries: 2,
+            query_timeout: Duration::from_secs(3),
+            timeout_factor: 1.5,
+            timeout_slack: Duration::from_secs(1),
+            lock_front_panel: false,
+            clear_settle: Duration::from_millis(100),
+            in_flight_budget: 80,
+        }
+    }
+}
+
+/// What `*IDN?` said.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Identity {
+    /// `HEWLETT-PACKARD` (later units: Agilent, Keysight).
+    pub manufacturer: String,
+    /// `34401A`.
+    pub model: String,
+    /// Serial field (`0` on the 34401A).
+    pub serial: String,
+    /// Firmware revisions, such as `11-5-2`.
+    pub firmware: String,
+    /// The whole reply.
+    pub raw: String,
+}
+
+impl Identity {
+    /// Parses a `*IDN?` reply; `None` unless it names a 34401A.
+    pub fn parse(reply: &str) -> Option<Identity> {
+        let f: Vec<&str> = reply.split(',').map(str::trim).collect();
+        if f.len() != 4 || !f[1].eq_ignore_ascii_case("34401A") {
+            return None;
+        }
+        Some(Identity {
+            manufacturer: f[0].to_string(),
+            model: f[1].to_string(),
+            serial: f[2].to_string(),
+            firmware: f[3].to_string(),
+            raw: reply.to_string(),
+        })
+    }
+}
+
+/// Progress of an acquisition: `done` of `total` readings received.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Progress {
+    /// Readings received so far.
+    pub done: usize,
+    /// Readings asked for.
+    pub total: usize,
+}
+
+/// A progress callback (see [`Hp34401a::set_progress`]).
+pub type ProgressFn = Box<dyn FnMut(Progress) + Send>;
+
+/// The result of [`Hp34401a::acquire`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Acquisition {
+    /// Every reading, in order, overloads included.
+    pub readings: Vec<Reading>,
+    /// The strategy used (`Auto` resolved).
+    pub strategy: Strategy,
+    /// Retries needed (each after a device clear).
+    pub retries: u32,
+    /// When the acquisition started (tokio clock).
+    pub started: Instant,
+    /// How long it took.
+    pub elapsed: Duration,
+}
+
+impl Acquisition {
+    /// The voltages, overloads left out.
+    pub fn volts(&self) -> Vec<f64> {
+        self.readings.iter().filter_map(|r| r.volts()).collect()
+    }
+
+    /// How many readings were overloads.
+    pub fn overloads(&self) -> usize {
+        self.readings.iter().filter(|r| r.is_overload()).count()
+    }
+}
+
+/// A memory burst in progress: from [`Hp34401a::arm_burst`] to [`Hp34401a::fetch`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Burst {
+    /// Readings the burst takes.
+    pub count: usize,
+    /// When `INIT;*OPC?` was sent.
+    pub armed_at: Instant,
+    /// Expected time from arming to the `1` of `*OPC?`.
+    pub expected: Duration,
+}
+
+/// The HP 34401A driver, generic over its link.
+///
+/// Protocol rules it keeps: never more than one query outstanding (every reply is read before
+/// anything else is sent); never more than [`DriverOptions::in_flight_budget`] characters of
+/// commands unacknowledged; every command line short.
+pub struct Hp34401a<T: Transport> {
+    link: T,
+    options: DriverOptions,
+    identity: Option<Identity>,
+    config: Option<DcvConfig>,
+    in_flight: usize,
+    progress: Option<ProgressFn>,
+}
+
+impl<T: Transport> Hp34401a<T> {
+    /// Wraps a link. Nothing is sent until [`Hp34401a::connect`].
+    pub fn new(link: T, options: DriverOptions) -> Self {
+        Hp34401a {
+            link,
+            options,
+            identity: None,
+            config: None,
+            in_flight: 0,
+            progress: None,
+        }
+    }
+
+    /// The link's description.
+    pub fn device(&self) -> &str {
+        self.link.describe()
+    }
+
+    /// The identity read by [`Hp34401a::connect`].
+    pub fn identity(&self) -> Option<&Identity> {
+        self.identity.as_ref()
+    }
+
+    /// The configuration applied by [`Hp34401a::configure`].
+    pub fn config(&self) -> Option<&DcvConfig> {
+        self.config.as_ref()
+    }
+
+    /// The timing model of the applied configuration.
+    pub fn timing(&self) -> Option<Timing> {
+        self.config.as_ref().map(Timing::new)
+    }
+
+    /// The driver options.
+    pub fn options(&self) -> &DriverOptions {
+        &self.options
+    }
+
+    /// Calls `f` with every reading received ("acquiring k of N").
+    pub fn set_progress(&mut self, f: impl FnMut(Progress) + Send + 'static) {
+        self.progress = Some(Box::new(f));
+    }
+
+    /// Removes the progress callback.
+    pub fn clear_progress(&mut self) {
+        self.progress = None;
+    }
+
+    /// The link back, without saying goodbye (see [`Hp34401a::close`]).
+    pub fn into_inner(self) -> T {
+        self.link
+    }
+
+    /// Device clear, `SYST:REM` (or `SYST:RWL`), `*IDN?` checked to be a 34401A, `*RST;*CLS`,
+    /// then the error queue drained (entries left from before are logged).
+    pub async fn connect(&mut self) -> Result<&Identity, Error> {
+        self.device_clear().await?;
+        let remote = if self.options.lock_front_panel {
+            "SYST:RWL"
+        } else {
+            "SYST:REM"
+        };
+        self.command(remote).await?;
+        let reply = self.query("*IDN?", self.options.query_timeout).await?;
+        let Some(id) = Identity::parse(&reply) else {
+            return Err(Error::NotA34401A {
+                device: self.device().to_string(),
+                reply,
+            });
+        };
+        tracing::info!(device = self.device(), idn = %id.raw, "34401A connected");
+        self.command("*RST;*CLS").await?;
+        self.config = None;
+        for e in self.drain_errors().await? {
+            tracing::warn!(device = self.device(), error = %e, "stale error after *RST;*CLS");
+        }
+        Ok(self.identity.insert(id))
+    }
+
+    /// Hands the meter back to its front panel (`SYST:LOC`) and returns the link.
+    pub async fn close(mut self) -> Result<T, Error> {
+        self.command("SYST:LOC").await?;
+        Ok(self.link)
+    }
+
+    /// Configures DC volts. `config` is validated before anything is sent; afterwards the error
+    /// queue must be empty, or the error carries the meter's messages.
+    pub async fn configure(&mut self, config: &DcvConfig) -> Result<(), Error> {
+        config.validate()?;
+        self.config = None;
+        for line in config.commands() {
+            self.command(&line).await?;
+        }
+        let errors = self.drain_errors().await?;
+        if !errors.is_empty() {
+            return Err(Error::Instrument {
+                device: self.device().to_string(),
+                context: "configuring DC volts".into(),
+                errors,
+            });
+        }
+        self.config = Some(config.clone());
+        Ok(())
+    }
+
+    /// Reads the whole error queue (until `+0,"No error"`), oldest first.
+    pub async fn drain_errors(&mut self) -> Result<Vec<InstrumentError>, Error> {
+        let mut out = Vec::new();
+        // 20 entries at most, plus the overflow entry; a few more in case new ones arrive
+        for _ in 0..24 {
+            let reply = self.query("SYST:ERR?", self.options.query_timeout).await?;
+            let e = parse_error(&reply).ok_or_else(|| Error::InvalidReply {
+                device: self.device().to_string(),
+                expected: "an error-queue entry",
+                bytes: reply.into_bytes(),
+            })?;
+            if e.code == 0 {
+                break;
+            }
+            out.push(e);
+        }
+        Ok(out)
+    }
+
+    /// Recovery after a timeout or a garbled reply: device clear (0x03), stale input thrown
+    /// away, error queue drained. Returns the errors that were in the queue.
+    pub async fn recover(&mut self) -> Result<Vec<InstrumentError>, Error> {
+        self.device_clear().await?;
+        let errors = self.drain_errors().await?;
+        for e in &errors {
+            tracing::info!(device = self.device(), error = %e, "error queue entry after device clear");
+        }
+        Ok(errors)
+    }
+
+    /// Acquires `n` readings with `strategy`, retrying each step (the stream, a memory burst, a
+    /// polled reading) after a timeout or garbled reply up to [`DriverOptions::retries`] times
+    /// in all, with [`Hp34401a::recover`] before each retry.
+    pub async fn acquire(&mut self, n: usize, strategy: Strategy) -> Result<Acquisition, Error> {
+        let timing = self.acquisition_timing()?;
+        let strategy = timing.resolve(strategy);
+        let started = Instant::now();
+        tracing::debug!(
+            device = self.device(),
+            n,
+            ?strategy,
+            expected_s = timing.estimate(strategy, n).as_secs_f64(),
+            "acquisition"
+        );
+        let mut readings = Vec::with_capacity(n);
+        let mut failures = 0;
+        match strategy {
+            Strategy::Stream | Strategy::Auto => {
+                while readings.len() < n {
+                    let k = (n - readings.len()).min(MAX_SAMPLE_COUNT);
+                    match self.stream(k, readings.len(), n, &timing).await {
+                        Ok(r) => readings.extend(r),
+                        Err(e) => self.after_failure(e, &mut failures).await?,
+                    }
+                }
+            }
+            Strategy::Memory => {
+                while readings.len() < n {
+                    let k = (n - readings.len()).min(MEMORY_READINGS);
+                    let base = readings.len();
+                    match self.burst(k, base, n).await {
+                        Ok(r) => readings.extend(r),
+                        Err(e) => self.after_failure(e, &mut failures).await?,
+                    }
+                }
+            }
+            Strategy::Poll => {
+                let mut counted = false;
+                while readings.len() < n {
+                    let step = async {
+                        if !counted {
+                            self.command("SAMP:COUN 1").await?;
+                        }
+                        self.poll_once(&timing).await
+                    };
+                    match step.await {
+                        Ok(r) => {
+                            counted = true;
+                            readings.push(r);
+                            self.report(readings.len(), n);
+                        }
+                        Err(e) => {
+                            counted = false;
+                            self.after_failure(e, &mut failures).await?;
+                        }
+                    }
+                }
+            }
+        }
+        Ok(Acquisition {
+            readings,
+            strategy,
+            retries: failures,
+            started,
+            elapsed: started.elapsed(),
+        })
+    }
+
+    /// Memory mode, first step: `SAMP:COUN n` and `INIT;*OPC?` (1 <= n <= 512). The meter now
+    /// measures and hears nothing until the burst ends; the `*OPC?` is outstanding, so send
+    /// nothing to the meter before [`Hp34401a::wait_burst`]. No retries at this level.
+    pub async fn arm_burst(&mut self, n: usize) -> Result<Burst, Error> {
+        let timing = self.acquisition_timing()?;
+        if n == 0 || n > MEMORY_READINGS {
+            return Err(Error::Config(format!(
+                "a memory burst holds 1 to 512 readings, not {n}"
+            )));
+        }
+        self.command(&format!("SAMP:COUN {n}")).await?;
+        self.send_query("INIT;*OPC?").await?;
+        let expected = timing.burst_time(n);
+        Ok(Burst {
+            count: n,
+            armed_at: Instant::now(),
+            expected,
+        })
+    }
+
+    /// Memory mode, second step: waits for the `1` that ends the burst.
+    pub async fn wait_burst(&mut self, burst: &Burst) -> Result<(), Error> {
+        let deadline = burst.armed_at + self.scaled(burst.expected);
+        let timeout = deadline
+            .saturating_duration_since(Instant::now())
+            .max(self.options.timeout_slack);
+        let reply = self.link.read_line(Some(timeout)).await?;
+        self.in_flight = 0;
+        if reply.trim() != "1" {
+            return Err(Error::InvalidReply {
+                device: self.device().to_string(),
+                expected: "1 from *OPC? at the end of the burst",
+                bytes: reply.into_bytes(),
+            });
+        }
+        Ok(())
+    }
+
+    /// Memory mode, third step: `FETC?` and the burst's readings, parsed as they arrive. The
+    /// table can move meanwhile (it is on another link).
+    pub async fn fetch(&mut self, burst: &Burst) -> Result<Vec<Reading>, Error> {
+        self.fetch_progress(burst, 0, burst.count).await
+    }
+
+    async fn fetch_progress(
+        &mut self,
+        burst: &Burst,
+        base: usize,
+        total: usize,
+    ) -> Result<Vec<Reading>, Error> {
+        let timing = self.acquisition_timing()?;
+        self.send_query("FETC?").await?;
+        let first = self.scaled(timing.command_time("FETC?") + timing.wire_time_per_reading());
+        let next = self.scaled(timing.wire_time_per_reading());
+        self.read_readings(burst.count, first, next, base, total)
+            .await
+    }
+
+    async fn burst(&mut self, k: usize, base: usize, total: usize) -> Result<Vec<Reading>, Error> {
+        let b = self.arm_burst(k).await?;
+        self.wait_burst(&b).await?;
+        self.fetch_progress(&b, base, total).await
+    }
+
+    async fn stream(
+        &mut self,
+        k: usize,
+        base: usize,
+        total: usize,
+        timing: &Timing,
+    ) -> Result<Vec<Reading>, Error> {
+        self.command(&format!("SAMP:COUN {k}")).await?;
+        self.send_query("READ?").await?;
+        let first = self.scaled(
+            timing.command_time("READ?")
+                + timing.arming_time()
+                + timing.reading_time()
+                + timing.wire_time_per_reading(),
+        );
+        let next = self.scaled(timing.reading_time().max(timing.wire_time_per_reading()));
+        self.read_readings(k, first, next, base, total).await
+    }
+
+    async fn poll_once(&mut self, timing: &Timing) -> Result<Reading, Error> {
+        let reply = self.query("READ?", self.scaled(timing.poll_time())).await?;
+        parse_reading(&reply).ok_or_else(|| Error::InvalidReply {
+            device: self.device().to_string(),
+            expected: "one reading",
+            bytes: reply.into_bytes(),
+        })
+    }
+
+    /// Reads `k` comma-separated readings ending one line, parsing each as it arrives.
+    async fn read_readings(
+        &mut self,
+        k: usize,
+        first: Duration,
+        next: Duration,
+        base: usize,
+        total: usize,
+    ) -> Result<Vec<Reading>, Error> {
+        let mut out = Vec::with_capacity(k);
+        let mut timeout = first;
+        loop {
+            let field = self.link.read_field(b',', Some(timeout)).await?;
+            for piece in field.text.split(',') {
+                if out.len() >= k {
+                    return Err(self.wrong_count(k, out.len() + 1));
+                }
+                let r = parse_reading(piece).ok_or_else(|| Error::InvalidReply {
+                    device: self.device().to_string(),
+                    expected: "a reading",
+                    bytes: piece.as_bytes().to_vec(),
+                })?;
+                out.push(r);
+                self.report(base + out.len(), total);
+            }
+            if field.end_of_line {
+                break;
+            }
+            timeout = next;
+        }
+        self.in_flight = 0;
+        if out.len() != k {
+            return Err(self.wrong_count(k, out.len()));
+        }
+        Ok(out)
+    }
+
+    fn wrong_count(&self, expected: usize, got: usize) -> Error {
+        Error::WrongCount {
+            device: self.device().to_string(),
+            expected,
+            got,
+        }
+    }
+
+    fn report(&mut self, done: usize, total: usize) {
+        if let Some(f) = self.progress.as_mut() {
+            f(Progress { done, total });
+        }
+    }
+
+    fn acquisition_timing(&self) -> Result<Timing, Error> {
+        let config = self.config.as_ref().ok_or(Error::NotConfigured)?;
+        if config.trigger_source != TriggerSource::Immediate {
+            return Err(Error::Config(
+                "acquisition needs the immediate trigger source (TRIG:SOUR IMM)".into(),
+            ));
+        }
+        Ok(Timing::new(config))
+    }
+
+    /// Decides after a failed step: retry (after recovery) or give up.
+    async fn after_failure(&mut self, error: Error, failures: &mut u32) -> Result<(), Error> {
+        let mut error = error;
+        loop {
+            if !error.is_retryable() {
+                return Err(error);
+            }
+            if *failures >= self.options.retries {
+                return Err(Error::GaveUp {
+                    device: self.device().to_string(),
+                    attempts: *failures + 1,
+                    last: Box::new(error),
+                });
+            }
+            *failures += 1;
+            tracing::warn!(
+                device = self.device(),
+                retry = *failures,
+                of = self.options.retries,
+                %error,
+                "acquisition step failed; device clear and retry"
+            );
+            match self.recover().await {
+                Ok(_) => return Ok(()),
+                Err(e) => error = e,
+            }
+        }
+    }
+
+    fn scaled(&self, expected: Duration) -> Duration {
+        expected.mul_f64(self.options.timeout_factor.max(1.0)) + self.options.timeout_slack
+    }
+
+    async fn device_clear(&mut self) -> Result<(), Error> {
+        self.link.write_raw(&[DEVICE_CLEAR]).await?;
+        self.in_flight = 0;
+        tokio::time::sleep(self.options.clear_settle).await;
+        let dropped = self.link.discard_input().await?;
+        if dropped > 0 {
+            tracing::debug!(
+                device = self.device(),
+                dropped,
+                "stale input discarded after device clear"
+            );
+        }
+        Ok(())
+    }
+
+    /// Makes room for `len` more characters within the in-flight budget.
+    async fn make_room(&mut self, len: usize) -> Result<(), Error> {
+        if self.in_flight > 0 && self.in_flight + len > self.options.in_flight_budget {
+            let reply = self.query("*OPC?", self.options.query_timeout).await?;
+            if reply.trim() != "1" {
+                return Err(Error::InvalidReply {
+                    device: self.device().to_string(),
+                    expected: "1 from *OPC?",
+                    bytes: reply.into_bytes(),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Sends a command (no reply expected).
+    async fn command(&mut self, line: &str) -> Result<(), Error> {
+        self.make_room(line.len() + 1).await?;
+        self.link.send_line(line).await?;
+        self.in_flight += line.len() + 1;
+        Ok(())
+    }
+
+    /// Sends a query; its reply must be read before anything else is sent.
+    async fn send_query(&mut self, line: &str) -> Result<(), Error> {
+        self.make_room(line.len() + 1).await?;
+        self.link.send_line(line).await?;
+        self.in_flight += line.len() + 1;
+        Ok(())
+    }
+
+    /// Sends a query and reads its one-line reply.
+    async fn query(&mut self, line: &str, timeout: Duration) -> Result<String, Error> {
+        if self.in_flight > 0 && self.in_flight + line.len() + 1 > self.options.in_flight_budget {
+            // `make_room` would recurse through `query`; an *OPC? fits any budget on its own
+            self.link.send_line("*OPC?").await?;
+            let r = self
+                .link
+                .read_line(Some(self.options.query_timeout))
+                .await?;
+            self.in_flight = 0;
+            if r.trim() != "1" {
+                return Err(Error::InvalidReply {
+                    device: self.device().to_string(),
+                    expected: "1 from *OPC?",
+                    bytes: r.into_bytes(),
+                });
+            }
+        }
+        self.link.send_line(line).await?;
+        let reply = self.link.read_line(Some(timeout)).await?;
+        self.in_flight = 0;
+        Ok(reply)
+    }
+}
+
+/// Parses an error-queue entry such as `-222,"Data out of range"` or `+0,"No error"`.
+pub fn parse_error(reply: &str) -> Option<InstrumentError> {
+    let (code, message) = reply.split_once(',')?;
+    let code: i32 = code.trim().trim_start_matches('+').parse().ok()?;
+    let message = message.trim().trim_matches('"').to_string();
+    Some(InstrumentError { code, message })
+}

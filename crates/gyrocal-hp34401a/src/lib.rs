@@ -1,0 +1,47 @@
+//! # gyrocal-hp34401a
+//!
+//! A driver for the HP 34401A digital multimeter over RS-232 (or TCP through a serial
+//! converter), generic over [`gyrocal_link::Transport`] so the same code runs on a real port, a
+//! pseudo-terminal, an in-memory pipe to the simulator in virtual time, or a transcript.
+//!
+//! Why it looks the way it does (see `shared/docs/hp34401a.md`):
+//!
+//! - the meter answers nothing sensible until `SYST:REM`, so [`Hp34401a::connect`] starts with a
+//!   device clear (Ctrl-C) and `SYST:REM`, then checks `*IDN?`;
+//! - the meter's RS-232 handshake cannot be used through `serialport`, and queries that pile up
+//!   give mixed replies (-410/-420): the driver reads every reply before it sends anything else
+//!   and keeps fewer than ~100 characters of commands unacknowledged;
+//! - one `READ?` per reading wastes most of a run: [`Hp34401a::acquire`] streams (`READ?` with
+//!   `SAMP:COUN`), or uses memory bursts of at most 512 readings (`INIT;*OPC?`, `FETC?`) whose
+//!   fetch ([`Hp34401a::fetch`]) can overlap the table moving; [`Strategy::Auto`] picks from the
+//!   [`timing`] model, which is public for run estimates;
+//! - overloads (±9.9E37) come back as [`Reading::Overload`], never as numbers;
+//! - after a timeout or a garbled reply the driver clears the device, drains the error queue and
+//!   retries; errors carry an [`ErrorKind`] and [`Error::is_retryable`].
+//!
+//! ```no_run
+//! # async fn demo() -> Result<(), Box<dyn std::error::Error>> {
+//! use gyrocal_hp34401a::{DcvConfig, DriverOptions, Hp34401a, Strategy};
+//! let link = gyrocal_link::open("/dev/ttyUSB0", &Default::default()).await?;
+//! let mut dmm = Hp34401a::new(link, DriverOptions::default());
+//! dmm.connect().await?;
+//! dmm.configure(&DcvConfig { nplc: 1.0, range: Some(10.0), ..DcvConfig::default() }).await?;
+//! let acq = dmm.acquire(500, Strategy::Auto).await?;
+//! println!("{} readings, {} overloads", acq.readings.len(), acq.overloads());
+//! dmm.close().await?;
+//! # Ok(()) }
+//! ```
+
+mod config;
+mod driver;
+mod error;
+mod reading;
+pub mod timing;
+
+pub use config::{AutoZero, DcvConfig, NPLC_VALUES, RANGES, TriggerSource};
+pub use driver::{
+    Acquisition, Burst, DriverOptions, Hp34401a, Identity, Progress, ProgressFn, parse_error,
+};
+pub use error::{Error, ErrorKind, InstrumentError};
+pub use reading::{OVERLOAD, Reading, parse_reading};
+pub use timing::{Strategy, Timing};

@@ -1,0 +1,195 @@
+//! Serial ports (real RS-232 adapters and pseudo-terminals) through `tokio-serial`.
+//!
+//! The HP 34401A and most rate-table controllers of its era speak 300–9600 baud with two stop
+//! bits, and with parity and data bits tied together (None/8, Even/7, Odd/7). The meter will not
+//! transmit while the host's DTR is false, and `serialport` has no DTR/DSR flow control, so the
+//! port is opened without flow control and DTR is asserted by hand. Pseudo-terminals (used by the
+//! simulator) have no modem lines: the `ENOTTY` that asserting DTR gives there is logged, not
+//! fatal. Whatever the previous user of the port left in its input buffer is thrown away after
+//! opening, so the first reply the driver reads is an answer to its own first question.
+
+use std::fmt;
+use std::str::FromStr;
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+use tokio_serial::{
+    ClearBuffer, DataBits, FlowControl, Parity, SerialPort, SerialStream, StopBits,
+};
+
+use crate::{LinkError, StreamTransport};
+
+/// The baud rates the supported instruments offer (HP 34401A: 300 to 9600).
+pub const SUPPORTED_BAUDS: [u32; 6] = [300, 600, 1200, 2400, 4800, 9600];
+
+/// Character framing: parity and data bits are tied, always one start and two stop bits, so every
+/// character is 11 bits on the wire.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+pub enum Framing {
+    /// 8 data bits, no parity, 2 stop bits (`8N2`).
+    #[default]
+    #[serde(rename = "8N2")]
+    EightNone,
+    /// 7 data bits, even parity, 2 stop bits (`7E2`).
+    #[serde(rename = "7E2")]
+    SevenEven,
+    /// 7 data bits, odd parity, 2 stop bits (`7O2`).
+    #[serde(rename = "7O2")]
+    SevenOdd,
+}
+
+impl Framing {
+    /// Bits on the wire per character: 1 start + 7 or 8 data + parity + 2 stop = 11.
+    pub const BITS_PER_CHAR: u32 = 11;
+
+    fn settings(self) -> (DataBits, Parity) {
+        match self {
+            Framing::EightNone => (DataBits::Eight, Parity::None),
+            Framing::SevenEven => (DataBits::Seven, Parity::Even),
+            Framing::SevenOdd => (DataBits::Seven, Parity::Odd),
+        }
+    }
+}
+
+impl fmt::Display for Framing {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Framing::EightNone => "8N2",
+            Framing::SevenEven => "7E2",
+            Framing::SevenOdd => "7O2",
+        })
+    }
+}
+
+impl FromStr for Framing {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.to_ascii_uppercase().as_str() {
+            "8N2" => Ok(Framing::EightNone),
+            "7E2" => Ok(Framing::SevenEven),
+            "7O2" => Ok(Framing::SevenOdd),
+            other => Err(format!(
+                "unsupported framing {other:?} (use 8N2, 7E2 or 7O2)"
+            )),
+        }
+    }
+}
+
+/// How to open a link. Serial settings are ignored for TCP.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LinkOptions {
+    /// Baud rate, one of [`SUPPORTED_BAUDS`]. Default 9600 (the 34401A's factory setting).
+    pub baud: u32,
+    /// Character framing. Default 8N2.
+    pub framing: Framing,
+    /// How long a TCP connection may take to establish. Default 5 s.
+    #[serde(with = "secs")]
+    pub connect_timeout: Duration,
+}
+
+impl Default for LinkOptions {
+    fn default() -> Self {
+        LinkOptions {
+            baud: 9600,
+            framing: Framing::EightNone,
+            connect_timeout: Duration::from_secs(5),
+        }
+    }
+}
+
+impl LinkOptions {
+    /// Checks the serial settings before anything is opened.
+    pub fn validate(&self, device: &str) -> Result<(), LinkError> {
+        if !SUPPORTED_BAUDS.contains(&self.baud) {
+            return Err(LinkError::io(
+                device,
+                "configuring",
+                std::io::Error::new(
+                    std::io::ErrorKind::InvalidInput,
+                    format!(
+                        "baud {} not supported (use one of {SUPPORTED_BAUDS:?})",
+                        self.baud
+                    ),
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Time one character takes on the wire at this baud (11 bits).
+    pub fn char_time(&self) -> Duration {
+        Duration::from_secs_f64(f64::from(Framing::BITS_PER_CHAR) / f64::from(self.baud.max(1)))
+    }
+}
+
+mod secs {
+    use serde::{Deserialize, Deserializer, Serializer};
+    use std::time::Duration;
+
+    pub fn serialize<S: Serializer>(d: &Duration, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_f64(d.as_secs_f64())
+    }
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Duration, D::Error> {
+        let v = f64::deserialize(d)?;
+        Duration::try_from_secs_f64(v).map_err(serde::de::Error::custom)
+    }
+}
+
+fn serial_err(path: &str, context: &str, e: tokio_serial::Error) -> LinkError {
+    LinkError::io(path, context, std::io::Error::from(e))
+}
+
+/// Opens a serial port (or the slave side of a pseudo-terminal) with `options`: no flow control,
+/// DTR asserted (failures tolerated and logged), stale input cleared.
+pub fn open_serial(
+    path: &str,
+    options: &LinkOptions,
+) -> Result<StreamTransport<SerialStream>, LinkError> {
+    options.validate(path)?;
+    let (data_bits, parity) = options.framing.settings();
+    let builder = tokio_serial::new(path, options.baud)
+        .data_bits(data_bits)
+        .parity(parity)
+        .stop_bits(StopBits::Two)
+        .flow_control(FlowControl::None);
+    let mut port = SerialStream::open(&builder).map_err(|e| serial_err(path, "opening", e))?;
+    prepare(&mut port, path);
+    tracing::debug!(port = path, baud = options.baud, framing = %options.framing, "serial port open");
+    Ok(StreamTransport::new(port, path))
+}
+
+/// Asserts DTR and RTS and clears stale input; on ports without modem lines (pseudo-terminals,
+/// some adapters) the failures are logged and ignored.
+fn prepare(port: &mut SerialStream, path: &str) {
+    if let Err(e) = port.write_data_terminal_ready(true) {
+        tracing::info!(port = path, error = %e, "cannot assert DTR (no modem lines?); continuing");
+    }
+    if let Err(e) = port.write_request_to_send(true) {
+        tracing::debug!(port = path, error = %e, "cannot assert RTS; continuing");
+    }
+    if let Err(e) = port.clear(ClearBuffer::Input) {
+        tracing::info!(port = path, error = %e, "cannot clear stale input; continuing");
+    }
+}
+
+/// A pseudo-terminal pair for tests and simulated benches (Unix only).
+///
+/// Returns `(device, placeholder, path)`: `device` is the master side a simulator serves,
+/// `path` is the slave side's path, to be opened through [`open_serial`] (or [`crate::open`]) like
+/// a real port. `placeholder` is the slave as `openpty` left it open: keep it until the host side
+/// has opened `path` (a pseudo-terminal with no slave open reports hang-ups to the master), then
+/// drop it. Keep `device` alive until the host is done.
+#[cfg(unix)]
+pub fn pseudo_terminal() -> Result<(SerialStream, SerialStream, String), LinkError> {
+    let (master, slave) =
+        SerialStream::pair().map_err(|e| serial_err("pseudo-terminal", "creating", e))?;
+    let path = slave.name().ok_or_else(|| {
+        LinkError::io(
+            "pseudo-terminal",
+            "naming",
+            std::io::Error::other("the slave side has no path"),
+        )
+    })?;
+    Ok((master, slave, path))
+}

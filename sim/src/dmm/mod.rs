@@ -1,0 +1,1278 @@
+//! A simulated HP 34401A on its RS-232 port.
+//!
+//! [`SimDmm::spawn`] serves the meter's wire protocol on any async byte stream (one end of an
+//! in-memory pipe in virtual time, or the master side of a pseudo-terminal in real time) as a
+//! tokio task. It follows `shared/docs/hp34401a.md`:
+//!
+//! - `SYST:REM` must come first (strict by default): before it, every other command is refused
+//!   with error 550 "Command not allowed in local" and queries are not answered;
+//! - long and short forms, case-insensitive; `;` chains within a subsystem, `;:` returns to the
+//!   root; several queries on one line answer `;`-separated on one line; every reply ends CR LF;
+//! - the five NPLC values (anything else -222 "Data out of range"); `INIT` stores at most 512
+//!   readings (more: error 531 "Insufficient memory") and the meter is deaf until the burst ends;
+//!   `READ?` streams readings to the output as they are taken (measuring pauses while the output
+//!   buffer is full); `FETC?` sends the stored readings; readings are `SD.DDDDDDDDESDD`,
+//!   overloads `+9.90000000E+37`;
+//! - a 20-entry error queue (-350 "Queue overflow" replaces the last entry when it is full) with
+//!   the standard codes; queries that pile up raise -410 "Query INTERRUPTED" (a reply had begun)
+//!   or -420 "Query UNTERMINATED" (no reply had begun), and the earlier replies are lost;
+//! - Ctrl-C (0x03) is the device clear: aborts the measurement, empties the input and output
+//!   buffers, keeps the configuration and the error queue;
+//! - timing from the doc's model on tokio's clock (so it runs in virtual time): the command's
+//!   characters on the wire, 20 ms to arm, per reading `delay + NPLC/f_line` (twice the
+//!   integration with autozero on), and output at 11 bits per character at the configured baud.
+//!
+//! The input voltage comes from a [`SignalSource`] sampled over each reading's integration
+//! window, plus seeded gaussian noise. Faults can be scheduled in [`DmmConfig::faults`] or
+//! injected at run time through [`DmmHandle::inject`].
+
+mod scpi;
+
+use std::collections::VecDeque;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use rand::SeedableRng;
+use rand::rngs::StdRng;
+use rand_distr::{Distribution, Normal};
+use serde::{Deserialize, Serialize};
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
+use tokio::sync::mpsc;
+use tokio::task::JoinHandle;
+use tokio::time::Instant;
+
+use crate::SignalSource;
+pub use gyrocal_link::Framing;
+use scpi::{Cmd, Unit, parse_line};
+
+/// What a real unit answers to `*IDN?` (firmware 11-5-2; 7-5-2 and 10-5-2 exist too).
+pub const DEFAULT_IDENTITY: &str = "HEWLETT-PACKARD,34401A,0,11-5-2";
+/// Readings the internal memory holds.
+pub const MEMORY_SIZE: usize = 512;
+/// Entries the error queue holds.
+pub const ERROR_QUEUE_SIZE: usize = 20;
+/// Time to enter wait-for-trigger (`INIT`, `READ?`), before scaling.
+pub const ARM_TIME: Duration = Duration::from_millis(20);
+/// The overload value.
+pub const OVERLOAD: f64 = 9.9e37;
+
+/// A fault to inject.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "kind", deny_unknown_fields)]
+pub enum Fault {
+    /// The next reply (the output of the next line that produces any) is never sent.
+    NoReply,
+    /// The next reply has a character replaced by `#`.
+    Garble,
+    /// The next reply stops halfway, without its terminator (the rest of that line's output,
+    /// readings included, is lost).
+    Truncate,
+    /// The meter drops the connection: the simulator closes its end and stops.
+    Disconnect,
+    /// The next `readings` readings are overloads.
+    Overload {
+        /// How many.
+        readings: u32,
+    },
+    /// An entry pushed into the error queue.
+    PushError {
+        /// The code.
+        code: i32,
+        /// The message.
+        message: String,
+    },
+}
+
+/// A fault from the configuration, injected once `after_commands` commands have been seen.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScheduledFault {
+    /// Commands (program message units, from the first) seen before the fault is injected.
+    pub after_commands: u64,
+    /// The fault.
+    pub fault: Fault,
+}
+
+/// The simulated meter's configuration. Every field has a default; TOML or JSON may give any.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DmmConfig {
+    /// `*IDN?` reply. Default [`DEFAULT_IDENTITY`].
+    pub identity: String,
+    /// Require `SYST:REM` (or `SYST:RWL`) before other commands take effect. Default true.
+    pub strict_remote: bool,
+    /// Baud rate for the wire timing. Default 9600 (factory setting).
+    pub baud: u32,
+    /// Framing; every framing is 11 bits per character, so it does not change the timing.
+    /// Default 8N2.
+    pub framing: Framing,
+    /// Power-line frequency (50 or 60 Hz) setting the integration time. Default 50.
+    pub line_hz: u32,
+    /// Standard deviation of the gaussian reading noise, volts. Default 1 µV.
+    pub noise_v: f64,
+    /// Output buffer for `READ?`, in characters: measuring pauses while a reading does not fit.
+    /// Unconfirmed in the manual; default 512 (32 readings).
+    pub output_buffer: usize,
+    /// 1.0 = real instrument timing; 10.0 runs everything ten times faster (for pseudo-terminal
+    /// tests in real time). Default 1.0.
+    pub time_scale: f64,
+    /// Faults injected when the command count reaches their mark. Default none.
+    pub faults: Vec<ScheduledFault>,
+}
+
+impl Default for DmmConfig {
+    fn default() -> Self {
+        DmmConfig {
+            identity: DEFAULT_IDENTITY.to_string(),
+            strict_remote: true,
+            baud: 9600,
+            framing: Framing::EightNone,
+            line_hz: 50,
+            noise_v: 1e-6,
+            output_buffer: 512,
+            time_scale: 1.0,
+            faults: Vec::new(),
+        }
+    }
+}
+
+impl DmmConfig {
+    /// Checks the values [`SimDmm::spawn`] needs.
+    pub fn validate(&self) -> Result<(), String> {
+        if !gyrocal_link::SUPPORTED_BAUDS.contains(&self.baud) {
+            return Err(format!("baud {} not supported", self.baud));
+        }
+        if self.line_hz != 50 && self.line_hz != 60 {
+            return Err(format!("line_hz {} is neither 50 nor 60", self.line_hz));
+        }
+        if !(self.time_scale.is_finite() && self.time_scale > 0.0) {
+            return Err(format!("time_scale {} must be positive", self.time_scale));
+        }
+        if !(self.noise_v.is_finite() && self.noise_v >= 0.0) {
+            return Err(format!("noise_v {} must be >= 0", self.noise_v));
+        }
+        if self.output_buffer < 17 {
+            return Err(format!(
+                "output_buffer {} cannot hold a reading",
+                self.output_buffer
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Counters and state a test can read through [`DmmHandle::stats`].
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct DmmStats {
+    /// Readings taken (to memory or to the output).
+    pub readings_taken: u64,
+    /// Commands (program message units) seen, refused ones included.
+    pub commands_seen: u64,
+    /// Lines seen.
+    pub lines_seen: u64,
+    /// Queries answered.
+    pub queries_answered: u64,
+    /// Device clears (Ctrl-C) received.
+    pub device_clears: u64,
+    /// Errors raised into the queue (also those lost to an overflow).
+    pub errors_raised: u64,
+    /// Largest number of characters waiting in the input at once (the real meter's input
+    /// buffer holds about 100).
+    pub max_input_backlog: usize,
+    /// Whether the meter is in remote.
+    pub remote: bool,
+    /// The error queue now, oldest first.
+    pub error_queue: Vec<(i32, String)>,
+    /// True once the simulator has stopped (stop, disconnect, or the host closed the link).
+    pub stopped: bool,
+}
+
+enum Ctl {
+    Fault(Fault),
+    Stop,
+}
+
+/// Controls a running simulated meter.
+pub struct DmmHandle {
+    ctl: mpsc::UnboundedSender<Ctl>,
+    stats: Arc<Mutex<DmmStats>>,
+    task: JoinHandle<()>,
+}
+
+impl DmmHandle {
+    /// Injects a fault now.
+    pub fn inject(&self, fault: Fault) {
+        let _ = self.ctl.send(Ctl::Fault(fault));
+    }
+
+    /// A snapshot of the counters.
+    pub fn stats(&self) -> DmmStats {
+        self.stats
+            .lock()
+            .map(|s| s.clone())
+            .unwrap_or_else(|e| e.into_inner().clone())
+    }
+
+    /// Readings taken so far.
+    pub fn readings_taken(&self) -> u64 {
+        self.stats().readings_taken
+    }
+
+    /// Commands seen so far.
+    pub fn commands_seen(&self) -> u64 {
+        self.stats().commands_seen
+    }
+
+    /// Whether the simulator task has ended.
+    pub fn is_finished(&self) -> bool {
+        self.task.is_finished()
+    }
+
+    /// Stops the simulator (its end of the stream is closed) and waits for it.
+    pub async fn stop(self) {
+        let _ = self.ctl.send(Ctl::Stop);
+        let _ = self.task.await;
+    }
+}
+
+/// The simulated 34401A.
+pub struct SimDmm;
+
+impl SimDmm {
+    /// Serves the meter on `stream` as a tokio task. `source` gives the input voltage; `seed`
+    /// seeds the reading noise. An invalid `config` is logged and its bad values replaced by
+    /// the defaults.
+    pub fn spawn<S>(
+        stream: S,
+        config: DmmConfig,
+        source: Box<dyn SignalSource>,
+        seed: u64,
+    ) -> DmmHandle
+    where
+        S: AsyncRead + AsyncWrite + Send + Unpin + 'static,
+    {
+        let config = sanitize(config);
+        let (tx, rx) = mpsc::unbounded_channel();
+        let stats = Arc::new(Mutex::new(DmmStats::default()));
+        let meter = Meter::new(config, source, seed, stats.clone());
+        let task = tokio::spawn(meter.run(stream, rx));
+        DmmHandle {
+            ctl: tx,
+            stats,
+            task,
+        }
+    }
+}
+
+fn sanitize(mut c: DmmConfig) -> DmmConfig {
+    if let Err(e) = c.validate() {
+        tracing::warn!(error = %e, "simulated 34401A: invalid configuration, using defaults for bad values");
+        let d = DmmConfig::default();
+        if !gyrocal_link::SUPPORTED_BAUDS.contains(&c.baud) {
+            c.baud = d.baud;
+        }
+        if c.line_hz != 50 && c.line_hz != 60 {
+            c.line_hz = d.line_hz;
+        }
+        if !(c.time_scale.is_finite() && c.time_scale > 0.0) {
+            c.time_scale = 1.0;
+        }
+        if !(c.noise_v.is_finite() && c.noise_v >= 0.0) {
+            c.noise_v = d.noise_v;
+        }
+        c.output_buffer = c.output_buffer.max(17);
+    }
+    c
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Zero {
+    On,
+    Off,
+    Once,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum TrigSource {
+    Imm,
+    Bus,
+    Ext,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Dest {
+    Memory,
+    Output,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ReplyFault {
+    NoReply,
+    Garble,
+    Truncate,
+}
+
+/// The settings `*RST` restores.
+#[derive(Debug, Clone, PartialEq)]
+struct Settings {
+    range: Option<f64>,
+    nplc: f64,
+    zero: Zero,
+    imp_auto: bool,
+    trig_source: TrigSource,
+    trig_delay: Option<f64>,
+    trig_count: u32,
+    samp_count: u32,
+    display: bool,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            range: None,
+            nplc: 10.0,
+            zero: Zero::On,
+            imp_auto: false,
+            trig_source: TrigSource::Imm,
+            trig_delay: None,
+            trig_count: 1,
+            samp_count: 1,
+            display: true,
+        }
+    }
+}
+
+struct Line {
+    text: String,
+    ready_at: Instant,
+}
+
+/// The line being executed.
+struct Exec {
+    units: VecDeque<Unit>,
+    has_output: bool,
+    fault: Option<ReplyFault>,
+    muted: bool,
+}
+
+/// A measurement in progress.
+struct Meas {
+    dest: Dest,
+    /// Readings left in this trigger's set.
+    left_in_set: u32,
+    /// Triggers left after this one.
+    triggers_left: u32,
+    /// Waiting for a trigger (BUS or EXT source).
+    awaiting_trigger: bool,
+    /// The current reading: start of its integration window and when it completes.
+    window_start: Instant,
+    done_at: Instant,
+    /// Paused: the output buffer cannot take another reading.
+    blocked: bool,
+    /// Readings this measurement has produced.
+    produced: u64,
+}
+
+struct Meter {
+    cfg: DmmConfig,
+    source: Box<dyn SignalSource>,
+    rng: StdRng,
+    noise: Option<Normal<f64>>,
+    stats: Arc<Mutex<DmmStats>>,
+    counters: DmmStats,
+    remote: bool,
+    set: Settings,
+    errors: VecDeque<(i32, String)>,
+    memory: Vec<f64>,
+    inbuf: Vec<u8>,
+    lines: VecDeque<Line>,
+    in_wire_free: Instant,
+    exec: Option<Exec>,
+    meas: Option<Meas>,
+    out: VecDeque<u8>,
+    tx: Option<(Vec<u8>, Instant)>,
+    out_wire_free: Instant,
+    pending_reply_fault: VecDeque<ReplyFault>,
+    overloads_left: u32,
+    disconnect: bool,
+    stop: bool,
+    faults: Vec<ScheduledFault>,
+}
+
+fn scaled(cfg: &DmmConfig, d: Duration) -> Duration {
+    d.div_f64(cfg.time_scale)
+}
+
+impl Meter {
+    fn new(
+        cfg: DmmConfig,
+        source: Box<dyn SignalSource>,
+        seed: u64,
+        stats: Arc<Mutex<DmmStats>>,
+    ) -> Self {
+        let noise = if cfg.noise_v > 0.0 {
+            Normal::new(0.0, cfg.noise_v).ok()
+        } else {
+            None
+        };
+        let now = Instant::now();
+        let mut faults = cfg.faults.clone();
+        faults.sort_by_key(|f| std::cmp::Reverse(f.after_commands));
+        Meter {
+            remote: !cfg.strict_remote,
+            cfg,
+            source,
+            rng: StdRng::seed_from_u64(seed),
+            noise,
+            stats,
+            counters: DmmStats::default(),
+            set: Settings::default(),
+            errors: VecDeque::new(),
+            memory: Vec::new(),
+            inbuf: Vec::new(),
+            lines: VecDeque::new(),
+            in_wire_free: now,
+            exec: None,
+            meas: None,
+            out: VecDeque::new(),
+            tx: None,
+            out_wire_free: now,
+            pending_reply_fault: VecDeque::new(),
+            overloads_left: 0,
+            disconnect: false,
+            stop: false,
+            faults,
+        }
+    }
+
+    async fn run<S>(mut self, stream: S, mut ctl: mpsc::UnboundedReceiver<Ctl>)
+    where
+        S: AsyncRead + AsyncWrite + Send + Unpin + 'static,
+    {
+        let (mut rd, mut wr) = tokio::io::split(stream);
+        let mut buf = [0u8; 1024];
+        let mut ctl_open = true;
+        loop {
+            let now = Instant::now();
+            self.advance(now);
+            if let Some((bytes, due)) = self.tx.take_if(|(_, due)| *due <= now) {
+                let _ = due;
+                if wr.write_all(&bytes).await.is_err() || wr.flush().await.is_err() {
+                    break;
+                }
+                continue;
+            }
+            self.publish();
+            if self.stop || self.disconnect {
+                break;
+            }
+            let wake = self.next_wake();
+            tokio::select! {
+                biased;
+                c = ctl.recv(), if ctl_open => match c {
+                    Some(Ctl::Fault(f)) => self.inject(f),
+                    Some(Ctl::Stop) => self.stop = true,
+                    None => ctl_open = false,
+                },
+                r = rd.read(&mut buf) => match r {
+                    Ok(0) | Err(_) => break,
+                    Ok(n) => self.input(&buf[..n]),
+                },
+                () = sleep_until_opt(wake) => {}
+            }
+        }
+        let _ = wr.shutdown().await;
+        self.counters.stopped = true;
+        self.publish();
+        tracing::debug!("simulated 34401A stopped");
+    }
+
+    fn publish(&mut self) {
+        self.counters.remote = self.remote;
+        self.counters.error_queue = self.errors.iter().cloned().collect();
+        if let Ok(mut s) = self.stats.lock() {
+            *s = self.counters.clone();
+        }
+    }
+
+    fn char_time(&self) -> Duration {
+        scaled(
+            &self.cfg,
+            Duration::from_secs_f64(11.0 / f64::from(self.cfg.baud)),
+        )
+    }
+
+    fn next_wake(&self) -> Option<Instant> {
+        let mut wake: Option<Instant> = None;
+        let mut consider = |t: Instant| wake = Some(wake.map_or(t, |w| w.min(t)));
+        if let Some((_, due)) = &self.tx {
+            consider(*due);
+        }
+        if let Some(m) = &self.meas
+            && !m.blocked
+            && !m.awaiting_trigger
+        {
+            consider(m.done_at);
+        }
+        if self.meas.is_none()
+            && self.exec.is_none()
+            && let Some(l) = self.lines.front()
+        {
+            consider(l.ready_at);
+        }
+        wake
+    }
+
+    // ---- input -------------------------------------------------------------------------
+
+    fn input(&mut self, bytes: &[u8]) {
+        let now = Instant::now();
+        for &b in bytes {
+            match b {
+                gyrocal_link::DEVICE_CLEAR => self.device_clear(),
+                b'\n' => {
+                    let mut raw = std::mem::take(&mut self.inbuf);
+                    if raw.last() == Some(&b'\r') {
+                        raw.pop();
+                    }
+                    self.line_arrived(String::from_utf8_lossy(&raw).into_owned(), now);
+                }
+                _ => {
+                    if self.inbuf.len() < 4096 {
+                        self.inbuf.push(b);
+                    }
+                }
+            }
+        }
+        let backlog = self.inbuf.len() + self.lines.iter().map(|l| l.text.len() + 1).sum::<usize>();
+        self.counters.max_input_backlog = self.counters.max_input_backlog.max(backlog);
+    }
+
+    fn device_clear(&mut self) {
+        self.counters.device_clears += 1;
+        self.meas = None;
+        self.exec = None;
+        self.out.clear();
+        self.tx = None;
+        self.lines.clear();
+        self.inbuf.clear();
+        tracing::debug!("simulated 34401A: device clear");
+    }
+
+    fn deaf(&self) -> bool {
+        self.meas.as_ref().is_some_and(|m| m.dest == Dest::Memory)
+    }
+
+    fn line_arrived(&mut self, text: String, now: Instant) {
+        self.counters.lines_seen += 1;
+        let chars = u32::try_from(text.len() + 1).unwrap_or(u32::MAX);
+        let ready_at = now.max(self.in_wire_free) + self.char_time() * chars;
+        self.in_wire_free = ready_at;
+        if self.deaf() {
+            // only *TRG gets through while the meter waits for a bus trigger
+            if let Some(m) = self.meas.as_mut()
+                && m.awaiting_trigger
+                && self.set.trig_source == TrigSource::Bus
+                && text.trim().eq_ignore_ascii_case("*TRG")
+            {
+                m.awaiting_trigger = false;
+                m.window_start = ready_at;
+                m.done_at = ready_at;
+                self.start_reading(ready_at);
+                return;
+            }
+            self.lines.push_back(Line { text, ready_at });
+            return;
+        }
+        if self.remote && self.query_pending() {
+            let started = self.tx.is_some()
+                || !self.out.is_empty()
+                || self.exec.as_ref().is_some_and(|e| e.has_output);
+            if started {
+                self.raise(-410, "Query INTERRUPTED");
+            } else {
+                self.raise(-420, "Query UNTERMINATED");
+            }
+            self.meas = None;
+            self.exec = None;
+            self.out.clear();
+            self.tx = None;
+            self.lines.clear();
+        }
+        self.lines.push_back(Line { text, ready_at });
+    }
+
+    fn query_pending(&self) -> bool {
+        self.tx.is_some()
+            || !self.out.is_empty()
+            || self.meas.as_ref().is_some_and(|m| m.dest == Dest::Output)
+            || self
+                .exec
+                .as_ref()
+                .is_some_and(|e| e.has_output || e.units.iter().any(|u| u.query))
+            || self.lines.iter().any(|l| l.text.contains('?'))
+    }
+
+    // ---- faults ------------------------------------------------------------------------
+
+    fn inject(&mut self, f: Fault) {
+        tracing::debug!(fault = ?f, "simulated 34401A: fault injected");
+        match f {
+            Fault::NoReply => self.pending_reply_fault.push_back(ReplyFault::NoReply),
+            Fault::Garble => self.pending_reply_fault.push_back(ReplyFault::Garble),
+            Fault::Truncate => self.pending_reply_fault.push_back(ReplyFault::Truncate),
+            Fault::Disconnect => self.disconnect = true,
+            Fault::Overload { readings } => self.overloads_left += readings,
+            Fault::PushError { code, message } => self.raise(code, &message),
+        }
+    }
+
+    fn scheduled_faults(&mut self) {
+        while self
+            .faults
+            .last()
+            .is_some_and(|f| f.after_commands <= self.counters.commands_seen)
+        {
+            if let Some(f) = self.faults.pop() {
+                self.inject(f.fault);
+            }
+        }
+    }
+
+    fn raise(&mut self, code: i32, message: &str) {
+        self.counters.errors_raised += 1;
+        tracing::debug!(code, message, "simulated 34401A: error");
+        if self.errors.len() < ERROR_QUEUE_SIZE {
+            self.errors.push_back((code, message.to_string()));
+        } else if let Some(last) = self.errors.back_mut() {
+            *last = (-350, "Queue overflow".to_string());
+        }
+    }
+
+    // ---- time --------------------------------------------------------------------------
+
+    fn advance(&mut self, now: Instant) {
+        loop {
+            let mut progressed = false;
+            if let Some(m) = self.meas.as_mut()
+                && m.blocked
+                && self.out.len() + self.tx.as_ref().map_or(0, |t| t.0.len()) + 16
+                    <= self.cfg.output_buffer
+            {
+                m.blocked = false;
+                self.start_reading(now);
+                progressed = true;
+            }
+            if let Some(m) = &self.meas
+                && !m.blocked
+                && !m.awaiting_trigger
+                && m.done_at <= now
+            {
+                self.complete_reading();
+                progressed = true;
+            }
+            if self.tx.is_none() && !self.out.is_empty() {
+                let n = self.out.len().min(16);
+                let chunk: Vec<u8> = self.out.drain(..n).collect();
+                let start = now.max(self.out_wire_free);
+                let due = start + self.char_time() * u32::try_from(n).unwrap_or(16);
+                self.out_wire_free = due;
+                self.tx = Some((chunk, due));
+                progressed = true;
+            }
+            if self.meas.is_none() && self.run_exec(now) {
+                progressed = true;
+            }
+            if !progressed {
+                break;
+            }
+        }
+    }
+
+    fn trigger_delay(&self) -> Duration {
+        let d = match self.set.trig_delay {
+            Some(d) => Duration::from_secs_f64(d),
+            None if self.set.nplc >= 1.0 => Duration::from_micros(1500),
+            None => Duration::from_micros(1000),
+        };
+        scaled(&self.cfg, d)
+    }
+
+    fn integration(&self) -> Duration {
+        scaled(
+            &self.cfg,
+            Duration::from_secs_f64(self.set.nplc / f64::from(self.cfg.line_hz)),
+        )
+    }
+
+    /// Starts the next reading at `t`: trigger delay, integration, autozero.
+    fn start_reading(&mut self, t: Instant) {
+        let delay = self.trigger_delay();
+        let t_int = self.integration();
+        let az = self.set.zero == Zero::On;
+        if let Some(m) = self.meas.as_mut() {
+            m.window_start = t + delay;
+            m.done_at = t + delay + if az { t_int * 2 } else { t_int };
+        }
+    }
+
+    fn begin_measurement(&mut self, dest: Dest, now: Instant) {
+        let awaiting = self.set.trig_source != TrigSource::Imm;
+        self.meas = Some(Meas {
+            dest,
+            left_in_set: self.set.samp_count,
+            triggers_left: self.set.trig_count.saturating_sub(1),
+            awaiting_trigger: awaiting,
+            window_start: now,
+            done_at: now,
+            blocked: false,
+            produced: 0,
+        });
+        if dest == Dest::Memory {
+            self.memory.clear();
+        }
+        if !awaiting {
+            let armed = now + scaled(&self.cfg, ARM_TIME);
+            self.start_reading(armed);
+        }
+    }
+
+    fn sample(&mut self, window_start: Instant) -> f64 {
+        let v = self.source.volts(window_start, self.integration());
+        let noise = match &self.noise {
+            Some(n) => n.sample(&mut self.rng),
+            None => 0.0,
+        };
+        let v = v + noise;
+        let limit = 1.2 * self.set.range.unwrap_or(1000.0);
+        if self.overloads_left > 0 {
+            self.overloads_left -= 1;
+            return if v < 0.0 { -OVERLOAD } else { OVERLOAD };
+        }
+        if !v.is_finite() || v.abs() > limit {
+            return if v < 0.0 { -OVERLOAD } else { OVERLOAD };
+        }
+        v
+    }
+
+    fn complete_reading(&mut self) {
+        let Some(m) = self.meas.as_ref() else { return };
+        let (dest, start, done_at, produced) = (m.dest, m.window_start, m.done_at, m.produced);
+        let v = self.sample(start);
+        self.counters.readings_taken += 1;
+        match dest {
+            Dest::Memory => self.memory.push(v),
+            Dest::Output => {
+                let sep = if produced > 0 {
+                    Some(b',')
+                } else if self.exec.as_ref().is_some_and(|e| e.has_output) {
+                    Some(b';')
+                } else {
+                    None
+                };
+                let mut bytes = Vec::with_capacity(17);
+                bytes.extend(sep);
+                bytes.extend_from_slice(format_reading(v).as_bytes());
+                self.emit(&bytes);
+            }
+        }
+        let room = self.out.len() + self.tx.as_ref().map_or(0, |t| t.0.len()) + 16
+            <= self.cfg.output_buffer;
+        let Some(m) = self.meas.as_mut() else { return };
+        m.produced += 1;
+        m.left_in_set = m.left_in_set.saturating_sub(1);
+        if m.left_in_set == 0 {
+            if m.triggers_left == 0 {
+                self.meas = None;
+                return;
+            }
+            m.triggers_left -= 1;
+            m.left_in_set = self.set.samp_count;
+            if self.set.trig_source != TrigSource::Imm {
+                m.awaiting_trigger = true;
+                return;
+            }
+        }
+        if dest == Dest::Output && !room {
+            m.blocked = true;
+        } else {
+            self.start_reading(done_at);
+        }
+    }
+
+    // ---- output ------------------------------------------------------------------------
+
+    /// Queues reply bytes of the current line, applying a pending reply fault.
+    fn emit(&mut self, bytes: &[u8]) {
+        let Some(exec) = self.exec.as_mut() else {
+            self.out.extend(bytes);
+            return;
+        };
+        if !exec.has_output {
+            exec.has_output = true;
+            exec.fault = self.pending_reply_fault.pop_front();
+        }
+        if exec.muted {
+            return;
+        }
+        match exec.fault.take() {
+            None => self.out.extend(bytes),
+            Some(ReplyFault::NoReply) => exec.muted = true,
+            Some(ReplyFault::Garble) => {
+                let mut b = bytes.to_vec();
+                // the second digit (or the first, or the first byte) becomes '#'
+                let mut digits = b
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, c)| c.is_ascii_digit())
+                    .map(|(i, _)| i);
+                let first = digits.next();
+                let i = digits.next().or(first).unwrap_or(0);
+                if let Some(c) = b.get_mut(i) {
+                    *c = b'#';
+                }
+                self.out.extend(b);
+            }
+            Some(ReplyFault::Truncate) => {
+                let half = bytes.len().div_ceil(2);
+                self.out.extend(&bytes[..half]);
+                exec.muted = true;
+            }
+        }
+    }
+
+    fn reply(&mut self, text: &str) {
+        self.counters.queries_answered += 1;
+        if self.exec.as_ref().is_some_and(|e| e.has_output) {
+            self.emit(b";");
+        }
+        self.emit(text.as_bytes());
+    }
+
+    // ---- execution ---------------------------------------------------------------------
+
+    /// Runs the current line (or starts the next ready one); false when nothing could be done.
+    fn run_exec(&mut self, now: Instant) -> bool {
+        if self.exec.is_none() {
+            if !self.lines.front().is_some_and(|l| l.ready_at <= now) {
+                return false;
+            }
+            let Some(line) = self.lines.pop_front() else {
+                return false;
+            };
+            self.exec = Some(Exec {
+                units: parse_line(&line.text).into(),
+                has_output: false,
+                fault: None,
+                muted: false,
+            });
+        }
+        while let Some(unit) = self.exec.as_mut().and_then(|e| e.units.pop_front()) {
+            self.counters.commands_seen += 1;
+            self.execute(&unit, now);
+            self.scheduled_faults();
+            if self.meas.is_some() || self.exec.is_none() || self.disconnect {
+                return true;
+            }
+        }
+        if self.exec.as_ref().is_some_and(|e| e.has_output) {
+            self.emit(b"\r\n");
+        }
+        self.exec = None;
+        true
+    }
+
+    fn execute(&mut self, u: &Unit, now: Instant) {
+        let Some(cmd) = u.cmd else {
+            self.raise(-113, "Undefined header");
+            return;
+        };
+        if !self.remote && !matches!(cmd, Cmd::Remote | Cmd::Rwlock) {
+            self.raise(550, "Command not allowed in local");
+            return;
+        }
+        if let Err((code, msg)) = self.command(cmd, u, now) {
+            self.raise(code, msg);
+        }
+    }
+
+    fn command(&mut self, cmd: Cmd, u: &Unit, now: Instant) -> Result<(), (i32, &'static str)> {
+        let q = u.query;
+        let p = &u.params;
+        let no_params = || {
+            if p.is_empty() {
+                Ok(())
+            } else {
+                Err((-108, "Parameter not allowed"))
+            }
+        };
+        let one = || match p.as_slice() {
+            [x] => Ok(x.as_str()),
+            [] => Err((-109, "Missing parameter")),
+            _ => Err((-108, "Parameter not allowed")),
+        };
+        match (cmd, q) {
+            (Cmd::Idn, true) => {
+                no_params()?;
+                let id = self.cfg.identity.clone();
+                self.reply(&id);
+            }
+            (Cmd::Rst, false) => {
+                no_params()?;
+                self.set = Settings::default();
+                self.memory.clear();
+            }
+            (Cmd::Cls, false) => {
+                no_params()?;
+                self.errors.clear();
+            }
+            (Cmd::Opc, true) => self.reply("1"),
+            (Cmd::Opc | Cmd::Ese | Cmd::Sre, false) => {}
+            (Cmd::Esr | Cmd::Stb | Cmd::Ese | Cmd::Sre | Cmd::Tst, true) => self.reply("+0"),
+            (Cmd::Trg, false) => return Err((-211, "Trigger ignored")),
+            (Cmd::Remote, false) => self.remote = true,
+            (Cmd::Rwlock, false) => self.remote = true,
+            (Cmd::Local, false) => self.remote = false,
+            (Cmd::Error, true) => {
+                let (code, msg) = self
+                    .errors
+                    .pop_front()
+                    .unwrap_or((0, "No error".to_string()));
+                let code = if code < 0 {
+                    code.to_string()
+                } else {
+                    format!("+{code}")
+                };
+                self.reply(&format!("{code},\"{msg}\""));
+            }
+            (Cmd::Version, true) => self.reply("1992.0"),
+            (Cmd::Configure, false) => self.configure(p)?,
+            (Cmd::Configure, true) => {
+                let r = self.set.range.unwrap_or(10.0);
+                let res = r * resolution_ratio(self.set.nplc);
+                self.reply(&format!("\"VOLT {},{}\"", format_nr3(r), format_nr3(res)));
+            }
+            (Cmd::Measure, true) => {
+                self.configure(p)?;
+                self.start_read(now);
+            }
+            (Cmd::Function, false) => {
+                let f = one()?.trim_matches(['"', '\'']).to_ascii_uppercase();
+                if !matches!(f.as_str(), "VOLT" | "VOLT:DC" | "VOLTAGE" | "VOLTAGE:DC") {
+                    return Err((-224, "Illegal parameter value"));
+                }
+            }
+            (Cmd::Function, true) => self.reply("\"VOLT\""),
+            (Cmd::Range, false) => {
+                self.set.range = Some(match keyword(one()?).as_str() {
+                    "MIN" => 0.1,
+                    "MAX" => 1000.0,
+                    "DEF" => 10.0,
+                    _ => pick_range(number(one()?)?)?,
+                });
+            }
+            (Cmd::Range, true) => {
+                let r = self.set.range.unwrap_or(10.0);
+                self.reply(&format_nr3(r));
+            }
+            (Cmd::RangeAuto, false) => {
+                if boolean(one()?)? {
+                    self.set.range = None;
+                } else if self.set.range.is_none() {
+                    self.set.range = Some(10.0);
+                }
+            }
+            (Cmd::RangeAuto, true) => self.reply(bool01(self.set.range.is_none())),
+            (Cmd::Nplc, false) => {
+                let v = match keyword(one()?).as_str() {
+                    "MIN" => 0.02,
+                    "MAX" => 100.0,
+                    "DEF" => 10.0,
+                    _ => number(one()?)?,
+                };
+                if ![0.02, 0.2, 1.0, 10.0, 100.0].contains(&v) {
+                    return Err((-222, "Data out of range"));
+                }
+                self.set.nplc = v;
+            }
+            (Cmd::Nplc, true) => {
+                let v = self.set.nplc;
+                self.reply(&format_nr3(v));
+            }
+            (Cmd::Resolution, false) => {
+                let r = number(one()?)?;
+                self.set.nplc = nplc_for_resolution(r / self.set.range.unwrap_or(10.0));
+            }
+            (Cmd::Resolution, true) => {
+                let r = self.set.range.unwrap_or(10.0) * resolution_ratio(self.set.nplc);
+                self.reply(&format_nr3(r));
+            }
+            (Cmd::ZeroAuto, false) => {
+                self.set.zero = match keyword(one()?).as_str() {
+                    "ON" | "1" => Zero::On,
+                    "OFF" | "0" => Zero::Off,
+                    "ONCE" => Zero::Once,
+                    _ => return Err((-224, "Illegal parameter value")),
+                };
+            }
+            (Cmd::ZeroAuto, true) => self.reply(bool01(self.set.zero == Zero::On)),
+            (Cmd::ImpedanceAuto, false) => self.set.imp_auto = boolean(one()?)?,
+            (Cmd::ImpedanceAuto, true) => self.reply(bool01(self.set.imp_auto)),
+            (Cmd::TrigSource, false) => {
+                self.set.trig_source = match keyword(one()?).as_str() {
+                    "IMM" | "IMMEDIATE" => TrigSource::Imm,
+                    "BUS" => TrigSource::Bus,
+                    "EXT" | "EXTERNAL" => TrigSource::Ext,
+                    _ => return Err((-224, "Illegal parameter value")),
+                };
+            }
+            (Cmd::TrigSource, true) => {
+                let s = match self.set.trig_source {
+                    TrigSource::Imm => "IMM",
+                    TrigSource::Bus => "BUS",
+                    TrigSource::Ext => "EXT",
+                };
+                self.reply(s);
+            }
+            (Cmd::TrigDelay, false) => {
+                let d = match keyword(one()?).as_str() {
+                    "MIN" => 0.0,
+                    "MAX" => 3600.0,
+                    _ => number(one()?)?,
+                };
+                if !(0.0..=3600.0).contains(&d) {
+                    return Err((-222, "Data out of range"));
+                }
+                self.set.trig_delay = Some(d);
+            }
+            (Cmd::TrigDelay, true) => {
+                let d = self
+                    .trigger_delay()
+                    .mul_f64(self.cfg.time_scale)
+                    .as_secs_f64();
+                self.reply(&format_nr3(d));
+            }
+            (Cmd::TrigDelayAuto, false) => {
+                if boolean(one()?)? {
+                    self.set.trig_delay = None;
+                } else if self.set.trig_delay.is_none() {
+                    let d = self
+                        .trigger_delay()
+                        .mul_f64(self.cfg.time_scale)
+                        .as_secs_f64();
+                    self.set.trig_delay = Some(d);
+                }
+            }
+            (Cmd::TrigDelayAuto, true) => self.reply(bool01(self.set.trig_delay.is_none())),
+            (Cmd::TrigCount, false) => self.set.trig_count = count(one()?)?,
+            (Cmd::TrigCount, true) => self.reply(&format!("{:+}", self.set.trig_count)),
+            (Cmd::SampleCount, false) => self.set.samp_count = count(one()?)?,
+            (Cmd::SampleCount, true) => self.reply(&format!("{:+}", self.set.samp_count)),
+            (Cmd::Init, false) => {
+                no_params()?;
+                let total = u64::from(self.set.samp_count) * u64::from(self.set.trig_count);
+                if total > MEMORY_SIZE as u64 {
+                    return Err((531, "Insufficient memory"));
+                }
+                self.begin_measurement(Dest::Memory, now);
+            }
+            (Cmd::Read, true) => {
+                no_params()?;
+                self.start_read(now);
+            }
+            (Cmd::Fetch, true) => {
+                no_params()?;
+                if self.memory.is_empty() {
+                    return Err((-230, "Data stale"));
+                }
+                let text = self
+                    .memory
+                    .iter()
+                    .map(|&v| format_reading(v))
+                    .collect::<Vec<_>>()
+                    .join(",");
+                self.reply(&text);
+            }
+            (Cmd::DataPoints, true) => {
+                let n = self.memory.len();
+                self.reply(&format!("{n:+}"));
+            }
+            (Cmd::Display, false) => self.set.display = boolean(one()?)?,
+            (Cmd::Display, true) => self.reply(bool01(self.set.display)),
+            (Cmd::DisplayText, false) => {
+                let t = one()?.trim_matches(['"', '\'']);
+                if t.len() > 12 {
+                    return Err((-223, "Too much data"));
+                }
+            }
+            (Cmd::DisplayText, true) => self.reply("\"\""),
+            (Cmd::DisplayTextClear, false) => {}
+            _ => return Err((-113, "Undefined header")),
+        }
+        Ok(())
+    }
+
+    fn start_read(&mut self, now: Instant) {
+        self.counters.queries_answered += 1;
+        self.begin_measurement(Dest::Output, now);
+    }
+
+    /// `CONFigure:VOLTage:DC [range[,resolution]]` and its presets.
+    fn configure(&mut self, p: &[String]) -> Result<(), (i32, &'static str)> {
+        if p.len() > 2 {
+            return Err((-108, "Parameter not allowed"));
+        }
+        let range = match p.first().map(|s| keyword(s)) {
+            None => None,
+            Some(k) if k == "DEF" || k == "AUTO" => None,
+            Some(k) if k == "MIN" => Some(0.1),
+            Some(k) if k == "MAX" => Some(1000.0),
+            Some(_) => Some(pick_range(number(&p[0])?)?),
+        };
+        let nplc = match p.get(1).map(|s| keyword(s)) {
+            None => 10.0,
+            Some(k) if k == "DEF" => 10.0,
+            Some(k) if k == "MIN" => 100.0,
+            Some(k) if k == "MAX" => 0.02,
+            Some(_) => nplc_for_resolution(number(&p[1])? / range.unwrap_or(10.0)),
+        };
+        self.set.range = range;
+        self.set.nplc = nplc;
+        self.set.samp_count = 1;
+        self.set.trig_count = 1;
+        self.set.trig_source = TrigSource::Imm;
+        self.set.trig_delay = None;
+        self.set.zero = if nplc >= 1.0 { Zero::On } else { Zero::Off };
+        self.set.imp_auto = false;
+        Ok(())
+    }
+}
+
+async fn sleep_until_opt(t: Option<Instant>) {
+    match t {
+        Some(t) => tokio::time::sleep_until(t).await,
+        None => std::future::pending().await,
+    }
+}
+
+/// Formats a reading the way the 34401A sends it: `SD.DDDDDDDDESDD` (15 characters).
+pub fn format_reading(v: f64) -> String {
+    if !v.is_finite() || v.abs() >= OVERLOAD {
+        return if v < 0.0 {
+            "-9.90000000E+37".into()
+        } else {
+            "+9.90000000E+37".into()
+        };
+    }
+    format_nr3(v)
+}
+
+/// NR3 with 8 decimals and a signed two-digit exponent: `+1.00010310E+01`.
+fn format_nr3(v: f64) -> String {
+    let s = format!("{:.8E}", v.abs());
+    let (mant, exp) = s.split_once('E').unwrap_or((s.as_str(), "0"));
+    let exp: i32 = exp.parse().unwrap_or(0);
+    let sign = if v.is_sign_negative() && v != 0.0 {
+        '-'
+    } else {
+        '+'
+    };
+    let esign = if exp < 0 { '-' } else { '+' };
+    format!("{sign}{mant}E{esign}{:02}", exp.abs())
+}
+
+fn keyword(s: &str) -> String {
+    s.trim().to_ascii_uppercase()
+}
+
+fn number(s: &str) -> Result<f64, (i32, &'static str)> {
+    let t = s.trim();
+    // the 34401A accepts an optional unit suffix on voltages
+    let t = t.strip_suffix(['V', 'v']).unwrap_or(t);
+    match t.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        _ => Err((-104, "Data type error")),
+    }
+}
+
+fn boolean(s: &str) -> Result<bool, (i32, &'static str)> {
+    match keyword(s).as_str() {
+        "ON" | "1" => Ok(true),
+        "OFF" | "0" => Ok(false),
+        _ => Err((-224, "Illegal parameter value")),
+    }
+}
+
+fn count(s: &str) -> Result<u32, (i32, &'static str)> {
+    let k = keyword(s);
+    let v = match k.as_str() {
+        "MIN" => 1.0,
+        "MAX" => 50_000.0,
+        _ => number(s)?,
+    };
+    if !(1.0..=50_000.0).contains(&v) || v.fract() != 0.0 {
+        return Err((-222, "Data out of range"));
+    }
+    Ok(v as u32)
+}
+
+fn bool01(b: bool) -> &'static str {
+    if b { "1" } else { "0" }
+}
+
+/// The smallest range that holds `v` volts.
+fn pick_range(v: f64) -> Result<f64, (i32, &'static str)> {
+    let v = v.abs();
+    [0.1, 1.0, 10.0, 100.0, 1000.0]
+        .into_iter()
+        .find(|&r| v <= r * 1.2)
+        .ok_or((-222, "Data out of range"))
+}
+
+/// Resolution as a fraction of the range for each NPLC (User's Guide, resolution table).
+fn resolution_ratio(nplc: f64) -> f64 {
+    match nplc {
+        n if n <= 0.02 => 1e-4,
+        n if n <= 0.2 => 1e-5,
+        n if n <= 1.0 => 3e-6,
+        n if n <= 10.0 => 1e-6,
+        _ => 3e-7,
+    }
+}
+
+fn nplc_for_resolution(ratio: f64) -> f64 {
+    [(1e-4, 0.02), (1e-5, 0.2), (3e-6, 1.0), (1e-6, 10.0)]
+        .into_iter()
+        .find(|&(r, _)| ratio >= r * 0.999)
+        .map_or(100.0, |(_, n)| n)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reading_format() {
+        assert_eq!(format_reading(10.001031), "+1.00010310E+01");
+        assert_eq!(format_reading(0.0), "+0.00000000E+00");
+        assert_eq!(format_reading(-1.5e-3), "-1.50000000E-03");
+        assert_eq!(format_reading(OVERLOAD), "+9.90000000E+37");
+        assert_eq!(format_reading(-OVERLOAD), "-9.90000000E+37");
+        for v in [1.0, -123.456, 9.99999999e-9, 1000.0] {
+            assert_eq!(format_reading(v).len(), 15, "{v}");
+        }
+    }
+
+    #[test]
+    fn config_defaults_and_toml() {
+        let c: DmmConfig = toml::from_str("").unwrap();
+        assert_eq!(c, DmmConfig::default());
+        let c: DmmConfig = toml::from_str(
+            "baud = 1200\nframing = \"7E2\"\ntime_scale = 10.0\n[[faults]]\nafter_commands = 5\nfault = { kind = \"overload\", readings = 3 }\n",
+        )
+        .unwrap();
+        assert_eq!(c.baud, 1200);
+        assert_eq!(c.faults[0].fault, Fault::Overload { readings: 3 });
+        assert!(toml::from_str::<DmmConfig>("bogus = 1").is_err());
+    }
+}
