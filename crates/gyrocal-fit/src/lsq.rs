@@ -320,3 +320,11 @@ pub(crate) fn assemble(
         neuron,
     }
 }
+
+impl Dataset {
+    /// Checks that the data can determine `model`: enough points, enough distinct rates, both
+    /// turning directions for the split model.
+    pub fn check_model(&self, model: Model) -> Result<(), FitError> {
+        check(self, model)
+    }
+}

@@ -1,5 +1,8 @@
 //! Behaviour of the fitting crate as a user of its results would notice it.
 
+// Helpers outside #[test] functions may unwrap too: a panic there is a failed test.
+#![allow(clippy::unwrap_used)]
+
 use gyrocal_fit::input::{InputError, parse_csv};
 use gyrocal_fit::{
     Analysis, Dataset, FitError, Method, Model, NeuronOptions, NeuronStatus, Options, Point,

@@ -154,6 +154,18 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     for path in &args.files {
         let data = read(path)?;
         let _span = tracing::info_span!("fit", file = %path.display()).entered();
+        let mut opts = opts.clone();
+        if args.models.is_empty() && data.check_model(Model::Linear).is_ok() {
+            // Default "every model": leave out the ones this data cannot determine; data that
+            // cannot determine even a line is still an error.
+            opts.models.retain(|&m| match data.check_model(m) {
+                Ok(()) => true,
+                Err(e) => {
+                    tracing::warn!(file = %path.display(), "skipping the {m} model: {e}");
+                    false
+                }
+            });
+        }
         let analysis = analyze(&data, &opts).map_err(|e| {
             let name = path.display();
             let place = match data.last_line() {

@@ -1,0 +1,243 @@
+//! `gyrocal fit` as a user runs it: output, JSON, and one-line errors with exit code 2.
+
+// Helpers outside #[test] functions may unwrap too: a panic there is a failed test.
+#![allow(clippy::unwrap_used)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn gyrocal(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_gyrocal"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn example() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/paper-shaped.csv")
+}
+
+fn write(dir: &tempfile::TempDir, name: &str, text: &str) -> String {
+    let path = dir.path().join(name);
+    std::fs::write(&path, text).unwrap();
+    path.to_str().unwrap().to_string()
+}
+
+#[test]
+fn json_is_one_document_with_every_fit_and_the_metrics() {
+    let out = gyrocal(&["fit", "--json", example().to_str().unwrap()]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["points"], 19);
+    let fits = v["fits"].as_array().unwrap();
+    let names: Vec<String> = fits
+        .iter()
+        .map(|f| {
+            format!(
+                "{} {}",
+                f["method"].as_str().unwrap(),
+                f["model"].as_str().unwrap()
+            )
+        })
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "least-squares linear",
+            "least-squares quadratic",
+            "least-squares cubic",
+            "least-squares split",
+            "neuron linear"
+        ]
+    );
+    let k = fits[0]["scale_factor"].as_f64().unwrap();
+    assert!((k - 0.3612).abs() < 1e-4, "{k}");
+    let kn = fits[4]["scale_factor"].as_f64().unwrap();
+    assert!(((kn - k) / k).abs() < 1e-6);
+    assert_eq!(fits[4]["converged"], true);
+    assert!(v["metrics"]["asymmetry_ppm"].is_number());
+    assert!(v["metrics"]["repeatability_ppm"].is_null());
+}
+
+#[test]
+fn human_report_has_the_table_and_an_honest_comparison() {
+    let out = gyrocal(&["fit", example().to_str().unwrap()]);
+    assert!(out.status.success());
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        text.contains("LS resid. [mV]") && text.contains("neuron resid. [mV]"),
+        "{text}"
+    );
+    assert!(text.contains("same estimate, not a better one"), "{text}");
+    assert!(!text.contains("neuron is better"));
+    // 19 table rows: every rate appears at the start of a line.
+    for rate in ["-20", "-0.1", "0", "0.7", "20"] {
+        assert!(
+            text.lines()
+                .any(|l| l.trim_start().starts_with(&format!("{rate} "))),
+            "{rate}"
+        );
+    }
+}
+
+#[test]
+fn selected_model_and_method_only() {
+    let out = gyrocal(&[
+        "fit",
+        "--json",
+        "--model",
+        "quadratic",
+        "--method",
+        "least-squares",
+        example().to_str().unwrap(),
+    ]);
+    assert!(out.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let fits = v["fits"].as_array().unwrap();
+    assert_eq!(fits.len(), 1);
+    assert_eq!(fits[0]["model"], "quadratic");
+    assert!(fits[0]["coefficients"]["k2"].is_number());
+}
+
+#[test]
+fn huge_learning_rate_says_diverged() {
+    let out = gyrocal(&[
+        "fit",
+        "--method",
+        "neuron",
+        "--eta",
+        "100",
+        example().to_str().unwrap(),
+    ]);
+    assert!(out.status.success());
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(text.contains("DIVERGED"), "{text}");
+    assert!(!text.contains("NaN"));
+}
+
+#[test]
+fn several_files_report_repeatability() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = write(
+        &dir,
+        "a.csv",
+        "rate_dps,volts\n-10,-3.6032\n0,0.0088\n10,3.6208\n",
+    );
+    let b = write(
+        &dir,
+        "b.csv",
+        "rate_dps,volts\n-10,-3.6042\n0,0.0088\n10,3.6218\n",
+    );
+    let out = gyrocal(&["fit", "--json", &a, &b]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["files"].as_array().unwrap().len(), 2);
+    let r = v["repeatability_ppm"].as_f64().unwrap();
+    // K = 0.3612 and 0.3613: std/mean = (1e-4/√2)/0.36125.
+    assert!((r - 1e-4 / 2f64.sqrt() / 0.36125 * 1e6).abs() < 1.0, "{r}");
+}
+
+/// Runs `gyrocal fit` on a file and checks: exit code 2, one line on stderr naming the file
+/// and the line, containing `needle`, nothing on stdout.
+fn bad(text: &str, extra: &[&str], line: u64, needle: &str) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(&dir, "bad.csv", text);
+    let mut args = vec!["fit"];
+    args.extend_from_slice(extra);
+    args.push(&path);
+    let out = gyrocal(&args);
+    let err = String::from_utf8(out.stderr).unwrap();
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(out.stdout.is_empty());
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(err.contains(&format!("{path}: line {line}")), "{err}");
+    assert!(err.contains(needle), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+#[test]
+fn missing_file() {
+    let out = gyrocal(&["fit", "/nonexistent/gyro.csv"]);
+    let err = String::from_utf8(out.stderr).unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert_eq!(err.trim_end().lines().count(), 1);
+    assert!(err.contains("/nonexistent/gyro.csv: cannot open"), "{err}");
+}
+
+#[test]
+fn missing_column() {
+    bad(
+        "# rate table run\nrate_dps,voltage\n0,0.0088\n1,0.37\n",
+        &[],
+        2,
+        "no `volts` column",
+    );
+}
+
+#[test]
+fn non_numeric_value() {
+    bad(
+        "rate_dps,volts\n0,0.0088\n1,0.3.7\n2,0.73\n",
+        &[],
+        3,
+        "not a number",
+    );
+}
+
+#[test]
+fn nan_value() {
+    bad(
+        "rate_dps,volts\n0,0.0088\n1,NaN\n2,0.73\n",
+        &[],
+        3,
+        "not a finite number",
+    );
+}
+
+#[test]
+fn infinite_value() {
+    bad(
+        "rate_dps,volts\n0,0.0088\n1,0.37\n-inf,0.73\n",
+        &[],
+        4,
+        "not a finite number",
+    );
+}
+
+#[test]
+fn fewer_points_than_coefficients() {
+    bad(
+        "rate_dps,volts\n0,0.0088\n1,0.37\n2,0.73\n",
+        &["--model", "cubic"],
+        4,
+        "has only 3 points",
+    );
+}
+
+#[test]
+fn fewer_than_two_distinct_rates() {
+    bad(
+        "rate_dps,volts\n1,0.37\n1,0.371\n1,0.369\n",
+        &[],
+        4,
+        "1 distinct rate",
+    );
+}
+
+#[test]
+fn split_without_both_signs() {
+    bad(
+        "rate_dps,volts\n0,0.0088\n1,0.37\n2,0.73\n",
+        &["--model", "split"],
+        4,
+        "negative side",
+    );
+}
