@@ -15,5 +15,6 @@ pub mod dmm;
 pub mod signal;
 pub mod table;
 pub mod gyro;
+pub mod bench;
 
 pub use signal::SignalSource;
