@@ -547,10 +547,16 @@ impl<T: Transport> Hp34401a<T> {
         Ok(())
     }
 
-    /// Makes room for `len` more characters within the in-flight budget.
+    /// Makes room for `len` more characters within the in-flight budget: when they would not
+    /// fit, sends `*OPC?` and waits for its `1` (the meter has then read everything before it).
     async fn make_room(&mut self, len: usize) -> Result<(), Error> {
         if self.in_flight > 0 && self.in_flight + len > self.options.in_flight_budget {
-            let reply = self.query("*OPC?", self.options.query_timeout).await?;
+            self.link.send_line("*OPC?").await?;
+            let reply = self
+                .link
+                .read_line(Some(self.options.query_timeout))
+                .await?;
+            self.in_flight = 0;
             if reply.trim() != "1" {
                 return Err(Error::InvalidReply {
                     device: self.device().to_string(),
@@ -580,22 +586,7 @@ impl<T: Transport> Hp34401a<T> {
 
     /// Sends a query and reads its one-line reply.
     async fn query(&mut self, line: &str, timeout: Duration) -> Result<String, Error> {
-        if self.in_flight > 0 && self.in_flight + line.len() + 1 > self.options.in_flight_budget {
-            // `make_room` would recurse through `query`; an *OPC? fits any budget on its own
-            self.link.send_line("*OPC?").await?;
-            let r = self
-                .link
-                .read_line(Some(self.options.query_timeout))
-                .await?;
-            self.in_flight = 0;
-            if r.trim() != "1" {
-                return Err(Error::InvalidReply {
-                    device: self.device().to_string(),
-                    expected: "1 from *OPC?",
-                    bytes: r.into_bytes(),
-                });
-            }
-        }
+        self.make_room(line.len() + 1).await?;
         self.link.send_line(line).await?;
         let reply = self.link.read_line(Some(timeout)).await?;
         self.in_flight = 0;

@@ -392,6 +392,11 @@ struct Meter {
     out: VecDeque<u8>,
     tx: Option<(Vec<u8>, Instant)>,
     out_wire_free: Instant,
+    /// When the bytes now first in `out` were queued.
+    out_time: Instant,
+    /// The exact time of the event being processed (tokio's timer wakes on whole
+    /// milliseconds; the model's times are kept exact so they do not drift).
+    clock: Instant,
     pending_reply_fault: VecDeque<ReplyFault>,
     overloads_left: u32,
     disconnect: bool,
@@ -437,6 +442,8 @@ impl Meter {
             out: VecDeque::new(),
             tx: None,
             out_wire_free: now,
+            out_time: now,
+            clock: now,
             pending_reply_fault: VecDeque::new(),
             overloads_left: 0,
             disconnect: false,
@@ -660,6 +667,7 @@ impl Meter {
                     <= self.cfg.output_buffer
             {
                 m.blocked = false;
+                self.clock = self.clock.max(now);
                 self.start_reading(now);
                 progressed = true;
             }
@@ -668,13 +676,14 @@ impl Meter {
                 && !m.awaiting_trigger
                 && m.done_at <= now
             {
+                self.clock = self.clock.max(m.done_at);
                 self.complete_reading();
                 progressed = true;
             }
             if self.tx.is_none() && !self.out.is_empty() {
                 let n = self.out.len().min(16);
                 let chunk: Vec<u8> = self.out.drain(..n).collect();
-                let start = now.max(self.out_wire_free);
+                let start = self.out_time.max(self.out_wire_free);
                 let due = start + self.char_time() * u32::try_from(n).unwrap_or(16);
                 self.out_wire_free = due;
                 self.tx = Some((chunk, due));
@@ -804,6 +813,9 @@ impl Meter {
 
     /// Queues reply bytes of the current line, applying a pending reply fault.
     fn emit(&mut self, bytes: &[u8]) {
+        if self.out.is_empty() {
+            self.out_time = self.clock;
+        }
         let Some(exec) = self.exec.as_mut() else {
             self.out.extend(bytes);
             return;
@@ -860,6 +872,7 @@ impl Meter {
             let Some(line) = self.lines.pop_front() else {
                 return false;
             };
+            self.clock = self.clock.max(line.ready_at);
             self.exec = Some(Exec {
                 units: parse_line(&line.text).into(),
                 has_output: false,
@@ -869,7 +882,8 @@ impl Meter {
         }
         while let Some(unit) = self.exec.as_mut().and_then(|e| e.units.pop_front()) {
             self.counters.commands_seen += 1;
-            self.execute(&unit, now);
+            let t = self.clock.min(now);
+            self.execute(&unit, t);
             self.scheduled_faults();
             if self.meas.is_some() || self.exec.is_none() || self.disconnect {
                 return true;

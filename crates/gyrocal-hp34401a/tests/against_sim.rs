@@ -1,0 +1,311 @@
+//! The driver against the simulated 34401A over an in-memory pipe, in virtual time.
+#![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
+
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use gyrocal_hp34401a::{
+    AutoZero, DcvConfig, DriverOptions, ErrorKind, Hp34401a, Reading, Strategy, Timing,
+};
+use gyrocal_link::{DynStream, StreamTransport, memory_pair};
+use gyrocal_sim::dmm::{DmmConfig, DmmHandle, Fault, SimDmm};
+use gyrocal_sim::signal::{Constant, FnOfTime};
+use tokio::time::Instant;
+
+type Dmm = Hp34401a<StreamTransport<DynStream>>;
+
+fn nplc1() -> DcvConfig {
+    DcvConfig {
+        nplc: 1.0,
+        range: Some(10.0),
+        autozero: AutoZero::On,
+        line_hz: 50,
+        ..DcvConfig::default()
+    }
+}
+
+async fn bench_with(cfg: DmmConfig, config: &DcvConfig, volts: f64) -> (Dmm, DmmHandle) {
+    let (link, dev) = memory_pair("sim-dmm");
+    let handle = SimDmm::spawn(dev, cfg, Box::new(Constant(volts)), 7);
+    let mut dmm = Hp34401a::new(link.boxed(), DriverOptions::default());
+    let id = dmm.connect().await.unwrap();
+    assert_eq!(id.raw, "HEWLETT-PACKARD,34401A,0,11-5-2");
+    dmm.configure(config).await.unwrap();
+    (dmm, handle)
+}
+
+async fn bench(config: &DcvConfig) -> (Dmm, DmmHandle) {
+    bench_with(DmmConfig::default(), config, 1.234_567).await
+}
+
+async fn timed(dmm: &mut Dmm, n: usize, s: Strategy) -> (Vec<Reading>, f64) {
+    let t0 = Instant::now();
+    let acq = dmm.acquire(n, s).await.unwrap();
+    assert_eq!(acq.readings.len(), n);
+    assert_eq!(acq.retries, 0);
+    for r in &acq.readings {
+        let v = r.volts().unwrap();
+        assert!((v - 1.234_567).abs() < 1e-5, "{v}");
+    }
+    (acq.readings, t0.elapsed().as_secs_f64())
+}
+
+#[tokio::test(start_paused = true)]
+async fn timing_500_readings_stream_memory_poll() {
+    let cfg = nplc1();
+    let (mut dmm, sim) = bench(&cfg).await;
+    let (_, stream) = timed(&mut dmm, 500, Strategy::Stream).await;
+    let (_, memory) = timed(&mut dmm, 500, Strategy::Memory).await;
+    let (_, poll) = timed(&mut dmm, 500, Strategy::Poll).await;
+    let doc = 0.020 + 500.0 * 0.0415; // arm + 500 readings of 41.5 ms
+    let model = Timing::new(&cfg);
+    println!(
+        "500 readings, NPLC 1, 50 Hz, autozero on, 9600 baud (virtual seconds): \
+         stream {stream:.3} (doc {doc:.3}, model {:.3}), memory {memory:.3} (model {:.3}), \
+         poll {poll:.3} (model {:.3})",
+        model.estimate(Strategy::Stream, 500).as_secs_f64(),
+        model.estimate(Strategy::Memory, 500).as_secs_f64(),
+        model.estimate(Strategy::Poll, 500).as_secs_f64(),
+    );
+    assert!(
+        (stream - doc).abs() / doc < 0.01,
+        "stream {stream} vs {doc}"
+    );
+    assert!(poll > stream * 1.5, "poll {poll} vs stream {stream}");
+    for (got, s) in [
+        (stream, Strategy::Stream),
+        (memory, Strategy::Memory),
+        (poll, Strategy::Poll),
+    ] {
+        let want = model.estimate(s, 500).as_secs_f64();
+        assert!(
+            (got - want).abs() / want < 0.01,
+            "{s:?}: {got} vs model {want}"
+        );
+    }
+    assert_eq!(sim.readings_taken(), 1500);
+    let st = sim.stats();
+    assert!(st.error_queue.is_empty(), "{:?}", st.error_queue);
+    assert_eq!(st.errors_raised, 0);
+    assert!(st.max_input_backlog < 100, "{}", st.max_input_backlog);
+    sim.stop().await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn memory_2000_readings_in_4_bursts() {
+    let cfg = DcvConfig {
+        nplc: 0.2,
+        autozero: AutoZero::Off,
+        ..nplc1()
+    };
+    let (mut dmm, sim) = bench(&cfg).await;
+    let seen = Arc::new(Mutex::new(Vec::new()));
+    let s2 = seen.clone();
+    dmm.set_progress(move |p| s2.lock().unwrap().push(p.done));
+    let lines_before = sim.stats().lines_seen;
+    let (r, secs) = timed(&mut dmm, 2000, Strategy::Memory).await;
+    assert_eq!(r.len(), 2000);
+    let st = sim.stats();
+    // 4 x (SAMP:COUN, INIT;*OPC?, FETC?)
+    assert_eq!(st.lines_seen - lines_before, 12);
+    assert_eq!(st.readings_taken, 2000);
+    let seen = seen.lock().unwrap();
+    assert_eq!(seen.len(), 2000);
+    assert_eq!(seen.last(), Some(&2000));
+    let want = Timing::new(&cfg)
+        .estimate(Strategy::Memory, 2000)
+        .as_secs_f64();
+    assert!((secs - want).abs() / want < 0.01, "{secs} vs {want}");
+    sim.stop().await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn auto_streams_when_the_wire_keeps_up_and_uses_memory_otherwise() {
+    let (mut dmm, sim) = bench(&nplc1()).await;
+    assert_eq!(
+        dmm.acquire(20, Strategy::Auto).await.unwrap().strategy,
+        Strategy::Stream
+    );
+    let fast = DcvConfig {
+        nplc: 0.02,
+        autozero: AutoZero::Off,
+        ..nplc1()
+    };
+    dmm.configure(&fast).await.unwrap();
+    let acq = dmm.acquire(600, Strategy::Auto).await.unwrap();
+    assert_eq!(acq.strategy, Strategy::Memory);
+    assert_eq!(acq.readings.len(), 600);
+    // a stream at this rate is wire-bound: the meter's output buffer throttles it
+    let (_, stream) = timed(&mut dmm, 600, Strategy::Stream).await;
+    let wire = 600.0 * 16.0 * 11.0 / 9600.0;
+    assert!(stream > wire * 0.99, "{stream} vs {wire}");
+    sim.stop().await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn split_burst_overlaps_with_other_work() {
+    let (mut dmm, sim) = bench(&nplc1()).await;
+    let b = dmm.arm_burst(100).await.unwrap();
+    dmm.wait_burst(&b).await.unwrap();
+    let t0 = Instant::now();
+    let (readings, ()) = tokio::join!(dmm.fetch(&b), tokio::time::sleep(Duration::from_secs(1)));
+    assert_eq!(readings.unwrap().len(), 100);
+    // the fetch (about 1.8 s on the wire) hid the 1 s of "table motion"
+    assert!(
+        t0.elapsed() < Duration::from_millis(2000),
+        "{:?}",
+        t0.elapsed()
+    );
+    sim.stop().await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn signal_is_sampled_at_each_reading_time() {
+    let (link, dev) = memory_pair("sim-dmm");
+    let ramp = FnOfTime::new(|t| t); // 1 V per second
+    let cfg = DmmConfig {
+        noise_v: 0.0,
+        ..DmmConfig::default()
+    };
+    let sim = SimDmm::spawn(dev, cfg, Box::new(ramp), 1);
+    let mut dmm = Hp34401a::new(link.boxed(), DriverOptions::default());
+    dmm.connect().await.unwrap();
+    dmm.configure(&nplc1()).await.unwrap();
+    let v = dmm.acquire(50, Strategy::Stream).await.unwrap().volts();
+    for w in v.windows(2) {
+        assert!((w[1] - w[0] - 0.0415).abs() < 1e-6, "{w:?}");
+    }
+    sim.stop().await;
+}
+
+async fn recovers_from(fault: Fault, strategy: Strategy) {
+    let (mut dmm, sim) = bench(&nplc1()).await;
+    sim.inject(fault.clone());
+    let acq = dmm.acquire(40, strategy).await.unwrap();
+    assert_eq!(acq.readings.len(), 40, "{fault:?} {strategy:?}");
+    assert_eq!(acq.retries, 1, "{fault:?} {strategy:?}");
+    assert_eq!(sim.stats().device_clears, 2, "connect and one recovery");
+    sim.stop().await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn recovery_from_no_reply() {
+    for s in [Strategy::Stream, Strategy::Memory, Strategy::Poll] {
+        recovers_from(Fault::NoReply, s).await;
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn recovery_from_garbled_reply() {
+    for s in [Strategy::Stream, Strategy::Memory, Strategy::Poll] {
+        recovers_from(Fault::Garble, s).await;
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn recovery_from_truncated_reply() {
+    for s in [Strategy::Stream, Strategy::Memory, Strategy::Poll] {
+        recovers_from(Fault::Truncate, s).await;
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn gives_up_after_the_configured_retries() {
+    let (link, dev) = memory_pair("sim-dmm");
+    let sim = SimDmm::spawn(dev, DmmConfig::default(), Box::new(Constant(1.0)), 1);
+    let mut dmm = Hp34401a::new(
+        link.boxed(),
+        DriverOptions {
+            retries: 2,
+            ..DriverOptions::default()
+        },
+    );
+    dmm.connect().await.unwrap();
+    dmm.configure(&nplc1()).await.unwrap();
+    // the first reply of each attempt is lost; the recovery's SYST:ERR? replies come through
+    for _ in 0..3 {
+        sim.inject(Fault::Garble);
+    }
+    let err = dmm.acquire(10, Strategy::Poll).await.unwrap_err();
+    assert_eq!(err.kind(), ErrorKind::Garbled, "{err}");
+    assert!(!err.is_retryable());
+    sim.stop().await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn overloads_are_reported_not_averaged() {
+    let (mut dmm, sim) = bench(&nplc1()).await;
+    sim.inject(Fault::Overload { readings: 3 });
+    let acq = dmm.acquire(10, Strategy::Stream).await.unwrap();
+    assert_eq!(acq.overloads(), 3);
+    assert_eq!(acq.volts().len(), 7);
+    assert!(acq.readings[..3].iter().all(|r| r.is_overload()));
+    // beyond the range the meter overloads on its own
+    let (mut dmm2, sim2) = bench_with(
+        DmmConfig::default(),
+        &DcvConfig {
+            range: Some(1.0),
+            ..nplc1()
+        },
+        5.0,
+    )
+    .await;
+    let acq = dmm2.acquire(5, Strategy::Memory).await.unwrap();
+    assert_eq!(acq.overloads(), 5);
+    sim.stop().await;
+    sim2.stop().await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn pushed_error_fails_configure_with_its_text() {
+    let (mut dmm, sim) = bench(&nplc1()).await;
+    sim.inject(Fault::PushError {
+        code: -222,
+        message: "Data out of range".into(),
+    });
+    let err = dmm.configure(&nplc1()).await.unwrap_err();
+    assert_eq!(err.kind(), ErrorKind::Instrument);
+    assert!(
+        err.to_string().contains("-222,\"Data out of range\""),
+        "{err}"
+    );
+    // the queue was drained: the next configure is clean
+    dmm.configure(&nplc1()).await.unwrap();
+    sim.stop().await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn dropped_connection_is_a_disconnect() {
+    let (mut dmm, sim) = bench(&nplc1()).await;
+    sim.inject(Fault::Disconnect);
+    let err = dmm.acquire(10, Strategy::Stream).await.unwrap_err();
+    assert_eq!(err.kind(), ErrorKind::Disconnected, "{err}");
+    assert!(!err.is_retryable());
+    assert!(sim.stats().stopped);
+}
+
+#[tokio::test(start_paused = true)]
+async fn scheduled_fault_from_config() {
+    use gyrocal_sim::dmm::ScheduledFault;
+    // connect = 6 commands, configure = 9: the first acquisition's READ? reply is lost
+    let cfg = DmmConfig {
+        faults: vec![ScheduledFault {
+            after_commands: 16,
+            fault: Fault::NoReply,
+        }],
+        ..DmmConfig::default()
+    };
+    let (mut dmm, sim) = bench_with(cfg, &nplc1(), 1.234_567).await;
+    let acq = dmm.acquire(5, Strategy::Stream).await.unwrap();
+    assert_eq!(acq.retries, 1);
+    sim.stop().await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn close_returns_to_local() {
+    let (dmm, sim) = bench(&nplc1()).await;
+    let _link = dmm.close().await.unwrap();
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    assert!(!sim.stats().remote);
+    sim.stop().await;
+}
