@@ -86,8 +86,18 @@ impl Bench {
     /// Spawns the table and the multimeter (reading the gyro on the table) as tokio tasks over
     /// in-memory pipes. Must be called inside a tokio runtime; fine in paused virtual time.
     pub fn spawn(config: BenchConfig) -> Bench {
-        let BenchConfig { seed, time_scale, mut table, gyro, mut dmm } = config;
-        let time_scale = if time_scale.is_finite() && time_scale > 0.0 { time_scale } else { 1.0 };
+        let BenchConfig {
+            seed,
+            time_scale,
+            mut table,
+            gyro,
+            mut dmm,
+        } = config;
+        let time_scale = if time_scale.is_finite() && time_scale > 0.0 {
+            time_scale
+        } else {
+            1.0
+        };
         table.time_scale = time_scale;
         dmm.time_scale = time_scale;
         let (table_link, table_dev) = memory_pair("sim-table");
@@ -99,7 +109,11 @@ impl Bench {
         Bench {
             dmm: dmm_link,
             table: table_link,
-            handle: BenchHandle { table: table_handle, dmm: dmm_handle, truth },
+            handle: BenchHandle {
+                table: table_handle,
+                dmm: dmm_handle,
+                truth,
+            },
         }
     }
 }

@@ -117,7 +117,11 @@ impl GyroTruth {
 
     /// Noise-free output (no walk, no drift) at input rate `input` (Earth rate included), V.
     pub fn output_at_input(&self, input: f64) -> f64 {
-        let k1 = if input >= 0.0 { self.k1_pos } else { self.k1_neg };
+        let k1 = if input >= 0.0 {
+            self.k1_pos
+        } else {
+            self.k1_neg
+        };
         self.k0 + k1 * input + self.k2 * input * input + self.k3 * input.powi(3)
     }
 
@@ -143,7 +147,11 @@ impl GyroTruth {
         let mx = rates.iter().sum::<f64>() / n;
         let ys: Vec<f64> = rates.iter().map(|&w| self.output(w)).collect();
         let my = ys.iter().sum::<f64>() / n;
-        let sxy: f64 = rates.iter().zip(&ys).map(|(x, y)| (x - mx) * (y - my)).sum();
+        let sxy: f64 = rates
+            .iter()
+            .zip(&ys)
+            .map(|(x, y)| (x - mx) * (y - my))
+            .sum();
         let sxx: f64 = rates.iter().map(|x| (x - mx).powi(2)).sum();
         let k = sxy / sxx;
         (k, my - k * mx)
@@ -162,7 +170,9 @@ pub struct GyroSignal {
 
 impl std::fmt::Debug for GyroSignal {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("GyroSignal").field("truth", &self.truth).finish_non_exhaustive()
+        f.debug_struct("GyroSignal")
+            .field("truth", &self.truth)
+            .finish_non_exhaustive()
     }
 }
 
@@ -170,7 +180,14 @@ impl GyroSignal {
     /// A gyro mounted on `table`, with its own seeded noise.
     pub fn new(config: GyroConfig, table: TableHandle, seed: u64) -> Self {
         let truth = GyroTruth::from_config(&config);
-        GyroSignal { config, truth, table, rng: StdRng::seed_from_u64(seed), walk: 0.0, last_t: None }
+        GyroSignal {
+            config,
+            truth,
+            table,
+            rng: StdRng::seed_from_u64(seed),
+            walk: 0.0,
+            last_t: None,
+        }
     }
 
     /// The true coefficients.

@@ -247,18 +247,29 @@ impl State {
             };
             let seg = self.seg;
             let message = self.config.faults.message.clone();
-            consider(self.inject_after.map(|a| a.max(seg.t0)), 220, &|_| message.clone());
-            consider(self.inject_at_rate.and_then(|r| seg.first_crossing(r)), 220, &|_| {
+            consider(self.inject_after.map(|a| a.max(seg.t0)), 220, &|_| {
                 message.clone()
             });
+            consider(
+                self.inject_at_rate.and_then(|r| seg.first_crossing(r)),
+                220,
+                &|_| message.clone(),
+            );
             let trip = self.config.trip_rate;
             consider(seg.first_crossing(trip), 210, &|w| {
-                format!("Rate trip: {:.3} deg/s above the trip limit {trip} deg/s", seg.rate(w).abs())
+                format!(
+                    "Rate trip: {:.3} deg/s above the trip limit {trip} deg/s",
+                    seg.rate(w).abs()
+                )
             });
             let Some((when, code, text)) = first else {
                 let now_rate = self.actual(t).abs();
                 if now_rate > trip {
-                    self.latch(t, 210, format!("Rate trip: {now_rate:.3} deg/s above the trip limit {trip} deg/s"));
+                    self.latch(
+                        t,
+                        210,
+                        format!("Rate trip: {now_rate:.3} deg/s above the trip limit {trip} deg/s"),
+                    );
                     continue;
                 }
                 return;
@@ -340,7 +351,9 @@ impl TableHandle {
     }
 
     fn lock(&self) -> MutexGuard<'_, State> {
-        self.state.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+        self.state
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
     }
 
     /// Locks the state brought up to `at`; returns it with the sim time of `at`.
@@ -387,7 +400,11 @@ impl TableHandle {
     /// The demanded rate now, deg/s (0 unless in RATE mode with a demand).
     pub fn demanded_rate(&self) -> f64 {
         let (st, _) = self.at(Instant::now());
-        if st.mode == SimMode::Rate { st.demand } else { 0.0 }
+        if st.mode == SimMode::Rate {
+            st.demand
+        } else {
+            0.0
+        }
     }
 
     /// True when the table is not commanded to turn and its profile has reached zero: what
@@ -499,13 +516,19 @@ impl TableHandle {
             } else if let Some(abs) = header.strip_prefix(':') {
                 abs.split(':').map(str::to_string).collect()
             } else {
-                base.iter().cloned().chain(header.split(':').map(str::to_string)).collect()
+                base.iter()
+                    .cloned()
+                    .chain(header.split(':').map(str::to_string))
+                    .collect()
             };
             if nodes.len() > 1 {
                 base = nodes[..nodes.len() - 1].to_vec();
             }
-            let args: Vec<&str> =
-                if args.is_empty() { Vec::new() } else { args.split(',').map(str::trim).collect() };
+            let args: Vec<&str> = if args.is_empty() {
+                Vec::new()
+            } else {
+                args.split(',').map(str::trim).collect()
+            };
             if let Some(r) = command(&mut st, t, &nodes, query, &args) {
                 replies.push(r);
             }
@@ -638,8 +661,11 @@ fn command(st: &mut State, t: f64, nodes: &[String], query: bool, args: &[&str])
     } else if path_is(nodes, &["Mode", "Off"]) {
         parse_axis(st, args.first())?;
         if st.interlock_closed {
-            let accel =
-                if st.accel_limit > 0.0 { st.accel_limit } else { st.config.max_acceleration };
+            let accel = if st.accel_limit > 0.0 {
+                st.accel_limit
+            } else {
+                st.config.max_acceleration
+            };
             let jerk = st.config.jerk;
             st.ramp_to(t, 0.0, accel, jerk);
             st.mode = SimMode::Off;

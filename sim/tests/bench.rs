@@ -1,13 +1,16 @@
 //! The simulated bench: a rate held on the table while the simulated multimeter reads the
 //! simulated gyro gives the true model's voltage within the expected noise.
 
+// Test helpers outside #[test] functions may unwrap too: a panic is a failed test.
+#![allow(clippy::unwrap_used)]
+
 use std::time::Duration;
 
 use gyrocal_link::{StreamTransport, Transport};
+use gyrocal_sim::SignalSource;
 use gyrocal_sim::bench::{Bench, BenchConfig};
 use gyrocal_sim::gyro::{GyroConfig, GyroSignal, GyroTruth};
 use gyrocal_sim::table::{SimTable, TableConfig};
-use gyrocal_sim::SignalSource;
 use tokio::io::DuplexStream;
 use tokio::time::Instant;
 
@@ -30,15 +33,26 @@ async fn table_to(link: &mut StreamTransport<DuplexStream>, from: f64, rate: f64
 
 /// `n` readings at 10 PLC through raw SCPI (the 34401A driver is another crate).
 async fn read_dmm(link: &mut StreamTransport<DuplexStream>, n: u32) -> Vec<f64> {
-    for c in ["SYST:REM", "*CLS", "CONF:VOLT:DC 10", "VOLT:DC:NPLC 10", &format!("SAMP:COUN {n}")] {
+    for c in [
+        "SYST:REM",
+        "*CLS",
+        "CONF:VOLT:DC 10",
+        "VOLT:DC:NPLC 10",
+        &format!("SAMP:COUN {n}"),
+    ] {
         link.send_line(c).await.unwrap();
     }
     link.send_line("READ?").await.unwrap();
-    let line = link.read_line(Some(Duration::from_secs(600))).await.unwrap();
+    let line = link
+        .read_line(Some(Duration::from_secs(600)))
+        .await
+        .unwrap();
     link.send_line("SYST:ERR?").await.unwrap();
     let err = link.read_line(T).await.unwrap();
     assert!(err.starts_with("+0,"), "{err}");
-    line.split(',').map(|r| r.trim().parse::<f64>().unwrap()).collect()
+    line.split(',')
+        .map(|r| r.trim().parse::<f64>().unwrap())
+        .collect()
 }
 
 fn mean(xs: &[f64]) -> f64 {
@@ -47,8 +61,15 @@ fn mean(xs: &[f64]) -> f64 {
 
 #[tokio::test(start_paused = true)]
 async fn bench_constant_rate_reads_the_true_model_voltage() {
-    let config = BenchConfig { seed: 11, ..BenchConfig::default() };
-    let Bench { mut dmm, mut table, handle } = Bench::spawn(config.clone());
+    let config = BenchConfig {
+        seed: 11,
+        ..BenchConfig::default()
+    };
+    let Bench {
+        mut dmm,
+        mut table,
+        handle,
+    } = Bench::spawn(config.clone());
     let truth = handle.truth;
     // per reading: the gyro's 1 s noise over a 0.2 s window (10 PLC at 50 Hz) and the meter's
     let sigma = (config.gyro.noise_std.powi(2) / 0.2 + config.dmm.noise_v.powi(2)).sqrt();
@@ -63,9 +84,15 @@ async fn bench_constant_rate_reads_the_true_model_voltage() {
         assert_eq!(readings.len(), n as usize);
         let m = mean(&readings);
         let expected = truth.output(rate);
-        assert!((m - expected).abs() < tol, "rate {rate}: mean {m} vs true {expected} (tol {tol})");
+        assert!(
+            (m - expected).abs() < tol,
+            "rate {rate}: mean {m} vs true {expected} (tol {tol})"
+        );
         let sd = (readings.iter().map(|r| (r - m).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt();
-        assert!(sd > 0.5 * sigma && sd < 1.5 * sigma, "reading std {sd} vs expected {sigma}");
+        assert!(
+            sd > 0.5 * sigma && sd < 1.5 * sigma,
+            "reading std {sd} vs expected {sigma}"
+        );
     }
     // at zero rate the Earth-rate term is visible in the bias, as the method says
     assert!((truth.effective_k0() - truth.k0 - 0.3612 * truth.earth_rate).abs() < 1e-12);
@@ -78,7 +105,11 @@ async fn bench_gyro_model_asymmetry_nonlinearity_and_window_integration() {
     let (_link, dev) = gyrocal_link::memory_pair("t");
     let table = SimTable::spawn(
         dev,
-        TableConfig { rate_noise_std: 0.0, ripple_amplitude: 0.0, ..Default::default() },
+        TableConfig {
+            rate_noise_std: 0.0,
+            ripple_amplitude: 0.0,
+            ..Default::default()
+        },
         1,
     );
     let cfg = GyroConfig {
@@ -104,15 +135,26 @@ async fn bench_gyro_model_asymmetry_nonlinearity_and_window_integration() {
     let (k, _) = truth.fit_line(&[-20.0, -10.0, 10.0, 20.0]);
     assert!(k > 0.3590 && k < 0.3612, "{k}");
     // for a linear, symmetric gyro the line is (K1, K0 + K1 * earth rate)
-    let linear = GyroTruth { k1_neg: 0.3612, k2: 0.0, k3: 0.0, ..truth };
+    let linear = GyroTruth {
+        k1_neg: 0.3612,
+        k2: 0.0,
+        k3: 0.0,
+        ..truth
+    };
     let (k, k0) = linear.fit_line(&[-20.0, -1.0, 0.0, 3.0, 20.0]);
     assert!((k - 0.3612).abs() < 1e-12 && (k0 - linear.effective_k0()).abs() < 1e-12);
     // seeded: two gyros with the same seed give the same noisy readings
-    let noisy = GyroConfig { noise_std: 0.001, ..cfg };
+    let noisy = GyroConfig {
+        noise_std: 0.001,
+        ..cfg
+    };
     let mut a = GyroSignal::new(noisy.clone(), table.clone(), 9);
     let mut b = GyroSignal::new(noisy, table.clone(), 9);
     let t = Instant::now();
-    assert_eq!(a.volts(t, Duration::from_millis(20)), b.volts(t, Duration::from_millis(20)));
+    assert_eq!(
+        a.volts(t, Duration::from_millis(20)),
+        b.volts(t, Duration::from_millis(20))
+    );
 }
 
 #[test]
@@ -128,7 +170,10 @@ fn bench_config_from_toml_with_defaults_and_unknown_fields_refused() {
     assert_eq!(c.gyro.k1_neg, Some(0.361));
     assert_eq!(c.gyro.k1, GyroConfig::default().k1);
     assert_eq!(c.dmm.line_hz, 60);
-    assert_eq!(toml::from_str::<BenchConfig>("").unwrap(), BenchConfig::default());
+    assert_eq!(
+        toml::from_str::<BenchConfig>("").unwrap(),
+        BenchConfig::default()
+    );
     assert!(toml::from_str::<BenchConfig>("[gyro]\nk4 = 1.0\n").is_err());
     assert!(toml::from_str::<BenchConfig>("[table]\nmax_speed = 1.0\n").is_err());
 }

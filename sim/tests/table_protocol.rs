@@ -1,5 +1,8 @@
 //! The simulated table's wire protocol, byte for byte, in virtual time.
 
+// Test helpers outside #[test] functions may unwrap too: a panic is a failed test.
+#![allow(clippy::unwrap_used)]
+
 use std::time::Duration;
 
 use gyrocal_link::{StreamTransport, Transport, memory_pair};
@@ -25,8 +28,15 @@ fn spawn(config: TableConfig) -> (StreamTransport<DuplexStream>, TableHandle) {
 
 #[tokio::test(start_paused = true)]
 async fn table_protocol_error_queue_mode_rules_and_short_forms() {
-    let (mut l, h) = spawn(TableConfig { rate_noise_std: 0.0, ripple_amplitude: 0.0, ..Default::default() });
-    assert_eq!(q(&mut l, "*IDN?").await, "ACUTRONIC,ACUTROL3000,SIM0001,1.0");
+    let (mut l, h) = spawn(TableConfig {
+        rate_noise_std: 0.0,
+        ripple_amplitude: 0.0,
+        ..Default::default()
+    });
+    assert_eq!(
+        q(&mut l, "*IDN?").await,
+        "ACUTRONIC,ACUTROL3000,SIM0001,1.0"
+    );
     assert_eq!(q(&mut l, ":System:Error?").await, "0,\"No error\"");
     assert_eq!(q(&mut l, ":mode? 1").await, "OFF");
     // a demand with the interlock open is refused
@@ -35,15 +45,24 @@ async fn table_protocol_error_queue_mode_rules_and_short_forms() {
     assert_eq!(q(&mut l, ":S:E?").await, "201,\"Interlock open\"");
     assert_eq!(q(&mut l, ":S:E?").await, "0,\"No error\"");
     cmd(&mut l, ":Bogus:Thing 1").await;
-    assert_eq!(q(&mut l, ":SYSTEM:ERROR?").await, "-113,\"Undefined header\"");
+    assert_eq!(
+        q(&mut l, ":SYSTEM:ERROR?").await,
+        "-113,\"Undefined header\""
+    );
     // enable, rate mode; the acceleration limit starts at 0 and refuses demands
     cmd(&mut l, ":Interlock:Reset").await;
     cmd(&mut l, ":I:C 1").await;
     cmd(&mut l, ":Mode:Rate 1").await;
     cmd(&mut l, ":Demand:Rate 1,10").await;
-    assert_eq!(q(&mut l, ":S:E?").await, "202,\"Acceleration limit must be positive\"");
+    assert_eq!(
+        q(&mut l, ":S:E?").await,
+        "202,\"Acceleration limit must be positive\""
+    );
     cmd(&mut l, ":Limit:Acceleration R,1,0").await;
-    assert_eq!(q(&mut l, ":S:E?").await, "202,\"Acceleration limit must be positive\"");
+    assert_eq!(
+        q(&mut l, ":S:E?").await,
+        "202,\"Acceleration limit must be positive\""
+    );
     // a chain within one subsystem; a rate demand above the rate limit is refused, not clipped
     cmd(&mut l, ":Limit:Acceleration R,1,5;Rate R,1,15").await;
     cmd(&mut l, ":Demand:Rate 1,20").await;
@@ -73,8 +92,16 @@ async fn table_protocol_error_queue_mode_rules_and_short_forms() {
 
 #[tokio::test(start_paused = true)]
 async fn table_protocol_latched_fault_needs_a_reset() {
-    let (mut l, h) = spawn(TableConfig { trip_rate: 12.0, ..Default::default() });
-    for c in [":Interlock:Reset", ":Interlock:Close 1", ":Mode:Rate 1", ":Limit:Acceleration R,1,4"] {
+    let (mut l, h) = spawn(TableConfig {
+        trip_rate: 12.0,
+        ..Default::default()
+    });
+    for c in [
+        ":Interlock:Reset",
+        ":Interlock:Close 1",
+        ":Mode:Rate 1",
+        ":Limit:Acceleration R,1,4",
+    ] {
         cmd(&mut l, c).await;
     }
     cmd(&mut l, ":Demand:Rate 1,20").await;
@@ -88,7 +115,11 @@ async fn table_protocol_latched_fault_needs_a_reset() {
     assert_eq!(q(&mut l, ":Mode? 1").await, "OFF");
     assert!(h.is_stopped());
     cmd(&mut l, ":Interlock:Close 1").await;
-    assert!(q(&mut l, ":S:E?").await.starts_with("203,\"Fault latched: Rate trip"));
+    assert!(
+        q(&mut l, ":S:E?")
+            .await
+            .starts_with("203,\"Fault latched: Rate trip")
+    );
     cmd(&mut l, ":Interlock:Reset").await;
     assert_eq!(q(&mut l, "*STB?").await, "0");
     cmd(&mut l, ":Interlock:Close 1").await;

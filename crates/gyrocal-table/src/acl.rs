@@ -90,7 +90,9 @@ struct Shared<T> {
 impl<T: Transport> Shared<T> {
     fn status(&self) -> MutexGuard<'_, Status> {
         // A poisoned lock only means another thread panicked while holding plain data.
-        self.status.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+        self.status
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
     }
 
     fn stop_line(&self, kind: StopKind) -> String {
@@ -116,12 +118,12 @@ impl<T: Transport> Shared<T> {
     async fn stop(&self, kind: StopKind) -> Result<(), TableError> {
         let line = self.stop_line(kind);
         let wait = self.reply_timeout * 2 + Duration::from_millis(500);
-        let mut link = tokio::time::timeout(wait, self.link.lock()).await.map_err(|_| {
-            TableError::Fault {
+        let mut link = tokio::time::timeout(wait, self.link.lock())
+            .await
+            .map_err(|_| TableError::Fault {
                 device: self.device.clone(),
                 reason: format!("could not get the link within {wait:?} to send `{line}`"),
-            }
-        })?;
+            })?;
         tracing::info!(device = %self.device, "{line}");
         let sent = tokio::time::timeout(self.reply_timeout, link.transport.send_line(&line)).await;
         drop(link);
@@ -130,7 +132,10 @@ impl<T: Transport> Shared<T> {
             Ok(r) => r.map_err(|e| TableError::from_link(&self.device, &line, e)),
             Err(_) => Err(TableError::Fault {
                 device: self.device.clone(),
-                reason: format!("`{line}` could not be written within {:?}", self.reply_timeout),
+                reason: format!(
+                    "`{line}` could not be written within {:?}",
+                    self.reply_timeout
+                ),
             }),
         }
     }
@@ -147,7 +152,10 @@ impl<T: Transport> Shared<T> {
         if let Err(e) = self.stop(StopKind::Controlled).await {
             tracing::error!(device = %self.device, "controlled stop after the fault failed: {e}");
         }
-        TableError::Fault { device: self.device.clone(), reason }
+        TableError::Fault {
+            device: self.device.clone(),
+            reason,
+        }
     }
 }
 
@@ -220,7 +228,10 @@ impl<T: Transport + 'static> AclTable<T> {
                 device,
                 axis: config.axis,
                 reply_timeout: config.reply_timeout,
-                link: tokio::sync::Mutex::new(Link { transport, dirty: false }),
+                link: tokio::sync::Mutex::new(Link {
+                    transport,
+                    dirty: false,
+                }),
                 status: Mutex::new(Status {
                     state: TableState::Disconnected,
                     interlock_closed: false,
@@ -395,7 +406,10 @@ impl<T: Transport + 'static> AclTable<T> {
             return Ok(());
         }
         let errors = self.drain_errors().await?;
-        let text = errors.iter().map(|(c, t)| format!("{c},\"{t}\"")).collect::<Vec<_>>();
+        let text = errors
+            .iter()
+            .map(|(c, t)| format!("{c},\"{t}\""))
+            .collect::<Vec<_>>();
         let expected_event = self.shared.status().opened_by_us;
         if stb & 0x01 != 0 && !expected_event {
             let reason = if text.is_empty() {
@@ -423,9 +437,15 @@ impl<T: Transport + 'static> AclTable<T> {
         let what = if !rate.is_finite() {
             Some(format!("rate {rate} is not a number"))
         } else if rate.abs() > l.max_rate {
-            Some(format!("|rate| {} deg/s above the maximum {} deg/s", rate.abs(), l.max_rate))
+            Some(format!(
+                "|rate| {} deg/s above the maximum {} deg/s",
+                rate.abs(),
+                l.max_rate
+            ))
         } else if !acceleration.is_finite() || acceleration <= 0.0 {
-            Some(format!("acceleration {acceleration} deg/s^2 must be positive"))
+            Some(format!(
+                "acceleration {acceleration} deg/s^2 must be positive"
+            ))
         } else if acceleration > l.max_acceleration {
             Some(format!(
                 "acceleration {acceleration} deg/s^2 above the maximum {} deg/s^2",
@@ -435,7 +455,10 @@ impl<T: Transport + 'static> AclTable<T> {
             None
         };
         match what {
-            Some(what) => Err(TableError::Limit { device: self.device().to_string(), what }),
+            Some(what) => Err(TableError::Limit {
+                device: self.device().to_string(),
+                what,
+            }),
             None => Ok(()),
         }
     }
@@ -483,9 +506,11 @@ impl<T: Transport + 'static> RateTable for AclTable<T> {
     async fn connect(&mut self) -> Result<Identity, TableError> {
         {
             let mut link = self.shared.link.lock().await;
-            let dropped = link.transport.discard_input().await.map_err(|e| {
-                TableError::from_link(&self.shared.device, "(clear input)", e)
-            })?;
+            let dropped = link
+                .transport
+                .discard_input()
+                .await
+                .map_err(|e| TableError::from_link(&self.shared.device, "(clear input)", e))?;
             link.dirty = false;
             if dropped > 0 {
                 tracing::info!(device = %self.shared.device, "cleared {dropped} stale bytes");
@@ -542,7 +567,10 @@ impl<T: Transport + 'static> RateTable for AclTable<T> {
         let lines = vec![
             ":Interlock:Reset".to_string(),
             format!(":Interlock:Close {axis}"),
-            format!(":Limit:Rate R,{axis},{}", Self::num(self.config.limits.max_rate)),
+            format!(
+                ":Limit:Rate R,{axis},{}",
+                Self::num(self.config.limits.max_rate)
+            ),
             format!(":Mode:Rate {axis}"),
         ];
         self.commands(&lines).await?;
@@ -578,13 +606,21 @@ impl<T: Transport + 'static> RateTable for AclTable<T> {
         if !rate_mode {
             lines.push(format!(":Mode:Rate {axis}"));
         }
-        lines.push(format!(":Limit:Acceleration R,{axis},{}", Self::num(acceleration)));
+        lines.push(format!(
+            ":Limit:Acceleration R,{axis},{}",
+            Self::num(acceleration)
+        ));
         lines.push(format!(":Demand:Rate {axis},{}", Self::num(rate)));
         let start = Instant::now();
         self.commands(&lines).await?;
         self.shared.status().rate_mode = true;
         self.check_errors(&lines).await?;
-        self.ramp = Some(Ramp { start, from: self.demand, target: rate, acceleration });
+        self.ramp = Some(Ramp {
+            start,
+            from: self.demand,
+            target: rate,
+            acceleration,
+        });
         self.demand = rate;
         self.set_state(TableState::Ramping { target: rate });
         Ok(())
@@ -612,14 +648,19 @@ impl<T: Transport + 'static> RateTable for AclTable<T> {
 
     async fn sample(&mut self) -> Result<f64, TableError> {
         let line = format!(":Read:Rate? {}", self.config.axis);
-        let rate = self.query_number(&line, self.config.heartbeat_deadline).await?;
+        let rate = self
+            .query_number(&line, self.config.heartbeat_deadline)
+            .await?;
         let stb = self.query_stb(self.config.heartbeat_deadline).await?;
         self.check_stb(stb).await?;
         self.record(rate);
         Ok(rate)
     }
 
-    async fn wait_at_rate(&mut self, criteria: &SettleCriteria) -> Result<SettleReport, TableError> {
+    async fn wait_at_rate(
+        &mut self,
+        criteria: &SettleCriteria,
+    ) -> Result<SettleReport, TableError> {
         match self.state() {
             TableState::Servoed | TableState::Ramping { .. } | TableState::AtRate { .. } => {}
             _ => return Err(self.state_error("wait for the rate")),
@@ -677,7 +718,10 @@ impl<T: Transport + 'static> RateTable for AclTable<T> {
     }
 
     fn stop_recording(&mut self) -> RateStats {
-        self.recorder.take().map(|a| a.stats()).unwrap_or(RateStats::EMPTY)
+        self.recorder
+            .take()
+            .map(|a| a.stats())
+            .unwrap_or(RateStats::EMPTY)
     }
 
     async fn heartbeat(&mut self) -> Result<(), TableError> {

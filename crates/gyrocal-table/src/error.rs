@@ -118,8 +118,16 @@ impl TableError {
     pub fn from_link(device: &str, command: &str, source: LinkError) -> Self {
         let (device, command) = (device.to_string(), command.to_string());
         match source.kind() {
-            LinkErrorKind::Timeout => TableError::Timeout { device, command, source },
-            _ => TableError::Link { device, command, source },
+            LinkErrorKind::Timeout => TableError::Timeout {
+                device,
+                command,
+                source,
+            },
+            _ => TableError::Link {
+                device,
+                command,
+                source,
+            },
         }
     }
 

@@ -90,7 +90,10 @@ pub enum TableState {
 impl TableState {
     /// True when the table may be turning because of a demand this driver sent.
     pub fn is_moving(&self) -> bool {
-        matches!(self, TableState::Ramping { .. } | TableState::AtRate { .. } | TableState::Stopping)
+        matches!(
+            self,
+            TableState::Ramping { .. } | TableState::AtRate { .. } | TableState::Stopping
+        )
     }
 }
 
@@ -149,7 +152,10 @@ pub struct Limits {
 
 impl Default for Limits {
     fn default() -> Self {
-        Limits { max_rate: 30.0, max_acceleration: 10.0 }
+        Limits {
+            max_rate: 30.0,
+            max_acceleration: 10.0,
+        }
     }
 }
 

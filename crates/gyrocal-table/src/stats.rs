@@ -23,8 +23,13 @@ pub struct RateStats {
 
 impl RateStats {
     /// The statistics of no samples.
-    pub const EMPTY: RateStats =
-        RateStats { count: 0, mean: f64::NAN, std: f64::NAN, min: f64::NAN, max: f64::NAN };
+    pub const EMPTY: RateStats = RateStats {
+        count: 0,
+        mean: f64::NAN,
+        std: f64::NAN,
+        min: f64::NAN,
+        max: f64::NAN,
+    };
 
     /// Statistics of a slice of samples.
     pub fn from_samples(samples: &[f64]) -> Self {
@@ -77,7 +82,11 @@ impl RateAccumulator {
             n => RateStats {
                 count: n,
                 mean: self.mean,
-                std: if n > 1 { (self.m2 / (n - 1) as f64).sqrt() } else { 0.0 },
+                std: if n > 1 {
+                    (self.m2 / (n - 1) as f64).sqrt()
+                } else {
+                    0.0
+                },
                 min: self.min,
                 max: self.max,
             },

@@ -39,7 +39,9 @@ pub struct StopHandle {
 
 impl std::fmt::Debug for StopHandle {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("StopHandle").field("device", &self.path.describe()).finish()
+        f.debug_struct("StopHandle")
+            .field("device", &self.path.describe())
+            .finish()
     }
 }
 
@@ -69,7 +71,9 @@ impl StopHandle {
     /// stops it. The stop is spawned on the current tokio runtime (if any) because `Drop` cannot
     /// wait.
     pub fn guard(&self) -> StopGuard {
-        StopGuard { handle: Some(self.clone()) }
+        StopGuard {
+            handle: Some(self.clone()),
+        }
     }
 }
 
@@ -89,10 +93,15 @@ impl StopGuard {
 
 impl Drop for StopGuard {
     fn drop(&mut self) {
-        let Some(handle) = self.handle.take() else { return };
+        let Some(handle) = self.handle.take() else {
+            return;
+        };
         match tokio::runtime::Handle::try_current() {
             Ok(rt) => {
-                tracing::warn!(device = handle.describe(), "stop guard dropped: stopping the table");
+                tracing::warn!(
+                    device = handle.describe(),
+                    "stop guard dropped: stopping the table"
+                );
                 rt.spawn(async move {
                     if let Err(e) = handle.stop().await {
                         tracing::error!("stop guard could not stop the table: {e}");

@@ -1,5 +1,8 @@
 //! The ACL driver against the simulated table, in virtual time over an in-memory pipe.
 
+// Test helpers outside #[test] functions may unwrap too: a panic is a failed test.
+#![allow(clippy::unwrap_used)]
+
 use std::time::Duration;
 
 use gyrocal_link::memory_pair;
@@ -36,7 +39,11 @@ async fn table_sim_ramps_both_ways_settles_and_records() {
     let report = table.wait_at_rate(&criteria).await.unwrap();
     assert_eq!(report.ramp_time, Duration::from_secs(4));
     assert!(report.settled_after >= Duration::from_secs(6), "{report:?}");
-    assert!(t0.elapsed() < Duration::from_secs(7), "settles promptly: {:?}", t0.elapsed());
+    assert!(
+        t0.elapsed() < Duration::from_secs(7),
+        "settles promptly: {:?}",
+        t0.elapsed()
+    );
     assert!((report.window.mean - 20.0).abs() < 1e-3, "{report:?}");
     assert!(report.window.count >= 20);
     assert_eq!(table.state(), TableState::AtRate { rate: 20.0 });
@@ -76,23 +83,35 @@ async fn table_sim_ramps_both_ways_settles_and_records() {
 
 #[tokio::test(start_paused = true)]
 async fn table_sim_never_settling_table_times_out_as_a_fault_and_is_stopped() {
-    let config = TableConfig { never_settle: true, ..TableConfig::default() };
+    let config = TableConfig {
+        never_settle: true,
+        ..TableConfig::default()
+    };
     let (mut table, sim) = bench(config).await;
     table.set_rate(10.0, 5.0).await.unwrap();
-    let criteria = SettleCriteria { timeout: Duration::from_secs(20), ..Default::default() };
+    let criteria = SettleCriteria {
+        timeout: Duration::from_secs(20),
+        ..Default::default()
+    };
     let t0 = Instant::now();
     let err = table.wait_at_rate(&criteria).await.unwrap_err();
     assert_eq!(err.kind(), TableErrorKind::Fault, "{err}");
     assert!(err.to_string().contains("not settled"), "{err}");
     let waited = t0.elapsed();
-    assert!(waited >= Duration::from_secs(22) && waited < Duration::from_secs(23), "{waited:?}");
+    assert!(
+        waited >= Duration::from_secs(22) && waited < Duration::from_secs(23),
+        "{waited:?}"
+    );
     assert_eq!(table.state(), TableState::Faulted);
     // the driver stopped the table on the way out
     let_sim_run().await;
     assert_eq!(sim.mode(), SimMode::Off);
     assert_eq!(sim.demanded_rate(), 0.0);
     // a faulted driver refuses demands until enabled again
-    assert_eq!(table.set_rate(1.0, 1.0).await.unwrap_err().kind(), TableErrorKind::State);
+    assert_eq!(
+        table.set_rate(1.0, 1.0).await.unwrap_err().kind(),
+        TableErrorKind::State
+    );
 }
 
 #[tokio::test(start_paused = true)]
@@ -122,12 +141,21 @@ async fn table_sim_fault_latched_mid_ramp_stops_the_run_with_the_tables_message(
     let t0 = Instant::now();
     table.set_rate(20.0, 4.0).await.unwrap();
     table.start_recording();
-    let err = table.wait_at_rate(&SettleCriteria::default()).await.unwrap_err();
+    let err = table
+        .wait_at_rate(&SettleCriteria::default())
+        .await
+        .unwrap_err();
     assert_eq!(err.kind(), TableErrorKind::Fault, "{err}");
-    assert!(err.to_string().contains("220,\"Feedback loss on axis 1\""), "{err}");
+    assert!(
+        err.to_string().contains("220,\"Feedback loss on axis 1\""),
+        "{err}"
+    );
     // latched at 8 deg/s, i.e. 2 s into the ramp, seen by the next 100 ms sample
     let seen = t0.elapsed();
-    assert!(seen >= Duration::from_secs(2) && seen <= Duration::from_millis(2200), "{seen:?}");
+    assert!(
+        seen >= Duration::from_secs(2) && seen <= Duration::from_millis(2200),
+        "{seen:?}"
+    );
     let stats = table.stop_recording();
     assert!(stats.max <= 8.01, "{stats:?}");
     assert_eq!(table.state(), TableState::Faulted);
@@ -136,7 +164,11 @@ async fn table_sim_fault_latched_mid_ramp_stops_the_run_with_the_tables_message(
 
     // recovery: wait for the abort profile, then an explicit enable resets the latch
     table.wait_stopped(Duration::from_secs(5)).await.unwrap();
-    assert_eq!(table.state(), TableState::Faulted, "stopping does not clear a fault");
+    assert_eq!(
+        table.state(),
+        TableState::Faulted,
+        "stopping does not clear a fault"
+    );
     table.enable().await.unwrap();
     assert_eq!(table.state(), TableState::Servoed);
     assert_eq!(sim.fault(), None);
@@ -146,7 +178,10 @@ async fn table_sim_fault_latched_mid_ramp_stops_the_run_with_the_tables_message(
 async fn table_sim_runtime_rate_trip_is_a_fault() {
     let (mut table, sim) = bench(TableConfig::default()).await;
     table.set_rate(5.0, 5.0).await.unwrap();
-    table.wait_at_rate(&SettleCriteria::default()).await.unwrap();
+    table
+        .wait_at_rate(&SettleCriteria::default())
+        .await
+        .unwrap();
     sim.trip();
     let err = table.sample().await.unwrap_err();
     assert_eq!(err.kind(), TableErrorKind::Fault);
@@ -158,7 +193,10 @@ async fn table_sim_runtime_rate_trip_is_a_fault() {
 async fn table_sim_emergency_stop_opens_the_interlock() {
     let (mut table, sim) = bench(TableConfig::default()).await;
     table.set_rate(10.0, 5.0).await.unwrap();
-    table.wait_at_rate(&SettleCriteria::default()).await.unwrap();
+    table
+        .wait_at_rate(&SettleCriteria::default())
+        .await
+        .unwrap();
     let handle = table.stop_handle();
     handle.emergency_stop().await.unwrap();
     let_sim_run().await;
@@ -172,7 +210,10 @@ async fn table_sim_emergency_stop_opens_the_interlock() {
     assert_eq!(sim.mode(), SimMode::Off);
     assert!(sim.is_stopped());
     // demands need the servo again
-    assert_eq!(table.set_rate(1.0, 1.0).await.unwrap_err().kind(), TableErrorKind::State);
+    assert_eq!(
+        table.set_rate(1.0, 1.0).await.unwrap_err().kind(),
+        TableErrorKind::State
+    );
     table.enable().await.unwrap();
     table.set_rate(1.0, 1.0).await.unwrap();
     let_sim_run().await;
@@ -187,14 +228,21 @@ async fn table_sim_silent_table_fails_the_heartbeat() {
     let t0 = Instant::now();
     let err = table.heartbeat().await.unwrap_err();
     assert_eq!(err.kind(), TableErrorKind::Timeout, "{err}");
-    assert_eq!(t0.elapsed(), Duration::from_secs(2), "the heartbeat deadline");
+    assert_eq!(
+        t0.elapsed(),
+        Duration::from_secs(2),
+        "the heartbeat deadline"
+    );
     assert_eq!(table.state(), TableState::Faulted);
     // the silent table ignored the stop the driver tried: that is why the run must end
     let_sim_run().await;
     assert_eq!(sim.demanded_rate(), 10.0);
     // silence during an acquisition ends it too
     let err = table
-        .record_while(Duration::from_millis(100), tokio::time::sleep(Duration::from_secs(60)))
+        .record_while(
+            Duration::from_millis(100),
+            tokio::time::sleep(Duration::from_secs(60)),
+        )
         .await
         .unwrap_err();
     assert_eq!(err.kind(), TableErrorKind::Timeout);

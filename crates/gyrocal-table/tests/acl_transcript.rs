@@ -44,7 +44,10 @@ async fn table_transcript_connect_enable_rate_stop() {
     let mut table = AclTable::new(script, AclConfig::default());
     assert_eq!(table.state(), TableState::Disconnected);
     let id = table.connect().await.unwrap();
-    assert_eq!((id.manufacturer.as_str(), id.serial.as_str()), ("ACUTRONIC", "1234"));
+    assert_eq!(
+        (id.manufacturer.as_str(), id.serial.as_str()),
+        ("ACUTRONIC", "1234")
+    );
     assert_eq!(table.state(), TableState::Connected);
     table.enable().await.unwrap();
     assert_eq!(table.state(), TableState::Servoed);
@@ -65,10 +68,19 @@ async fn table_transcript_connect_enable_rate_stop() {
 async fn table_limits_are_refused_before_anything_is_sent() {
     // An empty script: any byte written fails the test.
     let mut table = AclTable::new(ScriptedTransport::new("table"), AclConfig::default());
-    for (rate, acc) in [(30.001, 1.0), (-31.0, 1.0), (10.0, 0.0), (10.0, -1.0), (10.0, 10.5)] {
+    for (rate, acc) in [
+        (30.001, 1.0),
+        (-31.0, 1.0),
+        (10.0, 0.0),
+        (10.0, -1.0),
+        (10.0, 10.5),
+    ] {
         let err = table.set_rate(rate, acc).await.unwrap_err();
         assert_eq!(err.kind(), TableErrorKind::Limit, "{err}");
-        assert!(err.to_string().contains("table: refused before sending"), "{err}");
+        assert!(
+            err.to_string().contains("table: refused before sending"),
+            "{err}"
+        );
     }
     let err = table.set_rate(f64::NAN, 1.0).await.unwrap_err();
     assert_eq!(err.kind(), TableErrorKind::Limit);
@@ -115,9 +127,17 @@ async fn table_latched_fault_in_a_sample_faults_the_driver_and_stops() {
     table.start_recording();
     let err = table.sample().await.unwrap_err();
     assert_eq!(err.kind(), TableErrorKind::Fault);
-    assert!(err.to_string().contains("220,\"Tracking error limit exceeded\""), "{err}");
+    assert!(
+        err.to_string()
+            .contains("220,\"Tracking error limit exceeded\""),
+        "{err}"
+    );
     assert_eq!(table.state(), TableState::Faulted);
-    assert_eq!(table.stop_recording().count, 0, "a faulted sample is not recorded");
+    assert_eq!(
+        table.stop_recording().count,
+        0,
+        "a faulted sample is not recorded"
+    );
     assert!(table.last_fault().is_some());
 }
 

@@ -26,7 +26,14 @@ pub(crate) struct Segment {
 impl Segment {
     /// A hold at rate `w` from `t0`.
     pub fn hold(t0: f64, p0: f64, w: f64) -> Self {
-        Segment { t0, p0, w0: w, target: w, accel: 1.0, jerk: None }
+        Segment {
+            t0,
+            p0,
+            w0: w,
+            target: w,
+            accel: 1.0,
+            jerk: None,
+        }
     }
 
     fn delta(&self) -> f64 {
@@ -82,10 +89,16 @@ impl Segment {
         } else if tau < tj + tc {
             let u = tau - tj;
             let r1 = j * tj * tj / 2.0;
-            (r1 + ap * u, j * tj.powi(3) / 6.0 + r1 * u + ap * u * u / 2.0)
+            (
+                r1 + ap * u,
+                j * tj.powi(3) / 6.0 + r1 * u + ap * u * u / 2.0,
+            )
         } else {
             let s = total - tau;
-            (d - j * s * s / 2.0, d * total / 2.0 - (d * s - j * s.powi(3) / 6.0))
+            (
+                d - j * s * s / 2.0,
+                d * total / 2.0 - (d * s - j * s.powi(3) / 6.0),
+            )
         }
     }
 
@@ -140,23 +153,43 @@ mod tests {
     #[test]
     fn table_profile_trapezoid_and_s_curve_integrate_exactly() {
         for jerk in [None, Some(20.0), Some(1.0)] {
-            let s = Segment { t0: 1.0, p0: 10.0, w0: -5.0, target: 15.0, accel: 4.0, jerk };
+            let s = Segment {
+                t0: 1.0,
+                p0: 10.0,
+                w0: -5.0,
+                target: 15.0,
+                accel: 4.0,
+                jerk,
+            };
             assert!((s.rate(s.end()) - 15.0).abs() < 1e-9);
             assert_eq!(s.rate(0.0), -5.0);
             let mut prev = s.rate(s.t0);
             for i in 1..200 {
                 let r = s.rate(s.t0 + i as f64 * s.duration() / 150.0);
-                assert!(r >= prev - 1e-12 && r <= 15.0 + 1e-12, "monotonic, no overshoot");
+                assert!(
+                    r >= prev - 1e-12 && r <= 15.0 + 1e-12,
+                    "monotonic, no overshoot"
+                );
                 prev = r;
             }
             for t in [1.5, 3.0, s.end(), s.end() + 2.0] {
                 let exact = s.position(t);
-                assert!((exact - numeric_position(&s, t)).abs() < 1e-4, "{jerk:?} {t}");
+                assert!(
+                    (exact - numeric_position(&s, t)).abs() < 1e-4,
+                    "{jerk:?} {t}"
+                );
             }
             let tc = s.first_crossing(10.0).unwrap();
             assert!((s.rate(tc) - 10.0).abs() < 1e-9);
         }
-        let plain = Segment { t0: 0.0, p0: 0.0, w0: 0.0, target: -20.0, accel: 5.0, jerk: None };
+        let plain = Segment {
+            t0: 0.0,
+            p0: 0.0,
+            w0: 0.0,
+            target: -20.0,
+            accel: 5.0,
+            jerk: None,
+        };
         assert_eq!(plain.duration(), 4.0);
         assert!((plain.rate(2.0) + 10.0).abs() < 1e-12);
         assert!((plain.first_crossing(10.0).unwrap() - 2.0).abs() < 1e-9);
