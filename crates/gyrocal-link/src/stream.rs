@@ -28,6 +28,16 @@ pub struct StreamTransport<S> {
     max_line: usize,
 }
 
+impl<S> std::fmt::Debug for StreamTransport<S> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("StreamTransport")
+            .field("name", &self.name)
+            .field("buffered", &self.buf.len())
+            .field("max_line", &self.max_line)
+            .finish_non_exhaustive()
+    }
+}
+
 impl<S: AsyncStream> StreamTransport<S> {
     /// Wraps `stream`; `name` is what error messages call the link.
     pub fn new(stream: S, name: impl Into<String>) -> Self {
