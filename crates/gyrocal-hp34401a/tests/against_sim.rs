@@ -109,7 +109,7 @@ async fn memory_2000_readings_in_4_bursts() {
     // 4 x (SAMP:COUN, INIT;*OPC?, FETC?)
     assert_eq!(st.lines_seen - lines_before, 12);
     assert_eq!(st.readings_taken, 2000);
-    let seen = seen.lock().unwrap();
+    let seen = seen.lock().unwrap().clone();
     assert_eq!(seen.len(), 2000);
     assert_eq!(seen.last(), Some(&2000));
     let want = Timing::new(&cfg)

@@ -47,7 +47,7 @@ async fn ready(t: ScriptedTransport) -> Hp34401a<ScriptedTransport> {
 #[tokio::test(start_paused = true)]
 async fn connect_configure_close() {
     let t = configure_script(connect_script()).expect_line("SYST:LOC");
-    let mut dmm = ready(t).await;
+    let dmm = ready(t).await;
     let id = dmm.identity().unwrap();
     assert_eq!(
         (id.model.as_str(), id.firmware.as_str()),

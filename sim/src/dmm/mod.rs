@@ -866,7 +866,7 @@ impl Meter {
     /// Runs the current line (or starts the next ready one); false when nothing could be done.
     fn run_exec(&mut self, now: Instant) -> bool {
         if self.exec.is_none() {
-            if !self.lines.front().is_some_and(|l| l.ready_at <= now) {
+            if self.lines.front().is_none_or(|l| l.ready_at > now) {
                 return false;
             }
             let Some(line) = self.lines.pop_front() else {
