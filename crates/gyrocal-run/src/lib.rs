@@ -12,14 +12,21 @@
 //!   [`RunDir::open_for_resume`] keeps every finished step, drops the partial step's readings
 //!   and a torn last line, and tells the sequencer where to continue.
 //!
-//! Why a crate of its own: the sequencer (which drives the instruments), the CLI (`gyrocal
-//! check`, `gyrocal run`) and the report all read these formats, and none of them should have
-//! to know how durability is achieved. This crate does no instrument I/O and depends on no
-//! driver; it is synchronous and small, so the sequencer can call it between async steps
-//! (writes are a few kilobytes per chunk).
+//! - [`estimate`]: the plan's duration from the instruments' timing models, and the physical
+//!   bound a run's elapsed time is judged against (`gyrocal check` prints it).
+//! - [`sequencer`]: the run itself. Generic over the multimeter's transport and the
+//!   [`gyrocal_table::RateTable`], so the same code drives real instruments and the simulated
+//!   bench, in real or virtual time.
+//!
+//! The plan and run-directory modules do no instrument I/O; they are synchronous and small, so
+//! the sequencer calls them between async steps (writes are a few kilobytes per chunk). The
+//! report and the CLI read the same formats without knowing how durability is achieved.
 
+pub mod estimate;
 pub mod plan;
 pub mod rundir;
+pub mod sequencer;
+pub mod simulate;
 mod time;
 
 pub use plan::{
@@ -30,4 +37,54 @@ pub use rundir::{
     Instruments, Manifest, Resume, Retry, RunData, RunDir, RunError, RunMeta, Sample, SampleRow,
     Status, StepRecord, Timing, load, load_samples,
 };
+pub use sequencer::{
+    Event, Phase, RunSummary, SequenceError, Sequencer, SequencerOptions, StopRequest,
+};
 pub use time::rfc3339_utc;
+
+/// The fitting crate's data set from a run's recorded steps: the demanded rate (as in the
+/// method; the measured rate is reported separately), the mean voltage, its spread and count
+/// (so least squares can weight by the standard error of each mean).
+pub fn dataset_from_steps(steps: &[StepRecord], source: &str) -> gyrocal_fit::Dataset {
+    gyrocal_fit::Dataset {
+        source: Some(source.to_string()),
+        points: steps
+            .iter()
+            .map(|s| gyrocal_fit::Point {
+                rate_dps: s.rate_dps,
+                volts: s.volts,
+                volts_std: s.volts_std,
+                n: Some(s.n),
+                line: None,
+            })
+            .collect(),
+    }
+}
+
+/// Fits a run directory's steps with `options`, stores the analysis in the manifest and in
+/// `fit.json`, and returns it.
+pub fn fit_run(
+    run: &mut RunDir,
+    options: &gyrocal_fit::Options,
+) -> Result<gyrocal_fit::Analysis, FitRunError> {
+    let data = load(run.path())?;
+    let source = run.path().join("steps.csv").display().to_string();
+    let analysis = gyrocal_fit::analyze(&dataset_from_steps(&data.steps, &source), options)?;
+    let value = serde_json::to_value(&analysis).map_err(|e| FitRunError::Json(e.to_string()))?;
+    run.set_fit(value)?;
+    Ok(analysis)
+}
+
+/// Why [`fit_run`] failed.
+#[derive(Debug, thiserror::Error)]
+pub enum FitRunError {
+    /// Reading or writing the run directory.
+    #[error(transparent)]
+    Run(#[from] RunError),
+    /// The fit itself (too few points, ...).
+    #[error("fit: {0}")]
+    Fit(#[from] gyrocal_fit::FitError),
+    /// Serialising the analysis.
+    #[error("fit result could not be serialised: {0}")]
+    Json(String),
+}
