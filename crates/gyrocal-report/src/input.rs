@@ -1,0 +1,248 @@
+//! What a report is made from: a run directory or a bare steps CSV, read and fitted.
+
+use std::fs::{self, File};
+use std::io::BufReader;
+use std::path::{Path, PathBuf};
+
+use gyrocal_fit::{Analysis, Dataset, Model, MultiAnalysis, Options, Point, Weighting};
+use gyrocal_run::Manifest;
+use gyrocal_run::rundir::{FIT_JSON, MANIFEST_JSON};
+
+use crate::ReportError;
+
+/// Where the input's fit came from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FitSource {
+    /// The run's `fit.json` (the numbers are exactly the run's).
+    FitJson(PathBuf),
+    /// The `fit` member of the run's manifest (no `fit.json` on disk).
+    Manifest(PathBuf),
+    /// Fitted by the report from the data with `gyrocal-fit`'s default options.
+    Computed,
+}
+
+/// One step's acquisition figures, for the noise and rate-error plots.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepStats {
+    /// Demanded rate, °/s.
+    pub rate_dps: f64,
+    /// Standard deviation of the readings, V.
+    pub volts_std: Option<f64>,
+    /// Mean measured table rate, °/s.
+    pub rate_meas_dps: Option<f64>,
+    /// Standard deviation of the measured table rate, °/s.
+    pub rate_meas_std_dps: Option<f64>,
+}
+
+/// One input of a report: the data, its fit and, for a run directory, the manifest.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Input {
+    /// The path given (run directory or CSV file).
+    pub path: PathBuf,
+    /// The run's manifest (run directories only).
+    pub manifest: Option<Manifest>,
+    /// The data set the fit uses (one point per finished step).
+    pub data: Dataset,
+    /// Per-step acquisition figures, in step order.
+    pub steps: Vec<StepStats>,
+    /// The analysis, or why none could be made (e.g. an aborted run with one step).
+    pub analysis: Result<Analysis, String>,
+    /// Where the analysis came from.
+    pub fit_source: FitSource,
+}
+
+/// Reads a run directory (a directory) or a steps CSV (a file).
+pub fn load_input(path: &Path) -> Result<Input, ReportError> {
+    if path.is_dir() {
+        load_run(path)
+    } else if path.is_file() {
+        load_csv(path)
+    } else {
+        Err(ReportError::NotFound {
+            path: path.to_path_buf(),
+        })
+    }
+}
+
+/// Reads a run directory: manifest, finished steps, and `fit.json` (or the manifest's fit, or a
+/// fit computed here when the run has none).
+pub(crate) fn load_run(dir: &Path) -> Result<Input, ReportError> {
+    if !dir.is_dir() {
+        return Err(ReportError::NotFound {
+            path: dir.to_path_buf(),
+        });
+    }
+    let run = gyrocal_run::load(dir)?;
+    let data = Dataset {
+        source: Some(dir.display().to_string()),
+        points: run
+            .steps
+            .iter()
+            .map(|s| Point {
+                rate_dps: s.rate_dps,
+                volts: s.volts,
+                volts_std: s.volts_std,
+                n: Some(s.n),
+                line: None,
+            })
+            .collect(),
+    };
+    let steps = run
+        .steps
+        .iter()
+        .map(|s| StepStats {
+            rate_dps: s.rate_dps,
+            volts_std: s.volts_std,
+            rate_meas_dps: s.rate_meas_dps,
+            rate_meas_std_dps: s.rate_meas_std_dps,
+        })
+        .collect();
+    let fit_path = dir.join(FIT_JSON);
+    let (analysis, fit_source) = if fit_path.exists() {
+        let bytes = fs::read(&fit_path).map_err(|source| ReportError::Io {
+            path: fit_path.clone(),
+            action: "read",
+            source,
+        })?;
+        let value: serde_json::Value =
+            serde_json::from_slice(&bytes).map_err(|e| ReportError::FitDocument {
+                path: fit_path.clone(),
+                message: e.to_string(),
+            })?;
+        (
+            Ok(analysis_from_json(&fit_path, value)?),
+            FitSource::FitJson(fit_path),
+        )
+    } else if let Some(value) = run.manifest.fit.clone() {
+        let mpath = dir.join(MANIFEST_JSON);
+        (
+            Ok(analysis_from_json(&mpath, value)?),
+            FitSource::Manifest(mpath),
+        )
+    } else {
+        (fit(&data), FitSource::Computed)
+    };
+    Ok(Input {
+        path: dir.to_path_buf(),
+        manifest: Some(run.manifest),
+        data,
+        steps,
+        analysis,
+        fit_source,
+    })
+}
+
+/// Reads a bare steps CSV and fits it.
+pub(crate) fn load_csv(path: &Path) -> Result<Input, ReportError> {
+    let name = path.display().to_string();
+    let file = File::open(path).map_err(|source| ReportError::Io {
+        path: path.to_path_buf(),
+        action: "read",
+        source,
+    })?;
+    let data = gyrocal_fit::input::parse_csv(BufReader::new(file), &name)?;
+    let measured = measured_rates(path);
+    let steps = data
+        .points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let (m, s) = measured.get(i).copied().unwrap_or((None, None));
+            StepStats {
+                rate_dps: p.rate_dps,
+                volts_std: p.volts_std,
+                rate_meas_dps: m,
+                rate_meas_std_dps: s,
+            }
+        })
+        .collect();
+    let analysis = fit(&data);
+    if let Err(message) = &analysis {
+        // A CSV is only data: when even a line cannot be fitted, there is nothing to report.
+        return Err(ReportError::FitDocument {
+            path: path.to_path_buf(),
+            message: message.clone(),
+        });
+    }
+    Ok(Input {
+        path: path.to_path_buf(),
+        manifest: None,
+        data,
+        steps,
+        analysis,
+        fit_source: FitSource::Computed,
+    })
+}
+
+/// The optional `rate_meas_dps` / `rate_meas_std_dps` columns of a steps CSV, row by row
+/// (data rows only, in the order `parse_csv` reads them). Best effort: the required columns were
+/// checked by `parse_csv`; a missing or unreadable optional cell is `None`.
+fn measured_rates(path: &Path) -> Vec<(Option<f64>, Option<f64>)> {
+    let Ok(file) = File::open(path) else {
+        return Vec::new();
+    };
+    let mut rdr = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .flexible(true)
+        .trim(csv::Trim::All)
+        .from_reader(BufReader::new(file));
+    let Ok(header) = rdr.headers().cloned() else {
+        return Vec::new();
+    };
+    let col = |name: &str| header.iter().position(|h| h.eq_ignore_ascii_case(name));
+    let (Some(meas), std) = (col("rate_meas_dps"), col("rate_meas_std_dps")) else {
+        return Vec::new();
+    };
+    let cell = |rec: &csv::StringRecord, i: Option<usize>| {
+        i.and_then(|i| rec.get(i))
+            .and_then(|s| s.parse::<f64>().ok())
+            .filter(|v| v.is_finite())
+    };
+    rdr.records()
+        .map(|r| match r {
+            Ok(rec) => (cell(&rec, Some(meas)), cell(&rec, std)),
+            Err(_) => (None, None),
+        })
+        .collect()
+}
+
+/// A run's fit document: an [`Analysis`], or a [`MultiAnalysis`] of one file.
+fn analysis_from_json(path: &Path, value: serde_json::Value) -> Result<Analysis, ReportError> {
+    match serde_json::from_value::<Analysis>(value.clone()) {
+        Ok(a) => Ok(a),
+        Err(e) => match serde_json::from_value::<MultiAnalysis>(value) {
+            Ok(m) if m.files.len() == 1 => {
+                Ok(m.files
+                    .into_iter()
+                    .next()
+                    .ok_or_else(|| ReportError::FitDocument {
+                        path: path.to_path_buf(),
+                        message: "no analysis".into(),
+                    })?)
+            }
+            _ => Err(ReportError::FitDocument {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            }),
+        },
+    }
+}
+
+/// Fits the data with the default options, leaving out the models the data cannot determine
+/// (as `gyrocal fit` does); an error only when not even a line can be fitted.
+pub(crate) fn fit(data: &Dataset) -> Result<Analysis, String> {
+    let mut opts = Options::default();
+    match gyrocal_fit::analyze(data, &opts) {
+        Ok(a) => Ok(a),
+        Err(first) => {
+            opts.models.retain(|&m| {
+                gyrocal_fit::fit_least_squares(data, m, Weighting::Auto).is_ok()
+                    || m == Model::Linear
+            });
+            gyrocal_fit::analyze(data, &opts).map_err(|e| {
+                tracing::warn!(error = %first, "fit with every model failed");
+                e.to_string()
+            })
+        }
+    }
+}
