@@ -40,6 +40,9 @@ code { font-size: 0.9em; word-break: break-all; }
 }
 "#;
 
+/// Side of the error-surface grid the report draws.
+const SURFACE_GRID: usize = 81;
+
 /// HTML-escapes text (element content and attribute values).
 pub(crate) fn esc(s: &str) -> String {
     let mut out = String::with_capacity(s.len());
@@ -522,27 +525,38 @@ fn training_and_surface(
             .push_str("<p class=\"note\">No neuron training trace in this fit.</p>\n"),
     }
     let _ = writeln!(doc.html, "<h2 id=\"surface{sfx}\">Error surface</h2>");
-    // The surface is in fit.json when the fit computed one; otherwise compute it here.
-    let surface = match (&a.error_surface, ls) {
-        (Some(s), _) => Some(s.clone()),
-        (None, Some(l)) => {
-            let data = gyrocal_fit::Dataset {
-                source: None,
-                points: l
-                    .residuals
-                    .iter()
-                    .map(|r| gyrocal_fit::Point::new(r.rate_dps, r.volts))
-                    .collect(),
-            };
-            Some(gyrocal_fit::ErrorSurface::around(
+    // Drawn on a finer grid than fit.json's (81 × 81 instead of its 41 × 41, for smoother level
+    // boundaries) over the same window; without a surface in the fit, over gyrocal-fit's default
+    // window. The points are the fit's own (rate, measured output) pairs.
+    let surface = ls.map(|l| {
+        let data = gyrocal_fit::Dataset {
+            source: None,
+            points: l
+                .residuals
+                .iter()
+                .map(|r| gyrocal_fit::Point::new(r.rate_dps, r.volts))
+                .collect(),
+        };
+        match &a.error_surface {
+            Some(s) if s.weights.len() >= 2 && s.thresholds.len() >= 2 => {
+                let half = |v: &[f64]| (v[v.len() - 1] - v[0]) / 2.0;
+                gyrocal_fit::ErrorSurface::grid(
+                    &data,
+                    s.center_weight,
+                    s.center_threshold,
+                    half(&s.weights),
+                    half(&s.thresholds),
+                    SURFACE_GRID,
+                )
+            }
+            _ => gyrocal_fit::ErrorSurface::around(
                 &data,
                 a.metrics.scale_factor,
                 a.metrics.bias_volts,
-                41,
-            ))
+                SURFACE_GRID,
+            ),
         }
-        (None, None) => None,
-    };
+    });
     match (surface, ls) {
         (Some(s), Some(l)) => {
             let neuron = nn.map(|f| (f.scale_factor, f.bias));

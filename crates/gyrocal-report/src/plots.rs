@@ -138,6 +138,18 @@ pub(crate) fn fit_plot(a: &Analysis) -> Result<String, ReportError> {
                 })
                 .collect()
         };
+        // The best model first, wide and light, so the two lines stay visible on top of it.
+        if let Some(best) = a.best_model.filter(|m| *m != Model::Linear)
+            && let Some(f) = a.fit(Method::LeastSquares, best)
+        {
+            let c = fit_color(f.method, f.model);
+            chart
+                .draw_series(LineSeries::new(line(f, 200), c.mix(0.55).stroke_width(6)))?
+                .label(format!("best model: least squares, {best} (wide line)"))
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 24, y)], c.mix(0.55).stroke_width(6))
+                });
+        }
         if let Some(f) = a.fit(Method::LeastSquares, Model::Linear) {
             let c = fit_color(f.method, f.model);
             chart
@@ -158,17 +170,6 @@ pub(crate) fn fit_plot(a: &Analysis) -> Result<String, ReportError> {
                     "neuron: K = {:.6} V/(°/s), K0 = {:.5} V",
                     f.scale_factor, f.bias
                 ))
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(2))
-                });
-        }
-        if let Some(best) = a.best_model.filter(|m| *m != Model::Linear)
-            && let Some(f) = a.fit(Method::LeastSquares, best)
-        {
-            let c = fit_color(f.method, f.model);
-            chart
-                .draw_series(LineSeries::new(line(f, 200), c.stroke_width(2)))?
-                .label(format!("best model: least squares, {best}"))
                 .legend(move |(x, y)| {
                     PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(2))
                 });
@@ -488,8 +489,8 @@ pub(crate) fn surface_plot(
         // Legend: the levels, then the markers.
         let l = &legend_area;
         let text =
-            |s: &str, y: i32, size: u32| l.draw(&Text::new(s.to_string(), (10, y), (FONT, size)));
-        text("SSE (V²), from", 22, LABEL_SIZE)?;
+            |s: &str, x: i32, y: i32| l.draw(&Text::new(s.to_string(), (x, y), (FONT, LABEL_SIZE)));
+        text("SSE (V²), from", 10, 22)?;
         for (k, lvl) in levels.iter().enumerate() {
             let y = 44 + 24 * k as i32;
             let c = LEVEL_COLORS[k.min(LEVEL_COLORS.len() - 1)];
@@ -498,14 +499,14 @@ pub(crate) fn surface_plot(
                 [(10, y), (34, y + 18)],
                 BLACK.stroke_width(1),
             ))?;
-            text(&format!("{lvl:.3e}"), y + 2, LABEL_SIZE)?;
+            text(&format!("{lvl:.3e}"), 42, y + 2)?;
         }
         let y = 44 + 24 * levels.len() as i32 + 16;
         l.draw(&Cross::new((22, y + 8), 7, BLACK.stroke_width(3)))?;
-        text("least squares", y + 1, LABEL_SIZE)?;
+        text("least squares", 42, y + 1)?;
         if neuron.is_some() {
             l.draw(&Circle::new((22, y + 34), 7, RED.stroke_width(2)))?;
-            text("neuron", y + 27, LABEL_SIZE)?;
+            text("neuron", 42, y + 27)?;
         }
         root.present()?;
         Ok(())
@@ -588,19 +589,9 @@ pub(crate) fn rate_error_plot(steps: &[StepStats]) -> Result<String, ReportError
             .draw()?;
         chart.draw_series(LineSeries::new([(x0, 0.0), (x1, 0.0)], BLACK.mix(0.6)))?;
         let c = RGBColor(44, 160, 44);
-        chart
-            .draw_series(raw.iter().map(|&(w, e, sd)| {
-                ErrorBar::new_vertical(w, (e - sd) * f, e * f, (e + sd) * f, c.stroke_width(2), 8)
-            }))?
-            .label("mean measured − demanded, ± std during the step")
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(2)));
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .label_font((FONT, LABEL_SIZE))
-            .background_style(WHITE.mix(0.9))
-            .border_style(BOLD)
-            .draw()?;
+        chart.draw_series(raw.iter().map(|&(w, e, sd)| {
+            ErrorBar::new_vertical(w, (e - sd) * f, e * f, (e + sd) * f, c.stroke_width(2), 8)
+        }))?;
         root.present()?;
         Ok(())
     })
@@ -617,6 +608,8 @@ pub(crate) fn repeatability_plot(ks: &[(f64, Option<f64>)]) -> Result<String, Re
             ks.iter()
                 .flat_map(|&(k, se)| [k - se.unwrap_or(0.0), k + se.unwrap_or(0.0)]),
         );
+        // Head room for the legend above the bars.
+        let y1 = y1 + (y1 - y0) * 0.3;
         let mut chart = ChartBuilder::on(&root)
             .caption("Scale factor per run (repeatability)", (FONT, TITLE_SIZE))
             .margin(12)

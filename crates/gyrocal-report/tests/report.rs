@@ -141,6 +141,22 @@ fn make_run(dir: &Path, spec: &RunSpec<'_>) {
     .unwrap();
 }
 
+/// With `GYROCAL_REPORT_KEEP=DIR`, copies a test's report files to `DIR/NAME` to look at them
+/// (e.g. in a browser); otherwise does nothing.
+fn keep(dir: &Path, name: &str) {
+    let Some(base) = std::env::var_os("GYROCAL_REPORT_KEEP") else {
+        return;
+    };
+    let out = Path::new(&base).join(name);
+    fs::create_dir_all(&out).unwrap();
+    for e in fs::read_dir(dir).unwrap() {
+        let e = e.unwrap();
+        if e.path().is_file() {
+            fs::copy(e.path(), out.join(e.file_name())).unwrap();
+        }
+    }
+}
+
 fn complete_run() -> (tempfile::TempDir, PathBuf) {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("run");
@@ -257,6 +273,7 @@ fn run_report_has_every_section_and_plot() {
     let table_start = html.find("class=\"residuals\"").unwrap();
     let table = &html[table_start..table_start + html[table_start..].find("</table>").unwrap()];
     assert_eq!(table.matches("<tr>").count(), 1 + RATES.len());
+    keep(&dir, "complete");
 }
 
 #[test]
@@ -364,6 +381,7 @@ fn incomplete_run_shows_the_banner_with_the_reason() {
     // No fit.json: the report fits the finished steps itself.
     assert!(html.contains("computed by the report"));
     assert!(html.contains("id=\"fig-fit\""));
+    keep(&dir, "incomplete");
 }
 
 #[test]
@@ -440,6 +458,8 @@ fn several_runs_give_the_repeatability() {
         })
         .collect();
     let report = render_many(&dirs).unwrap();
+    report.write(&tmp.path().join("report.html")).unwrap();
+    keep(tmp.path(), "several");
     assert!(report.html.contains("id=\"repeatability\""));
     let ks: Vec<f64> = dirs
         .iter()
