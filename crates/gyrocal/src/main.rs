@@ -23,6 +23,8 @@ struct Cli {
 enum Command {
     /// Fit scale factor and bias to measured (rate, volts) data and report the metrics.
     Fit(cmd::fit::FitArgs),
+    /// Write the HTML calibration report (with SVG plots) of run directories or steps CSV files.
+    Report(cmd::report::ReportArgs),
 }
 
 /// An error caused by the user's input (file, values, options): exit code 2.
@@ -48,6 +50,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Fit(args) => cmd::fit::run(&args),
+        Command::Report(args) => cmd::report::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

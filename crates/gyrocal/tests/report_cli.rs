@@ -1,0 +1,158 @@
+//! `gyrocal report` as a user runs it: files written, default output in a run directory, and
+//! one-line errors naming the file with exit code 2 (never a panic).
+
+// Helpers outside #[test] functions may unwrap too: a panic there is a failed test.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use gyrocal_run::{Plan, RunDir, RunMeta, Sample, Status, StepRecord};
+
+fn gyrocal(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_gyrocal"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn example() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/paper-shaped.csv")
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+fn assert_user_error(out: &Output, must_name: &str) {
+    let err = stderr(out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains(must_name), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "one line: {err}");
+}
+
+/// A small complete run: 5 rates, 3 readings each, no fit.json (the report fits it).
+fn small_run(dir: &Path) {
+    let plan = Plan::from_toml_str(
+        "[plan]\nname = \"cli test\"\nrates_dps = [0, 5, -5, 10, -10]\nsamples_per_rate = 3\n[table]\nport = \"/dev/ttyUSB1\"\nmax_rate_dps = 20\nacceleration_dps2 = 10\n[dmm]\nport = \"/dev/ttyUSB0\"\n",
+        Path::new("cli.toml"),
+    )
+    .unwrap();
+    let mut rd = RunDir::create(
+        dir,
+        &plan,
+        RunMeta {
+            gyrocal_version: "test".into(),
+            ..RunMeta::default()
+        },
+    )
+    .unwrap();
+    let schedule = rd.schedule().to_vec();
+    for (i, s) in schedule.iter().enumerate() {
+        let w = s.rate_dps;
+        let v = [
+            0.0088 + 0.3612 * w + 1e-4,
+            0.0088 + 0.3612 * w - 1e-4,
+            0.0088 + 0.3612 * w,
+        ];
+        let samples: Vec<Sample> = v
+            .iter()
+            .enumerate()
+            .map(|(j, &v)| Sample {
+                index: j as u64,
+                t_s: i as f64 + j as f64 * 0.1,
+                volts: Some(v + 1e-5 * w * w),
+            })
+            .collect();
+        rd.append_samples(s.index, &samples).unwrap();
+        rd.append_step(StepRecord {
+            step: s.index,
+            pass: s.pass,
+            rate_dps: w,
+            rate_meas_dps: None,
+            rate_meas_std_dps: None,
+            rate_meas_min_dps: None,
+            rate_meas_max_dps: None,
+            volts: 0.0088 + 0.3612 * w + 1e-5 * w * w,
+            volts_std: Some(1e-4),
+            n: 3,
+            overloads: 0,
+            retries: 0,
+            t_start_s: i as f64,
+            t_end_s: i as f64 + 0.3,
+        })
+        .unwrap();
+    }
+    rd.finish(Status::Complete, None, 5.0).unwrap();
+}
+
+#[test]
+fn report_of_a_steps_csv_writes_the_html_and_the_plots() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out_path = tmp.path().join("out").join("cal.html");
+    std::fs::create_dir_all(out_path.parent().unwrap()).unwrap();
+    let out = gyrocal(&[
+        "report",
+        example().to_str().unwrap(),
+        "--out",
+        out_path.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let html = std::fs::read_to_string(&out_path).unwrap();
+    assert!(html.contains("id=\"summary\""));
+    for f in [
+        "fit.svg",
+        "residuals.svg",
+        "training.svg",
+        "surface.svg",
+        "noise.svg",
+    ] {
+        assert!(out_path.with_file_name(f).is_file(), "{f}");
+    }
+    assert!(String::from_utf8_lossy(&out.stdout).contains("cal.html"));
+}
+
+#[test]
+fn report_of_a_run_directory_defaults_to_report_html_in_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    small_run(&dir);
+    let out = gyrocal(&["report", dir.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert!(html.contains("cli test"));
+    assert!(dir.join("surface.svg").is_file());
+}
+
+#[test]
+fn missing_input_exits_2_naming_it() {
+    let out = gyrocal(&["report", "/nonexistent/run-7"]);
+    assert_user_error(&out, "/nonexistent/run-7");
+}
+
+#[test]
+fn malformed_csv_exits_2_naming_the_file_and_line() {
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("bad-steps.csv");
+    std::fs::write(&path, "rate_dps,volts\n0,0.0088\n1,oops\n-1,-0.35\n").unwrap();
+    let out = gyrocal(&[
+        "report",
+        path.to_str().unwrap(),
+        "--out",
+        tmp.path().join("r.html").to_str().unwrap(),
+    ]);
+    assert_user_error(&out, "bad-steps.csv");
+    assert!(stderr(&out).contains("line 3"), "{}", stderr(&out));
+    assert!(!tmp.path().join("r.html").exists());
+}
+
+#[test]
+fn run_directory_without_steps_csv_exits_2_naming_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    small_run(&dir);
+    std::fs::remove_file(dir.join("steps.csv")).unwrap();
+    let out = gyrocal(&["report", dir.to_str().unwrap()]);
+    assert_user_error(&out, "steps.csv");
+}
