@@ -18,7 +18,7 @@
 
 use gyrocal_link::{StreamTransport, memory_pair};
 use serde::{Deserialize, Serialize};
-use tokio::io::DuplexStream;
+use tokio::io::{AsyncRead, AsyncWrite, DuplexStream};
 
 use crate::dmm::{DmmConfig, DmmHandle, SimDmm};
 use crate::gyro::{GyroConfig, GyroSignal, GyroTruth};
@@ -86,34 +86,47 @@ impl Bench {
     /// Spawns the table and the multimeter (reading the gyro on the table) as tokio tasks over
     /// in-memory pipes. Must be called inside a tokio runtime; fine in paused virtual time.
     pub fn spawn(config: BenchConfig) -> Bench {
+        let (table_link, table_dev) = memory_pair("sim-table");
+        let (dmm_link, dmm_dev) = memory_pair("sim-34401a");
+        let handle = Bench::spawn_on(config, dmm_dev, table_dev);
+        Bench {
+            dmm: dmm_link,
+            table: table_link,
+            handle,
+        }
+    }
+
+    /// Spawns the bench serving the device sides of the links it is given: `dmm` for the
+    /// multimeter, `table` for the table (for example the master sides of two
+    /// pseudo-terminals). More table links can be served later with
+    /// [`TableHandle::serve_link`]. Must be called inside a tokio runtime.
+    pub fn spawn_on<D, T>(config: BenchConfig, dmm: D, table: T) -> BenchHandle
+    where
+        D: AsyncRead + AsyncWrite + Send + Unpin + 'static,
+        T: AsyncRead + AsyncWrite + Send + Unpin + 'static,
+    {
         let BenchConfig {
             seed,
             time_scale,
-            mut table,
+            table: mut table_config,
             gyro,
-            mut dmm,
+            dmm: mut dmm_config,
         } = config;
         let time_scale = if time_scale.is_finite() && time_scale > 0.0 {
             time_scale
         } else {
             1.0
         };
-        table.time_scale = time_scale;
-        dmm.time_scale = time_scale;
-        let (table_link, table_dev) = memory_pair("sim-table");
-        let (dmm_link, dmm_dev) = memory_pair("sim-34401a");
-        let table_handle = SimTable::spawn(table_dev, table, derive_seed(seed, 1));
+        table_config.time_scale = time_scale;
+        dmm_config.time_scale = time_scale;
+        let table_handle = SimTable::spawn(table, table_config, derive_seed(seed, 1));
         let signal = GyroSignal::new(gyro, table_handle.clone(), derive_seed(seed, 2));
         let truth = signal.truth();
-        let dmm_handle = SimDmm::spawn(dmm_dev, dmm, Box::new(signal), derive_seed(seed, 3));
-        Bench {
-            dmm: dmm_link,
-            table: table_link,
-            handle: BenchHandle {
-                table: table_handle,
-                dmm: dmm_handle,
-                truth,
-            },
+        let dmm_handle = SimDmm::spawn(dmm, dmm_config, Box::new(signal), derive_seed(seed, 3));
+        BenchHandle {
+            table: table_handle,
+            dmm: dmm_handle,
+            truth,
         }
     }
 }

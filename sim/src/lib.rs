@@ -16,5 +16,6 @@ pub mod signal;
 pub mod table;
 pub mod gyro;
 pub mod bench;
+pub mod faults;
 
 pub use signal::SignalSource;

@@ -111,6 +111,21 @@ impl Default for TableConfig {
     }
 }
 
+/// A fault armed for the N-th `:Demand:Rate` the table sees (see [`TableHandle::arm_at_demand`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DemandFault {
+    /// A rate trip (error 210) latched halfway through that demand's ramp (at once if the
+    /// demand starts no ramp): abort profile, interlock open.
+    Trip,
+    /// An injected fault (error 220, [`TableFaults::message`]) latched halfway through that
+    /// demand's ramp (at once if the demand starts no ramp).
+    Fault,
+    /// From that demand on (itself included) the table executes and answers nothing: it keeps
+    /// doing what it did before.
+    Silent,
+}
+
 /// The table's mode, as `:Mode? 1` reports it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum SimMode {
@@ -148,6 +163,12 @@ struct State {
     silent: bool,
     inject_at_rate: Option<f64>,
     inject_after: Option<f64>,
+    /// Sim time of an armed rate trip (error 210).
+    trip_after: Option<f64>,
+    /// `:Demand:Rate` commands seen (refused ones included).
+    demands_seen: u64,
+    /// Faults armed for a demand number.
+    on_demand: Vec<(u64, DemandFault)>,
     rng: StdRng,
 }
 
@@ -255,6 +276,10 @@ impl State {
                 220,
                 &|_| message.clone(),
             );
+            let armed_trip = self.trip_after.map(|a| a.max(seg.t0));
+            consider(armed_trip, 210, &|w| {
+                format!("Rate trip: {:.3} deg/s (armed trip)", seg.rate(w).abs())
+            });
             let trip = self.config.trip_rate;
             consider(seg.first_crossing(trip), 210, &|w| {
                 format!(
@@ -278,6 +303,9 @@ impl State {
                 self.inject_after = None;
                 self.inject_at_rate = None;
             }
+            if code == 210 && armed_trip == Some(when) {
+                self.trip_after = None;
+            }
             self.latch(when, code, text);
         }
     }
@@ -292,6 +320,13 @@ impl State {
 pub struct SimTable;
 
 impl SimTable {
+    /// A table with no link yet (its clock starts now): serve links with
+    /// [`TableHandle::serve_link`], one or several, one after the other or at once (a
+    /// pseudo-terminal and a TCP port, a client that reconnects).
+    pub fn idle(config: TableConfig, seed: u64) -> TableHandle {
+        TableHandle::new(config, seed)
+    }
+
     /// Serves the ACL dialect on `stream` as a tokio task (on tokio's clock: fine in paused
     /// virtual time) until the stream closes or [`TableHandle::shutdown`]. `seed` seeds the
     /// readback noise.
@@ -344,6 +379,9 @@ impl TableHandle {
                 silent: false,
                 inject_at_rate: faults.inject_at_rate,
                 inject_after: faults.inject_after,
+                trip_after: None,
+                demands_seen: 0,
+                on_demand: Vec::new(),
                 rng: StdRng::seed_from_u64(seed),
             })),
             shutdown: Arc::new(watch::channel(false).0),
@@ -451,6 +489,33 @@ impl TableHandle {
         }
     }
 
+    /// Arms `fault` for the `n`-th `:Demand:Rate` the table sees (counted from 1 since the
+    /// start, refused demands included; see [`DemandFault`] for what happens). A number already
+    /// passed never fires.
+    pub fn arm_at_demand(&self, n: u64, fault: DemandFault) {
+        self.lock().on_demand.push((n, fault));
+    }
+
+    /// `:Demand:Rate` commands seen so far (refused ones included).
+    pub fn demands_seen(&self) -> u64 {
+        self.lock().demands_seen
+    }
+
+    /// Whether the table is silent (answers and executes nothing).
+    pub fn is_silent(&self) -> bool {
+        self.at(Instant::now()).0.silent
+    }
+
+    /// Serves the ACL dialect on one more `stream` against this same table, as a tokio task,
+    /// until that stream closes or [`TableHandle::shutdown`]. Returns the task.
+    pub fn serve_link<S>(&self, stream: S) -> tokio::task::JoinHandle<()>
+    where
+        S: AsyncRead + AsyncWrite + Send + Unpin + 'static,
+    {
+        let task = self.clone();
+        tokio::spawn(async move { task.serve(stream).await })
+    }
+
     /// Ends the simulator task; the stream is closed.
     pub fn shutdown(&self) {
         self.shutdown.send_replace(true);
@@ -498,6 +563,9 @@ impl TableHandle {
         let mut replies = Vec::new();
         let mut base: Vec<String> = Vec::new();
         for part in line.split(';') {
+            if st.silent {
+                break;
+            }
             let part = part.trim();
             if part.is_empty() {
                 continue;
@@ -691,6 +759,47 @@ fn command(st: &mut State, t: f64, nodes: &[String], query: bool, args: &[&str])
             st.rate_limit = v;
         }
     } else if path_is(nodes, &["Demand", "Rate"]) {
+        st.demands_seen += 1;
+        let n = st.demands_seen;
+        let mut armed = Vec::new();
+        st.on_demand.retain(|&(k, f)| {
+            if k == n {
+                armed.push(f);
+                false
+            } else {
+                true
+            }
+        });
+        if armed.contains(&DemandFault::Silent) {
+            tracing::info!("sim table silent from demand {n} on");
+            st.silent = true;
+            return None;
+        }
+        demand_rate(st, t, args);
+        // halfway through the ramp this demand started, or now if it started none
+        let mid = if st.seg.t0 == t {
+            t + st.seg.duration() / 2.0
+        } else {
+            t
+        };
+        for f in armed {
+            tracing::info!("sim table: {f:?} armed at demand {n} for t={mid:.3}");
+            match f {
+                DemandFault::Trip => st.trip_after = Some(mid),
+                DemandFault::Fault => st.inject_after = Some(mid),
+                DemandFault::Silent => {}
+            }
+        }
+        st.advance(t);
+    } else {
+        st.push_error(-113, "Undefined header");
+    }
+    None
+}
+
+/// `:Demand:Rate <axis>,<rate>`: checks, then a ramp to the new demand.
+fn demand_rate(st: &mut State, t: f64, args: &[&str]) -> Option<()> {
+    {
         parse_axis(st, args.first())?;
         let v = parse_value(st, args.get(1))?;
         if !st.interlock_closed {
@@ -708,8 +817,6 @@ fn command(st: &mut State, t: f64, nodes: &[String], query: bool, args: &[&str])
             // a fault injected at a rate may now be reached on this ramp
             st.advance(t);
         }
-    } else {
-        st.push_error(-113, "Undefined header");
     }
-    None
+    Some(())
 }

@@ -189,6 +189,7 @@ pub struct DmmStats {
 
 enum Ctl {
     Fault(Fault),
+    AtReading(u64, Fault),
     Stop,
 }
 
@@ -213,6 +214,21 @@ impl DmmHandle {
             .unwrap_or_else(|e| e.into_inner().clone())
     }
 
+    /// Arms `fault` for the `n`-th reading the meter takes (counted from 1 since the start,
+    /// like [`DmmStats::readings_taken`]); injected just before that reading is taken, so:
+    ///
+    /// - a reply fault (no reply, garble, truncate) hits the reply that carries reading `n`:
+    ///   when readings stream (`READ?`) the reply it is part of, from that reading on (a garble
+    ///   lands in reading `n`'s own characters); when they go to memory, the `FETC?` reply
+    ///   (a garble lands in reading `n`'s characters there);
+    /// - an overload makes reading `n` (and the following ones, as many as asked) overloads;
+    /// - a disconnect drops the link instead of taking reading `n`.
+    ///
+    /// A reading number already passed fires at the next reading.
+    pub fn inject_at_reading(&self, n: u64, fault: Fault) {
+        let _ = self.ctl.send(Ctl::AtReading(n, fault));
+    }
+
     /// Readings taken so far.
     pub fn readings_taken(&self) -> u64 {
         self.stats().readings_taken
@@ -221,6 +237,14 @@ impl DmmHandle {
     /// Commands seen so far.
     pub fn commands_seen(&self) -> u64 {
         self.stats().commands_seen
+    }
+
+    /// A cloneable handle that injects faults and reads the counters (for other tasks).
+    pub fn injector(&self) -> DmmInjector {
+        DmmInjector {
+            ctl: self.ctl.clone(),
+            stats: self.stats.clone(),
+        }
     }
 
     /// Whether the simulator task has ended.
@@ -232,6 +256,44 @@ impl DmmHandle {
     pub async fn stop(self) {
         let _ = self.ctl.send(Ctl::Stop);
         let _ = self.task.await;
+    }
+}
+
+/// A cloneable part of a [`DmmHandle`]: fault injection and counters, without the task.
+#[derive(Clone)]
+pub struct DmmInjector {
+    ctl: mpsc::UnboundedSender<Ctl>,
+    stats: Arc<Mutex<DmmStats>>,
+}
+
+impl std::fmt::Debug for DmmInjector {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DmmInjector").finish_non_exhaustive()
+    }
+}
+
+impl DmmInjector {
+    /// See [`DmmHandle::inject`].
+    pub fn inject(&self, fault: Fault) {
+        let _ = self.ctl.send(Ctl::Fault(fault));
+    }
+
+    /// See [`DmmHandle::inject_at_reading`].
+    pub fn inject_at_reading(&self, n: u64, fault: Fault) {
+        let _ = self.ctl.send(Ctl::AtReading(n, fault));
+    }
+
+    /// A snapshot of the counters.
+    pub fn stats(&self) -> DmmStats {
+        self.stats
+            .lock()
+            .map(|s| s.clone())
+            .unwrap_or_else(|e| e.into_inner().clone())
+    }
+
+    /// Readings taken so far.
+    pub fn readings_taken(&self) -> u64 {
+        self.stats().readings_taken
     }
 }
 
@@ -402,6 +464,10 @@ struct Meter {
     disconnect: bool,
     stop: bool,
     faults: Vec<ScheduledFault>,
+    /// Faults armed for a reading number (see [`DmmHandle::inject_at_reading`]).
+    at_reading: Vec<(u64, Fault)>,
+    /// A reply fault for the reading at this index of the memory, applied by `FETC?`.
+    memory_fault: Option<(usize, ReplyFault)>,
 }
 
 fn scaled(cfg: &DmmConfig, d: Duration) -> Duration {
@@ -449,6 +515,8 @@ impl Meter {
             disconnect: false,
             stop: false,
             faults,
+            at_reading: Vec::new(),
+            memory_fault: None,
         }
     }
 
@@ -478,6 +546,7 @@ impl Meter {
                 biased;
                 c = ctl.recv(), if ctl_open => match c {
                     Some(Ctl::Fault(f)) => self.inject(f),
+                    Some(Ctl::AtReading(n, f)) => self.at_reading.push((n, f)),
                     Some(Ctl::Stop) => self.stop = true,
                     None => ctl_open = false,
                 },
@@ -634,6 +703,43 @@ impl Meter {
         }
     }
 
+    /// Fires the faults armed for the reading about to be taken; true when the meter
+    /// disconnected instead.
+    fn reading_faults(&mut self, dest: Dest) -> bool {
+        let next = self.counters.readings_taken + 1;
+        let mut due = Vec::new();
+        self.at_reading.retain(|(n, f)| {
+            if *n <= next {
+                due.push(f.clone());
+                false
+            } else {
+                true
+            }
+        });
+        for f in due {
+            tracing::debug!(fault = ?f, reading = next, "simulated 34401A: fault at reading");
+            let reply_fault = match f {
+                Fault::NoReply => ReplyFault::NoReply,
+                Fault::Garble => ReplyFault::Garble,
+                Fault::Truncate => ReplyFault::Truncate,
+                other => {
+                    self.inject(other);
+                    continue;
+                }
+            };
+            match dest {
+                Dest::Memory => self.memory_fault = Some((self.memory.len(), reply_fault)),
+                Dest::Output => match self.exec.as_mut() {
+                    // the reply has begun: the fault lands on this reading's characters
+                    Some(e) if e.has_output && !e.muted => e.fault = Some(reply_fault),
+                    // the reply begins with this reading
+                    _ => self.pending_reply_fault.push_front(reply_fault),
+                },
+            }
+        }
+        self.disconnect
+    }
+
     fn scheduled_faults(&mut self) {
         while self
             .faults
@@ -739,6 +845,7 @@ impl Meter {
         });
         if dest == Dest::Memory {
             self.memory.clear();
+            self.memory_fault = None;
         }
         if !awaiting {
             let armed = now + scaled(&self.cfg, ARM_TIME);
@@ -767,6 +874,10 @@ impl Meter {
     fn complete_reading(&mut self) {
         let Some(m) = self.meas.as_ref() else { return };
         let (dest, start, done_at, produced) = (m.dest, m.window_start, m.done_at, m.produced);
+        if self.reading_faults(dest) {
+            self.meas = None;
+            return;
+        }
         let v = self.sample(start);
         self.counters.readings_taken += 1;
         match dest {
@@ -830,21 +941,7 @@ impl Meter {
         match exec.fault.take() {
             None => self.out.extend(bytes),
             Some(ReplyFault::NoReply) => exec.muted = true,
-            Some(ReplyFault::Garble) => {
-                let mut b = bytes.to_vec();
-                // the second digit (or the first, or the first byte) becomes '#'
-                let mut digits = b
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, c)| c.is_ascii_digit())
-                    .map(|(i, _)| i);
-                let first = digits.next();
-                let i = digits.next().or(first).unwrap_or(0);
-                if let Some(c) = b.get_mut(i) {
-                    *c = b'#';
-                }
-                self.out.extend(b);
-            }
+            Some(ReplyFault::Garble) => self.out.extend(garbled(bytes).into_bytes()),
             Some(ReplyFault::Truncate) => {
                 let half = bytes.len().div_ceil(2);
                 self.out.extend(&bytes[..half]);
@@ -935,6 +1032,7 @@ impl Meter {
                 no_params()?;
                 self.set = Settings::default();
                 self.memory.clear();
+                self.memory_fault = None;
             }
             (Cmd::Cls, false) => {
                 no_params()?;
@@ -1099,13 +1197,20 @@ impl Meter {
                 if self.memory.is_empty() {
                     return Err((-230, "Data stale"));
                 }
-                let text = self
-                    .memory
-                    .iter()
-                    .map(|&v| format_reading(v))
-                    .collect::<Vec<_>>()
-                    .join(",");
-                self.reply(&text);
+                let mut fields: Vec<String> =
+                    self.memory.iter().map(|&v| format_reading(v)).collect();
+                match self.memory_fault.take() {
+                    Some((i, ReplyFault::Garble)) => {
+                        if let Some(f) = fields.get_mut(i) {
+                            *f = garbled(f.as_bytes());
+                        }
+                    }
+                    Some((_, other)) if !self.exec.as_ref().is_some_and(|e| e.has_output) => {
+                        self.pending_reply_fault.push_front(other);
+                    }
+                    Some(_) | None => {}
+                }
+                self.reply(&fields.join(","));
             }
             (Cmd::DataPoints, true) => {
                 let n = self.memory.len();
@@ -1160,6 +1265,22 @@ impl Meter {
         self.set.imp_auto = false;
         Ok(())
     }
+}
+
+/// `bytes` with the second digit (or the first, or the first byte) replaced by `#`.
+fn garbled(bytes: &[u8]) -> String {
+    let mut b = bytes.to_vec();
+    let mut digits = b
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| c.is_ascii_digit())
+        .map(|(i, _)| i);
+    let first = digits.next();
+    let i = digits.next().or(first).unwrap_or(0);
+    if let Some(c) = b.get_mut(i) {
+        *c = b'#';
+    }
+    String::from_utf8_lossy(&b).into_owned()
 }
 
 async fn sleep_until_opt(t: Option<Instant>) {

@@ -1,0 +1,446 @@
+//! Fault schedules for a running bench, from a small text grammar (`gyrocal sim --fault`).
+//!
+//! ```text
+//! spec    = device ":" action "@" trigger [ "x" count ]
+//! device  = "dmm" | "table"
+//! action  = dmm:   "timeout" | "garble" | "truncate" | "overload" | "disconnect"
+//!           table: "trip" | "fault" | "silent"
+//! trigger = "reading" N        the N-th reading the meter takes (N >= 1)
+//!         | "demand" N         the N-th `:Demand:Rate` the table sees (N >= 1)
+//!         | "t=" S ["s"]       S sim seconds after the bench started (S >= 0)
+//! count   = N >= 1, default 1: for overload the number of overload readings, for timeout,
+//!           garble and truncate the number of consecutive replies (readings) hit; not
+//!           allowed for disconnect and the table's actions
+//! ```
+//!
+//! Examples: `dmm:timeout@reading100` (the reply carrying reading 100 never comes),
+//! `dmm:garble@reading100`, `dmm:overload@reading50x5` (readings 50 to 54 are overloads),
+//! `dmm:disconnect@reading300` (the meter drops its link for good instead of taking reading
+//! 300), `table:trip@demand4` (a rate trip latched halfway through the 4th demand's ramp),
+//! `table:fault@t=12s`, `table:silent@demand3` (the table ignores the 3rd demand and everything
+//! after it).
+//!
+//! What the actions do: `timeout` loses a reply (the meter says nothing), `garble` replaces a
+//! digit of a reply by `#`, `truncate` cuts a reply halfway without its terminator, `overload`
+//! makes readings ±9.9E37, `disconnect` closes the meter's end of its link and stops it; `trip`
+//! latches a rate trip (error 210), `fault` an injected fault (error 220), `silent` makes the
+//! table stop answering and executing anything (it keeps turning as it was).
+//!
+//! How they fire: a meter action on a `reading` trigger and a table action on a `demand`
+//! trigger are armed on the instrument itself and fire exactly there
+//! ([`crate::dmm::DmmHandle::inject_at_reading`], [`crate::table::TableHandle::arm_at_demand`]).
+//! Time triggers and the crossed ones (a meter action at a table demand, a table action at a
+//! meter reading) fire from a supervisor task within a few milliseconds of their moment: a
+//! meter action then hits the next reply (or the next readings), a table trip or fault latches
+//! at once, whatever the rate.
+
+use std::fmt;
+use std::str::FromStr;
+use std::time::Duration;
+
+use tokio::task::JoinHandle;
+use tokio::time::Instant;
+
+use crate::bench::BenchHandle;
+use crate::dmm::Fault;
+use crate::table::DemandFault;
+
+/// The grammar, for command-line help.
+pub const GRAMMAR: &str = "\
+SPEC = DEVICE:ACTION@TRIGGER[xCOUNT]
+  dmm actions:   timeout (a reply never comes), garble (a digit of a reply becomes #),
+                 truncate (a reply stops halfway), overload (readings are +-9.9E37),
+                 disconnect (the meter closes its link and is gone for good)
+  table actions: trip (rate trip, error 210), fault (injected fault, error 220),
+                 silent (the table answers and executes nothing more)
+  triggers:      readingN (the N-th reading the meter takes), demandN (the N-th
+                 :Demand:Rate the table sees), t=Ss (S sim seconds after start)
+  xCOUNT:        overload: that many readings; timeout/garble/truncate: that many
+                 consecutive replies (readings)
+  examples: dmm:garble@reading100  dmm:overload@reading50x5  dmm:disconnect@reading300
+            table:trip@demand4  table:fault@t=12s  table:silent@demand3";
+
+/// What a fault does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum FaultAction {
+    /// The meter loses a reply.
+    DmmTimeout,
+    /// A digit of a meter reply becomes `#`.
+    DmmGarble,
+    /// A meter reply stops halfway, without its terminator.
+    DmmTruncate,
+    /// Meter readings are overloads.
+    DmmOverload,
+    /// The meter closes its link and stops for good.
+    DmmDisconnect,
+    /// The table latches a rate trip.
+    TableTrip,
+    /// The table latches an injected fault.
+    TableFault,
+    /// The table stops answering and executing.
+    TableSilent,
+}
+
+impl FaultAction {
+    /// The `device:action` text.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            FaultAction::DmmTimeout => "dmm:timeout",
+            FaultAction::DmmGarble => "dmm:garble",
+            FaultAction::DmmTruncate => "dmm:truncate",
+            FaultAction::DmmOverload => "dmm:overload",
+            FaultAction::DmmDisconnect => "dmm:disconnect",
+            FaultAction::TableTrip => "table:trip",
+            FaultAction::TableFault => "table:fault",
+            FaultAction::TableSilent => "table:silent",
+        }
+    }
+
+    fn takes_count(self) -> bool {
+        matches!(
+            self,
+            FaultAction::DmmTimeout
+                | FaultAction::DmmGarble
+                | FaultAction::DmmTruncate
+                | FaultAction::DmmOverload
+        )
+    }
+
+    fn is_dmm(self) -> bool {
+        self.as_str().starts_with("dmm:")
+    }
+
+    /// The meter faults this action injects (`count` of them, or one overload of `count`).
+    fn dmm_faults(self, count: u32) -> Vec<Fault> {
+        let one = match self {
+            FaultAction::DmmTimeout => Fault::NoReply,
+            FaultAction::DmmGarble => Fault::Garble,
+            FaultAction::DmmTruncate => Fault::Truncate,
+            FaultAction::DmmOverload => return vec![Fault::Overload { readings: count }],
+            FaultAction::DmmDisconnect => return vec![Fault::Disconnect],
+            _ => return Vec::new(),
+        };
+        vec![one; usize::try_from(count).unwrap_or(1)]
+    }
+
+    fn demand_fault(self) -> Option<DemandFault> {
+        match self {
+            FaultAction::TableTrip => Some(DemandFault::Trip),
+            FaultAction::TableFault => Some(DemandFault::Fault),
+            FaultAction::TableSilent => Some(DemandFault::Silent),
+            _ => None,
+        }
+    }
+}
+
+/// When a fault fires.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Trigger {
+    /// At the N-th reading the meter takes (from 1).
+    Reading(u64),
+    /// At the N-th `:Demand:Rate` the table sees (from 1).
+    Demand(u64),
+    /// This many sim seconds after the bench started.
+    Time(f64),
+}
+
+impl fmt::Display for Trigger {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Trigger::Reading(n) => write!(f, "reading{n}"),
+            Trigger::Demand(n) => write!(f, "demand{n}"),
+            Trigger::Time(s) => write!(f, "t={s}s"),
+        }
+    }
+}
+
+/// One parsed fault spec, such as `dmm:overload@reading50x5`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FaultSpec {
+    /// What happens.
+    pub action: FaultAction,
+    /// When.
+    pub trigger: Trigger,
+    /// How many (see the grammar); 1 unless given.
+    pub count: u32,
+}
+
+impl fmt::Display for FaultSpec {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}@{}", self.action.as_str(), self.trigger)?;
+        if self.count != 1 {
+            write!(f, "x{}", self.count)?;
+        }
+        Ok(())
+    }
+}
+
+/// A spec that does not follow the grammar; the message names the spec.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("fault spec `{spec}`: {reason}")]
+pub struct FaultSpecError {
+    /// The spec as given.
+    pub spec: String,
+    /// What is wrong with it.
+    pub reason: String,
+}
+
+fn positive(text: &str, what: &str) -> Result<u64, String> {
+    match text.parse::<u64>() {
+        Ok(n) if n >= 1 => Ok(n),
+        _ => Err(format!("{what} must be a whole number >= 1, not `{text}`")),
+    }
+}
+
+impl FromStr for FaultSpec {
+    type Err = FaultSpecError;
+
+    fn from_str(spec: &str) -> Result<Self, Self::Err> {
+        let err = |reason: String| FaultSpecError {
+            spec: spec.to_string(),
+            reason,
+        };
+        let text = spec.trim().to_ascii_lowercase();
+        let (what, when) = text.split_once('@').ok_or_else(|| {
+            err("expected DEVICE:ACTION@TRIGGER, such as dmm:garble@reading100".into())
+        })?;
+        let action = match what.trim() {
+            "dmm:timeout" => FaultAction::DmmTimeout,
+            "dmm:garble" => FaultAction::DmmGarble,
+            "dmm:truncate" => FaultAction::DmmTruncate,
+            "dmm:overload" => FaultAction::DmmOverload,
+            "dmm:disconnect" => FaultAction::DmmDisconnect,
+            "table:trip" => FaultAction::TableTrip,
+            "table:fault" => FaultAction::TableFault,
+            "table:silent" => FaultAction::TableSilent,
+            other => {
+                return Err(err(format!(
+                    "unknown action `{other}` (dmm: timeout, garble, truncate, overload, \
+                     disconnect; table: trip, fault, silent)"
+                )));
+            }
+        };
+        let when = when.trim();
+        let (trigger_text, count) = match when.rsplit_once('x') {
+            Some((t, c)) => (t, Some(positive(c, "the count").map_err(err)?)),
+            None => (when, None),
+        };
+        let trigger = if let Some(n) = trigger_text.strip_prefix("reading") {
+            Trigger::Reading(positive(n, "the reading number").map_err(err)?)
+        } else if let Some(n) = trigger_text.strip_prefix("demand") {
+            Trigger::Demand(positive(n, "the demand number").map_err(err)?)
+        } else if let Some(s) = trigger_text.strip_prefix("t=") {
+            let s = s.strip_suffix('s').unwrap_or(s);
+            match s.parse::<f64>() {
+                Ok(v) if (0.0..1e9).contains(&v) => Trigger::Time(v),
+                _ => {
+                    return Err(err(format!(
+                        "the time must be sim seconds >= 0, such as t=12s, not `{trigger_text}`"
+                    )));
+                }
+            }
+        } else {
+            return Err(err(format!(
+                "unknown trigger `{trigger_text}` (readingN, demandN or t=Ss)"
+            )));
+        };
+        let count = match count {
+            None => 1,
+            Some(_) if !action.takes_count() => {
+                return Err(err(format!("{} takes no count", action.as_str())));
+            }
+            Some(c) => u32::try_from(c)
+                .ok()
+                .filter(|&c| c <= 100_000)
+                .ok_or_else(|| err(format!("count {c} is above 100000")))?,
+        };
+        Ok(FaultSpec {
+            action,
+            trigger,
+            count,
+        })
+    }
+}
+
+/// Whether each spec of a schedule has been triggered, for reports.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FaultStatus {
+    /// The spec, in its canonical form.
+    pub spec: String,
+    /// Whether its trigger has been reached.
+    pub fired: bool,
+}
+
+/// A schedule armed on a bench: see [`schedule`].
+#[derive(Debug)]
+pub struct FaultSchedule {
+    specs: Vec<FaultSpec>,
+    started: Instant,
+    time_scale: f64,
+    supervisor: Option<JoinHandle<()>>,
+}
+
+impl FaultSchedule {
+    /// Where each spec stands now.
+    pub fn status(&self, bench: &BenchHandle) -> Vec<FaultStatus> {
+        let readings = bench.dmm.readings_taken();
+        let demands = bench.table.demands_seen();
+        let sim_s = self.started.elapsed().as_secs_f64() * self.time_scale;
+        let dmm_gone = bench.dmm.is_finished();
+        self.specs
+            .iter()
+            .map(|s| {
+                let fired = match s.trigger {
+                    Trigger::Reading(n) => {
+                        readings >= n
+                            || (s.action == FaultAction::DmmDisconnect
+                                && dmm_gone
+                                && readings + 1 >= n)
+                    }
+                    Trigger::Demand(n) => demands >= n,
+                    Trigger::Time(t) => sim_s >= t,
+                };
+                FaultStatus {
+                    spec: s.to_string(),
+                    fired,
+                }
+            })
+            .collect()
+    }
+
+    /// Stops the supervisor (faults not yet fired by it never fire).
+    pub fn stop(&mut self) {
+        if let Some(t) = self.supervisor.take() {
+            t.abort();
+        }
+    }
+}
+
+impl Drop for FaultSchedule {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}
+
+/// How often the supervisor looks at the counters for crossed triggers.
+const POLL: Duration = Duration::from_millis(2);
+
+/// Arms `specs` on a bench that started just now, whose instruments run `time_scale` sim
+/// seconds per real second. Exact triggers are armed on the instruments; the others are
+/// watched by a supervisor task (spawned only if needed; inside a tokio runtime).
+pub fn schedule(specs: &[FaultSpec], bench: &BenchHandle, time_scale: f64) -> FaultSchedule {
+    let time_scale = if time_scale.is_finite() && time_scale > 0.0 {
+        time_scale
+    } else {
+        1.0
+    };
+    let started = Instant::now();
+    let mut pending: Vec<FaultSpec> = Vec::new();
+    for s in specs {
+        match (s.trigger, s.action.is_dmm()) {
+            (Trigger::Reading(n), true) => {
+                for (i, f) in s.action.dmm_faults(s.count).into_iter().enumerate() {
+                    let offset = if matches!(f, Fault::Overload { .. }) {
+                        0
+                    } else {
+                        i as u64
+                    };
+                    bench.dmm.inject_at_reading(n + offset, f);
+                }
+            }
+            (Trigger::Demand(n), false) => {
+                if let Some(f) = s.action.demand_fault() {
+                    bench.table.arm_at_demand(n, f);
+                }
+            }
+            _ => pending.push(s.clone()),
+        }
+    }
+    let supervisor = (!pending.is_empty()).then(|| {
+        let dmm_faults = bench.dmm.injector();
+        let table = bench.table.clone();
+        let message = table.config().faults.message;
+        tokio::spawn(async move {
+            let mut left = pending;
+            while !left.is_empty() {
+                let sim_s = started.elapsed().as_secs_f64() * time_scale;
+                let readings = dmm_faults.readings_taken();
+                let demands = table.demands_seen();
+                left.retain(|s| {
+                    let due = match s.trigger {
+                        Trigger::Reading(n) => readings >= n,
+                        Trigger::Demand(n) => demands >= n,
+                        Trigger::Time(t) => sim_s >= t,
+                    };
+                    if !due {
+                        return true;
+                    }
+                    tracing::info!(spec = %s, "fault fires");
+                    match s.action {
+                        FaultAction::TableTrip => table.trip(),
+                        FaultAction::TableFault => table.inject_fault(&message),
+                        FaultAction::TableSilent => table.set_silent(true),
+                        a => {
+                            for f in a.dmm_faults(s.count) {
+                                dmm_faults.inject(f);
+                            }
+                        }
+                    }
+                    false
+                });
+                tokio::time::sleep(POLL).await;
+            }
+        })
+    });
+    FaultSchedule {
+        specs: specs.to_vec(),
+        started,
+        time_scale,
+        supervisor,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn grammar() {
+        let s: FaultSpec = "dmm:overload@reading50x5".parse().unwrap();
+        assert_eq!(s.action, FaultAction::DmmOverload);
+        assert_eq!(s.trigger, Trigger::Reading(50));
+        assert_eq!(s.count, 5);
+        assert_eq!(s.to_string(), "dmm:overload@reading50x5");
+        let s: FaultSpec = " Table:Fault@t=12s ".parse().unwrap();
+        assert_eq!(s.trigger, Trigger::Time(12.0));
+        assert_eq!(s.to_string(), "table:fault@t=12s");
+        let s: FaultSpec = "table:silent@demand3".parse().unwrap();
+        assert_eq!(
+            (s.action, s.trigger),
+            (FaultAction::TableSilent, Trigger::Demand(3))
+        );
+        assert_eq!(
+            "dmm:timeout@t=0.5".parse::<FaultSpec>().unwrap().trigger,
+            Trigger::Time(0.5)
+        );
+        for bad in [
+            "",
+            "dmm:garble",
+            "dmm:melt@reading1",
+            "dmm:garble@reading0",
+            "dmm:garble@reading-1",
+            "dmm:garble@step3",
+            "table:trip@demand4x2",
+            "dmm:disconnect@reading3x2",
+            "dmm:overload@reading3x0",
+            "dmm:timeout@t=-1s",
+            "dmm:timeout@t=nan",
+            "dmm:timeout@t=infs",
+        ] {
+            let e = bad.parse::<FaultSpec>().unwrap_err();
+            assert_eq!(e.spec, bad);
+            assert!(e.to_string().contains(&format!("`{bad}`")), "{e}");
+        }
+    }
+}
