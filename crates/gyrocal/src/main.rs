@@ -23,6 +23,10 @@ struct Cli {
 enum Command {
     /// Fit scale factor and bias to measured (rate, volts) data and report the metrics.
     Fit(cmd::fit::FitArgs),
+    /// Validate a test plan and print its schedule and estimated duration.
+    Check(cmd::check::CheckArgs),
+    /// Run a calibration plan (on the instruments, or --simulate on the simulated bench).
+    Run(cmd::run::RunArgs),
     /// Write the HTML calibration report (with SVG plots) of run directories or steps CSV files.
     Report(cmd::report::ReportArgs),
 }
@@ -49,11 +53,13 @@ fn main() -> ExitCode {
         .init();
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Fit(args) => cmd::fit::run(&args),
-        Command::Report(args) => cmd::report::run(&args),
+        Command::Fit(args) => cmd::fit::run(&args).map(|()| 0),
+        Command::Check(args) => cmd::check::run(&args).map(|()| 0),
+        Command::Run(args) => cmd::run::run(&args),
+        Command::Report(args) => cmd::report::run(&args).map(|()| 0),
     };
     match result {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(code) => ExitCode::from(code),
         Err(err) => {
             let message = format!("{err:#}").replace('\n', " ");
             eprintln!("gyrocal: error: {message}");

@@ -228,7 +228,8 @@ fn fit_label(f: &Fit) -> String {
     format!("{} {}", f.method, f.model)
 }
 
-fn human(out: &mut String, a: &Analysis) {
+/// Appends the human-readable summary and per-rate table of `a` to `out`.
+pub(crate) fn human(out: &mut String, a: &Analysis) {
     let source = a.source.as_deref().unwrap_or("<data>");
     let weighted = a.fits.first().is_some_and(|f| f.weighted);
     let _ = writeln!(

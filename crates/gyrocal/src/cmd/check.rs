@@ -1,0 +1,135 @@
+//! `gyrocal check PLAN`: validate a plan against the instruments' limits and print its
+//! schedule with the duration each step will take, from the instruments' timing models.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use clap::Args;
+use gyrocal_hp34401a::Strategy;
+use gyrocal_run::Plan;
+use gyrocal_run::estimate::{self, Estimate};
+
+use crate::BadInput;
+
+/// Arguments of `gyrocal check`.
+#[derive(Debug, Args)]
+pub struct CheckArgs {
+    /// The test plan (TOML).
+    pub plan: PathBuf,
+}
+
+/// Reads and validates a plan; a bad plan is the user's to fix (exit 2).
+pub fn load_plan(path: &std::path::Path) -> anyhow::Result<Plan> {
+    let plan = Plan::from_file(path).map_err(|e| BadInput(e.to_string()))?;
+    estimate::dcv_config(&plan)
+        .validate()
+        .map_err(|e| BadInput(format!("{}: [dmm] {e}", path.display())))?;
+    Ok(plan)
+}
+
+/// Runs `gyrocal check`.
+pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
+    let plan = load_plan(&args.plan)?;
+    let steps = plan.schedule();
+    let est = estimate::estimate(&plan, &steps, 0.0);
+    print!("{}", render(&plan, &args.plan, &est));
+    Ok(())
+}
+
+/// Formats seconds as `1 h 02 min 03.4 s`, `2 min 03.4 s` or `3.42 s`.
+pub fn hms(s: f64) -> String {
+    if !s.is_finite() {
+        return "?".into();
+    }
+    let h = (s / 3600.0).floor();
+    let m = ((s - h * 3600.0) / 60.0).floor();
+    let sec = s - h * 3600.0 - m * 60.0;
+    if h > 0.0 {
+        format!("{h:.0} h {m:02.0} min {sec:04.1} s")
+    } else if m > 0.0 {
+        format!("{m:.0} min {sec:04.1} s")
+    } else {
+        format!("{sec:.2} s")
+    }
+}
+
+/// The strategy's name as in plans.
+pub fn strategy_name(s: Strategy) -> &'static str {
+    match s {
+        Strategy::Stream => "stream",
+        Strategy::Memory => "memory",
+        Strategy::Poll => "poll",
+        Strategy::Auto => "auto",
+    }
+}
+
+fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
+    let mut o = String::new();
+    let d = plan.dmm();
+    let t = plan.table();
+    let _ = writeln!(o, "plan {} — {}", path.display(), plan.name());
+    let _ = writeln!(o, "hash {}", plan.hash());
+    let _ = writeln!(
+        o,
+        "table: {} on {} (max {} °/s, {} °/s², tolerance {} °/s for {:.1} s, timeout {:.0} s)",
+        "acl",
+        t.port,
+        t.max_rate_dps,
+        t.acceleration_dps2,
+        t.rate_tolerance_dps,
+        t.stability_window.as_secs_f64(),
+        t.at_rate_timeout.as_secs_f64()
+    );
+    let _ = writeln!(
+        o,
+        "multimeter: {} at {} baud, range {} V, NPLC {}, autozero {}, {} Hz: {:.1} ms per reading, acquisition {} -> {}",
+        d.port,
+        d.baud,
+        d.range_v,
+        d.nplc,
+        if d.autozero { "on" } else { "off" },
+        d.line_hz,
+        est.reading_time.as_secs_f64() * 1e3,
+        format!("{:?}", d.acquisition).to_lowercase(),
+        strategy_name(est.strategy)
+    );
+    let _ = writeln!(o);
+    let _ = writeln!(
+        o,
+        "{:>4} {:>4} {:>9} {:>8} {:>8} {:>8} {:>9} {:>10}",
+        "step", "pass", "rate °/s", "samples", "ramp s", "dwell s", "acquire s", "at s"
+    );
+    let mut at = 0.0;
+    for s in &est.steps {
+        at += s.ramp.as_secs_f64() + s.settle.as_secs_f64() + s.acquire.as_secs_f64();
+        let turns = match s.step.acquire {
+            gyrocal_run::Acquire::Span { revolutions, .. } => format!(
+                "  ({revolutions} turn{})",
+                if revolutions == 1 { "" } else { "s" }
+            ),
+            gyrocal_run::Acquire::Samples(_) => String::new(),
+        };
+        let _ = writeln!(
+            o,
+            "{:>4} {:>4} {:>9} {:>8} {:>8.2} {:>8.2} {:>9.2} {:>10.1}{turns}",
+            s.step.index,
+            s.step.pass,
+            s.step.rate_dps,
+            s.samples,
+            s.ramp.as_secs_f64(),
+            s.settle.as_secs_f64(),
+            s.acquire.as_secs_f64(),
+            at
+        );
+    }
+    let samples: u64 = est.steps.iter().map(|s| s.samples).sum();
+    let _ = writeln!(o);
+    let _ = writeln!(o, "{} steps, {} readings", est.steps.len(), samples);
+    let _ = writeln!(o, "estimated duration {}", hms(est.total.as_secs_f64()));
+    let _ = writeln!(
+        o,
+        "physical bound     {} (ramps at the acceleration limit + dwells + arming and reading time + unavoidable transfers)",
+        hms(est.bound.as_secs_f64())
+    );
+    o
+}

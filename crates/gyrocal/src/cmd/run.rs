@@ -1,0 +1,386 @@
+//! `gyrocal run PLAN`: the calibration run, on real instruments or on the simulated bench.
+//!
+//! The run directory is written as the run goes (see `gyrocal_run::rundir`); at the end the
+//! data are fitted, `fit.json` and `report.html` written, and the elapsed time compared with
+//! the physical bound. Ctrl-C or SIGTERM stops the table (controlled stop), clears the
+//! multimeter and marks the run `aborted` (exit 130); a second Ctrl-C sends the emergency stop.
+//! Any error does the same with `failed` (exit 1). `--resume DIR` continues where a run stopped.
+
+use std::io::IsTerminal as _;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use anyhow::Context as _;
+use clap::Args;
+use gyrocal_hp34401a::{DriverOptions, Hp34401a};
+use gyrocal_link::{LinkOptions, Transport};
+use gyrocal_run::sequencer::table_config;
+use gyrocal_run::{
+    Event, Phase, Plan, Port, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status,
+    StopRequest, fit_run,
+};
+use gyrocal_table::acl::AclTable;
+use tokio::sync::{mpsc, watch};
+
+use crate::BadInput;
+use crate::cmd::check::{hms, load_plan};
+
+/// Arguments of `gyrocal run`.
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// The test plan (TOML).
+    pub plan: PathBuf,
+    /// Run against the in-process simulated bench built from the plan's `[simulation]`
+    /// section, in virtual time (a full plan takes seconds).
+    #[arg(long)]
+    pub simulate: bool,
+    /// With --simulate: run the simulated bench in real time, sped up by this factor, instead
+    /// of virtual time (for trying the progress display, or for tests that interrupt a run).
+    #[arg(long, value_name = "X", requires = "simulate")]
+    pub sim_time_scale: Option<f64>,
+    /// The run directory to create (default: runs/<plan>-<UTC time>).
+    #[arg(long, value_name = "DIR", conflicts_with = "resume")]
+    pub out: Option<PathBuf>,
+    /// Continue the interrupted run in DIR (the plan must be the same).
+    #[arg(long, value_name = "DIR")]
+    pub resume: Option<PathBuf>,
+    /// The multimeter's port, overriding the plan (a serial device or tcp://HOST:PORT).
+    #[arg(long, value_name = "PORT")]
+    pub dmm_port: Option<String>,
+    /// The rate table's port, overriding the plan (a serial device or tcp://HOST:PORT).
+    #[arg(long, value_name = "PORT")]
+    pub table_port: Option<String>,
+    /// Do not write report.html at the end.
+    #[arg(long)]
+    pub no_report: bool,
+}
+
+/// Exit code of an aborted run (as after SIGINT).
+pub const EXIT_ABORTED: u8 = 130;
+
+/// Runs `gyrocal run`; returns the process exit code.
+pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
+    let mut plan = load_plan(&args.plan)?;
+    if let Some(p) = &args.dmm_port {
+        plan.set_dmm_port(Port::parse(p).map_err(|e| BadInput(format!("--dmm-port: {e}")))?);
+    }
+    if let Some(p) = &args.table_port {
+        plan.set_table_port(Port::parse(p).map_err(|e| BadInput(format!("--table-port: {e}")))?);
+    }
+    if let Some(x) = args.sim_time_scale
+        && !(x.is_finite() && x > 0.0)
+    {
+        return Err(BadInput(format!("--sim-time-scale must be > 0 (got {x})")).into());
+    }
+    let (dir, run) = open_run_dir(args, &plan)?;
+    let virtual_time = args.simulate && args.sim_time_scale.is_none();
+    let mut rt = if virtual_time {
+        let mut b = tokio::runtime::Builder::new_current_thread();
+        b.start_paused(true);
+        b
+    } else {
+        tokio::runtime::Builder::new_multi_thread()
+    };
+    let rt = rt
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    let (summary, run) = rt.block_on(execute(args, plan, run))?;
+    finish(args, &dir, &summary, run)
+}
+
+fn open_run_dir(args: &RunArgs, plan: &Plan) -> anyhow::Result<(PathBuf, RunDir)> {
+    if let Some(dir) = &args.resume {
+        let run =
+            RunDir::open_for_resume(dir, plan).map_err(|e| BadInput(format!("--resume: {e}")))?;
+        let done = run.done_steps().len();
+        eprintln!(
+            "resuming {}: {done} of {} steps done, {} to go",
+            dir.display(),
+            run.schedule().len(),
+            run.remaining_steps().len()
+        );
+        return Ok((dir.clone(), run));
+    }
+    let dir = match &args.out {
+        Some(d) => d.clone(),
+        None => default_dir(&args.plan),
+    };
+    let meta = RunMeta {
+        gyrocal_version: env!("CARGO_PKG_VERSION").into(),
+        simulated: args.simulate,
+        ..RunMeta::default()
+    };
+    let run = RunDir::create(&dir, plan, meta).map_err(|e| BadInput(e.to_string()))?;
+    Ok((dir, run))
+}
+
+fn default_dir(plan: &Path) -> PathBuf {
+    let stem = plan.file_stem().and_then(|s| s.to_str()).unwrap_or("run");
+    let now = gyrocal_run::rfc3339_utc(std::time::SystemTime::now()).replace(':', "");
+    PathBuf::from("runs").join(format!("{stem}-{now}"))
+}
+
+async fn execute(args: &RunArgs, plan: Plan, run: RunDir) -> anyhow::Result<(RunSummary, RunDir)> {
+    if args.simulate {
+        let mut cfg = gyrocal_run::simulate::bench_config(&plan);
+        if let Some(x) = args.sim_time_scale {
+            cfg.time_scale = x;
+        }
+        let bench = gyrocal_sim::bench::Bench::spawn(cfg);
+        let (summary, run) = sequence(plan, bench.dmm, bench.table, run).await;
+        // let the simulator take the last commands before it is dropped
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        let t = &bench.handle.table;
+        // one machine-readable line, so an operator (and a test) can see the table was parked
+        eprintln!(
+            "simulated table at the end: {}",
+            serde_json::json!({
+                "mode": format!("{:?}", t.mode()),
+                "demanded_dps": t.demanded_rate(),
+                "stopped": t.is_stopped(),
+            })
+        );
+        Ok((summary, run))
+    } else {
+        let d = plan.dmm();
+        let dmm_opts = LinkOptions {
+            baud: d.baud,
+            framing: link_framing(d.framing),
+            ..LinkOptions::default()
+        };
+        let dmm = gyrocal_link::open(&d.port.to_string(), &dmm_opts)
+            .await
+            .with_context(|| format!("opening the multimeter at {}", d.port))?;
+        let t = plan.table();
+        let table_opts = LinkOptions {
+            baud: t.baud,
+            ..LinkOptions::default()
+        };
+        let table = gyrocal_link::open(&t.port.to_string(), &table_opts)
+            .await
+            .with_context(|| format!("opening the rate table at {}", t.port))?;
+        Ok(sequence(plan, dmm, table, run).await)
+    }
+}
+
+fn link_framing(f: gyrocal_run::Framing) -> gyrocal_link::Framing {
+    match f {
+        gyrocal_run::Framing::N8 => gyrocal_link::Framing::EightNone,
+        gyrocal_run::Framing::E7 => gyrocal_link::Framing::SevenEven,
+        gyrocal_run::Framing::O7 => gyrocal_link::Framing::SevenOdd,
+    }
+}
+
+async fn sequence<D, T>(plan: Plan, dmm_link: D, table_link: T, run: RunDir) -> (RunSummary, RunDir)
+where
+    D: Transport + 'static,
+    T: Transport + 'static,
+{
+    let dmm = Hp34401a::new(dmm_link, DriverOptions::default());
+    let table = AclTable::new(table_link, table_config(&plan));
+    let (tx, rx) = mpsc::unbounded_channel();
+    let mut seq =
+        Sequencer::new(plan, dmm, table, run, SequencerOptions::default()).with_events(tx);
+    let (stop_tx, stop_rx) = watch::channel(StopRequest::None);
+    let signals = tokio::spawn(watch_signals(stop_tx, seq.stop_handle()));
+    let display = tokio::spawn(show_progress(rx));
+    let summary = seq.run(stop_rx).await;
+    signals.abort();
+    let run = seq.into_run_dir();
+    let _ = display.await;
+    (summary, run)
+}
+
+/// First Ctrl-C or SIGTERM: controlled stop. Second: emergency stop at once.
+async fn watch_signals(stop: watch::Sender<StopRequest>, table: gyrocal_table::StopHandle) {
+    #[cfg(unix)]
+    let mut term = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+        Ok(s) => Some(s),
+        Err(e) => {
+            tracing::warn!(error = %e, "cannot watch SIGTERM");
+            None
+        }
+    };
+    let mut count = 0;
+    loop {
+        #[cfg(unix)]
+        let got = async {
+            match term.as_mut() {
+                Some(t) => {
+                    t.recv().await;
+                }
+                None => std::future::pending::<()>().await,
+            }
+        };
+        #[cfg(not(unix))]
+        let got = std::future::pending::<()>();
+        tokio::select! {
+            r = tokio::signal::ctrl_c() => {
+                if r.is_err() {
+                    return;
+                }
+            }
+            () = got => {}
+        }
+        count += 1;
+        if count == 1 {
+            eprintln!(
+                "\ngyrocal: stopping (controlled stop of the table); interrupt again for an emergency stop"
+            );
+            let _ = stop.send(StopRequest::Controlled);
+        } else {
+            eprintln!("\ngyrocal: EMERGENCY STOP (interlock open)");
+            let _ = stop.send(StopRequest::Emergency);
+            if let Err(e) = table.emergency_stop().await {
+                eprintln!("gyrocal: emergency stop failed: {e}: STOP THE TABLE BY HAND");
+            }
+        }
+    }
+}
+
+/// An indicatif display on a terminal; plain lines otherwise.
+async fn show_progress(mut rx: mpsc::UnboundedReceiver<Event>) {
+    let tty = std::io::stderr().is_terminal();
+    let bar = indicatif::ProgressBar::hidden();
+    if tty {
+        bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{prefix:.bold} [{bar:30}] {pos}/{len} {msg} (ETA {eta})",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> "),
+        );
+    }
+    while let Some(e) = rx.recv().await {
+        match e {
+            Event::Connected { dmm, table } => {
+                line(tty, &bar, format!("multimeter: {dmm}\nrate table: {table}"))
+            }
+            Event::Planned {
+                steps,
+                done,
+                estimate,
+                strategy,
+            } => {
+                bar.set_length(steps as u64);
+                line(
+                    tty,
+                    &bar,
+                    format!(
+                        "{steps} steps to run ({done} already done), acquisition {}, estimated {}",
+                        crate::cmd::check::strategy_name(strategy),
+                        hms(estimate.as_secs_f64())
+                    ),
+                );
+            }
+            Event::StepStarted {
+                step,
+                position,
+                total,
+            } => {
+                let step_text = format!("step {position} of {total}: {:+} °/s", step.rate_dps);
+                bar.set_prefix(step_text.clone());
+                bar.set_position(position.saturating_sub(1) as u64);
+                if !tty {
+                    eprintln!("{step_text}");
+                }
+            }
+            Event::Phase { phase, .. } => {
+                let p = match phase {
+                    Phase::Ramping => "ramping",
+                    Phase::Settling => "settling",
+                    Phase::Acquiring => "acquiring",
+                    Phase::Fetching => "fetching",
+                };
+                bar.set_message(p);
+            }
+            Event::Acquiring { done, total } => {
+                if tty {
+                    bar.set_message(format!("acquiring {done} of {total}"));
+                }
+            }
+            Event::StepDone(r) => {
+                bar.inc(1);
+                line(
+                    tty,
+                    &bar,
+                    format!(
+                        "  step {} done: {:+.4} °/s -> {:.6} V (σ {:.1e} V, n {}, overloads {})",
+                        r.step,
+                        r.rate_dps,
+                        r.volts,
+                        r.volts_std.unwrap_or(f64::NAN),
+                        r.n,
+                        r.overloads
+                    ),
+                );
+            }
+            Event::Retry(r) => line(
+                tty,
+                &bar,
+                format!("  retry ({}): {}", r.instrument, r.message),
+            ),
+        }
+    }
+    bar.finish_and_clear();
+}
+
+fn line(tty: bool, bar: &indicatif::ProgressBar, text: String) {
+    if tty {
+        bar.println(text);
+    } else {
+        eprintln!("{text}");
+    }
+}
+
+/// After the sequencer: fit, report, the closing summary; the exit code.
+fn finish(args: &RunArgs, dir: &Path, summary: &RunSummary, mut run: RunDir) -> anyhow::Result<u8> {
+    match summary.status {
+        Status::Complete => {}
+        Status::Aborted => {
+            eprintln!(
+                "gyrocal: run aborted: {}\n  {} step(s) recorded this session; resume with: gyrocal run {} --resume {}",
+                summary.reason.as_deref().unwrap_or("stopped"),
+                summary.steps_recorded,
+                args.plan.display(),
+                dir.display()
+            );
+            return Ok(EXIT_ABORTED);
+        }
+        Status::Failed | Status::Running => {
+            eprintln!(
+                "gyrocal: run failed: {}\n  the table was sent a stop; {} step(s) recorded this session; resume with: gyrocal run {} --resume {}",
+                summary.reason.as_deref().unwrap_or("unknown"),
+                summary.steps_recorded,
+                args.plan.display(),
+                dir.display()
+            );
+            return Ok(1);
+        }
+    }
+    let analysis = fit_run(&mut run, &gyrocal_fit::Options::default())
+        .with_context(|| format!("fitting {}", dir.display()))?;
+    let mut out = String::new();
+    crate::cmd::fit::human(&mut out, &analysis);
+    println!("{out}");
+    if let Some(t) = &summary.timing {
+        println!(
+            "timing: elapsed {} (run clock), physical bound {}, ratio {:.4} (acquisition {})",
+            hms(t.elapsed_s),
+            hms(t.bound_s),
+            t.ratio,
+            t.acquisition.as_deref().unwrap_or("?")
+        );
+    }
+    if !args.no_report {
+        // the data and the fit are safe on disk already: a report failure is a warning
+        match gyrocal_report::write_run_report(dir) {
+            Ok(path) => println!("report: {}", path.display()),
+            Err(e) => eprintln!("gyrocal: warning: no report: {e}"),
+        }
+    }
+    println!("run directory: {}", dir.display());
+    Ok(0)
+}

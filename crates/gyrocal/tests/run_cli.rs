@@ -1,0 +1,376 @@
+//! `gyrocal run` and `gyrocal check` as a user runs them: the binary, the simulated bench in
+//! virtual time, signals, resume, and bad plans.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use nix::sys::signal::{Signal, kill};
+use nix::unistd::Pid;
+
+fn gyrocal() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_gyrocal"));
+    c.env_remove("RUST_LOG");
+    c
+}
+
+fn config(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../configs")
+        .join(name)
+}
+
+fn steps_done(dir: &Path) -> usize {
+    std::fs::read_to_string(dir.join("steps.csv"))
+        .map(|s| s.lines().skip(1).filter(|l| !l.trim().is_empty()).count())
+        .unwrap_or(0)
+}
+
+fn manifest(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap()
+}
+
+/// (step, index) of every sample row, and the set of step rows.
+fn samples(dir: &Path) -> Vec<(usize, u64)> {
+    let mut r = csv::Reader::from_path(dir.join("samples.csv")).unwrap();
+    let h = r.headers().unwrap().clone();
+    let si = h.iter().position(|c| c == "step").unwrap();
+    let ii = h.iter().position(|c| c == "index").unwrap();
+    r.records()
+        .map(|rec| {
+            let rec = rec.unwrap();
+            (rec[si].parse().unwrap(), rec[ii].parse().unwrap())
+        })
+        .collect()
+}
+
+fn step_indices(dir: &Path) -> Vec<usize> {
+    let mut r = csv::Reader::from_path(dir.join("steps.csv")).unwrap();
+    let mut v: Vec<usize> = r
+        .records()
+        .map(|rec| rec.unwrap()[0].parse().unwrap())
+        .collect();
+    v.sort_unstable();
+    v
+}
+
+fn spawn_run(plan: &Path, args: &[&str]) -> Child {
+    gyrocal()
+        .arg("run")
+        .arg(plan)
+        .arg("--simulate")
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
+/// Waits until `dir` has at least `k` finished steps, then sends `sig`.
+fn interrupt_after(child: &mut Child, dir: &Path, k: usize, sig: Signal) {
+    let t0 = Instant::now();
+    while steps_done(dir) < k {
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "run did not reach step {k}"
+        );
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!("run ended early with {status}");
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    kill(Pid::from_raw(child.id() as i32), sig).unwrap();
+}
+
+fn final_table_state(stderr: &str) -> serde_json::Value {
+    let line = stderr
+        .lines()
+        .find_map(|l| l.strip_prefix("simulated table at the end: "))
+        .unwrap_or_else(|| panic!("no final table state in:\n{stderr}"));
+    serde_json::from_str(line).unwrap()
+}
+
+fn check_complete(dir: &Path, steps: usize, per_step: u64) {
+    let m = manifest(dir);
+    assert_eq!(m["status"], "complete", "{m}");
+    assert_eq!(
+        step_indices(dir),
+        (0..steps).collect::<Vec<_>>(),
+        "every rate exactly once"
+    );
+    let s = samples(dir);
+    assert_eq!(
+        s.len() as u64,
+        steps as u64 * per_step,
+        "no lost or duplicated sample"
+    );
+    let mut seen = std::collections::BTreeSet::new();
+    for key in &s {
+        assert!(seen.insert(*key), "duplicated sample {key:?}");
+    }
+    assert!(dir.join("fit.json").exists());
+}
+
+#[test]
+fn paper_plan_runs_in_virtual_time_and_recovers_the_gyro() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let out = gyrocal()
+        .args(["run", "--simulate", "--out"])
+        .arg(&dir)
+        .arg(config("paper.toml"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    check_complete(&dir, 19, 500);
+    let fit: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("fit.json")).unwrap()).unwrap();
+    let lin = fit["fits"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|f| f["method"] == "least-squares" && f["model"] == "quadratic")
+        .unwrap();
+    // paper.toml's [simulation]: K = 0.3612 (asymmetry 100 ppm about it), K0 = 0.0088 V plus
+    // the Earth rate at 45.75° (10.77 °/h = 0.00299 °/s, times K)
+    let k = lin["scale_factor"].as_f64().unwrap();
+    let k0 = lin["bias"].as_f64().unwrap();
+    let sk = lin["std_errors"]["k1"].as_f64().unwrap();
+    let sk0 = lin["std_errors"]["k0"].as_f64().unwrap();
+    let earth = 15.041 / 3600.0 * 45.75f64.to_radians().sin();
+    let true_k0 = 0.0088 + 0.3612 * earth + 2e-5 * earth * earth;
+    assert!(
+        (k - 0.3612).abs() < 3.0 * sk + 0.3612 * 1e-4,
+        "K {k} ± {sk}"
+    );
+    // the asymmetry's |ω| shape leaks into a quadratic's K0 by a few tenths of a mV
+    assert!(
+        (k0 - true_k0).abs() < 3.0 * sk0 + 2e-4,
+        "K0 {k0} vs {true_k0} ± {sk0}"
+    );
+    assert!(stdout.contains("ratio"), "{stdout}");
+    let m = manifest(&dir);
+    assert!(
+        m["timing"]["ratio"].as_f64().unwrap() < 1.03,
+        "{}",
+        m["timing"]
+    );
+    assert_eq!(final_table_state(&stderr)["stopped"], true);
+    assert!(dir.join("report.html").exists());
+}
+
+#[test]
+fn sigint_mid_run_stops_the_table_and_the_run_resumes_to_completion() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let plan = config("paper.toml");
+    // a step chosen at random (from the clock): the test must hold wherever it lands
+    let k = 1
+        + (std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .subsec_nanos() as usize)
+            % 15;
+    let mut child = spawn_run(&plan, &["--out", dir.to_str().unwrap()]);
+    interrupt_after(&mut child, &dir, k, Signal::SIGINT);
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{stderr}");
+    let m = manifest(&dir);
+    assert_eq!(m["status"], "aborted", "{m}");
+    assert!(steps_done(&dir) >= k && steps_done(&dir) < 19);
+    let table = final_table_state(&stderr);
+    assert_eq!(table["demanded_dps"].as_f64(), Some(0.0), "{table}");
+    assert_ne!(table["mode"], "Rate", "{table}");
+
+    let out = gyrocal()
+        .arg("run")
+        .arg(&plan)
+        .arg("--simulate")
+        .arg("--resume")
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    check_complete(&dir, 19, 500);
+    assert_eq!(manifest(&dir)["resumes"].as_array().unwrap().len(), 1);
+}
+
+#[test]
+fn sigkill_mid_run_loses_nothing_recorded_and_resumes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let plan = config("paper.toml");
+    let k = 1
+        + (std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .subsec_nanos() as usize
+            / 7)
+            % 15;
+    let mut child = spawn_run(&plan, &["--out", dir.to_str().unwrap()]);
+    interrupt_after(&mut child, &dir, k, Signal::SIGKILL);
+    let _ = child.wait().unwrap();
+    assert_eq!(manifest(&dir)["status"], "running");
+    let before = step_indices(&dir);
+    assert!(before.len() >= k);
+
+    let out = gyrocal()
+        .arg("run")
+        .arg(&plan)
+        .arg("--simulate")
+        .arg("--resume")
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    check_complete(&dir, 19, 500);
+    let m = manifest(&dir);
+    assert_eq!(
+        m["resumes"][0]["steps_done"].as_u64(),
+        Some(before.len() as u64)
+    );
+}
+
+#[test]
+fn resume_with_a_changed_plan_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let out = gyrocal()
+        .arg("run")
+        .arg(config("quick.toml"))
+        .args(["--simulate", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let changed = tmp.path().join("changed.toml");
+    let text = std::fs::read_to_string(config("quick.toml"))
+        .unwrap()
+        .replace("samples_per_rate = 50", "samples_per_rate = 60");
+    std::fs::write(&changed, text).unwrap();
+    let out = gyrocal()
+        .arg("run")
+        .arg(&changed)
+        .args(["--simulate", "--resume"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("plan"), "{err}");
+}
+
+fn bad_plan(dir: &Path, find: &str, replace: &str) -> PathBuf {
+    let text = std::fs::read_to_string(config("quick.toml")).unwrap();
+    assert!(text.contains(find), "quick.toml has no {find:?}");
+    let path = dir.join("bad.toml");
+    std::fs::write(&path, text.replacen(find, replace, 1)).unwrap();
+    path
+}
+
+fn line_of(path: &Path, needle: &str) -> usize {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .position(|l| l.contains(needle))
+        .unwrap()
+        + 1
+}
+
+#[test]
+fn malformed_plans_exit_2_naming_file_line_and_key() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cases = [
+        ("settle_s = 2", "settle_s = = 2", "settle_s", None),
+        (
+            "repeat = 1",
+            "repeat = 1\nrepeats = 2",
+            "repeats",
+            Some("repeats"),
+        ),
+        (
+            "max_rate_dps = 20",
+            "max_rate_dps = 5",
+            "rates_dps",
+            Some("rates_dps"),
+        ),
+        (
+            "acceleration_dps2 = 10",
+            "acceleration_dps2 = 0",
+            "acceleration_dps2",
+            Some("acceleration_dps2"),
+        ),
+        ("nplc = 1", "nplc = 2", "nplc", Some("nplc")),
+    ];
+    for (find, replace, line_key, key) in cases {
+        let path = bad_plan(tmp.path(), find, replace);
+        let line = line_of(&path, line_key);
+        for sub in ["check", "run"] {
+            let mut cmd = gyrocal();
+            cmd.arg(sub).arg(&path);
+            if sub == "run" {
+                cmd.args(["--simulate", "--out"])
+                    .arg(tmp.path().join("never"));
+            }
+            let out = cmd.output().unwrap();
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert_eq!(out.status.code(), Some(2), "{sub} {replace:?}: {err}");
+            assert!(
+                err.contains(&format!("bad.toml:{line}:")),
+                "{sub} {replace:?} should name line {line}: {err}"
+            );
+            if let Some(key) = key {
+                assert!(
+                    err.contains(key),
+                    "{sub} {replace:?} should name {key}: {err}"
+                );
+            }
+            assert!(!err.contains("panicked"), "{err}");
+        }
+        assert!(
+            !tmp.path().join("never").exists(),
+            "no run directory for a bad plan"
+        );
+    }
+    let out = gyrocal()
+        .arg("check")
+        .arg(tmp.path().join("missing.toml"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("missing.toml"));
+}
+
+#[test]
+fn check_prints_the_schedule_and_its_duration() {
+    let out = gyrocal()
+        .arg("check")
+        .arg(config("paper.toml"))
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("19 steps, 9500 readings"), "{text}");
+    assert!(text.contains("physical bound"), "{text}");
+    // one row per step, in the plan's order
+    let rows: Vec<Vec<&str>> = text
+        .lines()
+        .map(|l| l.split_whitespace().collect::<Vec<_>>())
+        .filter(|f| f.len() >= 8 && f.iter().take(7).all(|x| x.parse::<f64>().is_ok()))
+        .collect();
+    let rates: Vec<f64> = rows.iter().map(|f| f[2].parse().unwrap()).collect();
+    assert_eq!(rates.len(), 19, "{text}");
+    assert_eq!(&rates[..5], &[0.0, 0.1, -0.1, 0.3, -0.3], "{text}");
+    assert_eq!(rows.len(), 19, "{text}");
+}
