@@ -27,6 +27,8 @@ enum Command {
     Check(cmd::check::CheckArgs),
     /// Run a calibration plan (on the instruments, or --simulate on the simulated bench).
     Run(cmd::run::RunArgs),
+    /// Serve the simulated bench (34401A, rate table, gyro) on pseudo-terminals until SIGINT.
+    Sim(cmd::sim::SimArgs),
     /// Write the HTML calibration report (with SVG plots) of run directories or steps CSV files.
     Report(cmd::report::ReportArgs),
 }
@@ -56,6 +58,7 @@ fn main() -> ExitCode {
         Command::Fit(args) => cmd::fit::run(&args).map(|()| 0),
         Command::Check(args) => cmd::check::run(&args).map(|()| 0),
         Command::Run(args) => cmd::run::run(&args),
+        Command::Sim(args) => cmd::sim::run(&args).map(|()| 0),
         Command::Report(args) => cmd::report::run(&args).map(|()| 0),
     };
     match result {

@@ -4,3 +4,4 @@ pub mod check;
 pub mod fit;
 pub mod report;
 pub mod run;
+pub mod sim;

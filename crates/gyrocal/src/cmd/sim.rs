@@ -1,0 +1,261 @@
+//! `gyrocal sim`: the simulated bench (HP 34401A, ACL rate table, HRG gyro) on two
+//! pseudo-terminals, and optionally the table on a TCP port, in real time.
+//!
+//! Output contract (stdout, one JSON object per line, nothing else):
+//!
+//! 1. once the bench serves: `{"dmm": "/dev/pts/N", "table": "/dev/pts/M",
+//!    ["table_tcp": "tcp://127.0.0.1:P",] "pid", "seed", "time_scale", "truth": {...},
+//!    "faults": ["dmm:garble@reading100", ...]}`;
+//! 2. on SIGINT or SIGTERM, before exiting with 0: `{"exit": "SIGINT"|"SIGTERM", "table":
+//!    {"mode", "demanded_rate", "actual_rate", "stopped", "interlock_closed", "fault",
+//!    "silent", "demands_seen"}, "dmm": {"readings_taken", ...}, "faults": [{"spec",
+//!    "fired"}]}`.
+//!
+//! Logs go to stderr. The slave side of each pseudo-terminal stays open in this process for as
+//! long as it runs, so a client may close its port and open the same path again (a resumed
+//! run does): the simulators never see a hang-up and keep their state.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use clap::Args;
+use gyrocal_sim::bench::{Bench, BenchConfig, BenchHandle};
+use gyrocal_sim::faults::{self, FaultSchedule, FaultSpec};
+use serde_json::{Value, json};
+
+use crate::BadInput;
+
+/// Arguments of `gyrocal sim`.
+#[derive(Debug, Args)]
+#[command(after_long_help = after_help())]
+pub struct SimArgs {
+    /// Bench configuration: a simulator TOML (seed, time_scale, [table], [gyro], [dmm]) or a
+    /// test plan, whose [simulation] section and link settings are used (told apart by content:
+    /// a file with a [plan] or [simulation] table is a plan). Default: the simulator's defaults.
+    #[arg(long, value_name = "FILE|PLAN")]
+    pub config: Option<PathBuf>,
+    /// Sim seconds per real second for the instruments' own timing (integration, transfers,
+    /// table dynamics); overrides the configuration's. Default 1 (real instrument timing).
+    #[arg(long, value_name = "X")]
+    pub time_scale: Option<f64>,
+    /// Seed of every random stream; overrides the configuration's.
+    #[arg(long, value_name = "N")]
+    pub seed: Option<u64>,
+    /// Schedule a fault (repeatable): DEVICE:ACTION@TRIGGER[xCOUNT], such as
+    /// dmm:garble@reading100 or table:trip@demand4 (see below).
+    #[arg(long = "fault", value_name = "SPEC")]
+    pub faults: Vec<String>,
+    /// Also serve the table on tcp://127.0.0.1:PORT (0 picks a free port; the JSON line says
+    /// which), in addition to its pseudo-terminal. Clients may use either; both drive the same
+    /// table.
+    #[arg(long, value_name = "PORT")]
+    pub table_tcp: Option<u16>,
+}
+
+const AFTER_HELP: &str = "\
+Output: one JSON line on stdout once the bench serves, with the device paths and the truth:
+  {\"dmm\": \"/dev/pts/N\", \"table\": \"/dev/pts/M\", [\"table_tcp\": \"tcp://127.0.0.1:P\",]
+   \"pid\": ..., \"seed\": ..., \"time_scale\": ..., \"truth\": {\"k0\", \"k1_pos\", \"k1_neg\", \"k2\",
+   \"k3\", \"earth_rate\"}, \"faults\": [...]}
+then, on SIGINT or SIGTERM, one more line before exiting with 0:
+  {\"exit\": \"SIGINT\", \"table\": {\"mode\", \"demanded_rate\", \"actual_rate\", \"stopped\",
+   \"interlock_closed\", \"fault\", \"silent\", \"demands_seen\"}, \"dmm\": {\"readings_taken\",
+   \"commands_seen\", \"lines_seen\", \"queries_answered\", \"device_clears\", \"errors_raised\",
+   \"remote\", \"stopped\"}, \"faults\": [{\"spec\", \"fired\"}]}
+Clients may close a port and open the same path again; the simulators keep their state.
+
+Fault specs (--fault, repeatable):
+";
+
+fn after_help() -> String {
+    format!("{AFTER_HELP}{}", faults::GRAMMAR)
+}
+
+/// Runs `gyrocal sim` until SIGINT or SIGTERM.
+pub fn run(args: &SimArgs) -> Result<()> {
+    let mut specs = Vec::with_capacity(args.faults.len());
+    for text in &args.faults {
+        let spec: FaultSpec = text.parse().map_err(|e: faults::FaultSpecError| {
+            BadInput(format!("{e} (the grammar is in `gyrocal sim --help`)"))
+        })?;
+        specs.push(spec);
+    }
+    let mut config = match &args.config {
+        Some(path) => load_config(path)?,
+        None => BenchConfig::default(),
+    };
+    if let Some(seed) = args.seed {
+        config.seed = seed;
+    }
+    if let Some(x) = args.time_scale {
+        config.time_scale = x;
+    }
+    if !(config.time_scale.is_finite() && config.time_scale > 0.0 && config.time_scale <= 1e6) {
+        return Err(BadInput(format!(
+            "time scale {} must be a number above 0 (and at most 1e6)",
+            config.time_scale
+        ))
+        .into());
+    }
+    config
+        .dmm
+        .validate()
+        .map_err(|e| BadInput(format!("simulated multimeter: {e}")))?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    runtime.block_on(serve(config, specs, args.table_tcp))
+}
+
+/// Reads a bench TOML or a plan TOML (see [`SimArgs::config`]).
+fn load_config(path: &Path) -> Result<BenchConfig> {
+    let shown = path.display();
+    let src =
+        std::fs::read_to_string(path).map_err(|e| BadInput(format!("cannot read {shown}: {e}")))?;
+    let table: toml::Table = toml::from_str(&src)
+        .map_err(|e| BadInput(format!("{shown}: not TOML: {}", one_line(&e.to_string()))))?;
+    if table.contains_key("plan") || table.contains_key("simulation") {
+        let plan = gyrocal_run::Plan::from_toml_str(&src, path)
+            .map_err(|e| BadInput(one_line(&e.to_string())))?;
+        Ok(gyrocal_run::simulate::bench_config(&plan))
+    } else {
+        toml::from_str::<BenchConfig>(&src).map_err(|e| {
+            BadInput(format!(
+                "{shown}: not a bench configuration: {}",
+                one_line(&e.to_string())
+            ))
+            .into()
+        })
+    }
+}
+
+fn one_line(s: &str) -> String {
+    s.split('\n')
+        .map(str::trim_end)
+        .filter(|l| !l.is_empty())
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// Prints one JSON line on stdout and flushes it.
+fn emit(value: &Value) -> Result<()> {
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{value}").context("writing to stdout")?;
+    out.flush().context("flushing stdout")
+}
+
+async fn serve(config: BenchConfig, specs: Vec<FaultSpec>, table_tcp: Option<u16>) -> Result<()> {
+    let (dmm_dev, dmm_slave, dmm_path) =
+        gyrocal_link::pseudo_terminal().context("creating the multimeter's pseudo-terminal")?;
+    let (table_dev, table_slave, table_path) =
+        gyrocal_link::pseudo_terminal().context("creating the table's pseudo-terminal")?;
+    let listener = match table_tcp {
+        Some(port) => Some(
+            tokio::net::TcpListener::bind(("127.0.0.1", port))
+                .await
+                .with_context(|| format!("listening on 127.0.0.1:{port}"))?,
+        ),
+        None => None,
+    };
+    // the signal handlers exist before anyone is told the bench is up
+    let mut sigint = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())
+        .context("installing the SIGINT handler")?;
+    let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+        .context("installing the SIGTERM handler")?;
+
+    let (seed, time_scale) = (config.seed, config.time_scale);
+    let bench = Bench::spawn_on(config, dmm_dev, table_dev);
+    let mut schedule = faults::schedule(&specs, &bench, time_scale);
+
+    let mut hello = json!({
+        "dmm": dmm_path,
+        "table": table_path,
+        "pid": std::process::id(),
+        "seed": seed,
+        "time_scale": time_scale,
+        "truth": bench.truth,
+        "faults": specs.iter().map(ToString::to_string).collect::<Vec<_>>(),
+    });
+    let acceptor = match listener {
+        Some(listener) => {
+            let addr = listener
+                .local_addr()
+                .context("reading the TCP port's address")?;
+            hello["table_tcp"] = json!(format!("tcp://{addr}"));
+            let table = bench.table.clone();
+            Some(tokio::spawn(async move {
+                loop {
+                    match listener.accept().await {
+                        Ok((sock, peer)) => {
+                            tracing::info!(%peer, "table client connected over TCP");
+                            let _ = sock.set_nodelay(true);
+                            table.serve_link(sock);
+                        }
+                        Err(e) => {
+                            tracing::warn!(error = %e, "accepting a table client failed");
+                            tokio::time::sleep(Duration::from_millis(50)).await;
+                        }
+                    }
+                }
+            }))
+        }
+        None => None,
+    };
+    emit(&hello)?;
+    tracing::info!(dmm = %dmm_path, table = %table_path, "simulated bench serving");
+
+    let signal = tokio::select! {
+        _ = sigint.recv() => "SIGINT",
+        _ = sigterm.recv() => "SIGTERM",
+    };
+    tracing::info!("{signal}: stopping the simulated bench");
+    schedule.stop();
+    emit(&final_state(signal, &bench, &schedule))?;
+
+    if let Some(a) = acceptor {
+        a.abort();
+    }
+    let BenchHandle { table, dmm, .. } = bench;
+    table.shutdown();
+    let _ = tokio::time::timeout(Duration::from_secs(1), dmm.stop()).await;
+    // the slave sides were kept open so clients could come and go; now they may close
+    drop((dmm_slave, table_slave));
+    Ok(())
+}
+
+fn final_state(signal: &str, bench: &BenchHandle, schedule: &FaultSchedule) -> Value {
+    let t = &bench.table;
+    let now = tokio::time::Instant::now();
+    let d = bench.dmm.stats();
+    json!({
+        "exit": signal,
+        "table": {
+            "mode": format!("{:?}", t.mode()).to_ascii_uppercase(),
+            "demanded_rate": t.demanded_rate(),
+            "actual_rate": t.actual_rate(now),
+            "stopped": t.is_stopped(),
+            "interlock_closed": t.interlock_closed(),
+            "fault": t.fault(),
+            "silent": t.is_silent(),
+            "demands_seen": t.demands_seen(),
+        },
+        "dmm": {
+            "readings_taken": d.readings_taken,
+            "commands_seen": d.commands_seen,
+            "lines_seen": d.lines_seen,
+            "queries_answered": d.queries_answered,
+            "device_clears": d.device_clears,
+            "errors_raised": d.errors_raised,
+            "remote": d.remote,
+            "stopped": d.stopped,
+        },
+        "faults": schedule.status(bench).iter().map(|s| json!({
+            "spec": s.spec,
+            "fired": s.fired,
+        })).collect::<Vec<_>>(),
+    })
+}
