@@ -139,7 +139,7 @@ pub fn estimate(plan: &Plan, steps: &[Step], start_rate: f64) -> Estimate {
         };
         bound += step_bound;
         out.push(StepEstimate {
-            step: step.clone(),
+            step: *step,
             samples: n,
             ramp,
             settle: dwell,

@@ -137,13 +137,13 @@ impl Default for SequencerOptions {
 pub enum SequenceError {
     /// The multimeter failed (after its own retries).
     #[error("multimeter: {0}")]
-    Dmm(#[from] gyrocal_hp34401a::Error),
+    Dmm(Box<gyrocal_hp34401a::Error>),
     /// The rate table failed or faulted.
     #[error("rate table: {0}")]
-    Table(#[from] TableError),
+    Table(Box<TableError>),
     /// The run directory could not be written.
     #[error("run directory: {0}")]
-    RunDir(#[from] RunError),
+    RunDir(Box<RunError>),
     /// A step produced no valid reading.
     #[error(
         "step {step} at {rate_dps} °/s: all {count} readings were overloads (9.9E+37); is range_v too small?"
@@ -159,6 +159,26 @@ pub enum SequenceError {
     /// The operator stopped the run.
     #[error("stopped by the operator ({0:?})")]
     Stopped(StopRequest),
+}
+
+// The drivers' errors carry context (device, command, bytes) and are large; boxed, the
+// sequencer's results stay small on every `?` path.
+impl From<gyrocal_hp34401a::Error> for SequenceError {
+    fn from(e: gyrocal_hp34401a::Error) -> Self {
+        SequenceError::Dmm(Box::new(e))
+    }
+}
+
+impl From<TableError> for SequenceError {
+    fn from(e: TableError) -> Self {
+        SequenceError::Table(Box::new(e))
+    }
+}
+
+impl From<RunError> for SequenceError {
+    fn from(e: RunError) -> Self {
+        SequenceError::RunDir(Box::new(e))
+    }
 }
 
 /// How a run ended.
@@ -407,9 +427,7 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
     /// Connects, configures and runs every remaining step; stops the table at the end.
     async fn steps(&mut self) -> Result<RunTiming, SequenceError> {
         let Some(dmm) = self.dmm.as_mut() else {
-            return Err(SequenceError::Dmm(gyrocal_hp34401a::Error::Config(
-                "multimeter already released".into(),
-            )));
+            return Err(released());
         };
         let dmm_id = dmm.connect().await?.raw.clone();
         let t = self.table.connect().await?;
@@ -464,7 +482,7 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
         let total = steps.len();
         for (i, step) in steps.iter().enumerate() {
             self.emit(Event::StepStarted {
-                step: step.clone(),
+                step: *step,
                 position: i + 1,
                 total,
             });
@@ -667,7 +685,7 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
             stats.push(s);
             if last {
                 return Ok(PendingFetch {
-                    step: step.clone(),
+                    step: *step,
                     burst,
                     readings,
                     stats: merge_stats(&stats),
@@ -770,7 +788,7 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
 type FetchResult = Result<(Vec<Reading>, Vec<String>), (SequenceError, Vec<String>)>;
 
 fn released() -> SequenceError {
-    SequenceError::Dmm(gyrocal_hp34401a::Error::Config(
+    SequenceError::from(gyrocal_hp34401a::Error::Config(
         "multimeter already released".into(),
     ))
 }

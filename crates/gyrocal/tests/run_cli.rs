@@ -1,6 +1,8 @@
 //! `gyrocal run` and `gyrocal check` as a user runs them: the binary, the simulated bench in
 //! virtual time, signals, resume, and bad plans.
 
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a panic is a failed test
+
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};

@@ -71,8 +71,7 @@ fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
     let _ = writeln!(o, "hash {}", plan.hash());
     let _ = writeln!(
         o,
-        "table: {} on {} (max {} °/s, {} °/s², tolerance {} °/s for {:.1} s, timeout {:.0} s)",
-        "acl",
+        "table: acl on {} (max {} °/s, {} °/s², tolerance {} °/s for {:.1} s, timeout {:.0} s)",
         t.port,
         t.max_rate_dps,
         t.acceleration_dps2,
