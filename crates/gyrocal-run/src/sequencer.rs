@@ -86,6 +86,9 @@ pub enum Event {
         position: usize,
         /// Steps in this session.
         total: usize,
+        /// Estimated time to the end of the run from the start of this step (the instruments'
+        /// timing models, see [`crate::estimate`]).
+        remaining: Duration,
     },
     /// A step entered a phase.
     Phase {
@@ -480,11 +483,18 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
         let dwell = self.plan.settle().saturating_sub(criteria.window);
         let mut pending: Option<PendingFetch> = None;
         let total = steps.len();
+        let mut at_rate;
         for (i, step) in steps.iter().enumerate() {
+            let remaining = est.steps[i..]
+                .iter()
+                .map(|e| e.ramp + e.settle + e.acquire)
+                .sum::<Duration>()
+                + est.final_transfer;
             self.emit(Event::StepStarted {
                 step: *step,
                 position: i + 1,
                 total,
+                remaining,
             });
             let _span =
                 tracing::info_span!("step", index = step.index, rate_dps = step.rate_dps).entered();
@@ -501,10 +511,13 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
                 });
                 let Self { table, dmm, .. } = self;
                 let dmm = dmm.as_mut().ok_or_else(released)?;
-                let (settled, fetched) = tokio::join!(
-                    table.wait_at_rate(&criteria),
-                    fetch_with_retry(dmm, &p.burst)
-                );
+                // the dwell runs from the moment the table is at rate, fetch or no fetch
+                let wait = async {
+                    let r = table.wait_at_rate(&criteria).await;
+                    (r, Instant::now())
+                };
+                let ((settled, at), fetched) = tokio::join!(wait, fetch_with_retry(dmm, &p.burst));
+                at_rate = at;
                 // record the previous step before anything else can fail
                 let (readings, notes) = match fetched {
                     Ok(ok) => ok,
@@ -522,15 +535,17 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
                 settled?;
             } else {
                 self.table.wait_at_rate(&criteria).await?;
+                at_rate = Instant::now();
             }
-            if !dwell.is_zero() {
+            let dwell_end = at_rate + dwell;
+            if dwell_end > Instant::now() {
                 self.emit(Event::Phase {
                     step: step.index,
                     phase: Phase::Settling,
                 });
                 let interval = self.options.sample_interval;
                 self.table
-                    .record_while(interval, tokio::time::sleep(dwell))
+                    .record_while(interval, tokio::time::sleep_until(dwell_end))
                     .await?;
             }
             self.emit(Event::Phase {

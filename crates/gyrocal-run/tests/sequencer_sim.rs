@@ -208,3 +208,156 @@ async fn a_table_fault_fails_the_run_with_the_tables_message_and_stops_it() {
     tokio::time::sleep(Duration::from_millis(10)).await;
     assert_ne!(bench.handle.table.mode(), gyrocal_sim::table::SimMode::Rate);
 }
+
+/// Runs `plan` on `bench` into a fresh `dir` without stop requests.
+async fn run_on(plan: &Plan, bench: Bench, dir: &Path) -> RunSummary {
+    let meta = RunMeta {
+        gyrocal_version: "test".into(),
+        simulated: true,
+        ..RunMeta::default()
+    };
+    let run = RunDir::create(dir, plan, meta).unwrap();
+    let dmm = Hp34401a::new(bench.dmm, DriverOptions::default());
+    let table = AclTable::new(bench.table, table_config(plan));
+    let mut seq = Sequencer::new(plan.clone(), dmm, table, run, SequencerOptions::default());
+    let (_stop_tx, stop_rx) = watch::channel(StopRequest::None);
+    seq.run(stop_rx).await
+}
+
+#[tokio::test(start_paused = true)]
+async fn multimeter_faults_mid_acquisition_are_retried_and_the_run_completes() {
+    use gyrocal_sim::dmm::Fault;
+    let plan = plan_with("quick.toml", |_| {});
+    for (fault, what) in [
+        (Fault::NoReply, "timeout"),
+        (Fault::Garble, "garbled"),
+        (Fault::Truncate, "truncated"),
+    ] {
+        let bench = Bench::spawn(bench_config(&plan));
+        // in the middle of the third step's readings
+        bench
+            .handle
+            .dmm
+            .inject_at_reading(2 * 50 + 25, fault.clone());
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().join("run");
+        let summary = run_on(&plan, bench, &dir).await;
+        assert_eq!(
+            summary.status,
+            Status::Complete,
+            "{what}: {:?}",
+            summary.reason
+        );
+        let data = load(&dir).unwrap();
+        assert_eq!(data.steps.len(), plan.schedule().len(), "{what}");
+        // the retry is logged in the manifest and on the step
+        assert!(!data.manifest.retries.is_empty(), "{what}: no retry logged");
+        assert_eq!(
+            data.manifest.retries[0].step,
+            Some(2),
+            "{what}: {:?}",
+            data.manifest.retries
+        );
+        assert_eq!(
+            data.steps.iter().find(|s| s.step == 2).unwrap().retries,
+            1,
+            "{what}"
+        );
+        // and the step still has exactly its readings
+        assert_eq!(
+            load_samples(&dir)
+                .unwrap()
+                .iter()
+                .filter(|s| s.step == 2)
+                .count(),
+            50,
+            "{what}"
+        );
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn overload_readings_are_counted_and_left_out_of_the_mean() {
+    use gyrocal_sim::dmm::Fault;
+    let plan = plan_with("quick.toml", |_| {});
+    let bench = Bench::spawn(bench_config(&plan));
+    bench
+        .handle
+        .dmm
+        .inject_at_reading(3 * 50 + 10, Fault::Overload { readings: 4 });
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let summary = run_on(&plan, bench, &dir).await;
+    assert_eq!(summary.status, Status::Complete, "{:?}", summary.reason);
+    let data = load(&dir).unwrap();
+    let step = data.steps.iter().find(|s| s.step == 3).unwrap();
+    assert_eq!((step.n, step.overloads), (46, 4));
+    // the mean is a voltage near the gyro's output, not polluted by 9.9E+37
+    assert!(step.volts.abs() < 10.0, "{}", step.volts);
+    let rows = load_samples(&dir).unwrap();
+    assert_eq!(
+        rows.iter().filter(|s| s.step == 3).count(),
+        50,
+        "overloads are kept in samples.csv"
+    );
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_disconnected_multimeter_fails_the_run_cleanly_and_it_resumes() {
+    use gyrocal_sim::dmm::Fault;
+    let plan = plan_with("quick.toml", |_| {});
+    let bench = Bench::spawn(bench_config(&plan));
+    bench
+        .handle
+        .dmm
+        .inject_at_reading(2 * 50 + 5, Fault::Disconnect);
+    let table = bench.handle.table.clone();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let summary = run_on(&plan, bench, &dir).await;
+    assert_eq!(summary.status, Status::Failed);
+    assert!(
+        summary
+            .reason
+            .as_deref()
+            .unwrap_or("")
+            .contains("multimeter"),
+        "{:?}",
+        summary.reason
+    );
+    tokio::time::sleep(Duration::from_millis(10)).await;
+    assert_ne!(
+        table.mode(),
+        gyrocal_sim::table::SimMode::Rate,
+        "table left spinning"
+    );
+    let data = load(&dir).unwrap();
+    assert_eq!(data.steps.len(), 2, "the two finished steps are kept");
+    let (summary, _) = run_plan(&plan, &dir, true, None).await;
+    assert_eq!(summary.status, Status::Complete, "{:?}", summary.reason);
+    assert_eq!(
+        load_samples(&dir).unwrap().len(),
+        plan.schedule().len() * 50
+    );
+}
+
+#[tokio::test(start_paused = true)]
+async fn paper_plan_in_memory_mode_hides_every_fetch_but_the_last() {
+    // settle_s (10 s) is longer than the stability window (2 s) and than a 500-reading FETC?
+    // (9.2 s at 9600 baud): each fetch must vanish into the next ramp and dwell
+    let plan = plan_with("paper.toml", |d| {
+        set(
+            d,
+            "dmm",
+            "acquisition",
+            toml::Value::String("memory".into()),
+        );
+    });
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let (summary, _) = run_plan(&plan, &dir, false, None).await;
+    assert_eq!(summary.status, Status::Complete, "{:?}", summary.reason);
+    let timing = summary.timing.unwrap();
+    assert_eq!(timing.acquisition.as_deref(), Some("memory"));
+    assert!(timing.ratio < 1.01, "{timing:?}");
+}

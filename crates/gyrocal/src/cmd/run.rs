@@ -246,13 +246,12 @@ async fn show_progress(mut rx: mpsc::UnboundedReceiver<Event>) {
     if tty {
         bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
         bar.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{prefix:.bold} [{bar:30}] {pos}/{len} {msg} (ETA {eta})",
-            )
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
-            .progress_chars("=> "),
+            indicatif::ProgressStyle::with_template("{prefix:.bold} [{bar:30}] {pos}/{len} {msg}")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+                .progress_chars("=> "),
         );
     }
+    let mut eta = String::new();
     while let Some(e) = rx.recv().await {
         match e {
             Event::Connected { dmm, table } => {
@@ -279,12 +278,14 @@ async fn show_progress(mut rx: mpsc::UnboundedReceiver<Event>) {
                 step,
                 position,
                 total,
+                remaining,
             } => {
+                eta = format!("ETA {}", hms(remaining.as_secs_f64()));
                 let step_text = format!("step {position} of {total}: {:+} °/s", step.rate_dps);
                 bar.set_prefix(step_text.clone());
                 bar.set_position(position.saturating_sub(1) as u64);
                 if !tty {
-                    eprintln!("{step_text}");
+                    eprintln!("{step_text} ({eta})");
                 }
             }
             Event::Phase { phase, .. } => {
@@ -294,11 +295,11 @@ async fn show_progress(mut rx: mpsc::UnboundedReceiver<Event>) {
                     Phase::Acquiring => "acquiring",
                     Phase::Fetching => "fetching",
                 };
-                bar.set_message(p);
+                bar.set_message(format!("{p} · {eta}"));
             }
             Event::Acquiring { done, total } => {
                 if tty {
-                    bar.set_message(format!("acquiring {done} of {total}"));
+                    bar.set_message(format!("acquiring {done} of {total} · {eta}"));
                 }
             }
             Event::StepDone(r) => {
