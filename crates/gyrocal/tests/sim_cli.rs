@@ -387,3 +387,47 @@ fn sim_takes_a_bench_toml_or_a_plan() {
     assert!((k - 0.3612).abs() < 1e-3, "{}", sim.info);
     assert_eq!(sim.info["truth"]["k2"], 2e-5);
 }
+
+/// The same driver session against a real bench: `GYROCAL_DMM_PORT` and `GYROCAL_TABLE_PORT`
+/// (serial paths at 9600 8N2, or `tcp://host:port`), optionally `GYROCAL_TEST_RATE` (deg/s,
+/// default 1). Ignored by default; see TESTING.md. The table turns slowly (1 deg/s², at most
+/// 5 deg/s) and is stopped whatever happens.
+#[tokio::test]
+#[ignore = "needs real instruments: set GYROCAL_DMM_PORT and GYROCAL_TABLE_PORT"]
+async fn real_bench_identify_spin_read_stop() {
+    let dmm_port = std::env::var("GYROCAL_DMM_PORT").expect("GYROCAL_DMM_PORT");
+    let table_port = std::env::var("GYROCAL_TABLE_PORT").expect("GYROCAL_TABLE_PORT");
+    let rate: f64 = std::env::var("GYROCAL_TEST_RATE")
+        .ok()
+        .map_or(1.0, |r| r.parse().expect("GYROCAL_TEST_RATE in deg/s"));
+    assert!(
+        rate.abs() <= 5.0,
+        "GYROCAL_TEST_RATE is capped at 5 deg/s here"
+    );
+
+    let mut dmm = Hp34401a::new(open(&dmm_port).await, DriverOptions::default());
+    let id = dmm.connect().await.unwrap().clone();
+    assert_eq!(id.model, "34401A");
+    dmm.configure(&dcv()).await.unwrap();
+
+    let mut table = AclTable::new(open(&table_port).await, AclConfig::default());
+    table.connect().await.unwrap();
+    let guard = table.stop_handle().guard();
+    let outcome = async {
+        table.enable().await?;
+        table.set_rate(rate, 1.0).await?;
+        table.wait_at_rate(&SettleCriteria::default()).await?;
+        Ok::<_, gyrocal_table::TableError>(())
+    }
+    .await;
+    let acq = dmm.acquire(20, Strategy::Stream).await;
+    let stopped = table.stop().await;
+    let waited = table.wait_stopped(Duration::from_secs(60)).await;
+    guard.disarm();
+    outcome.unwrap();
+    stopped.unwrap();
+    waited.unwrap();
+    let acq = acq.unwrap();
+    assert_eq!(acq.readings.len(), 20);
+    assert!(acq.volts().iter().all(|v| v.is_finite()));
+}
