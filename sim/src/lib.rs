@@ -11,11 +11,11 @@
 //! Fidelity follows `shared/docs/hp34401a.md` and `shared/docs/rate-table.md`; what those leave
 //! open is configurable, with the default documented on the configuration field.
 
+pub mod bench;
 pub mod dmm;
+pub mod faults;
+pub mod gyro;
 pub mod signal;
 pub mod table;
-pub mod gyro;
-pub mod bench;
-pub mod faults;
 
 pub use signal::SignalSource;

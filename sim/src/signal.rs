@@ -34,7 +34,10 @@ pub struct FnOfTime<F> {
 impl<F: FnMut(f64) -> f64 + Send + 'static> FnOfTime<F> {
     /// `f` maps seconds since now to volts.
     pub fn new(f: F) -> Self {
-        FnOfTime { origin: Instant::now(), f }
+        FnOfTime {
+            origin: Instant::now(),
+            f,
+        }
     }
 }
 

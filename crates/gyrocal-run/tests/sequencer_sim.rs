@@ -1,6 +1,8 @@
 //! The sequencer against the simulated bench, in virtual time: whole plans through the real
 //! drivers and the real run directory.
 
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a panic is a failed test
+
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
