@@ -4,7 +4,7 @@ use std::fs::{self, File};
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
-use gyrocal_fit::{Analysis, Dataset, Model, MultiAnalysis, Options, Point, Weighting};
+use gyrocal_fit::{Analysis, Dataset, Model, MultiAnalysis, Options, Weighting};
 use gyrocal_run::Manifest;
 use gyrocal_run::rundir::{FIT_JSON, MANIFEST_JSON};
 
@@ -73,20 +73,7 @@ pub(crate) fn load_run(dir: &Path) -> Result<Input, ReportError> {
         });
     }
     let run = gyrocal_run::load(dir)?;
-    let data = Dataset {
-        source: Some(dir.display().to_string()),
-        points: run
-            .steps
-            .iter()
-            .map(|s| Point {
-                rate_dps: s.rate_dps,
-                volts: s.volts,
-                volts_std: s.volts_std,
-                n: Some(s.n),
-                line: None,
-            })
-            .collect(),
-    };
+    let data = gyrocal_run::dataset_from_steps(&run.steps, &dir.display().to_string());
     let steps = run
         .steps
         .iter()

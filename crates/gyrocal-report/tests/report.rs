@@ -116,20 +116,7 @@ fn make_run(dir: &Path, spec: &RunSpec<'_>) {
     }
     if spec.with_fit {
         let run = gyrocal_run::load(dir).unwrap();
-        let data = gyrocal_fit::Dataset {
-            source: Some(dir.display().to_string()),
-            points: run
-                .steps
-                .iter()
-                .map(|s| gyrocal_fit::Point {
-                    rate_dps: s.rate_dps,
-                    volts: s.volts,
-                    volts_std: s.volts_std,
-                    n: Some(s.n),
-                    line: None,
-                })
-                .collect(),
-        };
+        let data = gyrocal_run::dataset_from_steps(&run.steps, &dir.display().to_string());
         let a = analyze(&data, &Options::default()).unwrap();
         rd.set_fit(serde_json::to_value(&a).unwrap()).unwrap();
     }
