@@ -17,10 +17,9 @@
 //! The gyro's own white noise is switched off, so `noise_v` alone sets the reading scatter
 //! and a plan reads as what it means.
 
-use gyrocal_link::Framing as LinkFraming;
 use gyrocal_sim::bench::BenchConfig;
 
-use crate::plan::{Framing, Plan};
+use crate::plan::Plan;
 
 /// The bench configuration for `plan`'s `[simulation]` section, at real instrument timing
 /// (`time_scale` 1; set it for a real-time bench).
@@ -47,10 +46,6 @@ pub fn bench_config(plan: &Plan) -> BenchConfig {
     b.dmm.noise_v = s.noise_v;
     b.dmm.baud = plan.dmm().baud;
     b.dmm.line_hz = plan.dmm().line_hz;
-    b.dmm.framing = match plan.dmm().framing {
-        Framing::N8 => LinkFraming::EightNone,
-        Framing::E7 => LinkFraming::SevenEven,
-        Framing::O7 => LinkFraming::SevenOdd,
-    };
+    b.dmm.framing = plan.dmm().framing.into();
     b
 }

@@ -146,7 +146,7 @@ async fn execute(args: &RunArgs, plan: Plan, run: RunDir) -> anyhow::Result<(Run
         let d = plan.dmm();
         let dmm_opts = LinkOptions {
             baud: d.baud,
-            framing: link_framing(d.framing),
+            framing: d.framing.into(),
             ..LinkOptions::default()
         };
         let dmm = gyrocal_link::open(&d.port.to_string(), &dmm_opts)
@@ -161,14 +161,6 @@ async fn execute(args: &RunArgs, plan: Plan, run: RunDir) -> anyhow::Result<(Run
             .await
             .with_context(|| format!("opening the rate table at {}", t.port))?;
         Ok(sequence(plan, dmm, table, run).await)
-    }
-}
-
-fn link_framing(f: gyrocal_run::Framing) -> gyrocal_link::Framing {
-    match f {
-        gyrocal_run::Framing::N8 => gyrocal_link::Framing::EightNone,
-        gyrocal_run::Framing::E7 => gyrocal_link::Framing::SevenEven,
-        gyrocal_run::Framing::O7 => gyrocal_link::Framing::SevenOdd,
     }
 }
 
