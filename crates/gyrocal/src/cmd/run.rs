@@ -328,27 +328,44 @@ fn line(tty: bool, bar: &indicatif::ProgressBar, text: String) {
     }
 }
 
+/// The command line that continues this run, with the options it was started with.
+fn resume_command(args: &RunArgs, dir: &Path) -> String {
+    let mut c = format!("gyrocal run {}", args.plan.display());
+    if args.simulate {
+        c.push_str(" --simulate");
+    }
+    if let Some(x) = args.sim_time_scale {
+        c.push_str(&format!(" --sim-time-scale {x}"));
+    }
+    if let Some(p) = &args.dmm_port {
+        c.push_str(&format!(" --dmm-port {p}"));
+    }
+    if let Some(p) = &args.table_port {
+        c.push_str(&format!(" --table-port {p}"));
+    }
+    c.push_str(&format!(" --resume {}", dir.display()));
+    c
+}
+
 /// After the sequencer: fit, report, the closing summary; the exit code.
 fn finish(args: &RunArgs, dir: &Path, summary: &RunSummary, mut run: RunDir) -> anyhow::Result<u8> {
     match summary.status {
         Status::Complete => {}
         Status::Aborted => {
             eprintln!(
-                "gyrocal: run aborted: {}\n  {} step(s) recorded this session; resume with: gyrocal run {} --resume {}",
+                "gyrocal: run aborted: {}\n  {} step(s) recorded this session; resume with: {}",
                 summary.reason.as_deref().unwrap_or("stopped"),
                 summary.steps_recorded,
-                args.plan.display(),
-                dir.display()
+                resume_command(args, dir)
             );
             return Ok(EXIT_ABORTED);
         }
         Status::Failed | Status::Running => {
             eprintln!(
-                "gyrocal: run failed: {}\n  the table was sent a stop; {} step(s) recorded this session; resume with: gyrocal run {} --resume {}",
+                "gyrocal: run failed: {}\n  the table was sent a stop; {} step(s) recorded this session; resume with: {}",
                 summary.reason.as_deref().unwrap_or("unknown"),
                 summary.steps_recorded,
-                args.plan.display(),
-                dir.display()
+                resume_command(args, dir)
             );
             return Ok(1);
         }
