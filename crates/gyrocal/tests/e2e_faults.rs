@@ -1,0 +1,820 @@
+//! The end-to-end fault matrix: `gyrocal sim` and `gyrocal run` as two processes talking over
+//! pseudo-terminals through the real serial stack, in real time (the simulator's instruments
+//! sped up by `--time-scale`; the sequencer's own waits are real seconds, hence the small plan).
+//!
+//! Each case asserts the run's outcome (exit code, manifest, CSV files) and the state of the
+//! simulated table at the end (the simulator's final JSON line after SIGINT, or a probe of the
+//! table's port between two runs). The virtual-time versions of the same logic are in
+//! `crates/gyrocal-run/tests/sequencer_sim.rs` and `run_cli.rs`; these prove it on a serial port.
+#![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::io::{BufRead, BufReader, Read};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex, mpsc};
+use std::time::{Duration, Instant};
+
+use gyrocal_link::{LinkOptions, Transport};
+use nix::sys::signal::{Signal, kill};
+use nix::unistd::Pid;
+use serde_json::Value;
+
+const BIN: &str = env!("CARGO_BIN_EXE_gyrocal");
+/// Sim seconds per real second for the instruments.
+const TIME_SCALE: &str = "30";
+const SEED: &str = "11";
+/// The plan's rates: every case runs these five steps.
+const RATES: [f64; 5] = [0.0, 2.0, -2.0, 5.0, -5.0];
+/// Readings per step (NPLC 1 with autozero: 30 × 40 ms = 1.2 sim s = 40 ms real).
+const SAMPLES: u64 = 30;
+/// The table's once-per-turn ripple in the plan, deg/s (see the clean case's allowance).
+const RIPPLE_DPS: f64 = 0.0005;
+/// Longest a single `gyrocal run` may take in these tests (a clean one takes about 3 s).
+const RUN_LIMIT: Duration = Duration::from_secs(20);
+
+/// A small plan in `dir`, with the `[simulation]` section the simulator is started from.
+/// `[table]`/`[dmm]` ports are placeholders: the command line overrides them.
+fn write_plan(dir: &Path) -> PathBuf {
+    let rates: Vec<String> = RATES.iter().map(|r| format!("{r}")).collect();
+    let text = format!(
+        r#"[plan]
+name = "e2e fault matrix"
+rates_dps = [{rates}]
+samples_per_rate = {SAMPLES}
+settle_s = 0.2
+repeat = 1
+whole_revolutions = 0
+
+[table]
+dialect = "acl"
+port = "/dev/ttyUSB1"
+baud = 9600
+max_rate_dps = 10
+acceleration_dps2 = 20
+rate_tolerance_dps = 0.01
+stability_window_s = 0.2
+at_rate_timeout_s = 10
+
+[dmm]
+port = "/dev/ttyUSB0"
+baud = 9600
+framing = "8N2"
+range_v = 10
+nplc = 1
+autozero = true
+line_hz = 50
+acquisition = "stream"
+
+[simulation]
+seed = 3
+scale_factor = 0.3612
+bias = 0.0088
+k2 = 0
+k3 = 0
+asymmetry = 0
+noise_v = 0.002
+bias_walk = 0
+latitude_deg = 45.75
+rate_noise_dps = 0.0002
+ripple_dps = {RIPPLE_DPS}
+"#,
+        rates = rates.join(", ")
+    );
+    let path = dir.join("plan.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// A child process killed (and reaped) on drop, so a failed assertion leaves nothing running.
+struct Guard {
+    child: Child,
+}
+
+impl Guard {
+    fn pid(&self) -> Pid {
+        Pid::from_raw(i32::try_from(self.child.id()).unwrap())
+    }
+
+    fn signal(&self, sig: Signal) {
+        kill(self.pid(), sig).unwrap();
+    }
+}
+
+impl Drop for Guard {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Collects a child's output stream line by line on a thread.
+fn collect<R: Read + Send + 'static>(stream: R) -> (mpsc::Receiver<String>, Arc<Mutex<String>>) {
+    let (tx, rx) = mpsc::channel();
+    let all = Arc::new(Mutex::new(String::new()));
+    let sink = Arc::clone(&all);
+    std::thread::spawn(move || {
+        for line in BufReader::new(stream).lines() {
+            let Ok(line) = line else { break };
+            {
+                let mut s = sink.lock().unwrap();
+                s.push_str(&line);
+                s.push('\n');
+            }
+            let _ = tx.send(line);
+        }
+    });
+    (rx, all)
+}
+
+/// A running `gyrocal sim` started from the plan.
+struct Sim {
+    guard: Guard,
+    lines: mpsc::Receiver<String>,
+    info: Value,
+}
+
+impl Sim {
+    fn start(plan: &Path, faults: &[&str]) -> Sim {
+        let mut cmd = Command::new(BIN);
+        cmd.env_remove("RUST_LOG")
+            .arg("sim")
+            .arg("--config")
+            .arg(plan)
+            .args(["--time-scale", TIME_SCALE, "--seed", SEED]);
+        for f in faults {
+            cmd.args(["--fault", f]);
+        }
+        let mut child = cmd
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .unwrap();
+        let stdout = child.stdout.take().unwrap();
+        let guard = Guard { child };
+        let (lines, _) = collect(stdout);
+        let first = lines
+            .recv_timeout(Duration::from_secs(10))
+            .expect("the simulator's JSON line with the device paths");
+        let info: Value = serde_json::from_str(&first).unwrap();
+        Sim { guard, lines, info }
+    }
+
+    fn dmm(&self) -> &str {
+        self.info["dmm"].as_str().unwrap()
+    }
+
+    fn table(&self) -> &str {
+        self.info["table"].as_str().unwrap()
+    }
+
+    /// SIGINT; the simulator's final-state line (and its clean exit).
+    fn finish(mut self) -> Value {
+        self.guard.signal(Signal::SIGINT);
+        let last = self
+            .lines
+            .recv_timeout(Duration::from_secs(5))
+            .expect("the simulator's final-state line");
+        let status = self.guard.child.wait().unwrap();
+        assert!(status.success(), "gyrocal sim exited with {status:?}");
+        serde_json::from_str(&last).unwrap()
+    }
+}
+
+/// A running `gyrocal run` against a simulator's ports.
+struct Run {
+    guard: Guard,
+    stderr_lines: mpsc::Receiver<String>,
+    stderr: Arc<Mutex<String>>,
+    stdout: Arc<Mutex<String>>,
+    started: Instant,
+}
+
+/// How a `gyrocal run` ended.
+#[derive(Debug)]
+struct Ended {
+    code: Option<i32>,
+    elapsed: Duration,
+    stderr: String,
+    stdout: String,
+}
+
+impl Run {
+    /// `gyrocal run PLAN --dmm-port .. --table-port .. --no-report` plus `args`
+    /// (`--out DIR` or `--resume DIR`), with `RUST_LOG` set to `log` when given.
+    fn start(plan: &Path, sim: &Sim, args: &[&str], log: Option<&str>) -> Run {
+        let mut cmd = Command::new(BIN);
+        cmd.env_remove("RUST_LOG");
+        if let Some(l) = log {
+            cmd.env("RUST_LOG", l);
+        }
+        let mut child = cmd
+            .arg("run")
+            .arg(plan)
+            .args(["--dmm-port", sim.dmm(), "--table-port", sim.table()])
+            .arg("--no-report")
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let out = child.stdout.take().unwrap();
+        let err = child.stderr.take().unwrap();
+        let guard = Guard { child };
+        let (_, stdout) = collect(out);
+        let (stderr_lines, stderr) = collect(err);
+        Run {
+            guard,
+            stderr_lines,
+            stderr,
+            stdout,
+            started: Instant::now(),
+        }
+    }
+
+    /// Waits for the process to end (at most [`RUN_LIMIT`] from its start).
+    fn wait(mut self) -> Ended {
+        let code = loop {
+            if let Some(status) = self.guard.child.try_wait().unwrap() {
+                break status.code();
+            }
+            assert!(
+                self.started.elapsed() < RUN_LIMIT,
+                "gyrocal run still running after {RUN_LIMIT:?}; stderr:\n{}",
+                self.stderr.lock().unwrap()
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        };
+        let elapsed = self.started.elapsed();
+        // the reader threads see EOF once the process is gone
+        std::thread::sleep(Duration::from_millis(50));
+        Ended {
+            code,
+            elapsed,
+            stderr: self.stderr.lock().unwrap().clone(),
+            stdout: self.stdout.lock().unwrap().clone(),
+        }
+    }
+
+    /// Blocks until a stderr line satisfies `pred` (the run must still be running).
+    fn wait_for_stderr(&self, what: &str, mut pred: impl FnMut(&str) -> bool) {
+        loop {
+            let left = RUN_LIMIT.saturating_sub(self.started.elapsed());
+            match self.stderr_lines.recv_timeout(left) {
+                Ok(line) if pred(&line) => return,
+                Ok(_) => {}
+                Err(_) => panic!(
+                    "no stderr line for {what}; stderr:\n{}",
+                    self.stderr.lock().unwrap()
+                ),
+            }
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The run directory
+
+fn manifest(dir: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap()
+}
+
+/// Complete lines of a CSV file (a line torn by a killed writer is not one), header excluded.
+fn csv_rows(path: &Path) -> Vec<BTreeMap<String, String>> {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let complete = match text.rfind('\n') {
+        Some(i) => &text[..=i],
+        None => "",
+    };
+    let mut r = csv::Reader::from_reader(complete.as_bytes());
+    let h = r.headers().unwrap().clone();
+    r.records()
+        .map(|rec| {
+            let rec = rec.unwrap();
+            h.iter()
+                .zip(rec.iter())
+                .map(|(k, v)| (k.to_string(), v.to_string()))
+                .collect()
+        })
+        .collect()
+}
+
+fn steps(dir: &Path) -> Vec<BTreeMap<String, String>> {
+    csv_rows(&dir.join("steps.csv"))
+}
+
+fn samples(dir: &Path) -> Vec<BTreeMap<String, String>> {
+    csv_rows(&dir.join("samples.csv"))
+}
+
+fn num<T: std::str::FromStr>(row: &BTreeMap<String, String>, key: &str) -> T
+where
+    T::Err: std::fmt::Debug,
+{
+    row[key]
+        .parse()
+        .unwrap_or_else(|e| panic!("{key} = {:?}: {e:?}", row[key]))
+}
+
+/// Every recorded step has all its samples, once each (a step may have left stray samples of
+/// an unfinished acquisition behind it: a resume drops those).
+fn check_recorded_steps_whole(dir: &Path) -> Vec<usize> {
+    let mut per_step: BTreeMap<usize, BTreeSet<u64>> = BTreeMap::new();
+    for s in samples(dir) {
+        let fresh = per_step
+            .entry(num(&s, "step"))
+            .or_default()
+            .insert(num(&s, "index"));
+        assert!(fresh, "duplicated sample {s:?}");
+    }
+    let mut done = Vec::new();
+    for row in steps(dir) {
+        let step: usize = num(&row, "step");
+        let n: u64 = num(&row, "n");
+        let overloads: u64 = num(&row, "overloads");
+        assert_eq!(n + overloads, SAMPLES, "step row {row:?}");
+        let got = per_step.get(&step).cloned().unwrap_or_default();
+        assert_eq!(
+            got,
+            (0..SAMPLES).collect::<BTreeSet<_>>(),
+            "step {step} is recorded, so all its samples are"
+        );
+        done.push(step);
+    }
+    done
+}
+
+/// The run is complete: every step exactly once, every sample exactly once, a fit.
+fn check_complete(dir: &Path) {
+    let m = manifest(dir);
+    assert_eq!(m["status"], "complete", "{m}");
+    let done = check_recorded_steps_whole(dir);
+    let mut sorted = done.clone();
+    sorted.sort_unstable();
+    assert_eq!(
+        sorted,
+        (0..RATES.len()).collect::<Vec<_>>(),
+        "every step exactly once: {done:?}"
+    );
+    let all = samples(dir);
+    assert_eq!(
+        all.len() as u64,
+        RATES.len() as u64 * SAMPLES,
+        "no lost or duplicated sample"
+    );
+    for row in steps(dir) {
+        let step: usize = num(&row, "step");
+        assert_eq!(num::<f64>(&row, "rate_dps"), RATES[step], "{row:?}");
+    }
+    assert!(dir.join("fit.json").exists(), "fit.json written");
+}
+
+// ---------------------------------------------------------------------------------------------
+// The simulated table
+
+/// The simulator's table was parked: stopped, or switched off / aborted with no rate demanded.
+fn assert_table_parked(last: &Value) {
+    let t = &last["table"];
+    let parked = t["stopped"] == true
+        || ((t["mode"] == "OFF" || t["mode"] == "ABORT") && t["demanded_rate"] == 0.0);
+    assert!(parked, "table not stopped at the end: {last}");
+}
+
+/// Asks the table directly over its pseudo-terminal (the run has closed it): its mode and
+/// measured rate. Raw ACL queries, so the probe changes nothing (no error-queue drain).
+fn probe_table(path: &str) -> (String, f64) {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let mut link = gyrocal_link::open(path, &LinkOptions::default())
+            .await
+            .unwrap();
+        link.discard_input().await.unwrap();
+        let t = Some(Duration::from_secs(2));
+        link.send_line(":Mode? 1").await.unwrap();
+        let mode = link.read_line(t).await.unwrap().trim().to_ascii_uppercase();
+        link.send_line(":Read:Rate? 1").await.unwrap();
+        let rate: f64 = link.read_line(t).await.unwrap().trim().parse().unwrap();
+        (mode, rate)
+    })
+}
+
+fn fault_fired(last: &Value, spec: &str) -> bool {
+    last["faults"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|f| f["spec"] == spec && f["fired"] == true)
+}
+
+fn start(tmp: &Path, faults: &[&str]) -> (PathBuf, Sim, PathBuf) {
+    let plan = write_plan(tmp);
+    let sim = Sim::start(&plan, faults);
+    (plan, sim, tmp.join("run"))
+}
+
+fn out_args(dir: &Path) -> Vec<&str> {
+    vec!["--out", dir.to_str().unwrap()]
+}
+
+fn resume_args(dir: &Path) -> Vec<&str> {
+    vec!["--resume", dir.to_str().unwrap()]
+}
+
+// ---------------------------------------------------------------------------------------------
+// 1. clean run
+
+/// Weighted least-squares line through (x, y) with weights w: (K, K0).
+fn weighted_line(x: &[f64], y: &[f64], w: &[f64]) -> (f64, f64) {
+    let sw: f64 = w.iter().sum();
+    let xm = x.iter().zip(w).map(|(x, w)| x * w).sum::<f64>() / sw;
+    let ym = y.iter().zip(w).map(|(y, w)| y * w).sum::<f64>() / sw;
+    let sxx: f64 = x.iter().zip(w).map(|(x, w)| w * (x - xm).powi(2)).sum();
+    let sxy: f64 = x
+        .iter()
+        .zip(y)
+        .zip(w)
+        .map(|((x, y), w)| w * (x - xm) * (y - ym))
+        .sum();
+    let k = sxy / sxx;
+    (k, ym - k * xm)
+}
+
+#[test]
+fn e2e_clean_run_completes_and_its_fit_matches_the_truth() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (plan, sim, dir) = start(tmp.path(), &[]);
+    let truth = sim.info["truth"].clone();
+    let end = Run::start(&plan, &sim, &out_args(&dir), None).wait();
+    assert_eq!(end.code, Some(0), "{end:?}");
+    check_complete(&dir);
+    assert!(manifest(&dir)["retries"].as_array().unwrap().is_empty());
+    assert!(end.stdout.contains("least-squares linear"), "{end:?}");
+
+    let fit: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("fit.json")).unwrap()).unwrap();
+    let lin = fit["fits"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|f| f["method"] == "least-squares" && f["model"] == "linear")
+        .expect("a least-squares linear fit");
+    assert_eq!(lin["weighted"], true, "{lin}");
+    let k = lin["scale_factor"].as_f64().unwrap();
+    let k0 = lin["bias"].as_f64().unwrap();
+    let sk = lin["std_errors"]["k1"].as_f64().unwrap();
+    let sk0 = lin["std_errors"]["k0"].as_f64().unwrap();
+
+    // The truth's outputs at the plan's rates (what the gyro gives at exactly that table rate,
+    // the Earth rate included), and the line the fit would find through them with the fit's
+    // own weights n/σ²: for a linear truth it is K = k1, K0 = k0 + k1·Ω_E; with k2, k3 or an
+    // asymmetry it is the best line through the curve, which is what a linear fit estimates.
+    let f = |key: &str| truth[key].as_f64().unwrap();
+    let rows = steps(&dir);
+    let x: Vec<f64> = rows.iter().map(|r| num(r, "rate_dps")).collect();
+    let w: Vec<f64> = rows
+        .iter()
+        .map(|r| num::<f64>(r, "n") / num::<f64>(r, "volts_std").powi(2))
+        .collect();
+    let y: Vec<f64> = x
+        .iter()
+        .map(|&rate| {
+            let om = rate + f("earth_rate");
+            let k1 = if om >= 0.0 { f("k1_pos") } else { f("k1_neg") };
+            f("k0") + k1 * om + f("k2") * om * om + f("k3") * om.powi(3)
+        })
+        .collect();
+    let (true_k, true_k0) = weighted_line(&x, &y, &w);
+
+    // Model mismatch: the fit's abscissa is the demanded rate, the gyro feels the table's
+    // actual rate, which carries the once-per-turn ripple (±RIPPLE_DPS). An acquisition lasts
+    // ~1 sim second, a small part of a turn at these rates, so the ripple does not average
+    // out: each step's mean may be off by up to E = K·ripple volts (the other sources are off
+    // in this plan: bias walk 0, gyro white noise 0; the readback noise of the table does not
+    // reach the gyro). A weighted line moves by at most
+    //   |ΔK|  <= E·Σw|x−x̄| / Σw(x−x̄)²,   |ΔK0| <= E + |x̄|·|ΔK|
+    // for errors bounded by E: that is the allowance, on top of 3 standard errors for noise.
+    let kmax = f("k1_pos").max(f("k1_neg"));
+    let e = kmax * RIPPLE_DPS;
+    let sw: f64 = w.iter().sum();
+    let xm = x.iter().zip(&w).map(|(x, w)| x * w).sum::<f64>() / sw;
+    let sabs: f64 = x.iter().zip(&w).map(|(x, w)| w * (x - xm).abs()).sum();
+    let sxx: f64 = x.iter().zip(&w).map(|(x, w)| w * (x - xm).powi(2)).sum();
+    let allow_k = e * sabs / sxx;
+    let allow_k0 = e + xm.abs() * allow_k;
+    assert!(
+        (k - true_k).abs() <= 3.0 * sk + allow_k,
+        "K {k} ± {sk} vs truth {true_k} (allowance {allow_k:.2e})"
+    );
+    assert!(
+        (k0 - true_k0).abs() <= 3.0 * sk0 + allow_k0,
+        "K0 {k0} ± {sk0} vs truth {true_k0} (allowance {allow_k0:.2e})"
+    );
+
+    let last = sim.finish();
+    assert_table_parked(&last);
+    assert_eq!(last["table"]["mode"], "OFF", "{last}");
+    assert_eq!(last["table"]["demands_seen"], RATES.len(), "{last}");
+    assert_eq!(
+        last["dmm"]["readings_taken"],
+        RATES.len() as u64 * SAMPLES,
+        "no reading wasted: {last}"
+    );
+    assert_eq!(last["dmm"]["remote"], false, "meter back to local: {last}");
+}
+
+// ---------------------------------------------------------------------------------------------
+// 2–4. multimeter faults the run rides through
+
+/// A run with one multimeter fault in step 1 (reading 40 of 30 per step) that must complete
+/// with a retry logged against that step.
+fn retried_fault_completes(spec: &str) {
+    let tmp = tempfile::tempdir().unwrap();
+    let (plan, sim, dir) = start(tmp.path(), &[spec]);
+    let end = Run::start(&plan, &sim, &out_args(&dir), None).wait();
+    assert_eq!(end.code, Some(0), "{end:?}");
+    check_complete(&dir);
+    let m = manifest(&dir);
+    let retries = m["retries"].as_array().unwrap();
+    assert!(!retries.is_empty(), "a retry is logged: {m}");
+    assert!(
+        retries
+            .iter()
+            .all(|r| r["instrument"] == "dmm" && r["step"] == 1),
+        "{retries:?}"
+    );
+    let row = &steps(&dir)[1];
+    assert!(num::<u32>(row, "retries") >= 1, "{row:?}");
+    assert!(end.stderr.contains("retry (dmm)"), "{}", end.stderr);
+    let last = sim.finish();
+    assert!(fault_fired(&last, spec), "{last}");
+    assert!(
+        last["dmm"]["device_clears"].as_u64().unwrap() >= 1,
+        "{last}"
+    );
+    assert_table_parked(&last);
+}
+
+#[test]
+fn e2e_multimeter_silent_for_one_reply_is_retried_and_the_run_completes() {
+    retried_fault_completes("dmm:timeout@reading40");
+}
+
+#[test]
+fn e2e_garbled_reply_is_retried_and_the_run_completes() {
+    retried_fault_completes("dmm:garble@reading40");
+}
+
+#[test]
+fn e2e_overload_readings_are_counted_and_excluded_not_repeated() {
+    let spec = "dmm:overload@reading40x3";
+    let tmp = tempfile::tempdir().unwrap();
+    let (plan, sim, dir) = start(tmp.path(), &[spec]);
+    let end = Run::start(&plan, &sim, &out_args(&dir), None).wait();
+    assert_eq!(end.code, Some(0), "{end:?}");
+    check_complete(&dir);
+    // readings 40..42 are the 10th..12th of step 1
+    for row in steps(&dir) {
+        let step: usize = num(&row, "step");
+        let want = if step == 1 { 3 } else { 0 };
+        assert_eq!(num::<u64>(&row, "overloads"), want, "{row:?}");
+        assert_eq!(num::<u64>(&row, "n"), SAMPLES - want, "{row:?}");
+    }
+    let s1: Vec<_> = samples(&dir)
+        .into_iter()
+        .filter(|s| s["step"] == "1")
+        .collect();
+    let over: Vec<u64> = s1
+        .iter()
+        .filter(|s| s["overload"] == "1")
+        .map(|s| num(s, "index"))
+        .collect();
+    assert_eq!(over, vec![9, 10, 11], "overloads recorded as such");
+    assert!(
+        s1.iter()
+            .filter(|s| s["overload"] == "1")
+            .all(|s| s["volts"].is_empty())
+    );
+    // the step's mean is the mean of the valid readings only
+    let valid: Vec<f64> = s1
+        .iter()
+        .filter(|s| s["overload"] == "0")
+        .map(|s| num(s, "volts"))
+        .collect();
+    let mean = valid.iter().sum::<f64>() / valid.len() as f64;
+    let recorded: f64 = num(&steps(&dir)[1], "volts");
+    assert!(
+        (mean - recorded).abs() < 1e-9,
+        "{mean} vs recorded {recorded}"
+    );
+    assert!(recorded > 0.5 && recorded < 1.0, "2 °/s → about 0.72 V");
+    assert!(manifest(&dir)["retries"].as_array().unwrap().is_empty());
+    let last = sim.finish();
+    assert!(fault_fired(&last, spec), "{last}");
+    // the step was not repeated: the meter took exactly the plan's readings
+    assert_eq!(
+        last["dmm"]["readings_taken"],
+        RATES.len() as u64 * SAMPLES,
+        "{last}"
+    );
+    assert_table_parked(&last);
+}
+
+// ---------------------------------------------------------------------------------------------
+// 5. multimeter disconnected
+
+#[test]
+fn e2e_multimeter_disconnect_fails_cleanly_and_resumes_on_a_new_bench() {
+    let spec = "dmm:disconnect@reading40";
+    let tmp = tempfile::tempdir().unwrap();
+    let (plan, sim, dir) = start(tmp.path(), &[spec]);
+    let end = Run::start(&plan, &sim, &out_args(&dir), None).wait();
+    assert_eq!(end.code, Some(1), "{end:?}");
+    let m = manifest(&dir);
+    assert_eq!(m["status"], "failed", "{m}");
+    let reason = m["reason"].as_str().unwrap();
+    assert!(reason.contains("multimeter"), "{reason}");
+    assert!(end.stderr.contains("resume with"), "{}", end.stderr);
+    assert_eq!(check_recorded_steps_whole(&dir), vec![0]);
+    let last = sim.finish();
+    assert!(fault_fired(&last, spec), "{last}");
+    assert_table_parked(&last);
+
+    // the meter is gone for good: a new bench (same plan, same seed), the same run directory
+    let sim = Sim::start(&plan, &[]);
+    let end = Run::start(&plan, &sim, &resume_args(&dir), None).wait();
+    assert_eq!(end.code, Some(0), "{end:?}");
+    check_complete(&dir);
+    let m = manifest(&dir);
+    assert_eq!(m["resumes"].as_array().unwrap().len(), 1, "{m}");
+    assert_eq!(m["resumes"][0]["steps_done"], 1, "{m}");
+    let last = sim.finish();
+    assert_eq!(
+        last["dmm"]["readings_taken"],
+        (RATES.len() as u64 - 1) * SAMPLES,
+        "the resume runs only the steps left: {last}"
+    );
+    assert_table_parked(&last);
+}
+
+// ---------------------------------------------------------------------------------------------
+// 6–7. table faults
+
+#[test]
+fn e2e_table_trip_fails_with_the_tables_message_and_the_table_stopped() {
+    let spec = "table:trip@demand3";
+    let tmp = tempfile::tempdir().unwrap();
+    let (plan, sim, dir) = start(tmp.path(), &[spec]);
+    let end = Run::start(&plan, &sim, &out_args(&dir), None).wait();
+    assert_eq!(end.code, Some(1), "{end:?}");
+    let m = manifest(&dir);
+    assert_eq!(m["status"], "failed", "{m}");
+    let reason = m["reason"].as_str().unwrap();
+    assert!(reason.contains("rate table"), "{reason}");
+    assert!(
+        reason.contains("Rate trip"),
+        "the table's own message: {reason}"
+    );
+    assert_eq!(check_recorded_steps_whole(&dir), vec![0, 1]);
+    let last = sim.finish();
+    assert!(fault_fired(&last, spec), "{last}");
+    assert_table_parked(&last);
+    assert!(
+        last["table"]["fault"]
+            .as_str()
+            .unwrap()
+            .contains("Rate trip"),
+        "{last}"
+    );
+}
+
+#[test]
+fn e2e_silent_table_is_a_heartbeat_fault_and_a_stop_is_attempted() {
+    let spec = "table:silent@demand3";
+    let tmp = tempfile::tempdir().unwrap();
+    let (plan, sim, dir) = start(tmp.path(), &[spec]);
+    // info from the table driver: it logs every stop command it sends
+    let run = Run::start(
+        &plan,
+        &sim,
+        &out_args(&dir),
+        Some("warn,gyrocal_table=info"),
+    );
+    let end = run.wait();
+    assert_eq!(end.code, Some(1), "{end:?}");
+    // the heartbeat deadline is 2 s, the reply timeout 1 s; the cleanup is bounded too
+    assert!(
+        end.elapsed < Duration::from_secs(15),
+        "failed after {:?}",
+        end.elapsed
+    );
+    let m = manifest(&dir);
+    assert_eq!(m["status"], "failed", "{m}");
+    let reason = m["reason"].as_str().unwrap();
+    assert!(reason.contains("rate table"), "{reason}");
+    assert!(
+        reason.contains("no answer") || reason.contains("deadline") || reason.contains("heartbeat"),
+        "a timeout: {reason}"
+    );
+    assert_eq!(check_recorded_steps_whole(&dir), vec![0, 1]);
+    // the stop was sent (a silent table ignores it: that is the point of the case)
+    let stop_sent = end
+        .stderr
+        .lines()
+        .filter(|l| l.contains(":Mode:Off") || l.contains(":Mode:Abort"))
+        .count();
+    assert!(stop_sent >= 1, "no stop attempted:\n{}", end.stderr);
+    let last = sim.finish();
+    assert!(fault_fired(&last, spec), "{last}");
+    let t = &last["table"];
+    assert_eq!(t["silent"], true, "{last}");
+    // what is true of a silent table: it ignored the 3rd demand and the stop, and still turns
+    // at the 2nd step's rate
+    assert_eq!(t["mode"], "RATE", "{last}");
+    assert_eq!(t["demanded_rate"], RATES[1], "{last}");
+    assert_eq!(t["stopped"], false, "{last}");
+}
+
+// ---------------------------------------------------------------------------------------------
+// 8–9. the operator and the operating system interrupt the run
+
+#[test]
+fn e2e_sigint_mid_acquisition_aborts_stops_the_table_and_resumes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (plan, sim, dir) = start(tmp.path(), &[]);
+    // the driver's debug line marks the start of each acquisition
+    let run = Run::start(
+        &plan,
+        &sim,
+        &out_args(&dir),
+        Some("warn,gyrocal_hp34401a=debug"),
+    );
+    let mut seen = 0;
+    run.wait_for_stderr("the second acquisition", |l| {
+        if l.contains("acquisition") && l.contains("expected_s") {
+            seen += 1;
+        }
+        seen == 2
+    });
+    assert!(
+        !steps(&dir).is_empty(),
+        "step 0 recorded before step 1 acquires"
+    );
+    run.guard.signal(Signal::SIGINT);
+    let end = run.wait();
+    assert_eq!(end.code, Some(130), "{end:?}");
+    let m = manifest(&dir);
+    assert_eq!(m["status"], "aborted", "{m}");
+    let done = check_recorded_steps_whole(&dir);
+    assert!(!done.is_empty() && done.len() < RATES.len(), "{done:?}");
+    // the table was parked by the aborted run: ask it before anything else talks to it
+    let (mode, rate) = probe_table(sim.table());
+    assert!(mode == "OFF" || mode == "ABORT", "table mode {mode}");
+    assert!(rate.abs() < 0.05, "table still turning at {rate} °/s");
+
+    let end = Run::start(&plan, &sim, &resume_args(&dir), None).wait();
+    assert_eq!(end.code, Some(0), "{end:?}");
+    check_complete(&dir);
+    assert_eq!(manifest(&dir)["resumes"].as_array().unwrap().len(), 1);
+    let last = sim.finish();
+    assert_table_parked(&last);
+    assert_eq!(last["table"]["mode"], "OFF", "{last}");
+}
+
+#[test]
+fn e2e_sigkill_records_nothing_incomplete_and_resumes_with_the_table_turning() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (plan, sim, dir) = start(tmp.path(), &[]);
+    let run = Run::start(&plan, &sim, &out_args(&dir), None);
+    let t0 = Instant::now();
+    while steps(&dir).len() < 2 {
+        assert!(t0.elapsed() < RUN_LIMIT, "the run did not reach step 2");
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    run.guard.signal(Signal::SIGKILL);
+    let end = run.wait();
+    assert_eq!(end.code, None, "killed by a signal: {end:?}");
+    assert_eq!(manifest(&dir)["status"], "running");
+    let before = check_recorded_steps_whole(&dir);
+    assert!(
+        before.len() >= 2 && before.len() < RATES.len(),
+        "{before:?}"
+    );
+    // the dead process left the table turning (at step 1's or step 2's rate)
+    let (mode, rate) = probe_table(sim.table());
+    assert_eq!(mode, "RATE", "the table was left in rate mode");
+    assert!(rate.abs() > 1.0, "the table was left turning: {rate} °/s");
+
+    let end = Run::start(&plan, &sim, &resume_args(&dir), None).wait();
+    assert_eq!(end.code, Some(0), "{end:?}");
+    check_complete(&dir);
+    let m = manifest(&dir);
+    assert_eq!(m["resumes"][0]["steps_done"], before.len(), "{m}");
+    let last = sim.finish();
+    assert_table_parked(&last);
+    assert_eq!(last["table"]["mode"], "OFF", "{last}");
+}
