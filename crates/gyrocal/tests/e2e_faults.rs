@@ -136,12 +136,17 @@ struct Sim {
 
 impl Sim {
     fn start(plan: &Path, faults: &[&str]) -> Sim {
+        Sim::start_scaled(plan, faults, TIME_SCALE)
+    }
+
+    /// With another time scale (a slower bench makes a phase long enough to hit).
+    fn start_scaled(plan: &Path, faults: &[&str], time_scale: &str) -> Sim {
         let mut cmd = Command::new(BIN);
         cmd.env_remove("RUST_LOG")
             .arg("sim")
             .arg("--config")
             .arg(plan)
-            .args(["--time-scale", TIME_SCALE, "--seed", SEED]);
+            .args(["--time-scale", time_scale, "--seed", SEED]);
         for f in faults {
             cmd.args(["--fault", f]);
         }
@@ -516,6 +521,7 @@ fn e2e_clean_run_completes_and_its_fit_matches_the_truth() {
     );
 
     let last = sim.finish();
+    eprintln!("simulator at the end: {last}");
     assert_table_parked(&last);
     assert_eq!(last["table"]["mode"], "OFF", "{last}");
     assert_eq!(last["table"]["demands_seen"], RATES.len(), "{last}");
@@ -551,6 +557,7 @@ fn retried_fault_completes(spec: &str) {
     assert!(num::<u32>(row, "retries") >= 1, "{row:?}");
     assert!(end.stderr.contains("retry (dmm)"), "{}", end.stderr);
     let last = sim.finish();
+    eprintln!("simulator at the end: {last}");
     assert!(fault_fired(&last, spec), "{last}");
     assert!(
         last["dmm"]["device_clears"].as_u64().unwrap() >= 1,
@@ -614,6 +621,7 @@ fn e2e_overload_readings_are_counted_and_excluded_not_repeated() {
     assert!(recorded > 0.5 && recorded < 1.0, "2 °/s → about 0.72 V");
     assert!(manifest(&dir)["retries"].as_array().unwrap().is_empty());
     let last = sim.finish();
+    eprintln!("simulator at the end: {last}");
     assert!(fault_fired(&last, spec), "{last}");
     // the step was not repeated: the meter took exactly the plan's readings
     assert_eq!(
@@ -637,10 +645,12 @@ fn e2e_multimeter_disconnect_fails_cleanly_and_resumes_on_a_new_bench() {
     let m = manifest(&dir);
     assert_eq!(m["status"], "failed", "{m}");
     let reason = m["reason"].as_str().unwrap();
+    eprintln!("reason after {:?}: {reason}", end.elapsed);
     assert!(reason.contains("multimeter"), "{reason}");
     assert!(end.stderr.contains("resume with"), "{}", end.stderr);
     assert_eq!(check_recorded_steps_whole(&dir), vec![0]);
     let last = sim.finish();
+    eprintln!("simulator at the end: {last}");
     assert!(fault_fired(&last, spec), "{last}");
     assert_table_parked(&last);
 
@@ -653,6 +663,7 @@ fn e2e_multimeter_disconnect_fails_cleanly_and_resumes_on_a_new_bench() {
     assert_eq!(m["resumes"].as_array().unwrap().len(), 1, "{m}");
     assert_eq!(m["resumes"][0]["steps_done"], 1, "{m}");
     let last = sim.finish();
+    eprintln!("simulator at the end: {last}");
     assert_eq!(
         last["dmm"]["readings_taken"],
         (RATES.len() as u64 - 1) * SAMPLES,
@@ -666,7 +677,7 @@ fn e2e_multimeter_disconnect_fails_cleanly_and_resumes_on_a_new_bench() {
 
 #[test]
 fn e2e_table_trip_fails_with_the_tables_message_and_the_table_stopped() {
-    let spec = "table:trip@demand3";
+    let spec = "table:trip@demand4";
     let tmp = tempfile::tempdir().unwrap();
     let (plan, sim, dir) = start(tmp.path(), &[spec]);
     let end = Run::start(&plan, &sim, &out_args(&dir), None).wait();
@@ -674,13 +685,15 @@ fn e2e_table_trip_fails_with_the_tables_message_and_the_table_stopped() {
     let m = manifest(&dir);
     assert_eq!(m["status"], "failed", "{m}");
     let reason = m["reason"].as_str().unwrap();
+    eprintln!("reason after {:?}: {reason}", end.elapsed);
     assert!(reason.contains("rate table"), "{reason}");
     assert!(
         reason.contains("Rate trip"),
         "the table's own message: {reason}"
     );
-    assert_eq!(check_recorded_steps_whole(&dir), vec![0, 1]);
+    assert_eq!(check_recorded_steps_whole(&dir), vec![0, 1, 2]);
     let last = sim.finish();
+    eprintln!("simulator at the end: {last}");
     assert!(fault_fired(&last, spec), "{last}");
     assert_table_parked(&last);
     assert!(
@@ -693,7 +706,7 @@ fn e2e_table_trip_fails_with_the_tables_message_and_the_table_stopped() {
 }
 
 #[test]
-fn e2e_silent_table_is_a_heartbeat_fault_and_a_stop_is_attempted() {
+fn e2e_table_silent_from_a_demand_times_out_and_a_stop_is_attempted() {
     let spec = "table:silent@demand3";
     let tmp = tempfile::tempdir().unwrap();
     let (plan, sim, dir) = start(tmp.path(), &[spec]);
@@ -706,7 +719,9 @@ fn e2e_silent_table_is_a_heartbeat_fault_and_a_stop_is_attempted() {
     );
     let end = run.wait();
     assert_eq!(end.code, Some(1), "{end:?}");
-    // the heartbeat deadline is 2 s, the reply timeout 1 s; the cleanup is bounded too
+    // the demand goes unanswered: the driver's error-queue check after it times out (reply
+    // timeout 1 s; a silent table mid-step misses its 2 s heartbeat instead, see below); the
+    // cleanup is bounded too
     assert!(
         end.elapsed < Duration::from_secs(15),
         "failed after {:?}",
@@ -715,6 +730,7 @@ fn e2e_silent_table_is_a_heartbeat_fault_and_a_stop_is_attempted() {
     let m = manifest(&dir);
     assert_eq!(m["status"], "failed", "{m}");
     let reason = m["reason"].as_str().unwrap();
+    eprintln!("reason after {:?}: {reason}", end.elapsed);
     assert!(reason.contains("rate table"), "{reason}");
     assert!(
         reason.contains("no answer") || reason.contains("deadline") || reason.contains("heartbeat"),
@@ -729,6 +745,7 @@ fn e2e_silent_table_is_a_heartbeat_fault_and_a_stop_is_attempted() {
         .count();
     assert!(stop_sent >= 1, "no stop attempted:\n{}", end.stderr);
     let last = sim.finish();
+    eprintln!("simulator at the end: {last}");
     assert!(fault_fired(&last, spec), "{last}");
     let t = &last["table"];
     assert_eq!(t["silent"], true, "{last}");
@@ -739,38 +756,100 @@ fn e2e_silent_table_is_a_heartbeat_fault_and_a_stop_is_attempted() {
     assert_eq!(t["stopped"], false, "{last}");
 }
 
-// ---------------------------------------------------------------------------------------------
-// 8–9. the operator and the operating system interrupt the run
-
 #[test]
-fn e2e_sigint_mid_acquisition_aborts_stops_the_table_and_resumes() {
+fn e2e_table_silent_mid_acquisition_misses_its_heartbeat() {
+    // silent from the middle of step 1's readings (31..60): the sequencer samples the table
+    // every 200 ms while the meter reads, and each sample is a heartbeat with a 2 s deadline
+    let spec = "table:silent@reading45";
     let tmp = tempfile::tempdir().unwrap();
-    let (plan, sim, dir) = start(tmp.path(), &[]);
-    // the driver's debug line marks the start of each acquisition
+    let plan = write_plan(tmp.path());
+    let dir = tmp.path().join("run");
+    // a slower bench: 240 ms of readings per step, so a sample falls inside step 1's
+    let sim = Sim::start_scaled(&plan, &[spec], "5");
     let run = Run::start(
         &plan,
         &sim,
         &out_args(&dir),
-        Some("warn,gyrocal_hp34401a=debug"),
+        Some("warn,gyrocal_table=info"),
     );
+    let end = run.wait();
+    assert_eq!(end.code, Some(1), "{end:?}");
+    assert!(
+        end.elapsed < Duration::from_secs(15),
+        "failed after {:?}",
+        end.elapsed
+    );
+    let m = manifest(&dir);
+    assert_eq!(m["status"], "failed", "{m}");
+    let reason = m["reason"].as_str().unwrap();
+    eprintln!("reason after {:?}: {reason}", end.elapsed);
+    assert!(reason.contains("rate table"), "{reason}");
+    assert!(
+        reason.contains(":Read:Rate?") && reason.contains("no answer"),
+        "a missed heartbeat (a monitoring sample unanswered): {reason}"
+    );
+    // step 1 was cut short: not recorded
+    assert_eq!(check_recorded_steps_whole(&dir), vec![0]);
+    assert!(
+        end.stderr.contains(":Mode:Off") || end.stderr.contains(":Mode:Abort"),
+        "no stop attempted:\n{}",
+        end.stderr
+    );
+    let last = sim.finish();
+    eprintln!("simulator at the end: {last}");
+    assert!(fault_fired(&last, spec), "{last}");
+    let t = &last["table"];
+    assert_eq!(t["silent"], true, "{last}");
+    assert_eq!(t["mode"], "RATE", "{last}");
+    assert_eq!(t["demanded_rate"], RATES[1], "{last}");
+    assert_eq!(t["stopped"], false, "{last}");
+}
+
+// ---------------------------------------------------------------------------------------------
+// 8–9. the operator and the operating system interrupt the run
+
+/// Marks of the driver's debug line at the start of each acquisition (`RUST_LOG` below).
+const ACQ_LOG: &str = "warn,gyrocal_hp34401a=debug";
+
+fn is_acquisition_start(line: &str) -> bool {
+    line.contains("acquisition") && line.contains("expected_s")
+}
+
+/// Blocks until the `k`-th acquisition (1-based) has started.
+fn wait_acquisition(run: &Run, k: usize) {
     let mut seen = 0;
-    run.wait_for_stderr("the second acquisition", |l| {
-        if l.contains("acquisition") && l.contains("expected_s") {
+    run.wait_for_stderr("an acquisition start", |l| {
+        if is_acquisition_start(l) {
             seen += 1;
         }
-        seen == 2
+        seen == k
     });
-    assert!(
-        !steps(&dir).is_empty(),
+}
+
+#[test]
+fn e2e_sigint_mid_acquisition_aborts_stops_the_table_and_resumes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_plan(tmp.path());
+    let dir = tmp.path().join("run");
+    // a slower bench: an acquisition of 30 readings lasts 1.2 sim s = 240 ms here, so a
+    // SIGINT 100 ms into it lands while the meter is reading
+    let sim = Sim::start_scaled(&plan, &[], "5");
+    let run = Run::start(&plan, &sim, &out_args(&dir), Some(ACQ_LOG));
+    wait_acquisition(&run, 2);
+    assert_eq!(
+        steps(&dir).len(),
+        1,
         "step 0 recorded before step 1 acquires"
     );
+    std::thread::sleep(Duration::from_millis(100));
     run.guard.signal(Signal::SIGINT);
     let end = run.wait();
     assert_eq!(end.code, Some(130), "{end:?}");
     let m = manifest(&dir);
     assert_eq!(m["status"], "aborted", "{m}");
-    let done = check_recorded_steps_whole(&dir);
-    assert!(!done.is_empty() && done.len() < RATES.len(), "{done:?}");
+    assert!(m["reason"].as_str().unwrap().contains("operator"), "{m}");
+    // the interrupted step is not recorded, in either file
+    assert_eq!(check_recorded_steps_whole(&dir), vec![0]);
     // the table was parked by the aborted run: ask it before anything else talks to it
     let (mode, rate) = probe_table(sim.table());
     assert!(mode == "OFF" || mode == "ABORT", "table mode {mode}");
@@ -779,35 +858,48 @@ fn e2e_sigint_mid_acquisition_aborts_stops_the_table_and_resumes() {
     let end = Run::start(&plan, &sim, &resume_args(&dir), None).wait();
     assert_eq!(end.code, Some(0), "{end:?}");
     check_complete(&dir);
-    assert_eq!(manifest(&dir)["resumes"].as_array().unwrap().len(), 1);
+    let m = manifest(&dir);
+    assert_eq!(m["resumes"].as_array().unwrap().len(), 1, "{m}");
+    assert_eq!(m["resumes"][0]["steps_done"], 1, "{m}");
     let last = sim.finish();
+    eprintln!("simulator at the end: {last}");
     assert_table_parked(&last);
     assert_eq!(last["table"]["mode"], "OFF", "{last}");
+    // the meter was stopped part-way through step 1's readings: more than the plan's readings
+    // in all, fewer than one more step's worth (the interrupted ones were thrown away)
+    let taken = last["dmm"]["readings_taken"].as_u64().unwrap();
+    let plan_total = RATES.len() as u64 * SAMPLES;
+    assert!(
+        taken > plan_total && taken < plan_total + SAMPLES,
+        "SIGINT mid-acquisition: {taken} readings taken for {plan_total} recorded"
+    );
 }
 
 #[test]
 fn e2e_sigkill_records_nothing_incomplete_and_resumes_with_the_table_turning() {
     let tmp = tempfile::tempdir().unwrap();
     let (plan, sim, dir) = start(tmp.path(), &[]);
-    let run = Run::start(&plan, &sim, &out_args(&dir), None);
-    let t0 = Instant::now();
-    while steps(&dir).len() < 2 {
-        assert!(t0.elapsed() < RUN_LIMIT, "the run did not reach step 2");
-        std::thread::sleep(Duration::from_millis(2));
-    }
+    let run = Run::start(&plan, &sim, &out_args(&dir), Some(ACQ_LOG));
+    // killed during step 2 (at -2 °/s): in its acquisition, or just after it if the machine is
+    // slow; either way nothing may be recorded half
+    wait_acquisition(&run, 3);
+    std::thread::sleep(Duration::from_millis(10));
     run.guard.signal(Signal::SIGKILL);
     let end = run.wait();
     assert_eq!(end.code, None, "killed by a signal: {end:?}");
     assert_eq!(manifest(&dir)["status"], "running");
     let before = check_recorded_steps_whole(&dir);
     assert!(
-        before.len() >= 2 && before.len() < RATES.len(),
-        "{before:?}"
+        before == [0, 1] || before == [0, 1, 2],
+        "recorded when killed: {before:?}"
     );
-    // the dead process left the table turning (at step 1's or step 2's rate)
+    // the dead process left the table turning at step 2's rate
     let (mode, rate) = probe_table(sim.table());
     assert_eq!(mode, "RATE", "the table was left in rate mode");
-    assert!(rate.abs() > 1.0, "the table was left turning: {rate} °/s");
+    assert!(
+        (rate - RATES[2]).abs() < 0.05,
+        "the table was left turning at -2 °/s: {rate} °/s"
+    );
 
     let end = Run::start(&plan, &sim, &resume_args(&dir), None).wait();
     assert_eq!(end.code, Some(0), "{end:?}");
@@ -815,6 +907,7 @@ fn e2e_sigkill_records_nothing_incomplete_and_resumes_with_the_table_turning() {
     let m = manifest(&dir);
     assert_eq!(m["resumes"][0]["steps_done"], before.len(), "{m}");
     let last = sim.finish();
+    eprintln!("simulator at the end: {last}");
     assert_table_parked(&last);
     assert_eq!(last["table"]["mode"], "OFF", "{last}");
 }
