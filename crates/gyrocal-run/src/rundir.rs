@@ -90,6 +90,12 @@ pub enum RunError {
         /// The I/O error.
         source: std::io::Error,
     },
+    /// Another process (or another open `RunDir`) is writing this run directory.
+    #[error("{}: the run directory is in use by another gyrocal process", path.display())]
+    Locked {
+        /// The directory.
+        path: PathBuf,
+    },
     /// `create` was given a directory that already holds files.
     #[error("{}: the run directory exists and is not empty (use --resume to continue it)", path.display())]
     NotEmpty {
@@ -364,6 +370,27 @@ pub struct RunData {
 // The writer
 // ---------------------------------------------------------------------------------------------
 
+/// The lock file inside a run directory (see [`RunDir`]).
+pub const LOCK_FILE: &str = ".lock";
+
+/// Takes the run directory's exclusive lock.
+fn lock_dir(dir: &Path) -> Result<File, RunError> {
+    let path = dir.join(LOCK_FILE);
+    let file = fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&path)
+        .map_err(io(&path, "open the lock file"))?;
+    match file.try_lock() {
+        Ok(()) => Ok(file),
+        Err(std::fs::TryLockError::WouldBlock) => Err(RunError::Locked {
+            path: dir.to_path_buf(),
+        }),
+        Err(std::fs::TryLockError::Error(e)) => Err(io(&path, "lock")(e)),
+    }
+}
+
 /// The step whose samples are being written.
 #[derive(Debug, Clone, Copy)]
 struct Current {
@@ -378,6 +405,11 @@ struct Current {
 #[derive(Debug)]
 pub struct RunDir {
     dir: PathBuf,
+    /// An exclusive advisory lock on `DIR/.lock`, held while this value lives: a second
+    /// process (or a second `RunDir`) writing the same run directory is refused. The operating
+    /// system drops the lock when the process dies, even by SIGKILL, so a resume is never
+    /// blocked by a crashed run.
+    _lock: File,
     schedule: Vec<Step>,
     manifest: Manifest,
     samples: csv::Writer<File>,
@@ -399,6 +431,7 @@ impl RunDir {
             }
         }
         fs::create_dir_all(path).map_err(io(path, "create the directory"))?;
+        let lock = lock_dir(path)?;
         let samples = open_csv(&path.join(SAMPLES_CSV), &SAMPLES_HEADER, true)?;
         let steps = open_csv(&path.join(STEPS_CSV), &STEPS_HEADER, true)?;
         let now = now_utc();
@@ -424,6 +457,7 @@ impl RunDir {
         };
         let mut rd = RunDir {
             dir: path.to_path_buf(),
+            _lock: lock,
             schedule: plan.schedule(),
             manifest,
             samples,
@@ -443,6 +477,7 @@ impl RunDir {
     pub fn open_for_resume(path: &Path, plan: &Plan) -> Result<RunDir, RunError> {
         let mpath = path.join(MANIFEST_JSON);
         let mut manifest = read_manifest(&mpath)?;
+        let lock = lock_dir(path)?;
         let plan_hash = plan.hash();
         if manifest.plan_hash != plan_hash {
             return Err(RunError::PlanChanged {
@@ -497,6 +532,7 @@ impl RunDir {
         );
         let mut rd = RunDir {
             dir: path.to_path_buf(),
+            _lock: lock,
             schedule,
             manifest,
             samples,

@@ -25,6 +25,7 @@ use gyrocal_link::Transport;
 use gyrocal_table::{RateStats, RateTable, SettleCriteria, StopHandle, TableError};
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
+use tracing::Instrument as _;
 
 use crate::estimate::{self, Estimate};
 use crate::plan::{Plan, Step};
@@ -301,6 +302,8 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
     /// [`crate::fit_run`]), so a failed fit never loses the data.
     pub async fn run(&mut self, mut stop: watch::Receiver<StopRequest>) -> RunSummary {
         self.origin = Instant::now();
+        let run_span =
+            tracing::info_span!("run", plan = %self.plan.name(), dir = %self.run.path().display());
         let outcome = {
             let wait_stop = async {
                 loop {
@@ -317,7 +320,7 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
             tokio::select! {
                 biased;
                 req = wait_stop => Err(SequenceError::Stopped(req)),
-                r = self.steps() => r,
+                r = self.steps().instrument(run_span) => r,
             }
         };
         match outcome {
@@ -360,16 +363,22 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
         };
         let reason = error.to_string();
         tracing::warn!(%reason, ?status, "run stopping");
-        // Table first: it is the dangerous one.
+        // Table first: it is the dangerous one. A table that faulted or stopped answering gets
+        // the emergency path too (rate-table.md: "for a second interrupt or a fault"): a
+        // controlled stop that was written may still not have been heard.
+        let table_fault = matches!(&error, SequenceError::Table(e) if e.ends_run());
         let stopped = if emergency {
             self.stop_handle.emergency_stop().await
         } else {
             self.stop_handle.stop().await
         };
-        if let Err(e) = stopped {
+        if let Err(e) = &stopped {
             tracing::error!(error = %e, "stop command failed; trying the emergency stop");
+        }
+        if !emergency && (table_fault || stopped.is_err()) {
+            tracing::warn!("table fault: emergency stop (interlock open)");
             if let Err(e) = self.stop_handle.emergency_stop().await {
-                tracing::error!(error = %e, "emergency stop failed too: STOP THE TABLE BY HAND");
+                tracing::error!(error = %e, "emergency stop failed: STOP THE TABLE BY HAND");
             }
         }
         self.release_dmm(true).await;
@@ -483,7 +492,6 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
         let dwell = self.plan.settle().saturating_sub(criteria.window);
         let mut pending: Option<PendingFetch> = None;
         let total = steps.len();
-        let mut at_rate;
         for (i, step) in steps.iter().enumerate() {
             let remaining = est.steps[i..]
                 .iter()
@@ -496,82 +504,89 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
                 total,
                 remaining,
             });
-            let _span =
-                tracing::info_span!("step", index = step.index, rate_dps = step.rate_dps).entered();
-            self.table.set_rate(step.rate_dps, accel).await?;
-            self.emit(Event::Phase {
-                step: step.index,
-                phase: Phase::Ramping,
-            });
-            if let Some(p) = pending.take() {
-                // the previous step's readings come over while the table ramps
-                self.emit(Event::Phase {
-                    step: p.step.index,
-                    phase: Phase::Fetching,
-                });
-                let Self { table, dmm, .. } = self;
-                let dmm = dmm.as_mut().ok_or_else(released)?;
-                // the dwell runs from the moment the table is at rate, fetch or no fetch
-                let wait = async {
-                    let r = table.wait_at_rate(&criteria).await;
-                    (r, Instant::now())
-                };
-                let ((settled, at), fetched) = tokio::join!(wait, fetch_with_retry(dmm, &p.burst));
-                at_rate = at;
-                // record the previous step before anything else can fail
-                let (readings, notes) = match fetched {
-                    Ok(ok) => ok,
-                    Err((e, notes)) => {
-                        for m in notes {
-                            self.log_retry(Some(p.step.index), "dmm", m)?;
-                        }
-                        return Err(e);
-                    }
-                };
-                for m in notes {
-                    self.log_retry(Some(p.step.index), "dmm", m)?;
-                }
-                self.record_fetched(p, readings)?;
-                settled?;
-            } else {
-                self.table.wait_at_rate(&criteria).await?;
-                at_rate = Instant::now();
-            }
-            let dwell_end = at_rate + dwell;
-            if dwell_end > Instant::now() {
+            let span = tracing::info_span!("step", index = step.index, rate_dps = step.rate_dps);
+            async {
+                let at_rate;
+                self.table.set_rate(step.rate_dps, accel).await?;
                 self.emit(Event::Phase {
                     step: step.index,
-                    phase: Phase::Settling,
+                    phase: Phase::Ramping,
                 });
-                let interval = self.options.sample_interval;
-                self.table
-                    .record_while(interval, tokio::time::sleep_until(dwell_end))
-                    .await?;
-            }
-            self.emit(Event::Phase {
-                step: step.index,
-                phase: Phase::Acquiring,
-            });
-            let n = usize::try_from(step.sample_count(timing.reading_time())).unwrap_or(usize::MAX);
-            let last = i + 1 == total;
-            match strategy {
-                Strategy::Memory => {
-                    let p = self.acquire_memory(step, n).await?;
-                    if self.options.overlap_fetch && !last {
-                        pending = Some(p);
-                    } else {
-                        self.emit(Event::Phase {
-                            step: step.index,
-                            phase: Phase::Fetching,
-                        });
-                        let dmm = self.dmm_mut()?;
-                        let fetched = fetch_with_retry(dmm, &p.burst).await;
-                        let readings = self.retries_logged(p.step.index, fetched)?;
-                        self.record_fetched(p, readings)?;
+                if let Some(p) = pending.take() {
+                    // the previous step's readings come over while the table ramps
+                    self.emit(Event::Phase {
+                        step: p.step.index,
+                        phase: Phase::Fetching,
+                    });
+                    let Self { table, dmm, .. } = self;
+                    let dmm = dmm.as_mut().ok_or_else(released)?;
+                    // the dwell runs from the moment the table is at rate, fetch or no fetch
+                    let wait = async {
+                        let r = table.wait_at_rate(&criteria).await;
+                        (r, Instant::now())
+                    };
+                    let ((settled, at), fetched) =
+                        tokio::join!(wait, fetch_with_retry(dmm, &p.burst));
+                    at_rate = at;
+                    // record the previous step before anything else can fail
+                    let (readings, notes) = match fetched {
+                        Ok(ok) => ok,
+                        Err((e, notes)) => {
+                            for m in notes {
+                                self.log_retry(Some(p.step.index), "dmm", m)?;
+                            }
+                            return Err(e);
+                        }
+                    };
+                    for m in notes {
+                        self.log_retry(Some(p.step.index), "dmm", m)?;
                     }
+                    self.record_fetched(p, readings)?;
+                    settled?;
+                } else {
+                    self.table.wait_at_rate(&criteria).await?;
+                    at_rate = Instant::now();
                 }
-                s => self.acquire_direct(step, n, s).await?,
+                let dwell_end = at_rate + dwell;
+                if dwell_end > Instant::now() {
+                    self.emit(Event::Phase {
+                        step: step.index,
+                        phase: Phase::Settling,
+                    });
+                    let interval = self.options.sample_interval;
+                    self.table
+                        .record_while(interval, tokio::time::sleep_until(dwell_end))
+                        .await?;
+                }
+                self.emit(Event::Phase {
+                    step: step.index,
+                    phase: Phase::Acquiring,
+                });
+                let n =
+                    usize::try_from(step.sample_count(timing.reading_time())).unwrap_or(usize::MAX);
+                let last = i + 1 == total;
+                match strategy {
+                    Strategy::Memory => {
+                        let p = self.acquire_memory(step, n).await?;
+                        if self.options.overlap_fetch && !last {
+                            pending = Some(p);
+                        } else {
+                            self.emit(Event::Phase {
+                                step: step.index,
+                                phase: Phase::Fetching,
+                            });
+                            let dmm = self.dmm_mut()?;
+                            let fetched = fetch_with_retry(dmm, &p.burst).await;
+                            let readings = self.retries_logged(p.step.index, fetched)?;
+                            self.record_fetched(p, readings)?;
+                        }
+                    }
+                    s => self.acquire_direct(step, n, s).await?,
+                }
+                Ok::<(), SequenceError>(())
             }
+            .instrument(span)
+            .await?;
         }
         let elapsed = t0.elapsed();
         // park the table; a table that does not come to rest is a failure of the run

@@ -182,6 +182,7 @@ fn a_full_run_writes_what_the_fit_needs() {
     let leftovers: Vec<_> = fs::read_dir(&dir)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n != gyrocal_run::rundir::LOCK_FILE)
         .filter(|n| n.starts_with('.') || n.ends_with(".tmp"))
         .collect();
     assert!(leftovers.is_empty(), "{leftovers:?}");
@@ -439,4 +440,21 @@ fn a_step_row_without_its_samples_is_refused_on_resume() {
     let err = RunDir::open_for_resume(&dir, &p).unwrap_err();
     assert!(matches!(err, RunError::Inconsistent { .. }), "{err}");
     assert!(err.to_string().contains("samples.csv"), "{err}");
+}
+
+#[test]
+fn a_run_directory_in_use_is_refused_until_its_writer_is_gone() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let p = plan();
+    let mut first = RunDir::create(&dir, &p, meta()).unwrap();
+    run_step(&mut first, 0, true);
+    let err = RunDir::open_for_resume(&dir, &p).unwrap_err();
+    assert!(matches!(err, gyrocal_run::RunError::Locked { .. }), "{err}");
+    assert!(err.to_string().contains("in use"), "{err}");
+    // the refused second writer changed nothing
+    assert_eq!(load(&dir).unwrap().steps.len(), 1);
+    drop(first);
+    let second = RunDir::open_for_resume(&dir, &p).unwrap();
+    assert_eq!(second.done_steps().len(), 1);
 }

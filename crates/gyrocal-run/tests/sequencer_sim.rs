@@ -209,6 +209,11 @@ async fn a_table_fault_fails_the_run_with_the_tables_message_and_stops_it() {
     assert!(reason.contains("Tracking error limit exceeded"), "{reason}");
     tokio::time::sleep(Duration::from_millis(10)).await;
     assert_ne!(bench.handle.table.mode(), gyrocal_sim::table::SimMode::Rate);
+    // a fault takes the emergency path too: servo off
+    assert!(
+        !bench.handle.table.interlock_closed(),
+        "interlock still closed after a fault"
+    );
 }
 
 /// Runs `plan` on `bench` into a fresh `dir` without stop requests.

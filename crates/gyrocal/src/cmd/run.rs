@@ -128,7 +128,7 @@ async fn execute(args: &RunArgs, plan: Plan, run: RunDir) -> anyhow::Result<(Run
             cfg.time_scale = x;
         }
         let bench = gyrocal_sim::bench::Bench::spawn(cfg);
-        let (summary, run) = sequence(plan, bench.dmm, bench.table, run).await;
+        let (summary, run) = sequence(plan, bench.dmm, bench.table, run).await?;
         // let the simulator take the last commands before it is dropped
         tokio::time::sleep(Duration::from_millis(50)).await;
         let t = &bench.handle.table;
@@ -160,11 +160,16 @@ async fn execute(args: &RunArgs, plan: Plan, run: RunDir) -> anyhow::Result<(Run
         let table = gyrocal_link::open(&t.port.to_string(), &table_opts)
             .await
             .with_context(|| format!("opening the rate table at {}", t.port))?;
-        Ok(sequence(plan, dmm, table, run).await)
+        sequence(plan, dmm, table, run).await
     }
 }
 
-async fn sequence<D, T>(plan: Plan, dmm_link: D, table_link: T, run: RunDir) -> (RunSummary, RunDir)
+async fn sequence<D, T>(
+    plan: Plan,
+    dmm_link: D,
+    table_link: T,
+    run: RunDir,
+) -> anyhow::Result<(RunSummary, RunDir)>
 where
     D: Transport + 'static,
     T: Transport + 'static,
@@ -175,13 +180,34 @@ where
     let mut seq =
         Sequencer::new(plan, dmm, table, run, SequencerOptions::default()).with_events(tx);
     let (stop_tx, stop_rx) = watch::channel(StopRequest::None);
-    let signals = tokio::spawn(watch_signals(stop_tx, seq.stop_handle()));
+    let stop_handle = seq.stop_handle();
+    let signals = tokio::spawn(watch_signals(stop_tx, stop_handle.clone()));
     let display = tokio::spawn(show_progress(rx));
-    let summary = seq.run(stop_rx).await;
+    // The sequencer runs as a task of its own so that even a panic inside it comes back here,
+    // with the runtime still alive to stop the table.
+    let task = tokio::spawn(async move {
+        let summary = seq.run(stop_rx).await;
+        (summary, seq.into_run_dir())
+    });
+    let result = task.await;
     signals.abort();
-    let run = seq.into_run_dir();
     let _ = display.await;
-    (summary, run)
+    match result {
+        Ok(done) => Ok(done),
+        Err(e) => {
+            eprintln!("gyrocal: internal error in the sequencer ({e}); stopping the table");
+            if let Err(e) = stop_handle.stop().await {
+                eprintln!("gyrocal: controlled stop failed: {e}");
+            }
+            if let Err(e) = stop_handle.emergency_stop().await {
+                eprintln!("gyrocal: emergency stop failed: {e}: STOP THE TABLE BY HAND");
+            }
+            anyhow::bail!(
+                "the sequencer stopped unexpectedly ({e}); the table was sent a stop; the run \
+                 directory is resumable (its manifest still says running)"
+            )
+        }
+    }
 }
 
 /// First Ctrl-C or SIGTERM: controlled stop. Second: emergency stop at once.
