@@ -958,12 +958,14 @@ fn parse_steps(path: &Path, bytes: &[u8], schedule: &[Step]) -> Result<Vec<StepR
     let mut out = Vec::new();
     let mut rec = csv::StringRecord::new();
     loop {
-        let line = rdr.position().line();
         match rdr.read_record(&mut rec) {
             Ok(false) => break,
             Ok(true) => {}
             Err(e) => return Err(csv_read(path, &e)),
         }
+        // the record's own position: taken before the first read, the reader's position
+        // would still point at the header
+        let line = rec.position().map_or(0, csv::Position::line);
         let bad = |message: String| RunError::Csv {
             path: path.to_path_buf(),
             line,
@@ -1017,12 +1019,19 @@ fn scan_samples(
     // The header's end, in case there is no row at all.
     let mut keep = bytes.iter().position(|&b| b == b'\n').map_or(0, |i| i + 1) as u64;
     loop {
-        let pos = rdr.position().clone();
         match rdr.read_record(&mut rec) {
             Ok(false) => break,
             Ok(true) => {}
             Err(e) => return Err(csv_read(path, &e)),
         }
+        // the record's own start: the reader's position before the first read is the header's
+        let Some(pos) = rec.position().cloned() else {
+            return Err(RunError::Csv {
+                path: path.to_path_buf(),
+                line: 0,
+                message: "a row without a position".into(),
+            });
+        };
         let line = pos.line();
         let bad = |message: String| RunError::Csv {
             path: path.to_path_buf(),

@@ -414,6 +414,13 @@ fn corrupt_files_are_reported_with_file_and_line() {
     let err = load(&dir).unwrap_err();
     assert!(err.to_string().contains("steps.csv:3:"), "{err}");
 
+    // the first data row is line 2 (the header is line 1)
+    let dir2 = tmp.path().join("run2");
+    drop(RunDir::create(&dir2, &p, meta()).unwrap());
+    append_raw(&dir2.join(STEPS_CSV), b"0,0,zero,,,,,0.37,,7,0,0,1,2\n");
+    let err = load(&dir2).unwrap_err();
+    assert!(err.to_string().contains("steps.csv:2:"), "{err}");
+
     // a manifest that does not parse names its line
     fs::write(
         dir.join(MANIFEST_JSON),
@@ -457,4 +464,26 @@ fn a_run_directory_in_use_is_refused_until_its_writer_is_gone() {
     drop(first);
     let second = RunDir::open_for_resume(&dir, &p).unwrap();
     assert_eq!(second.done_steps().len(), 1);
+}
+
+#[test]
+fn dropping_a_partial_first_step_keeps_the_header_in_place() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let p = plan();
+    let mut rd = RunDir::create(&dir, &p, meta()).unwrap();
+    let header = fs::read(dir.join(SAMPLES_CSV)).unwrap();
+    rd.append_samples(
+        0,
+        &[Sample {
+            index: 0,
+            t_s: 0.0,
+            volts: Some(0.01),
+        }],
+    )
+    .unwrap();
+    drop(rd);
+    let _rd = RunDir::open_for_resume(&dir, &p).unwrap();
+    // exactly the header is left: the partial row is cut at its own start, not at the file's
+    assert_eq!(fs::read(dir.join(SAMPLES_CSV)).unwrap(), header);
 }
