@@ -19,7 +19,8 @@
 //!   uniformly from ±0.1 in these normalised units (seeded), and reported in volts.
 //! * **A stopping rule that can fire.** The paper stops when the error falls below ε, which never
 //!   happens on real data (the smallest error is the least-squares residual). The online phase
-//!   here stops when the *change* of the pass error is at most `epsilon` times the pass error.
+//!   here stops when the *change* of the pass error is at most `epsilon` times the pass error,
+//!   or after `max_online_passes` (the decayed step may crawl on strongly weighted data).
 //! * **Real convergence.** With a fixed step, online updates circle the minimum at a distance
 //!   proportional to η, because each point pulls the weights its own way. So the step decays
 //!   over the online passes, `η_p = η / (1 + p/eta_decay_passes)`, and training then *finishes
@@ -51,6 +52,11 @@ pub struct NeuronOptions {
     pub epsilon: f64,
     /// Maximum number of passes (online and batch together).
     pub max_passes: u64,
+    /// Most online passes before the batch finish starts even if the online stopping rule has
+    /// not fired. With strongly unequal weights (a whole-turn plan has 60 times more readings
+    /// at 0.3 °/s than at 20 °/s) the decayed online step can crawl for ever with a relative
+    /// change just above `epsilon`; the batch finish converges regardless.
+    pub max_online_passes: u64,
     /// Seed of the small random initial weight and threshold.
     pub seed: u64,
     /// The online step is `η / (1 + p / eta_decay_passes)` at pass `p` (0 or infinity: no
@@ -70,6 +76,7 @@ impl Default for NeuronOptions {
             alpha: 0.9,
             epsilon: 1e-6,
             max_passes: 100_000,
+            max_online_passes: 5_000,
             seed: 1,
             eta_decay_passes: 50.0,
             batch_finish: true,
@@ -244,14 +251,20 @@ pub fn train(
         pass_errors.push(sse_volts(w, t));
         let change = (prev_e - e).abs();
         prev_e = e;
-        if online && change <= opts.epsilon * e {
+        let settled = change <= opts.epsilon * e;
+        if online && (settled || online_passes >= opts.max_online_passes) {
             if opts.batch_finish {
                 online = false;
                 // Start the batch phase without the online phase's momentum.
                 dw = 0.0;
                 dt = 0.0;
             } else {
-                status = NeuronStatus::Converged;
+                // online only: the pass limit is not convergence
+                status = if settled {
+                    NeuronStatus::Converged
+                } else {
+                    NeuronStatus::MaxPasses
+                };
                 break;
             }
         }

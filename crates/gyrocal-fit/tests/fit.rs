@@ -474,3 +474,71 @@ proptest! {
         prop_assert!(dot.abs() <= 1e-10 * n * scale_d * scale_w, "dot {}", dot);
     }
 }
+
+/// A whole-turn plan's data: 60 times more readings at 0.3 °/s than at 20 °/s, so the
+/// least-squares weights (n/σ²) differ by as much.
+fn whole_turn_shaped() -> Dataset {
+    let rates_n = [
+        (0.0, 500u64),
+        (0.3, 28916),
+        (-0.3, 28916),
+        (1.0, 8675),
+        (-1.0, 8675),
+        (3.0, 2892),
+        (-3.0, 2892),
+        (10.0, 867),
+        (-10.0, 867),
+        (20.0, 434),
+        (-20.0, 434),
+        (0.0, 500),
+    ];
+    let mut rng = StdRng::seed_from_u64(11);
+    let noise = Normal::new(0.0, 1.0).unwrap();
+    Dataset {
+        source: None,
+        points: rates_n
+            .iter()
+            .map(|&(w, n)| {
+                let sigma_mean = 0.002 / (n as f64).sqrt();
+                Point {
+                    rate_dps: w,
+                    volts: 0.0099
+                        + 0.3612 * w
+                        + 2.1e-5 * w * w
+                        + sigma_mean * noise.sample(&mut rng),
+                    volts_std: Some(0.002),
+                    n: Some(n),
+                    line: None,
+                }
+            })
+            .collect(),
+    }
+}
+
+#[test]
+fn neuron_reaches_weighted_least_squares_on_strongly_unequal_weights() {
+    let data = whole_turn_shaped();
+    let ls = fit_least_squares(&data, Model::Linear, Weighting::Auto).unwrap();
+    assert!(ls.weighted);
+    let nn = fit_neuron(&data, &NeuronOptions::default(), Weighting::Auto).unwrap();
+    assert!(nn.converged, "{:?}", nn.neuron.as_ref().map(|t| t.status));
+    assert!(rel(nn.scale_factor, ls.scale_factor) < 1e-6);
+    assert!(rel(nn.bias, ls.bias) < 1e-6);
+    let trace = nn.neuron.unwrap();
+    assert!(
+        trace.batch_passes > 0,
+        "the batch finish did the converging"
+    );
+}
+
+#[test]
+fn online_only_neuron_at_its_pass_limit_is_not_called_converged() {
+    let opts = NeuronOptions {
+        batch_finish: false,
+        max_online_passes: 10,
+        ..NeuronOptions::default()
+    };
+    let nn = fit_neuron(&whole_turn_shaped(), &opts, Weighting::Auto).unwrap();
+    assert!(!nn.converged);
+    assert_eq!(nn.neuron.unwrap().status, NeuronStatus::MaxPasses);
+}
