@@ -64,7 +64,7 @@ fn main() -> ExitCode {
     match result {
         Ok(code) => ExitCode::from(code),
         Err(err) => {
-            let message = format!("{err:#}").replace('\n', " ");
+            let message = one_line(&err);
             eprintln!("gyrocal: error: {message}");
             if err.downcast_ref::<BadInput>().is_some() {
                 ExitCode::from(2)
@@ -73,4 +73,22 @@ fn main() -> ExitCode {
             }
         }
     }
+}
+
+/// The error and its causes on one line. The libraries' errors already name their source in
+/// their own message (so they read well alone); a cause whose text is already there is not
+/// repeated.
+fn one_line(err: &anyhow::Error) -> String {
+    let mut message = String::new();
+    for cause in err.chain() {
+        let text = cause.to_string();
+        if message.contains(&text) {
+            continue;
+        }
+        if !message.is_empty() {
+            message.push_str(": ");
+        }
+        message.push_str(&text);
+    }
+    message.replace('\n', " ")
 }

@@ -376,3 +376,84 @@ fn check_prints_the_schedule_and_its_duration() {
     assert_eq!(&rates[..5], &[0.0, 0.1, -0.1, 0.3, -0.3], "{text}");
     assert_eq!(rows.len(), 19, "{text}");
 }
+
+#[test]
+fn a_port_that_does_not_open_is_named_and_leaves_no_run_directory() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let missing = tmp.path().join("ttyNOPE");
+    let out = gyrocal()
+        .arg("run")
+        .arg(config("quick.toml"))
+        .arg("--dmm-port")
+        .arg(&missing)
+        .args(["--table-port", "/dev/null-table", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("opening the multimeter") && err.contains("ttyNOPE"),
+        "{err}"
+    );
+    // the cause is said once, not once per layer
+    assert_eq!(err.matches("No such file or directory").count(), 1, "{err}");
+    assert!(
+        !dir.exists(),
+        "a run that never started leaves no directory to clean up"
+    );
+    // and the same --out works once the instrument is there
+    let out = gyrocal()
+        .arg("run")
+        .arg(config("quick.toml"))
+        .args(["--simulate", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn several_runs_make_one_report_with_repeatability_in_a_new_directory() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut dirs = Vec::new();
+    for seed in [1, 2] {
+        let plan = tmp.path().join(format!("quick-{seed}.toml"));
+        let text = std::fs::read_to_string(config("quick.toml")).unwrap();
+        std::fs::write(&plan, text.replace("seed = 1", &format!("seed = {seed}"))).unwrap();
+        let dir = tmp.path().join(format!("run{seed}"));
+        let out = gyrocal()
+            .arg("run")
+            .arg(&plan)
+            .args(["--simulate", "--no-report", "--out"])
+            .arg(&dir)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        dirs.push(dir);
+    }
+    let html = tmp.path().join("reports/both/report.html");
+    let out = gyrocal()
+        .arg("report")
+        .args(&dirs)
+        .arg("--out")
+        .arg(&html)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(html.exists());
+    assert!(html.with_file_name("repeatability.svg").exists());
+}

@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 
+use anyhow::Context as _;
 use clap::Args;
 use gyrocal_report::{ReportError, render_many};
 
@@ -29,6 +30,10 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         (None, _) => PathBuf::from(gyrocal_run::rundir::REPORT_HTML),
     };
     let report = render_many(&args.inputs).map_err(classify)?;
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("{}: cannot create the directory", dir.display()))?;
+    }
     let written = report.write(&out).map_err(classify)?;
     println!("report: {}", out.display());
     tracing::info!(files = written.len(), "report written");

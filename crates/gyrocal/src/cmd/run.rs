@@ -72,7 +72,6 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
     {
         return Err(BadInput(format!("--sim-time-scale must be > 0 (got {x})")).into());
     }
-    let (dir, run) = open_run_dir(args, &plan)?;
     let virtual_time = args.simulate && args.sim_time_scale.is_none();
     let mut rt = if virtual_time {
         let mut b = tokio::runtime::Builder::new_current_thread();
@@ -85,7 +84,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
         .enable_all()
         .build()
         .context("starting the async runtime")?;
-    let (summary, run) = rt.block_on(execute(args, plan, run))?;
+    let (dir, summary, run) = rt.block_on(execute(args, plan))?;
     finish(args, &dir, &summary, run)
 }
 
@@ -121,13 +120,16 @@ fn default_dir(plan: &Path) -> PathBuf {
     PathBuf::from("runs").join(format!("{stem}-{now}"))
 }
 
-async fn execute(args: &RunArgs, plan: Plan, run: RunDir) -> anyhow::Result<(RunSummary, RunDir)> {
+/// Opens the instruments' links (or builds the simulated bench), then the run directory (so a
+/// port that does not open leaves no run directory behind), and runs the sequencer.
+async fn execute(args: &RunArgs, plan: Plan) -> anyhow::Result<(PathBuf, RunSummary, RunDir)> {
     if args.simulate {
         let mut cfg = gyrocal_run::simulate::bench_config(&plan);
         if let Some(x) = args.sim_time_scale {
             cfg.time_scale = x;
         }
         let bench = gyrocal_sim::bench::Bench::spawn(cfg);
+        let (dir, run) = open_run_dir(args, &plan)?;
         let (summary, run) = sequence(plan, bench.dmm, bench.table, run).await?;
         // let the simulator take the last commands before it is dropped
         tokio::time::sleep(Duration::from_millis(50)).await;
@@ -141,7 +143,7 @@ async fn execute(args: &RunArgs, plan: Plan, run: RunDir) -> anyhow::Result<(Run
                 "stopped": t.is_stopped(),
             })
         );
-        Ok((summary, run))
+        Ok((dir, summary, run))
     } else {
         let d = plan.dmm();
         let dmm_opts = LinkOptions {
@@ -160,7 +162,9 @@ async fn execute(args: &RunArgs, plan: Plan, run: RunDir) -> anyhow::Result<(Run
         let table = gyrocal_link::open(&t.port.to_string(), &table_opts)
             .await
             .with_context(|| format!("opening the rate table at {}", t.port))?;
-        sequence(plan, dmm, table, run).await
+        let (dir, run) = open_run_dir(args, &plan)?;
+        let (summary, run) = sequence(plan, dmm, table, run).await?;
+        Ok((dir, summary, run))
     }
 }
 
