@@ -263,7 +263,8 @@ async fn watch_signals(stop: watch::Sender<StopRequest>, table: gyrocal_table::S
 
 /// An indicatif display on a terminal; plain lines otherwise.
 async fn show_progress(mut rx: mpsc::UnboundedReceiver<Event>) {
-    let tty = std::io::stderr().is_terminal();
+    // the bar draws on stderr; with either stream redirected (a log file, CI), plain lines
+    let tty = std::io::stdout().is_terminal() && std::io::stderr().is_terminal();
     let bar = indicatif::ProgressBar::hidden();
     if tty {
         bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
