@@ -45,6 +45,26 @@ pub(crate) fn fit_name(f: &Fit) -> String {
     }
 }
 
+/// The legend, styled the same in every plot.
+fn legend<'a, DB, CT>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+) -> PlotResult
+where
+    DB: DrawingBackend + 'a,
+    DB::ErrorType: 'static,
+    CT: CoordTranslate,
+{
+    chart
+        .configure_series_labels()
+        .position(position)
+        .label_font((FONT, LABEL_SIZE))
+        .background_style(WHITE.mix(0.9))
+        .border_style(BOLD)
+        .draw()?;
+    Ok(())
+}
+
 /// Draws into a string; maps the backend's error to [`ReportError::Plot`] naming the plot.
 fn draw(name: &str, f: impl FnOnce(&mut String) -> PlotResult) -> Result<String, ReportError> {
     let mut s = String::new();
@@ -178,13 +198,7 @@ pub(crate) fn fit_plot(a: &Analysis) -> Result<String, ReportError> {
             .draw_series(pts.iter().map(|&p| Circle::new(p, 3, BLACK.filled())))?
             .label("measured (mean output per step)")
             .legend(|(x, y)| Circle::new((x + 12, y), 3, BLACK.filled()));
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .label_font((FONT, LABEL_SIZE))
-            .background_style(WHITE.mix(0.9))
-            .border_style(BOLD)
-            .draw()?;
+        legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
         root.present()?;
         Ok(())
     })
@@ -266,13 +280,7 @@ pub(crate) fn residuals_plot(a: &Analysis) -> Result<String, ReportError> {
                     });
             }
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperMiddle)
-            .label_font((FONT, LABEL_SIZE))
-            .background_style(WHITE.mix(0.9))
-            .border_style(BOLD)
-            .draw()?;
+        legend(&mut chart, SeriesLabelPosition::UpperMiddle)?;
         root.present()?;
         Ok(())
     })
@@ -356,13 +364,7 @@ pub(crate) fn training_plot(neuron: &Fit, ls_sse: Option<f64>) -> Result<String,
                     PathElement::new(vec![(x, y), (x + 24, y)], g.stroke_width(1))
                 });
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .label_font((FONT, LABEL_SIZE))
-            .background_style(WHITE.mix(0.9))
-            .border_style(BOLD)
-            .draw()?;
+        legend(&mut chart, SeriesLabelPosition::UpperRight)?;
         root.present()?;
         Ok(())
     })
@@ -652,13 +654,7 @@ pub(crate) fn repeatability_plot(ks: &[(f64, Option<f64>)]) -> Result<String, Re
             }))?
             .label("least-squares K ± one standard error")
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(2)));
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .label_font((FONT, LABEL_SIZE))
-            .background_style(WHITE.mix(0.9))
-            .border_style(BOLD)
-            .draw()?;
+        legend(&mut chart, SeriesLabelPosition::UpperRight)?;
         root.present()?;
         Ok(())
     })
