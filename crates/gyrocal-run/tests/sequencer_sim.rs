@@ -38,6 +38,48 @@ fn set(doc: &mut toml::Table, section: &str, key: &str, value: toml::Value) {
         .insert(key.into(), value);
 }
 
+fn new_run(plan: &Plan, dir: &Path) -> RunDir {
+    let meta = RunMeta {
+        gyrocal_version: "test".into(),
+        simulated: true,
+        ..RunMeta::default()
+    };
+    RunDir::create(dir, plan, meta).unwrap()
+}
+
+/// Runs `plan` on `bench` into `run`, asking for a stop once `stop_after` steps were recorded
+/// in this session (if given); fits a complete run as the CLI does.
+async fn run_with(
+    plan: &Plan,
+    bench: Bench,
+    run: RunDir,
+    stop_after: Option<usize>,
+) -> (RunSummary, BenchHandle) {
+    let dmm = Hp34401a::new(bench.dmm, DriverOptions::default());
+    let table = AclTable::new(bench.table, table_config(plan));
+    let (events_tx, mut events) = tokio::sync::mpsc::unbounded_channel();
+    let mut seq = Sequencer::new(plan.clone(), dmm, table, run, SequencerOptions::default())
+        .with_events(events_tx);
+    let (stop_tx, stop_rx) = watch::channel(StopRequest::None);
+    tokio::spawn(async move {
+        let mut done = 0;
+        while let Some(e) = events.recv().await {
+            if matches!(e, gyrocal_run::Event::StepDone(_)) {
+                done += 1;
+                if Some(done) == stop_after {
+                    let _ = stop_tx.send(StopRequest::Controlled);
+                }
+            }
+        }
+    });
+    let summary = seq.run(stop_rx).await;
+    if summary.status == Status::Complete {
+        let mut run = seq.into_run_dir();
+        fit_run(&mut run, &gyrocal_fit::Options::default()).unwrap();
+    }
+    (summary, bench.handle)
+}
+
 /// Runs `plan` on a fresh bench into `dir` (created or resumed), stopping when `stop_after`
 /// steps were recorded in this session, if given.
 async fn run_plan(
@@ -50,38 +92,9 @@ async fn run_plan(
     let run = if resume {
         RunDir::open_for_resume(dir, plan).unwrap()
     } else {
-        let meta = RunMeta {
-            gyrocal_version: "test".into(),
-            simulated: true,
-            ..RunMeta::default()
-        };
-        RunDir::create(dir, plan, meta).unwrap()
+        new_run(plan, dir)
     };
-    let dmm = Hp34401a::new(bench.dmm, DriverOptions::default());
-    let table = AclTable::new(bench.table, table_config(plan));
-    let (events_tx, mut events) = tokio::sync::mpsc::unbounded_channel();
-    let mut seq = Sequencer::new(plan.clone(), dmm, table, run, SequencerOptions::default())
-        .with_events(events_tx);
-    let (stop_tx, stop_rx) = watch::channel(StopRequest::None);
-    if let Some(k) = stop_after {
-        tokio::spawn(async move {
-            let mut done = 0;
-            while let Some(e) = events.recv().await {
-                if matches!(e, gyrocal_run::Event::StepDone(_)) {
-                    done += 1;
-                    if done == k {
-                        let _ = stop_tx.send(StopRequest::Controlled);
-                    }
-                }
-            }
-        });
-    }
-    let summary = seq.run(stop_rx).await;
-    if summary.status == Status::Complete {
-        let mut run = seq.into_run_dir();
-        fit_run(&mut run, &gyrocal_fit::Options::default()).unwrap();
-    }
-    (summary, bench.handle)
+    run_with(plan, bench, run, stop_after).await
 }
 
 #[tokio::test(start_paused = true)]
@@ -191,44 +204,24 @@ async fn a_table_fault_fails_the_run_with_the_tables_message_and_stops_it() {
     let bench = Bench::spawn(cfg);
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("run");
-    let meta = RunMeta {
-        gyrocal_version: "test".into(),
-        simulated: true,
-        ..RunMeta::default()
-    };
-    let run = RunDir::create(&dir, &plan, meta).unwrap();
-    let dmm = Hp34401a::new(bench.dmm, DriverOptions::default());
-    let table = AclTable::new(bench.table, table_config(&plan));
-    let mut seq = Sequencer::new(plan.clone(), dmm, table, run, SequencerOptions::default());
-    let (_stop_tx, stop_rx) = watch::channel(StopRequest::None);
-    let summary = seq.run(stop_rx).await;
+    let (summary, handle) = run_with(&plan, bench, new_run(&plan, &dir), None).await;
     assert_eq!(summary.status, Status::Failed);
     let manifest = load(&dir).unwrap().manifest;
     assert_eq!(manifest.status, Status::Failed);
     let reason = manifest.reason.unwrap();
     assert!(reason.contains("Tracking error limit exceeded"), "{reason}");
     tokio::time::sleep(Duration::from_millis(10)).await;
-    assert_ne!(bench.handle.table.mode(), gyrocal_sim::table::SimMode::Rate);
+    assert_ne!(handle.table.mode(), gyrocal_sim::table::SimMode::Rate);
     // a fault takes the emergency path too: servo off
     assert!(
-        !bench.handle.table.interlock_closed(),
+        !handle.table.interlock_closed(),
         "interlock still closed after a fault"
     );
 }
 
 /// Runs `plan` on `bench` into a fresh `dir` without stop requests.
 async fn run_on(plan: &Plan, bench: Bench, dir: &Path) -> RunSummary {
-    let meta = RunMeta {
-        gyrocal_version: "test".into(),
-        simulated: true,
-        ..RunMeta::default()
-    };
-    let run = RunDir::create(dir, plan, meta).unwrap();
-    let dmm = Hp34401a::new(bench.dmm, DriverOptions::default());
-    let table = AclTable::new(bench.table, table_config(plan));
-    let mut seq = Sequencer::new(plan.clone(), dmm, table, run, SequencerOptions::default());
-    let (_stop_tx, stop_rx) = watch::channel(StopRequest::None);
-    seq.run(stop_rx).await
+    run_with(plan, bench, new_run(plan, dir), None).await.0
 }
 
 #[tokio::test(start_paused = true)]
