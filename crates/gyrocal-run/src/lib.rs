@@ -63,13 +63,37 @@ pub fn dataset_from_steps(steps: &[StepRecord], source: &str) -> gyrocal_fit::Da
 
 /// Fits a run directory's steps with `options`, stores the analysis in the manifest and in
 /// `fit.json`, and returns it.
+///
+/// When the plan repeats its schedule (`repeat` > 1), the repeatability
+/// `std(K_i, ddof = 1) / mean(K_i)` is computed from the least-squares line of each pass on
+/// its own and reported in the metrics; the other figures come from all passes together.
 pub fn fit_run(
     run: &mut RunDir,
     options: &gyrocal_fit::Options,
 ) -> Result<gyrocal_fit::Analysis, FitRunError> {
     let data = load(run.path())?;
     let source = run.path().join("steps.csv").display().to_string();
-    let analysis = gyrocal_fit::analyze(&dataset_from_steps(&data.steps, &source), options)?;
+    let mut analysis = gyrocal_fit::analyze(&dataset_from_steps(&data.steps, &source), options)?;
+    let passes: std::collections::BTreeSet<u32> = data.steps.iter().map(|s| s.pass).collect();
+    if passes.len() > 1 {
+        let mut ks = Vec::with_capacity(passes.len());
+        for pass in &passes {
+            let steps: Vec<StepRecord> = data
+                .steps
+                .iter()
+                .filter(|s| s.pass == *pass)
+                .cloned()
+                .collect();
+            let line = gyrocal_fit::fit_least_squares(
+                &dataset_from_steps(&steps, &source),
+                gyrocal_fit::Model::Linear,
+                options.weighting,
+            )?;
+            tracing::info!(pass, k = line.scale_factor, "scale factor of one pass");
+            ks.push(line.scale_factor);
+        }
+        analysis.metrics.repeatability_ppm = gyrocal_fit::repeatability_ppm(&ks);
+    }
     let value = serde_json::to_value(&analysis).map_err(|e| FitRunError::Json(e.to_string()))?;
     run.set_fit(value)?;
     Ok(analysis)

@@ -361,3 +361,28 @@ async fn paper_plan_in_memory_mode_hides_every_fetch_but_the_last() {
     assert_eq!(timing.acquisition.as_deref(), Some("memory"));
     assert!(timing.ratio < 1.01, "{timing:?}");
 }
+
+#[tokio::test(start_paused = true)]
+async fn a_repeated_schedule_reports_the_repeatability_of_its_passes() {
+    let plan = plan_with("quick.toml", |d| {
+        set(d, "plan", "repeat", toml::Value::Integer(3))
+    });
+    assert_eq!(plan.schedule().len(), 15);
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let (summary, _) = run_plan(&plan, &dir, false, None).await;
+    assert_eq!(summary.status, Status::Complete, "{:?}", summary.reason);
+    let fit = load(&dir).unwrap().manifest.fit.unwrap();
+    let r = fit["metrics"]["repeatability_ppm"]
+        .as_f64()
+        .expect("repeatability over 3 passes");
+    // three passes of 50 readings with 2 mV noise: K to some tens of ppm, not zero, not wild
+    assert!(r > 0.0 && r < 1000.0, "{r}");
+
+    // one pass: no repeatability to speak of
+    let single = tmp.path().join("single");
+    let one = plan_with("quick.toml", |_| {});
+    run_plan(&one, &single, false, None).await;
+    let fit = load(&single).unwrap().manifest.fit.unwrap();
+    assert!(fit["metrics"]["repeatability_ppm"].is_null());
+}
