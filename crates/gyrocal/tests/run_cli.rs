@@ -457,3 +457,67 @@ fn several_runs_make_one_report_with_repeatability_in_a_new_directory() {
     assert!(html.exists());
     assert!(html.with_file_name("repeatability.svg").exists());
 }
+
+#[test]
+fn simulated_faults_rehearse_what_a_run_does_when_an_instrument_misbehaves() {
+    let tmp = tempfile::tempdir().unwrap();
+    // a garbled reading in step 1: retried, and the run completes
+    let dir = tmp.path().join("garble");
+    let out = gyrocal()
+        .arg("run")
+        .arg(config("quick.toml"))
+        .args([
+            "--simulate",
+            "--sim-fault",
+            "dmm:garble@reading75",
+            "--no-report",
+            "--out",
+        ])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("simulated fault dmm:garble@reading75: fired"),
+        "{err}"
+    );
+    let m = manifest(&dir);
+    assert_eq!(m["status"], "complete");
+    assert_eq!(m["retries"][0]["step"], 1, "{}", m["retries"]);
+
+    // a rate trip during the third demand: the run fails with the table's words, table parked
+    let dir = tmp.path().join("trip");
+    let out = gyrocal()
+        .arg("run")
+        .arg(config("quick.toml"))
+        .args(["--simulate", "--sim-fault", "table:trip@demand3", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    let m = manifest(&dir);
+    assert_eq!(m["status"], "failed");
+    assert!(
+        m["reason"].as_str().unwrap().contains("trip"),
+        "{}",
+        m["reason"]
+    );
+    assert_eq!(
+        final_table_state(&err)["demanded_dps"].as_f64(),
+        Some(0.0),
+        "{err}"
+    );
+
+    // a malformed spec is bad input
+    let out = gyrocal()
+        .arg("run")
+        .arg(config("quick.toml"))
+        .args(["--simulate", "--sim-fault", "dmm:explode@reading1", "--out"])
+        .arg(tmp.path().join("never"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--sim-fault"));
+}

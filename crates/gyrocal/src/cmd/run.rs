@@ -38,6 +38,11 @@ pub struct RunArgs {
     /// of virtual time (for trying the progress display, or for tests that interrupt a run).
     #[arg(long, value_name = "X", requires = "simulate")]
     pub sim_time_scale: Option<f64>,
+    /// With --simulate: a fault to inject into the simulated bench, in `gyrocal sim`'s
+    /// grammar (for example `dmm:garble@reading120`, `table:trip@demand4`); repeatable. For
+    /// rehearsing what a run does when an instrument misbehaves.
+    #[arg(long = "sim-fault", value_name = "SPEC", requires = "simulate")]
+    pub sim_faults: Vec<String>,
     /// The run directory to create (default: runs/<plan>-<UTC time>).
     #[arg(long, value_name = "DIR", conflicts_with = "resume")]
     pub out: Option<PathBuf>,
@@ -72,6 +77,17 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
     {
         return Err(BadInput(format!("--sim-time-scale must be > 0 (got {x})")).into());
     }
+    let mut faults = Vec::with_capacity(args.sim_faults.len());
+    for text in &args.sim_faults {
+        let spec: gyrocal_sim::faults::FaultSpec =
+            text.parse()
+                .map_err(|e: gyrocal_sim::faults::FaultSpecError| {
+                    BadInput(format!(
+                        "--sim-fault: {e} (the grammar is in `gyrocal sim --help`)"
+                    ))
+                })?;
+        faults.push(spec);
+    }
     let virtual_time = args.simulate && args.sim_time_scale.is_none();
     let mut rt = if virtual_time {
         let mut b = tokio::runtime::Builder::new_current_thread();
@@ -84,7 +100,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
         .enable_all()
         .build()
         .context("starting the async runtime")?;
-    let (dir, summary, run) = rt.block_on(execute(args, plan))?;
+    let (dir, summary, run) = rt.block_on(execute(args, plan, &faults))?;
     finish(args, &dir, &summary, run)
 }
 
@@ -122,17 +138,31 @@ fn default_dir(plan: &Path) -> PathBuf {
 
 /// Opens the instruments' links (or builds the simulated bench), then the run directory (so a
 /// port that does not open leaves no run directory behind), and runs the sequencer.
-async fn execute(args: &RunArgs, plan: Plan) -> anyhow::Result<(PathBuf, RunSummary, RunDir)> {
+async fn execute(
+    args: &RunArgs,
+    plan: Plan,
+    faults: &[gyrocal_sim::faults::FaultSpec],
+) -> anyhow::Result<(PathBuf, RunSummary, RunDir)> {
     if args.simulate {
         let mut cfg = gyrocal_run::simulate::bench_config(&plan);
         if let Some(x) = args.sim_time_scale {
             cfg.time_scale = x;
         }
+        let time_scale = cfg.time_scale;
         let bench = gyrocal_sim::bench::Bench::spawn(cfg);
+        let mut schedule = gyrocal_sim::faults::schedule(faults, &bench.handle, time_scale);
         let (dir, run) = open_run_dir(args, &plan)?;
         let (summary, run) = sequence(plan, bench.dmm, bench.table, run).await?;
         // let the simulator take the last commands before it is dropped
         tokio::time::sleep(Duration::from_millis(50)).await;
+        for f in schedule.status(&bench.handle) {
+            eprintln!(
+                "simulated fault {}: {}",
+                f.spec,
+                if f.fired { "fired" } else { "did not fire" }
+            );
+        }
+        schedule.stop();
         let t = &bench.handle.table;
         // one machine-readable line, so an operator (and a test) can see the table was parked
         eprintln!(
