@@ -1,0 +1,52 @@
+//! Wall time of a whole simulated calibration: the paper plan (19 rates × 500 readings, about
+//! ten simulated minutes) through the real drivers and the simulated bench in virtual time, with
+//! the run directory written to a temporary folder. This is what `gyrocal run --simulate` costs
+//! and bounds how fast CI can exercise the sequencer.
+
+#![allow(missing_docs, clippy::unwrap_used, clippy::expect_used)]
+
+use std::path::Path;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use gyrocal_hp34401a::{DriverOptions, Hp34401a};
+use gyrocal_run::sequencer::table_config;
+use gyrocal_run::simulate::bench_config;
+use gyrocal_run::{Plan, RunDir, RunMeta, Sequencer, SequencerOptions, Status, StopRequest};
+use gyrocal_sim::bench::Bench;
+use gyrocal_table::acl::AclTable;
+
+fn run_once(plan: &Plan) -> f64 {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .start_paused(true)
+        .build()
+        .unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    rt.block_on(async {
+        let bench = Bench::spawn(bench_config(plan));
+        let run = RunDir::create(&tmp.path().join("run"), plan, RunMeta::default()).unwrap();
+        let dmm = Hp34401a::new(bench.dmm, DriverOptions::default());
+        let table = AclTable::new(bench.table, table_config(plan));
+        let mut seq = Sequencer::new(plan.clone(), dmm, table, run, SequencerOptions::default());
+        let (_tx, rx) = tokio::sync::watch::channel(StopRequest::None);
+        let summary = seq.run(rx).await;
+        assert_eq!(summary.status, Status::Complete);
+        summary.elapsed_s
+    })
+}
+
+fn paper_run(c: &mut Criterion) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/paper.toml");
+    let plan = Plan::from_file(&path).unwrap();
+    let simulated = run_once(&plan);
+    eprintln!("one run = {simulated:.1} simulated seconds");
+    let mut g = c.benchmark_group("simulated run");
+    g.sample_size(10);
+    g.bench_function("paper plan, 19 x 500 readings, virtual time", |b| {
+        b.iter(|| run_once(&plan))
+    });
+    g.finish();
+}
+
+criterion_group!(benches, paper_run);
+criterion_main!(benches);
