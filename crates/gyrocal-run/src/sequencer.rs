@@ -575,8 +575,7 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
                                 step: step.index,
                                 phase: Phase::Fetching,
                             });
-                            let dmm = self.dmm_mut()?;
-                            let fetched = fetch_with_retry(dmm, &p.burst).await;
+                            let fetched = self.fetch_monitored(&p.burst).await?;
                             let readings = self.retries_logged(p.step.index, fetched)?;
                             self.record_fetched(p, readings)?;
                         }
@@ -606,6 +605,19 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
             ratio: if ratio.is_finite() { ratio } else { 1.0 },
             acquisition: Some(strategy_name(strategy).into()),
         })
+    }
+
+    /// A `FETC?` that overlaps with nothing: the table keeps being sampled (the heartbeat)
+    /// while the readings come over; those samples are not the step's (the meter is not
+    /// measuring), so their statistics are dropped.
+    async fn fetch_monitored(&mut self, burst: &Burst) -> Result<FetchResult, SequenceError> {
+        let interval = self.options.sample_interval;
+        let Self { table, dmm, .. } = self;
+        let dmm = dmm.as_mut().ok_or_else(released)?;
+        let (fetched, _not_measuring) = table
+            .record_while(interval, fetch_with_retry(dmm, burst))
+            .await?;
+        Ok(fetched)
     }
 
     /// Logs a fetch's retries in the manifest and passes its result on.
@@ -728,8 +740,7 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
                 step: step.index,
                 phase: Phase::Fetching,
             });
-            let dmm = self.dmm_mut()?;
-            let fetched = fetch_with_retry(dmm, &burst).await;
+            let fetched = self.fetch_monitored(&burst).await?;
             let got = self.retries_logged(step.index, fetched)?;
             readings.extend(got);
             self.emit(Event::Phase {

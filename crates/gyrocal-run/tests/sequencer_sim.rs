@@ -386,3 +386,39 @@ async fn a_repeated_schedule_reports_the_repeatability_of_its_passes() {
     let fit = load(&single).unwrap().manifest.fit.unwrap();
     assert!(fit["metrics"]["repeatability_ppm"].is_null());
 }
+
+#[tokio::test(start_paused = true)]
+async fn a_table_fault_during_a_long_fetch_is_caught_at_once() {
+    // 1000 fast readings: two memory bursts; the first burst's FETC? (512 readings, ~9.4 s at
+    // 9600 baud) overlaps with nothing, and the table must still be watched during it
+    let plan = plan_with("quick.toml", |d| {
+        set(d, "dmm", "nplc", toml::Value::Float(0.02));
+        set(d, "dmm", "autozero", toml::Value::Boolean(false));
+        set(d, "plan", "samples_per_rate", toml::Value::Integer(1000));
+    });
+    let mut cfg = bench_config(&plan);
+    // the first step's acquisition starts ~2 s in (stability window), its first burst takes
+    // 0.7 s: at 6 s the meter is mid-transfer
+    cfg.table.faults.inject_after = Some(6.0);
+    let bench = Bench::spawn(cfg);
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let (summary, _) = run_with(&plan, bench, new_run(&plan, &dir), None).await;
+    assert_eq!(summary.status, Status::Failed);
+    assert!(
+        summary
+            .reason
+            .as_deref()
+            .unwrap_or("")
+            .contains("Tracking error limit exceeded"),
+        "{:?}",
+        summary.reason
+    );
+    // caught within the sampling interval (plus the stop), not ~6 s later when the transfer ends
+    assert!(
+        summary.elapsed_s < 7.0,
+        "fault noticed after {} s",
+        summary.elapsed_s
+    );
+    assert!(load(&dir).unwrap().steps.is_empty());
+}
