@@ -5,6 +5,7 @@
 //! line) are reported on one line with exit code 2; anything else exits with 1.
 
 mod cmd;
+mod runlog;
 
 use std::process::ExitCode;
 
@@ -46,12 +47,20 @@ impl std::fmt::Display for BadInput {
 impl std::error::Error for BadInput {}
 
 fn main() -> ExitCode {
-    tracing_subscriber::fmt()
+    use tracing_subscriber::layer::SubscriberExt as _;
+    use tracing_subscriber::util::SubscriberInitExt as _;
+    use tracing_subscriber::{EnvFilter, Layer as _, filter::LevelFilter, fmt};
+    let console = fmt::layer()
         .with_writer(std::io::stderr)
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
-        )
+        .with_filter(EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("warn")));
+    // gyrocal run plugs its run directory's run.log in here (see runlog)
+    let file = fmt::layer()
+        .with_writer(runlog::RunLog)
+        .with_ansi(false)
+        .with_filter(LevelFilter::INFO);
+    tracing_subscriber::registry()
+        .with(console)
+        .with(file)
         .init();
     let cli = Cli::parse();
     let result = match cli.command {

@@ -485,6 +485,10 @@ fn simulated_faults_rehearse_what_a_run_does_when_an_instrument_misbehaves() {
     let m = manifest(&dir);
     assert_eq!(m["status"], "complete");
     assert_eq!(m["retries"][0]["step"], 1, "{}", m["retries"]);
+    // the run's own log tells the story, with the bytes the meter sent
+    let log = std::fs::read_to_string(dir.join("run.log")).unwrap();
+    assert!(log.contains("step{index=1"), "{log}");
+    assert!(log.contains("expected a reading"), "{log}");
 
     // a rate trip during the third demand: the run fails with the table's words, table parked
     let dir = tmp.path().join("trip");

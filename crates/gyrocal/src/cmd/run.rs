@@ -115,6 +115,7 @@ fn open_run_dir(args: &RunArgs, plan: &Plan) -> anyhow::Result<(PathBuf, RunDir)
             run.schedule().len(),
             run.remaining_steps().len()
         );
+        attach_log(dir);
         return Ok((dir.clone(), run));
     }
     let dir = match &args.out {
@@ -127,7 +128,16 @@ fn open_run_dir(args: &RunArgs, plan: &Plan) -> anyhow::Result<(PathBuf, RunDir)
         ..RunMeta::default()
     };
     let run = RunDir::create(&dir, plan, meta).map_err(|e| BadInput(e.to_string()))?;
+    attach_log(&dir);
     Ok((dir, run))
+}
+
+/// The run's log goes to `DIR/run.log` too (appended on a resume).
+fn attach_log(dir: &Path) {
+    let path = dir.join("run.log");
+    if let Err(e) = crate::runlog::attach(&path) {
+        eprintln!("gyrocal: warning: no run log at {}: {e}", path.display());
+    }
 }
 
 fn default_dir(plan: &Path) -> PathBuf {
