@@ -525,3 +525,33 @@ fn simulated_faults_rehearse_what_a_run_does_when_an_instrument_misbehaves() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--sim-fault"));
 }
+
+#[test]
+fn a_simulated_run_cannot_be_resumed_on_the_instruments() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let mut child = spawn_run(&config("paper.toml"), &["--out", dir.to_str().unwrap()]);
+    interrupt_after(&mut child, &dir, 1, Signal::SIGINT);
+    assert_eq!(child.wait().unwrap().code(), Some(130));
+    let out = gyrocal()
+        .arg("run")
+        .arg(config("paper.toml"))
+        .args([
+            "--dmm-port",
+            "/dev/null-dmm",
+            "--table-port",
+            "/dev/null-table",
+            "--resume",
+        ])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("mix simulated and measured data"), "{err}");
+    assert_eq!(
+        manifest(&dir)["status"],
+        "aborted",
+        "the refused resume changed nothing"
+    );
+}

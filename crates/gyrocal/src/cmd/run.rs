@@ -77,6 +77,9 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
     {
         return Err(BadInput(format!("--sim-time-scale must be > 0 (got {x})")).into());
     }
+    if let Some(dir) = &args.resume {
+        check_resume_mode(dir, args.simulate)?;
+    }
     let mut faults = Vec::with_capacity(args.sim_faults.len());
     for text in &args.sim_faults {
         let spec: gyrocal_sim::faults::FaultSpec =
@@ -130,6 +133,35 @@ fn open_run_dir(args: &RunArgs, plan: &Plan) -> anyhow::Result<(PathBuf, RunDir)
     let run = RunDir::create(&dir, plan, meta).map_err(|e| BadInput(e.to_string()))?;
     attach_log(&dir);
     Ok((dir, run))
+}
+
+/// Refuses to continue a simulated run on the instruments or the reverse, before anything is
+/// opened or changed: it would mix simulated and measured data in one calibration. Reads only
+/// the manifest's `simulated` flag (the rest is checked by the resume itself).
+fn check_resume_mode(dir: &Path, simulate: bool) -> anyhow::Result<()> {
+    let path = dir.join(gyrocal_run::rundir::MANIFEST_JSON);
+    let Ok(text) = std::fs::read_to_string(&path) else {
+        return Ok(()); // the resume names the missing or unreadable manifest itself
+    };
+    let simulated = serde_json::from_str::<serde_json::Value>(&text)
+        .ok()
+        .and_then(|m| m.get("simulated").and_then(serde_json::Value::as_bool));
+    if let Some(simulated) = simulated
+        && simulated != simulate
+    {
+        let (was, now) = if simulate {
+            ("on the instruments", "--simulate")
+        } else {
+            ("on the simulated bench", "the instruments")
+        };
+        return Err(BadInput(format!(
+            "--resume: {} was run {was}; continuing it with {now} would mix simulated and \
+             measured data in one calibration",
+            dir.display()
+        ))
+        .into());
+    }
+    Ok(())
 }
 
 /// The run's log goes to `DIR/run.log` too (appended on a resume).
