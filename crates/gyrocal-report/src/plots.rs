@@ -7,6 +7,7 @@
 use std::error::Error;
 
 use gyrocal_fit::{Analysis, ErrorSurface, Fit, Method, Model};
+use plotters::coord::ranged1d::ValueFormatter;
 use plotters::prelude::*;
 
 use crate::ReportError;
@@ -42,6 +43,28 @@ pub(crate) fn fit_name(f: &Fit) -> String {
     match f.method {
         Method::Neuron => "neuron (linear)".to_string(),
         Method::LeastSquares => format!("least squares, {}", f.model),
+    }
+}
+
+/// The axes and grid, styled the same in every plot: `.draw_styled()` in place of `.draw()`.
+trait DrawStyled {
+    fn draw_styled(&mut self) -> PlotResult;
+}
+
+impl<X, Y, XT, YT, DB> DrawStyled for plotters::chart::MeshStyle<'_, '_, X, Y, DB>
+where
+    X: Ranged<ValueType = XT> + ValueFormatter<XT>,
+    Y: Ranged<ValueType = YT> + ValueFormatter<YT>,
+    DB: DrawingBackend,
+    DB::ErrorType: 'static,
+{
+    fn draw_styled(&mut self) -> PlotResult {
+        self.axis_desc_style((FONT, DESC_SIZE))
+            .label_style((FONT, LABEL_SIZE))
+            .light_line_style(LIGHT)
+            .bold_line_style(BOLD)
+            .draw()?;
+        Ok(())
     }
 }
 
@@ -145,11 +168,7 @@ pub(crate) fn fit_plot(a: &Analysis) -> Result<String, ReportError> {
             .configure_mesh()
             .x_desc("input rate ω (°/s)")
             .y_desc("gyro output D (V)")
-            .axis_desc_style((FONT, DESC_SIZE))
-            .label_style((FONT, LABEL_SIZE))
-            .light_line_style(LIGHT)
-            .bold_line_style(BOLD)
-            .draw()?;
+            .draw_styled()?;
         let line = |f: &Fit, n: usize| -> Vec<(f64, f64)> {
             (0..=n)
                 .map(|i| {
@@ -243,11 +262,7 @@ pub(crate) fn residuals_plot(a: &Analysis) -> Result<String, ReportError> {
             .configure_mesh()
             .x_desc("input rate ω (°/s)")
             .y_desc(format!("residual ({vunit})"))
-            .axis_desc_style((FONT, DESC_SIZE))
-            .label_style((FONT, LABEL_SIZE))
-            .light_line_style(LIGHT)
-            .bold_line_style(BOLD)
-            .draw()?;
+            .draw_styled()?;
         chart
             .configure_secondary_axes()
             .y_desc(format!("residual / K ({runit} equivalent)"))
@@ -327,11 +342,7 @@ pub(crate) fn training_plot(neuron: &Fit, ls_sse: Option<f64>) -> Result<String,
             .y_desc("sum of squared residuals (V²)")
             .y_label_formatter(&|v| format!("{v:.0e}"))
             .x_label_formatter(&|v| format!("{v:.0}"))
-            .axis_desc_style((FONT, DESC_SIZE))
-            .label_style((FONT, LABEL_SIZE))
-            .light_line_style(LIGHT)
-            .bold_line_style(BOLD)
-            .draw()?;
+            .draw_styled()?;
         let c = fit_color(Method::Neuron, Model::Linear);
         chart
             .draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))?
@@ -538,11 +549,7 @@ pub(crate) fn noise_plot(steps: &[StepStats]) -> Result<String, ReportError> {
             .configure_mesh()
             .x_desc("input rate ω (°/s)")
             .y_desc(format!("std of the readings ({unit})"))
-            .axis_desc_style((FONT, DESC_SIZE))
-            .label_style((FONT, LABEL_SIZE))
-            .light_line_style(LIGHT)
-            .bold_line_style(BOLD)
-            .draw()?;
+            .draw_styled()?;
         let c = RGBColor(31, 119, 180);
         chart.draw_series(pts.iter().map(|&p| Circle::new(p, 4, c.filled())))?;
         root.present()?;
@@ -584,11 +591,7 @@ pub(crate) fn rate_error_plot(steps: &[StepStats]) -> Result<String, ReportError
             .configure_mesh()
             .x_desc("demanded rate ω (°/s)")
             .y_desc(format!("rate error ({unit})"))
-            .axis_desc_style((FONT, DESC_SIZE))
-            .label_style((FONT, LABEL_SIZE))
-            .light_line_style(LIGHT)
-            .bold_line_style(BOLD)
-            .draw()?;
+            .draw_styled()?;
         chart.draw_series(LineSeries::new([(x0, 0.0), (x1, 0.0)], BLACK.mix(0.6)))?;
         let c = RGBColor(44, 160, 44);
         chart.draw_series(raw.iter().map(|&(w, e, sd)| {
@@ -631,11 +634,7 @@ pub(crate) fn repeatability_plot(ks: &[(f64, Option<f64>)]) -> Result<String, Re
                 }
             })
             .y_label_formatter(&|v| format!("{v:.6}"))
-            .axis_desc_style((FONT, DESC_SIZE))
-            .label_style((FONT, LABEL_SIZE))
-            .light_line_style(LIGHT)
-            .bold_line_style(BOLD)
-            .draw()?;
+            .draw_styled()?;
         let g = RGBColor(120, 120, 120);
         chart
             .draw_series(DashedLineSeries::new(
