@@ -219,6 +219,13 @@ async fn a_table_fault_fails_the_run_with_the_tables_message_and_stops_it() {
     );
 }
 
+/// The plan's bench with `fault` armed for the `reading`-th reading the meter takes.
+fn bench_with_fault(plan: &Plan, reading: u64, fault: gyrocal_sim::dmm::Fault) -> Bench {
+    let bench = Bench::spawn(bench_config(plan));
+    bench.handle.dmm.inject_at_reading(reading, fault);
+    bench
+}
+
 /// Runs `plan` on `bench` into a fresh `dir` without stop requests.
 async fn run_on(plan: &Plan, bench: Bench, dir: &Path) -> RunSummary {
     run_with(plan, bench, new_run(plan, dir), None).await.0
@@ -233,12 +240,8 @@ async fn multimeter_faults_mid_acquisition_are_retried_and_the_run_completes() {
         (Fault::Garble, "garbled"),
         (Fault::Truncate, "truncated"),
     ] {
-        let bench = Bench::spawn(bench_config(&plan));
         // in the middle of the third step's readings
-        bench
-            .handle
-            .dmm
-            .inject_at_reading(2 * 50 + 25, fault.clone());
+        let bench = bench_with_fault(&plan, 2 * 50 + 25, fault.clone());
         let tmp = tempfile::tempdir().unwrap();
         let dir = tmp.path().join("run");
         let summary = run_on(&plan, bench, &dir).await;
@@ -280,11 +283,7 @@ async fn multimeter_faults_mid_acquisition_are_retried_and_the_run_completes() {
 async fn overload_readings_are_counted_and_left_out_of_the_mean() {
     use gyrocal_sim::dmm::Fault;
     let plan = plan_with("quick.toml", |_| {});
-    let bench = Bench::spawn(bench_config(&plan));
-    bench
-        .handle
-        .dmm
-        .inject_at_reading(3 * 50 + 10, Fault::Overload { readings: 4 });
+    let bench = bench_with_fault(&plan, 3 * 50 + 10, Fault::Overload { readings: 4 });
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("run");
     let summary = run_on(&plan, bench, &dir).await;
@@ -306,11 +305,7 @@ async fn overload_readings_are_counted_and_left_out_of_the_mean() {
 async fn a_disconnected_multimeter_fails_the_run_cleanly_and_it_resumes() {
     use gyrocal_sim::dmm::Fault;
     let plan = plan_with("quick.toml", |_| {});
-    let bench = Bench::spawn(bench_config(&plan));
-    bench
-        .handle
-        .dmm
-        .inject_at_reading(2 * 50 + 5, Fault::Disconnect);
+    let bench = bench_with_fault(&plan, 2 * 50 + 5, Fault::Disconnect);
     let table = bench.handle.table.clone();
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("run");

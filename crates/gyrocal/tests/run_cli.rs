@@ -84,6 +84,22 @@ fn interrupt_after(child: &mut Child, dir: &Path, k: usize, sig: Signal) {
     kill(Pid::from_raw(child.id() as i32), sig).unwrap();
 }
 
+/// `gyrocal run PLAN --simulate --resume DIR`, which must succeed.
+fn resume_simulated(plan: &Path, dir: &Path) {
+    let out = gyrocal()
+        .arg("run")
+        .arg(plan)
+        .args(["--simulate", "--resume"])
+        .arg(dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 fn final_table_state(stderr: &str) -> serde_json::Value {
     let line = stderr
         .lines()
@@ -187,19 +203,7 @@ fn sigint_mid_run_stops_the_table_and_the_run_resumes_to_completion() {
     assert_eq!(table["demanded_dps"].as_f64(), Some(0.0), "{table}");
     assert_ne!(table["mode"], "Rate", "{table}");
 
-    let out = gyrocal()
-        .arg("run")
-        .arg(&plan)
-        .arg("--simulate")
-        .arg("--resume")
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    resume_simulated(&plan, &dir);
     check_complete(&dir, 19, 500);
     assert_eq!(manifest(&dir)["resumes"].as_array().unwrap().len(), 1);
 }
@@ -223,19 +227,7 @@ fn sigkill_mid_run_loses_nothing_recorded_and_resumes() {
     let before = step_indices(&dir);
     assert!(before.len() >= k);
 
-    let out = gyrocal()
-        .arg("run")
-        .arg(&plan)
-        .arg("--simulate")
-        .arg("--resume")
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    resume_simulated(&plan, &dir);
     check_complete(&dir, 19, 500);
     let m = manifest(&dir);
     assert_eq!(
