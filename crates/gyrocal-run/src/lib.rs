@@ -38,7 +38,7 @@ pub use rundir::{
     Status, StepRecord, Timing, load, load_samples,
 };
 pub use sequencer::{
-    Event, Phase, RunSummary, SequenceError, Sequencer, SequencerOptions, StopRequest,
+    Event, Phase, RunSummary, SequenceError, Sequencer, SequencerOptions, StopRequest, TableRest,
 };
 pub use time::rfc3339_utc;
 

@@ -18,11 +18,12 @@
 //! - **Time is the run's own clock** (tokio's `Instant`), so a simulated run in virtual time is
 //!   exact and reproducible, and the same code runs in real time on real instruments.
 
+use std::collections::{HashMap, VecDeque};
 use std::time::Duration;
 
 use gyrocal_hp34401a::{Burst, Hp34401a, Reading, Strategy, Timing};
 use gyrocal_link::Transport;
-use gyrocal_table::{RateStats, RateTable, SettleCriteria, StopHandle, TableError};
+use gyrocal_table::{RateStats, RateTable, SettleCriteria, StopHandle, TableError, TableMode};
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 use tracing::Instrument as _;
@@ -33,16 +34,59 @@ use crate::rundir::{
     Instruments, Retry, RunDir, RunError, Sample, Status, StepRecord, Timing as RunTiming,
 };
 
-/// What the operator (or a signal) asked for.
+/// What the operator (or a signal) asked for. The `&'static str` names who asked (`"SIGINT"`,
+/// `"SIGHUP"`, `"operator"`, ...): the manifest's reason and the exit code say it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum StopRequest {
     /// Keep going.
     #[default]
     None,
-    /// Stop: controlled stop of the table, run marked `aborted`.
-    Controlled,
+    /// Stop: controlled stop of the table, wait for rest, run marked `aborted`.
+    Controlled(&'static str),
     /// Stop now: emergency stop of the table (interlock open), run marked `aborted`.
-    Emergency,
+    Emergency(&'static str),
+}
+
+impl StopRequest {
+    /// Who asked for the stop (`None` for [`StopRequest::None`]).
+    pub fn cause(&self) -> Option<&'static str> {
+        match self {
+            StopRequest::None => None,
+            StopRequest::Controlled(c) | StopRequest::Emergency(c) => Some(c),
+        }
+    }
+}
+
+/// Where the table was left at the end of a run, as far as gyrocal could tell. An operator is
+/// never told "stopped" unless the table itself said so.
+#[derive(Debug, Clone, PartialEq)]
+pub enum TableRest {
+    /// The table reported rest: |measured rate| within the stop tolerance and mode OFF.
+    AtRest {
+        /// The last measured rate, °/s.
+        rate_dps: f64,
+        /// How long the wait for rest took after the stop was sent.
+        waited: Duration,
+    },
+    /// Rest could not be confirmed: the table stopped answering, its port is gone, or it was
+    /// still turning at the deadline. Someone must stop it by hand.
+    NotConfirmed {
+        /// Why.
+        reason: String,
+    },
+    /// The table never answered in this session, so gyrocal never moved it; its state is
+    /// unknown (an earlier session may have left it turning).
+    NeverReached {
+        /// Why.
+        reason: String,
+    },
+}
+
+impl TableRest {
+    /// True only when the table confirmed rest.
+    pub fn is_at_rest(&self) -> bool {
+        matches!(self, TableRest::AtRest { .. })
+    }
 }
 
 /// The phase of a step, for progress displays.
@@ -109,6 +153,17 @@ pub enum Event {
     StepDone(StepRecord),
     /// A recovery was needed (logged in the manifest too).
     Retry(Retry),
+    /// The run is ending: the table was sent a stop and gyrocal waits until it is at rest.
+    Stopping {
+        /// The table's measured rate when the stop was sent, °/s (`None` if it did not answer).
+        from_dps: Option<f64>,
+        /// The emergency stop (interlock open) was sent.
+        emergency: bool,
+        /// How long gyrocal waits for rest before telling the operator it could not confirm it.
+        deadline: Duration,
+    },
+    /// The end state of the table (the last event of a run).
+    Rest(TableRest),
 }
 
 /// Tunables of the sequencer that are not in the plan.
@@ -117,21 +172,30 @@ pub struct SequencerOptions {
     /// Table sampling interval while waiting, dwelling and acquiring (each sample is also a
     /// heartbeat). Default 200 ms.
     pub sample_interval: Duration,
-    /// Time allowed for the table to come to rest at the end of a run. Default 60 s.
-    pub stop_timeout: Duration,
     /// Time allowed for each cleanup exchange with an instrument after an error. Default 5 s.
     pub cleanup_timeout: Duration,
     /// Fetch a memory burst while the table ramps to the next rate. Default true.
     pub overlap_fetch: bool,
+    /// A step is refused when any table sample during its acquisition is further from the
+    /// demand than this many times the plan's `rate_tolerance_dps` (or the mean of its
+    /// samples is further than the tolerance itself). Default 5: readback noise and the
+    /// once-per-turn ripple make single samples cross the at-rate tolerance now and then,
+    /// while a fault, an opened interlock or a lost servo moves the rate by far more.
+    pub hold_tolerance_factor: f64,
+    /// Times a step the table did not hold is measured again (the table is healthy again:
+    /// it reached the rate and held it for the stability window) before the run fails.
+    /// Default 1.
+    pub step_retries: u32,
 }
 
 impl Default for SequencerOptions {
     fn default() -> Self {
         SequencerOptions {
             sample_interval: Duration::from_millis(200),
-            stop_timeout: Duration::from_secs(60),
             cleanup_timeout: Duration::from_secs(5),
             overlap_fetch: true,
+            hold_tolerance_factor: 5.0,
+            step_retries: 1,
         }
     }
 }
@@ -160,9 +224,31 @@ pub enum SequenceError {
         /// Readings taken.
         count: usize,
     },
-    /// The operator stopped the run.
-    #[error("stopped by the operator ({0:?})")]
+    /// The table did not hold the step's rate for its whole acquisition: the step is not
+    /// recorded.
+    #[error("step {step} at {rate_dps} °/s not recorded: {detail}")]
+    NotHeld {
+        /// Step index.
+        step: usize,
+        /// The step's rate.
+        rate_dps: f64,
+        /// What the table did.
+        detail: String,
+    },
+    /// The run was stopped by the operator or a signal.
+    #[error("{}", stopped_text(.0))]
     Stopped(StopRequest),
+    /// The sequencer panicked (a bug); the table was still brought to rest.
+    #[error("internal error (panic) in the sequencer: {0}")]
+    Panicked(String),
+}
+
+fn stopped_text(req: &StopRequest) -> String {
+    match req {
+        StopRequest::Emergency(by) => format!("stopped by {by} (emergency stop)"),
+        StopRequest::Controlled(by) => format!("stopped by {by} (controlled stop)"),
+        StopRequest::None => "stopped".into(),
+    }
 }
 
 // The drivers' errors carry context (device, command, bytes) and are large; boxed, the
@@ -198,6 +284,8 @@ pub struct RunSummary {
     pub timing: Option<RunTiming>,
     /// Elapsed on the run clock, including earlier sessions, s.
     pub elapsed_s: f64,
+    /// Where the table was left, as far as gyrocal could confirm.
+    pub table: TableRest,
 }
 
 /// The ACL driver configuration for `plan`: its client-side limits are the plan's.
@@ -209,6 +297,25 @@ pub fn table_config(plan: &Plan) -> gyrocal_table::acl::AclConfig {
         },
         ..gyrocal_table::acl::AclConfig::default()
     }
+}
+
+/// What the steps share: how to reach the rate and how to read.
+struct StepContext {
+    criteria: SettleCriteria,
+    accel: f64,
+    dwell: Duration,
+    strategy: Strategy,
+    reading_time: Duration,
+}
+
+/// How a step ended (errors aside).
+enum StepOutcome {
+    /// Its readings and row are on disk.
+    Recorded,
+    /// Its readings are in the meter's memory, to be fetched during the next ramp.
+    Pending(PendingFetch),
+    /// The table did not hold the rate during the acquisition: nothing was recorded.
+    NotHeld(String),
 }
 
 /// A memory burst whose readings are still in the meter.
@@ -237,6 +344,10 @@ pub struct Sequencer<D: Transport, T: RateTable> {
     offset_s: f64,
     recorded: usize,
     strategy_used: Option<Strategy>,
+    /// The table identified itself in this session.
+    table_reached: bool,
+    /// A rate was demanded in this session.
+    moved: bool,
 }
 
 impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
@@ -262,6 +373,8 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
             offset_s,
             recorded: 0,
             strategy_used: None,
+            table_reached: false,
+            moved: false,
         }
     }
 
@@ -297,10 +410,13 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
     }
 
     /// Runs the remaining steps of the plan until done, failed or stopped through `stop`.
-    /// Whatever happens, the table is stopped, the multimeter returned to local and the manifest
-    /// left with a final status; the result says which. The fit is the caller's (see
-    /// [`crate::fit_run`]), so a failed fit never loses the data.
+    /// Whatever happens (a panic inside the steps included), the table is stopped and waited
+    /// for until it reports rest (a further [`StopRequest::Emergency`] during that wait sends
+    /// the emergency stop at once), the multimeter returned to local and the manifest left
+    /// with a final status; the summary says which, and where the table was left. The fit is
+    /// the caller's (see [`crate::fit_run`]), so a failed fit never loses the data.
     pub async fn run(&mut self, mut stop: watch::Receiver<StopRequest>) -> RunSummary {
+        use futures_util::FutureExt as _;
         self.origin = Instant::now();
         let run_span =
             tracing::info_span!("run", plan = %self.plan.name(), dir = %self.run.path().display());
@@ -317,37 +433,58 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
                     }
                 }
             };
+            // A panic in the steps (a bug) must not skip the stop below: it becomes an error
+            // here, with the table driver still in hand to confirm rest.
+            let steps =
+                std::panic::AssertUnwindSafe(self.steps().instrument(run_span)).catch_unwind();
             tokio::select! {
                 biased;
                 req = wait_stop => Err(SequenceError::Stopped(req)),
-                r = self.steps().instrument(run_span) => r,
+                r = steps => r.unwrap_or_else(|panic| Err(SequenceError::Panicked(panic_text(&panic)))),
             }
         };
         match outcome {
-            Ok(timing) => self.finish_ok(timing).await,
+            Ok(timing) => self.finish_ok(timing, &mut stop).await,
             Err(e) => {
-                let emergency = matches!(e, SequenceError::Stopped(StopRequest::Emergency))
-                    || *stop.borrow() == StopRequest::Emergency;
-                self.finish_err(e, emergency).await
+                let emergency = matches!(e, SequenceError::Stopped(StopRequest::Emergency(_)))
+                    || matches!(*stop.borrow(), StopRequest::Emergency(_));
+                self.finish_err(e, emergency, &mut stop).await
             }
         }
     }
 
-    async fn finish_ok(&mut self, timing: RunTiming) -> RunSummary {
-        // the table is already stopped by `steps`; say goodbye to the meter
+    async fn finish_ok(
+        &mut self,
+        timing: RunTiming,
+        stop: &mut watch::Receiver<StopRequest>,
+    ) -> RunSummary {
+        // `steps` sent the controlled stop; the run ends when the table says it is at rest
+        let table = self.bring_to_rest(stop, false).await;
         self.release_dmm(false).await;
         let elapsed_s = self.now_s();
+        // The data are complete whatever the table does now; a table that did not confirm
+        // rest is said in the manifest and by the caller, but does not void the calibration.
+        let note = match &table {
+            TableRest::AtRest { .. } => None,
+            TableRest::NotConfirmed { reason } | TableRest::NeverReached { reason } => {
+                Some(format!(
+                    "all steps recorded, but the table could NOT be confirmed at rest: {reason}"
+                ))
+            }
+        };
         let mut summary = RunSummary {
             status: Status::Complete,
-            reason: None,
+            reason: note.clone(),
             steps_recorded: self.recorded,
             timing: Some(timing.clone()),
             elapsed_s,
+            table,
         };
         let result = self
             .run
             .set_timing(timing)
-            .and_then(|()| self.run.finish(Status::Complete, None, elapsed_s));
+            .and_then(|()| self.log_table_retries(None))
+            .and_then(|()| self.run.finish(Status::Complete, note, elapsed_s));
         if let Err(e) = result {
             tracing::error!(error = %e, "could not close the run directory");
             summary.status = Status::Failed;
@@ -356,7 +493,12 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
         summary
     }
 
-    async fn finish_err(&mut self, error: SequenceError, emergency: bool) -> RunSummary {
+    async fn finish_err(
+        &mut self,
+        error: SequenceError,
+        emergency: bool,
+        stop: &mut watch::Receiver<StopRequest>,
+    ) -> RunSummary {
         let status = match error {
             SequenceError::Stopped(_) => Status::Aborted,
             _ => Status::Failed,
@@ -375,15 +517,21 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
         if let Err(e) = &stopped {
             tracing::error!(error = %e, "stop command failed; trying the emergency stop");
         }
+        let mut emergency_sent = emergency;
         if !emergency && (table_fault || stopped.is_err()) {
             tracing::warn!("table fault: emergency stop (interlock open)");
+            emergency_sent = true;
             if let Err(e) = self.stop_handle.emergency_stop().await {
                 tracing::error!(error = %e, "emergency stop failed: STOP THE TABLE BY HAND");
             }
         }
+        let table = self.bring_to_rest(stop, emergency_sent).await;
         self.release_dmm(true).await;
         let elapsed_s = self.now_s();
-        if let Err(e) = self.run.finish(status, Some(reason.clone()), elapsed_s) {
+        if let Err(e) = self
+            .log_table_retries(None)
+            .and_then(|()| self.run.finish(status, Some(reason.clone()), elapsed_s))
+        {
             tracing::error!(error = %e, "could not write the final manifest");
         }
         RunSummary {
@@ -392,7 +540,84 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
             steps_recorded: self.recorded,
             timing: None,
             elapsed_s,
+            table,
         }
+    }
+
+    /// After a stop was sent: waits until the table reports rest (|rate| within its stop
+    /// tolerance, mode OFF), at most the time a stop from the measured rate at the plan's
+    /// acceleration can take plus a margin. An emergency request arriving meanwhile sends the
+    /// emergency stop at once (from a task of its own: the wait may hold the table's link).
+    /// Says honestly what it found; never fails.
+    async fn bring_to_rest(
+        &mut self,
+        stop: &mut watch::Receiver<StopRequest>,
+        emergency_sent: bool,
+    ) -> TableRest {
+        let limit = self.options.cleanup_timeout;
+        let from = match tokio::time::timeout(limit, self.table.read_rate()).await {
+            Ok(Ok(r)) => Some(r),
+            Ok(Err(e)) => {
+                tracing::warn!(error = %e, "could not read the table's rate after the stop");
+                None
+            }
+            Err(_) => None,
+        };
+        let worst = from.map_or(self.plan.table().max_rate_dps, f64::abs);
+        let deadline = self.table.stop_deadline(worst);
+        self.emit(Event::Stopping {
+            from_dps: from,
+            emergency: emergency_sent,
+            deadline,
+        });
+        tracing::info!(from_dps = ?from, ?deadline, "waiting for the table to come to rest");
+        let started = Instant::now();
+        let Self {
+            table, stop_handle, ..
+        } = self;
+        let mut watching = !emergency_sent;
+        let result = {
+            let mut wait = std::pin::pin!(table.wait_stopped(deadline));
+            loop {
+                tokio::select! {
+                    r = &mut wait => break r,
+                    changed = stop.changed(), if watching => {
+                        if changed.is_err() {
+                            watching = false;
+                        } else if matches!(*stop.borrow_and_update(), StopRequest::Emergency(_)) {
+                            watching = false;
+                            tracing::warn!("emergency stop requested while the table decelerates");
+                            let handle = stop_handle.clone();
+                            tokio::spawn(async move {
+                                if let Err(e) = handle.emergency_stop().await {
+                                    tracing::error!(error = %e, "emergency stop failed: STOP THE TABLE BY HAND");
+                                }
+                            });
+                        }
+                    }
+                }
+            }
+        };
+        let rest = match result {
+            Ok(report) => TableRest::AtRest {
+                rate_dps: report.rate_dps,
+                waited: started.elapsed(),
+            },
+            Err(e) if !self.table_reached && !self.moved => TableRest::NeverReached {
+                reason: format!("the table did not answer ({e}); this session did not move it"),
+            },
+            Err(e) => TableRest::NotConfirmed {
+                reason: e.to_string(),
+            },
+        };
+        match &rest {
+            TableRest::AtRest { .. } => tracing::info!("table at rest"),
+            TableRest::NotConfirmed { reason } | TableRest::NeverReached { reason } => {
+                tracing::error!(%reason, "the table could NOT be confirmed at rest: stop it by hand")
+            }
+        }
+        self.emit(Event::Rest(rest.clone()));
+        rest
     }
 
     /// Device clear (after an interrupted exchange), then `SYST:LOC`; bounded in time, errors
@@ -443,6 +668,7 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
         };
         let dmm_id = dmm.connect().await?.raw.clone();
         let t = self.table.connect().await?;
+        self.table_reached = true;
         let table_id = format!("{},{},{},{}", t.manufacturer, t.model, t.serial, t.version);
         self.emit(Event::Connected {
             dmm: dmm_id.clone(),
@@ -490,107 +716,69 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
         };
         let accel = self.plan.table().acceleration_dps2;
         let dwell = self.plan.settle().saturating_sub(criteria.window);
+        let ctx = StepContext {
+            criteria,
+            accel,
+            dwell,
+            strategy,
+            reading_time: timing.reading_time(),
+        };
         let mut pending: Option<PendingFetch> = None;
-        let total = steps.len();
-        for (i, step) in steps.iter().enumerate() {
-            let remaining = est.steps[i..]
-                .iter()
+        // A step the table did not hold is measured again at once; the queue makes that (and
+        // the session's step count) explicit.
+        let mut queue: VecDeque<Step> = steps.iter().copied().collect();
+        let mut retried: HashMap<usize, u32> = HashMap::new();
+        let mut total = queue.len();
+        let mut position = 0;
+        while let Some(step) = queue.pop_front() {
+            position += 1;
+            // remaining: this step and every queued one, from the plan's estimate
+            let remaining = std::iter::once(&step)
+                .chain(queue.iter())
+                .filter_map(|s| est.steps.iter().find(|e| e.step.index == s.index))
                 .map(|e| e.ramp + e.settle + e.acquire)
                 .sum::<Duration>()
                 + est.final_transfer;
             self.emit(Event::StepStarted {
-                step: *step,
-                position: i + 1,
+                step,
+                position,
                 total,
                 remaining,
             });
+            let last = queue.is_empty();
             let span = tracing::info_span!("step", index = step.index, rate_dps = step.rate_dps);
-            async {
-                let at_rate;
-                self.table.set_rate(step.rate_dps, accel).await?;
-                self.emit(Event::Phase {
-                    step: step.index,
-                    phase: Phase::Ramping,
-                });
-                if let Some(p) = pending.take() {
-                    // the previous step's readings come over while the table ramps
-                    self.emit(Event::Phase {
-                        step: p.step.index,
-                        phase: Phase::Fetching,
-                    });
-                    let Self { table, dmm, .. } = self;
-                    let dmm = dmm.as_mut().ok_or_else(released)?;
-                    // the dwell runs from the moment the table is at rate, fetch or no fetch
-                    let wait = async {
-                        let r = table.wait_at_rate(&criteria).await;
-                        (r, Instant::now())
-                    };
-                    let ((settled, at), fetched) =
-                        tokio::join!(wait, fetch_with_retry(dmm, &p.burst));
-                    at_rate = at;
-                    // record the previous step before anything else can fail
-                    let (readings, notes) = match fetched {
-                        Ok(ok) => ok,
-                        Err((e, notes)) => {
-                            for m in notes {
-                                self.log_retry(Some(p.step.index), "dmm", m)?;
-                            }
-                            return Err(e);
-                        }
-                    };
-                    for m in notes {
-                        self.log_retry(Some(p.step.index), "dmm", m)?;
+            let outcome = self
+                .measure_step(&step, pending.take(), last, &ctx)
+                .instrument(span)
+                .await?;
+            self.log_table_retries(Some(step.index))?;
+            match outcome {
+                StepOutcome::Recorded => {}
+                StepOutcome::Pending(p) => pending = Some(p),
+                StepOutcome::NotHeld(detail) => {
+                    let used = retried.entry(step.index).or_default();
+                    if *used >= self.options.step_retries {
+                        return Err(SequenceError::NotHeld {
+                            step: step.index,
+                            rate_dps: step.rate_dps,
+                            detail,
+                        });
                     }
-                    self.record_fetched(p, readings)?;
-                    settled?;
-                } else {
-                    self.table.wait_at_rate(&criteria).await?;
-                    at_rate = Instant::now();
+                    *used += 1;
+                    self.log_retry(
+                        Some(step.index),
+                        "table",
+                        format!("step not recorded: {detail}; measuring it again"),
+                    )?;
+                    queue.push_front(step);
+                    total += 1;
                 }
-                let dwell_end = at_rate + dwell;
-                if dwell_end > Instant::now() {
-                    self.emit(Event::Phase {
-                        step: step.index,
-                        phase: Phase::Settling,
-                    });
-                    let interval = self.options.sample_interval;
-                    self.table
-                        .record_while(interval, tokio::time::sleep_until(dwell_end))
-                        .await?;
-                }
-                self.emit(Event::Phase {
-                    step: step.index,
-                    phase: Phase::Acquiring,
-                });
-                let n =
-                    usize::try_from(step.sample_count(timing.reading_time())).unwrap_or(usize::MAX);
-                let last = i + 1 == total;
-                match strategy {
-                    Strategy::Memory => {
-                        let p = self.acquire_memory(step, n).await?;
-                        if self.options.overlap_fetch && !last {
-                            pending = Some(p);
-                        } else {
-                            self.emit(Event::Phase {
-                                step: step.index,
-                                phase: Phase::Fetching,
-                            });
-                            let fetched = self.fetch_monitored(&p.burst).await?;
-                            let readings = self.retries_logged(p.step.index, fetched)?;
-                            self.record_fetched(p, readings)?;
-                        }
-                    }
-                    s => self.acquire_direct(step, n, s).await?,
-                }
-                Ok::<(), SequenceError>(())
             }
-            .instrument(span)
-            .await?;
         }
-        let elapsed = t0.elapsed();
-        // park the table; a table that does not come to rest is a failure of the run
+        // park the table: the controlled stop; the wait for rest is the run's ending
+        // (`bring_to_rest`), whatever way the run ends
         self.table.stop().await?;
-        self.table.wait_stopped(self.options.stop_timeout).await?;
+        let elapsed = t0.elapsed();
         let bound = est.bound.as_secs_f64();
         let elapsed_s = elapsed.as_secs_f64();
         let ratio = if bound > 0.0 {
@@ -605,6 +793,154 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
             ratio: if ratio.is_finite() { ratio } else { 1.0 },
             acquisition: Some(strategy_name(strategy).into()),
         })
+    }
+
+    /// One step: demand the rate, (fetch the previous step's readings while the table ramps),
+    /// wait until at rate, dwell, acquire, check the table held the rate, record (or hand the
+    /// last memory burst back as pending, to be fetched during the next ramp).
+    async fn measure_step(
+        &mut self,
+        step: &Step,
+        pending: Option<PendingFetch>,
+        last: bool,
+        ctx: &StepContext,
+    ) -> Result<StepOutcome, SequenceError> {
+        let at_rate;
+        self.moved = true;
+        self.table.set_rate(step.rate_dps, ctx.accel).await?;
+        self.emit(Event::Phase {
+            step: step.index,
+            phase: Phase::Ramping,
+        });
+        if let Some(p) = pending {
+            // the previous step's readings come over while the table ramps
+            self.emit(Event::Phase {
+                step: p.step.index,
+                phase: Phase::Fetching,
+            });
+            let Self { table, dmm, .. } = self;
+            let dmm = dmm.as_mut().ok_or_else(released)?;
+            // the dwell runs from the moment the table is at rate, fetch or no fetch
+            let wait = async {
+                let r = table.wait_at_rate(&ctx.criteria).await;
+                (r, Instant::now())
+            };
+            let ((settled, at), fetched) = tokio::join!(wait, fetch_with_retry(dmm, &p.burst));
+            at_rate = at;
+            // record the previous step before anything else can fail
+            let (readings, notes) = match fetched {
+                Ok(ok) => ok,
+                Err((e, notes)) => {
+                    for m in notes {
+                        self.log_retry(Some(p.step.index), "dmm", m)?;
+                    }
+                    return Err(e);
+                }
+            };
+            for m in notes {
+                self.log_retry(Some(p.step.index), "dmm", m)?;
+            }
+            self.record_fetched(p, readings)?;
+            settled?;
+        } else {
+            self.table.wait_at_rate(&ctx.criteria).await?;
+            at_rate = Instant::now();
+        }
+        let dwell_end = at_rate + ctx.dwell;
+        if dwell_end > Instant::now() {
+            self.emit(Event::Phase {
+                step: step.index,
+                phase: Phase::Settling,
+            });
+            let interval = self.options.sample_interval;
+            self.table
+                .record_while(interval, tokio::time::sleep_until(dwell_end))
+                .await?;
+        }
+        self.emit(Event::Phase {
+            step: step.index,
+            phase: Phase::Acquiring,
+        });
+        let n = usize::try_from(step.sample_count(ctx.reading_time)).unwrap_or(usize::MAX);
+        match ctx.strategy {
+            Strategy::Memory => {
+                let p = match self.acquire_memory(step, n).await? {
+                    Ok(p) => p,
+                    Err(not_held) => return Ok(StepOutcome::NotHeld(not_held)),
+                };
+                if self.options.overlap_fetch && !last {
+                    return Ok(StepOutcome::Pending(p));
+                }
+                self.emit(Event::Phase {
+                    step: step.index,
+                    phase: Phase::Fetching,
+                });
+                let fetched = self.fetch_monitored(&p.burst).await?;
+                let readings = self.retries_logged(p.step.index, fetched)?;
+                self.record_fetched(p, readings)?;
+                Ok(StepOutcome::Recorded)
+            }
+            s => self.acquire_direct(step, n, s).await,
+        }
+    }
+
+    /// The table's side of a finished acquisition, checked before its readings are accepted:
+    /// one more sample right after the last reading (a latched fault or an opened interlock
+    /// is an error there, as in every sample), the mode, and every sample of the acquisition
+    /// against the demand. `Ok(None)`: the table held the rate; `Ok(Some(why))`: it did not,
+    /// the step must not be recorded but the table is still in RATE mode (the step may be
+    /// measured again); `Err`: the table faulted or left RATE mode, and the run ends.
+    /// `stats` gains the final sample.
+    async fn check_hold(
+        &mut self,
+        step: &Step,
+        stats: &mut RateStats,
+    ) -> Result<Option<String>, SequenceError> {
+        let end = self.table.sample().await?;
+        *stats = merge_stats(&[*stats, RateStats::from_samples(&[end])]);
+        let status = self.table.status().await?;
+        let demand = step.rate_dps;
+        if status.mode != TableMode::Rate {
+            return Err(SequenceError::NotHeld {
+                step: step.index,
+                rate_dps: demand,
+                detail: format!(
+                    "the table left RATE mode during the acquisition (now {:?}, measured {end:+.6} °/s)",
+                    status.mode
+                ),
+            });
+        }
+        let tol = self.plan.table().rate_tolerance_dps;
+        let hold = tol * self.options.hold_tolerance_factor;
+        let farthest = if (stats.min - demand).abs() > (stats.max - demand).abs() {
+            stats.min
+        } else {
+            stats.max
+        };
+        if !(stats.count > 0 && (farthest - demand).abs() <= hold) {
+            return Ok(Some(format!(
+                "the measured rate reached {farthest:+.6} °/s during the acquisition (demand \
+                 {demand:+} °/s, allowed ±{hold} °/s; {} table samples)",
+                stats.count
+            )));
+        }
+        if (stats.mean - demand).abs() > tol {
+            return Ok(Some(format!(
+                "the mean measured rate during the acquisition was {:+.6} °/s (demand {demand:+} \
+                 °/s, tolerance ±{tol} °/s; {} table samples)",
+                stats.mean, stats.count
+            )));
+        }
+        Ok(None)
+    }
+
+    /// The table driver's link retries (a lost or garbled reply asked again) go to the
+    /// manifest like the meter's.
+    fn log_table_retries(&mut self, step: Option<usize>) -> Result<(), RunError> {
+        for note in self.table.take_retries() {
+            self.log_retry(step, "table", note)?;
+        }
+        Ok(())
     }
 
     /// A `FETC?` that overlaps with nothing: the table keeps being sampled (the heartbeat)
@@ -661,17 +997,20 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
         step: &Step,
         n: usize,
         strategy: Strategy,
-    ) -> Result<(), SequenceError> {
+    ) -> Result<StepOutcome, SequenceError> {
         self.progress_to_events();
         let t_start = self.now_s();
         let interval = self.options.sample_interval;
         let Self { table, dmm, .. } = self;
         let dmm = dmm.as_mut().ok_or_else(released)?;
-        let (acq, stats) = table
+        let (acq, mut stats) = table
             .record_while(interval, dmm.acquire(n, strategy))
             .await?;
         let acq = acq?;
         let t_end = self.now_s();
+        if let Some(why) = self.check_hold(step, &mut stats).await? {
+            return Ok(StepOutcome::NotHeld(why));
+        }
         if acq.retries > 0 {
             self.log_retry(
                 Some(step.index),
@@ -683,16 +1022,18 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
                 ),
             )?;
         }
-        self.record(step, &acq.readings, stats, acq.retries, t_start, t_end)
+        self.record(step, &acq.readings, stats, acq.retries, t_start, t_end)?;
+        Ok(StepOutcome::Recorded)
     }
 
     /// Memory mode: every burst but the last is armed, waited for and fetched; the last is
-    /// armed and waited for, and its fetch returned as pending.
+    /// armed and waited for, and its fetch returned as pending. The table is checked after
+    /// every burst, before its readings are accepted (`Ok(Err(why))`: it did not hold).
     async fn acquire_memory(
         &mut self,
         step: &Step,
         n: usize,
-    ) -> Result<PendingFetch, SequenceError> {
+    ) -> Result<Result<PendingFetch, String>, SequenceError> {
         self.progress_to_events();
         let t_start = self.now_s();
         let interval = self.options.sample_interval;
@@ -711,7 +1052,7 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
                 dmm.wait_burst(&b).await?;
                 Ok::<_, gyrocal_hp34401a::Error>(b)
             };
-            let (burst, s) = table.record_while(interval, burst).await?;
+            let (burst, mut s) = table.record_while(interval, burst).await?;
             let burst = match burst {
                 Ok(b) => b,
                 Err(e) if e.is_retryable() && retries < retries_allowed => {
@@ -724,9 +1065,12 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
                 }
                 Err(e) => return Err(e.into()),
             };
+            if let Some(why) = self.check_hold(step, &mut s).await? {
+                return Ok(Err(why));
+            }
             stats.push(s);
             if last {
-                return Ok(PendingFetch {
+                return Ok(Ok(PendingFetch {
                     step: *step,
                     burst,
                     readings,
@@ -734,7 +1078,7 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
                     retries,
                     t_start,
                     t_end: self.now_s(),
-                });
+                }));
             }
             self.emit(Event::Phase {
                 step: step.index,
@@ -854,6 +1198,15 @@ async fn fetch_with_retry<D: Transport>(dmm: &mut Hp34401a<D>, burst: &Burst) ->
             Err(e) => return Err((e.into(), notes)),
         }
     }
+}
+
+/// The message of a caught panic.
+fn panic_text(panic: &Box<dyn std::any::Any + Send>) -> String {
+    panic
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| panic.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "unknown panic".into())
 }
 
 fn strategy_name(s: Strategy) -> &'static str {

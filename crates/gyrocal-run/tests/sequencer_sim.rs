@@ -67,7 +67,7 @@ async fn run_with(
             if matches!(e, gyrocal_run::Event::StepDone(_)) {
                 done += 1;
                 if Some(done) == stop_after {
-                    let _ = stop_tx.send(StopRequest::Controlled);
+                    let _ = stop_tx.send(StopRequest::Controlled("test"));
                 }
             }
         }

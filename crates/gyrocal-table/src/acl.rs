@@ -741,7 +741,8 @@ impl<T: Transport + 'static> RateTable for AclTable<T> {
         self.shared.stop(StopKind::Emergency).await
     }
 
-    async fn wait_stopped(&mut self, timeout: Duration) -> Result<(), TableError> {
+    async fn wait_stopped(&mut self, timeout: Duration) -> Result<crate::RestReport, TableError> {
+        let t0 = Instant::now();
         let deadline = Instant::now() + timeout;
         loop {
             let rate = self.read_rate().await?;
@@ -754,7 +755,11 @@ impl<T: Transport + 'static> RateTable for AclTable<T> {
                         TableState::Connected
                     };
                 }
-                return Ok(());
+                return Ok(crate::RestReport {
+                    rate_dps: rate,
+                    mode: TableMode::Off,
+                    waited: t0.elapsed(),
+                });
             }
             if Instant::now() >= deadline {
                 let reason = format!("table still turning at {rate} deg/s {timeout:?} after stop");

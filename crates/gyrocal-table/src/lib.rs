@@ -194,6 +194,17 @@ impl TableStatus {
     }
 }
 
+/// What [`RateTable::wait_stopped`] saw when the table came to rest.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RestReport {
+    /// The last measured rate, deg/s.
+    pub rate_dps: f64,
+    /// The table's mode then.
+    pub mode: TableMode,
+    /// How long the wait took.
+    pub waited: Duration,
+}
+
 /// How [`RateTable::wait_at_rate`] decides the table is at rate.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SettleCriteria {
@@ -360,7 +371,20 @@ pub trait RateTable: Send {
     fn wait_stopped(
         &mut self,
         timeout: Duration,
-    ) -> impl Future<Output = Result<(), TableError>> + Send;
+    ) -> impl Future<Output = Result<RestReport, TableError>> + Send;
+
+    /// The link retries since the last call (a lost or garbled reply asked again), as
+    /// sentences for the run's manifest. Default: none.
+    fn take_retries(&mut self) -> Vec<String> {
+        Vec::new()
+    }
+
+    /// How long a stop from `from_rate` may take: the table decelerates at most at its
+    /// acceleration limit; 1.5× that plus 5 s of margin for jerk and link latency.
+    fn stop_deadline(&self, from_rate: f64) -> Duration {
+        let a = self.capabilities().max_acceleration;
+        Duration::from_secs_f64(from_rate.abs() / a * 1.5 + 5.0)
+    }
 
     /// A cloneable handle that can stop the table from another task or a signal handler.
     fn stop_handle(&self) -> StopHandle;

@@ -36,7 +36,12 @@ const RUN_LIMIT: Duration = Duration::from_secs(20);
 /// A small plan in `dir`, with the `[simulation]` section the simulator is started from.
 /// `[table]`/`[dmm]` ports are placeholders: the command line overrides them.
 fn write_plan(dir: &Path) -> PathBuf {
-    let rates: Vec<String> = RATES.iter().map(|r| format!("{r}")).collect();
+    write_plan_with(dir, &RATES, 20.0)
+}
+
+/// The same plan with other rates and acceleration.
+fn write_plan_with(dir: &Path, rates: &[f64], acceleration_dps2: f64) -> PathBuf {
+    let rates: Vec<String> = rates.iter().map(|r| format!("{r}")).collect();
     let text = format!(
         r#"[plan]
 name = "e2e fault matrix"
@@ -51,7 +56,7 @@ dialect = "acl"
 port = "/dev/ttyUSB1"
 baud = 9600
 max_rate_dps = 10
-acceleration_dps2 = 20
+acceleration_dps2 = {acceleration_dps2}
 rate_tolerance_dps = 0.01
 stability_window_s = 0.2
 at_rate_timeout_s = 10
@@ -408,6 +413,19 @@ fn probe_table(path: &str) -> (String, f64) {
     })
 }
 
+/// A table that could not be confirmed at rest is never said to be stopped: the last line
+/// tells the operator to stop it by hand.
+fn assert_not_called_at_rest(end: &Ended) {
+    let last = end.stderr.lines().last().unwrap_or("");
+    assert!(
+        last.contains("could NOT be confirmed at rest") && last.contains("by hand"),
+        "last line: {last}\n{}",
+        end.stderr
+    );
+    assert!(!end.stderr.contains("table at rest"), "{}", end.stderr);
+    assert!(!end.stderr.contains("sent a stop"), "{}", end.stderr);
+}
+
 fn fault_fired(last: &Value, spec: &str) -> bool {
     last["faults"]
         .as_array()
@@ -744,6 +762,7 @@ fn e2e_table_silent_from_a_demand_times_out_and_a_stop_is_attempted() {
         .filter(|l| l.contains(":Mode:Off") || l.contains(":Mode:Abort"))
         .count();
     assert!(stop_sent >= 1, "no stop attempted:\n{}", end.stderr);
+    assert_not_called_at_rest(&end);
     let last = sim.finish();
     eprintln!("simulator at the end: {last}");
     assert!(fault_fired(&last, spec), "{last}");
@@ -795,6 +814,7 @@ fn e2e_table_silent_mid_acquisition_misses_its_heartbeat() {
         "no stop attempted:\n{}",
         end.stderr
     );
+    assert_not_called_at_rest(&end);
     let last = sim.finish();
     eprintln!("simulator at the end: {last}");
     assert!(fault_fired(&last, spec), "{last}");
@@ -847,7 +867,7 @@ fn e2e_sigint_mid_acquisition_aborts_stops_the_table_and_resumes() {
     assert_eq!(end.code, Some(130), "{end:?}");
     let m = manifest(&dir);
     assert_eq!(m["status"], "aborted", "{m}");
-    assert!(m["reason"].as_str().unwrap().contains("operator"), "{m}");
+    assert!(m["reason"].as_str().unwrap().contains("SIGINT"), "{m}");
     // the interrupted step is not recorded, in either file
     assert_eq!(check_recorded_steps_whole(&dir), vec![0]);
     // the table was parked by the aborted run: ask it before anything else talks to it
@@ -910,4 +930,105 @@ fn e2e_sigkill_records_nothing_incomplete_and_resumes_with_the_table_turning() {
     eprintln!("simulator at the end: {last}");
     assert_table_parked(&last);
     assert_eq!(last["table"]["mode"], "OFF", "{last}");
+}
+
+// ---------------------------------------------------------------------------------------------
+// 10–14. stop means at rest: every stop signal, a second signal, honest final words
+
+/// A run at 10 °/s with a slow deceleration (5 °/s²: 2 sim s, 0.5 s here at time scale 4),
+/// stopped by `sig` while the meter reads at rate. Returns the run's end, the simulator and
+/// the run directory (in `tmp`).
+fn stopped_at_speed(tmp: &Path, sig: Signal, second: Option<Signal>) -> (Ended, Sim, PathBuf) {
+    let plan = write_plan_with(tmp, &[0.0, 10.0], 5.0);
+    let dir = tmp.join("run");
+    let sim = Sim::start_scaled(&plan, &[], "4");
+    let run = Run::start(&plan, &sim, &out_args(&dir), Some(ACQ_LOG));
+    wait_acquisition(&run, 2);
+    std::thread::sleep(Duration::from_millis(100));
+    run.guard.signal(sig);
+    if let Some(again) = second {
+        run.wait_for_stderr("the deceleration", |l| l.contains("decelerating from"));
+        run.guard.signal(again);
+    }
+    let end = run.wait();
+    (end, sim, dir)
+}
+
+fn stop_signal_waits_for_rest(sig: Signal, code: i32) {
+    let tmp = tempfile::tempdir().unwrap();
+    let (end, sim, dir) = stopped_at_speed(tmp.path(), sig, None);
+    // the table is asked the moment gyrocal has exited: at rest, not still decelerating (a
+    // 0.5 s deceleration here; exiting right after the stop command left it near 10 °/s)
+    let (mode, rate) = probe_table(sim.table());
+    assert_eq!(end.code, Some(code), "{sig}: {end:?}");
+    assert_eq!(mode, "OFF", "{sig}");
+    assert!(
+        rate.abs() < 0.05,
+        "{sig}: gyrocal exited with the table at {rate} °/s"
+    );
+    let m = manifest(&dir);
+    assert_eq!(m["status"], "aborted", "{m}");
+    let name = format!("{sig:?}");
+    assert!(m["reason"].as_str().unwrap().contains(&name), "{m}");
+    // the operator saw the deceleration and the rest, and the last line says so
+    let from: f64 = end
+        .stderr
+        .lines()
+        .find_map(|l| l.split("table decelerating from ").nth(1))
+        .and_then(|rest| rest.split_whitespace().next())
+        .and_then(|x| x.parse().ok())
+        .unwrap_or_else(|| panic!("{sig}: no deceleration line:\n{}", end.stderr));
+    assert!(
+        (from - 10.0).abs() < 0.05,
+        "{sig}: decelerating from {from}"
+    );
+    assert!(end.stderr.contains("table at rest"), "{}", end.stderr);
+    assert!(!end.stderr.contains("sent a stop"), "{}", end.stderr);
+    assert_eq!(check_recorded_steps_whole(&dir), vec![0]);
+    let last = sim.finish();
+    assert_table_parked(&last);
+    assert_eq!(
+        last["table"]["interlock_closed"], true,
+        "a controlled stop only: {last}"
+    );
+}
+
+#[test]
+fn e2e_sigint_exits_130_only_once_the_table_is_at_rest() {
+    stop_signal_waits_for_rest(Signal::SIGINT, 130);
+}
+
+#[test]
+fn e2e_sigterm_exits_143_only_once_the_table_is_at_rest() {
+    stop_signal_waits_for_rest(Signal::SIGTERM, 143);
+}
+
+#[test]
+fn e2e_sighup_exits_129_only_once_the_table_is_at_rest() {
+    stop_signal_waits_for_rest(Signal::SIGHUP, 129);
+}
+
+#[test]
+fn e2e_sigquit_exits_131_only_once_the_table_is_at_rest() {
+    stop_signal_waits_for_rest(Signal::SIGQUIT, 131);
+}
+
+#[test]
+fn e2e_a_second_signal_during_the_deceleration_is_the_emergency_stop() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (end, sim, dir) = stopped_at_speed(tmp.path(), Signal::SIGINT, Some(Signal::SIGHUP));
+    let (mode, rate) = probe_table(sim.table());
+    assert_eq!(
+        end.code,
+        Some(130),
+        "the first signal names the exit: {end:?}"
+    );
+    assert!(end.stderr.contains("EMERGENCY STOP"), "{}", end.stderr);
+    assert!(end.stderr.contains("table at rest"), "{}", end.stderr);
+    assert_eq!(mode, "OFF");
+    assert!(rate.abs() < 0.05, "table at {rate} °/s");
+    assert_eq!(manifest(&dir)["status"], "aborted");
+    let last = sim.finish();
+    // the emergency stop opened the interlock (servo off)
+    assert_eq!(last["table"]["interlock_closed"], false, "{last}");
 }

@@ -2,12 +2,22 @@
 //!
 //! The run directory is written as the run goes (see `gyrocal_run::rundir`); at the end the
 //! data are fitted, `fit.json` and `report.html` written, and the elapsed time compared with
-//! the physical bound. Ctrl-C or SIGTERM stops the table (controlled stop), clears the
-//! multimeter and marks the run `aborted` (exit 130); a second Ctrl-C sends the emergency stop.
-//! Any error does the same with `failed` (exit 1). `--resume DIR` continues where a run stopped.
+//! the physical bound.
+//!
+//! Stopping: the first SIGINT (Ctrl-C), SIGTERM, SIGHUP (a closed terminal, a dropped SSH
+//! session) or SIGQUIT sends the table a controlled stop, and gyrocal then waits until the
+//! table *reports* rest (measured rate within its stop tolerance, mode OFF) before it exits
+//! (130, 143, 129 or 131: 128 + the signal's number), with the run `aborted` and the signal
+//! named. The signals stay watched during that wait: a second one (any of the four) sends the
+//! emergency stop (interlock open) at once. Any error does the same with `failed` (exit 1).
+//! The last lines say where the table was left, and when rest could not be confirmed (a
+//! silent table, a vanished port) they say so plainly: the operator must stop it by hand.
+//! Everything printed here ignores write errors: after SIGHUP the terminal may be gone, and a
+//! failed write must never cut the stop short. `--resume DIR` continues where a run stopped.
 
-use std::io::IsTerminal as _;
+use std::io::{IsTerminal as _, Write as _};
 use std::path::{Path, PathBuf};
+use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
 use anyhow::Context as _;
@@ -17,7 +27,7 @@ use gyrocal_link::{LinkOptions, Transport};
 use gyrocal_run::sequencer::table_config;
 use gyrocal_run::{
     Event, Phase, Plan, Port, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status,
-    StopRequest, fit_run,
+    StopRequest, TableRest, fit_run,
 };
 use gyrocal_table::acl::AclTable;
 use tokio::sync::{mpsc, watch};
@@ -60,7 +70,51 @@ pub struct RunArgs {
     pub no_report: bool,
 }
 
-/// Exit code of an aborted run (as after SIGINT).
+/// Writes a line to stderr, ignoring errors (the terminal may be gone after SIGHUP).
+macro_rules! say {
+    ($($t:tt)*) => {{
+        let _ = writeln!(std::io::stderr(), $($t)*);
+    }};
+}
+
+/// Writes a line to stdout, ignoring errors (a closed pipe must not end the run's ending).
+macro_rules! out {
+    ($($t:tt)*) => {{
+        let _ = writeln!(std::io::stdout(), $($t)*);
+    }};
+}
+
+/// A signal that stops a run, with its conventional exit code (128 + its number).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StopSignal {
+    /// `SIGINT`, `SIGTERM`, `SIGHUP` or `SIGQUIT`.
+    pub name: &'static str,
+    /// 128 + the signal's number.
+    pub exit_code: u8,
+}
+
+/// The signals that stop a run: the first is a controlled stop, any further one an emergency
+/// stop.
+pub const STOP_SIGNALS: [StopSignal; 4] = [
+    StopSignal {
+        name: "SIGINT",
+        exit_code: 130,
+    },
+    StopSignal {
+        name: "SIGTERM",
+        exit_code: 143,
+    },
+    StopSignal {
+        name: "SIGHUP",
+        exit_code: 129,
+    },
+    StopSignal {
+        name: "SIGQUIT",
+        exit_code: 131,
+    },
+];
+
+/// Exit code of a run aborted by something other than a signal.
 pub const EXIT_ABORTED: u8 = 130;
 
 /// Runs `gyrocal run`; returns the process exit code.
@@ -103,8 +157,8 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
         .enable_all()
         .build()
         .context("starting the async runtime")?;
-    let (dir, summary, run) = rt.block_on(execute(args, plan, &faults))?;
-    finish(args, &dir, &summary, run)
+    let (dir, summary, run, signal) = rt.block_on(execute(args, plan, &faults))?;
+    finish(args, &dir, &summary, run, signal)
 }
 
 fn open_run_dir(args: &RunArgs, plan: &Plan) -> anyhow::Result<(PathBuf, RunDir)> {
@@ -112,7 +166,7 @@ fn open_run_dir(args: &RunArgs, plan: &Plan) -> anyhow::Result<(PathBuf, RunDir)
         let run =
             RunDir::open_for_resume(dir, plan).map_err(|e| BadInput(format!("--resume: {e}")))?;
         let done = run.done_steps().len();
-        eprintln!(
+        say!(
             "resuming {}: {done} of {} steps done, {} to go",
             dir.display(),
             run.schedule().len(),
@@ -168,7 +222,7 @@ fn check_resume_mode(dir: &Path, simulate: bool) -> anyhow::Result<()> {
 fn attach_log(dir: &Path) {
     let path = dir.join("run.log");
     if let Err(e) = crate::runlog::attach(&path) {
-        eprintln!("gyrocal: warning: no run log at {}: {e}", path.display());
+        say!("gyrocal: warning: no run log at {}: {e}", path.display());
     }
 }
 
@@ -184,7 +238,7 @@ async fn execute(
     args: &RunArgs,
     plan: Plan,
     faults: &[gyrocal_sim::faults::FaultSpec],
-) -> anyhow::Result<(PathBuf, RunSummary, RunDir)> {
+) -> anyhow::Result<(PathBuf, RunSummary, RunDir, Option<StopSignal>)> {
     if args.simulate {
         let mut cfg = gyrocal_run::simulate::bench_config(&plan);
         if let Some(x) = args.sim_time_scale {
@@ -194,11 +248,11 @@ async fn execute(
         let bench = gyrocal_sim::bench::Bench::spawn(cfg);
         let mut schedule = gyrocal_sim::faults::schedule(faults, &bench.handle, time_scale);
         let (dir, run) = open_run_dir(args, &plan)?;
-        let (summary, run) = sequence(plan, bench.dmm, bench.table, run).await?;
+        let (summary, run, signal) = sequence(plan, bench.dmm, bench.table, run).await?;
         // let the simulator take the last commands before it is dropped
         tokio::time::sleep(Duration::from_millis(50)).await;
         for f in schedule.status(&bench.handle) {
-            eprintln!(
+            say!(
                 "simulated fault {}: {}",
                 f.spec,
                 if f.fired { "fired" } else { "did not fire" }
@@ -207,7 +261,7 @@ async fn execute(
         schedule.stop();
         let t = &bench.handle.table;
         // one machine-readable line, so an operator (and a test) can see the table was parked
-        eprintln!(
+        say!(
             "simulated table at the end: {}",
             serde_json::json!({
                 "mode": format!("{:?}", t.mode()),
@@ -215,7 +269,7 @@ async fn execute(
                 "stopped": t.is_stopped(),
             })
         );
-        Ok((dir, summary, run))
+        Ok((dir, summary, run, signal))
     } else {
         let d = plan.dmm();
         let dmm_opts = LinkOptions {
@@ -235,8 +289,8 @@ async fn execute(
             .await
             .with_context(|| format!("opening the rate table at {}", t.port))?;
         let (dir, run) = open_run_dir(args, &plan)?;
-        let (summary, run) = sequence(plan, dmm, table, run).await?;
-        Ok((dir, summary, run))
+        let (summary, run, signal) = sequence(plan, dmm, table, run).await?;
+        Ok((dir, summary, run, signal))
     }
 }
 
@@ -245,7 +299,7 @@ async fn sequence<D, T>(
     dmm_link: D,
     table_link: T,
     run: RunDir,
-) -> anyhow::Result<(RunSummary, RunDir)>
+) -> anyhow::Result<(RunSummary, RunDir, Option<StopSignal>)>
 where
     D: Transport + 'static,
     T: Transport + 'static,
@@ -257,10 +311,19 @@ where
         Sequencer::new(plan, dmm, table, run, SequencerOptions::default()).with_events(tx);
     let (stop_tx, stop_rx) = watch::channel(StopRequest::None);
     let stop_handle = seq.stop_handle();
-    let signals = tokio::spawn(watch_signals(stop_tx, stop_handle.clone()));
+    let first_signal = Arc::new(OnceLock::new());
+    // Signals are watched until the sequencer has returned, and it returns only once the
+    // table is at rest (or that could not be confirmed): a second signal during the
+    // deceleration is the emergency stop.
+    let signals = tokio::spawn(watch_signals(
+        stop_tx,
+        stop_handle.clone(),
+        first_signal.clone(),
+    ));
     let display = tokio::spawn(show_progress(rx));
-    // The sequencer runs as a task of its own so that even a panic inside it comes back here,
-    // with the runtime still alive to stop the table.
+    // The sequencer catches a panic in its steps itself (and still brings the table to
+    // rest); running it as a task of its own is the second line: a panic anywhere else in
+    // it comes back here, with the runtime still alive to stop the table.
     let task = tokio::spawn(async move {
         let summary = seq.run(stop_rx).await;
         (summary, seq.into_run_dir())
@@ -268,66 +331,86 @@ where
     let result = task.await;
     signals.abort();
     let _ = display.await;
+    let signal = first_signal.get().copied();
     match result {
-        Ok(done) => Ok(done),
+        Ok((summary, run)) => Ok((summary, run, signal)),
         Err(e) => {
-            eprintln!("gyrocal: internal error in the sequencer ({e}); stopping the table");
+            say!("gyrocal: internal error in the sequencer ({e}); stopping the table");
             if let Err(e) = stop_handle.stop().await {
-                eprintln!("gyrocal: controlled stop failed: {e}");
+                say!("gyrocal: controlled stop failed: {e}");
             }
             if let Err(e) = stop_handle.emergency_stop().await {
-                eprintln!("gyrocal: emergency stop failed: {e}: STOP THE TABLE BY HAND");
+                say!("gyrocal: emergency stop failed: {e}");
             }
             anyhow::bail!(
-                "the sequencer stopped unexpectedly ({e}); the table was sent a stop; the run \
-                 directory is resumable (its manifest still says running)"
+                "the sequencer stopped unexpectedly ({e}); a stop and an emergency stop were \
+                 sent, but the table could NOT be confirmed at rest: check it and stop it by \
+                 hand if it turns. The run directory is resumable (its manifest still says \
+                 running)"
             )
         }
     }
 }
 
-/// First Ctrl-C or SIGTERM: controlled stop. Second: emergency stop at once.
-async fn watch_signals(stop: watch::Sender<StopRequest>, table: gyrocal_table::StopHandle) {
+/// The first of SIGINT, SIGTERM, SIGHUP, SIGQUIT: controlled stop (the sequencer then waits
+/// for rest). Any further one: emergency stop at once, from here (the sequencer may be
+/// waiting on the table's link), and the sequencer is told too.
+async fn watch_signals(
+    stop: watch::Sender<StopRequest>,
+    table: gyrocal_table::StopHandle,
+    first: Arc<OnceLock<StopSignal>>,
+) {
+    let (tx, mut rx) = mpsc::unbounded_channel::<StopSignal>();
     #[cfg(unix)]
-    let mut term = match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
-        Ok(s) => Some(s),
-        Err(e) => {
-            tracing::warn!(error = %e, "cannot watch SIGTERM");
-            None
-        }
-    };
-    let mut count = 0;
-    loop {
-        #[cfg(unix)]
-        let got = async {
-            match term.as_mut() {
-                Some(t) => {
-                    t.recv().await;
+    {
+        use tokio::signal::unix::{SignalKind, signal};
+        let kinds = [
+            SignalKind::interrupt(),
+            SignalKind::terminate(),
+            SignalKind::hangup(),
+            SignalKind::quit(),
+        ];
+        for (kind, sig) in kinds.into_iter().zip(STOP_SIGNALS) {
+            match signal(kind) {
+                Ok(mut stream) => {
+                    let tx = tx.clone();
+                    tokio::spawn(async move {
+                        while stream.recv().await.is_some() {
+                            if tx.send(sig).is_err() {
+                                return;
+                            }
+                        }
+                    });
                 }
-                None => std::future::pending::<()>().await,
+                Err(e) => tracing::warn!(error = %e, "cannot watch {}", sig.name),
             }
-        };
-        #[cfg(not(unix))]
-        let got = std::future::pending::<()>();
-        tokio::select! {
-            r = tokio::signal::ctrl_c() => {
-                if r.is_err() {
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let tx = tx.clone();
+        tokio::spawn(async move {
+            while tokio::signal::ctrl_c().await.is_ok() {
+                if tx.send(STOP_SIGNALS[0]).is_err() {
                     return;
                 }
             }
-            () = got => {}
-        }
-        count += 1;
-        if count == 1 {
-            eprintln!(
-                "\ngyrocal: stopping (controlled stop of the table); interrupt again for an emergency stop"
+        });
+    }
+    drop(tx);
+    while let Some(sig) = rx.recv().await {
+        if first.set(sig).is_ok() {
+            say!(
+                "\ngyrocal: {}: controlled stop of the table; gyrocal exits once the table is at \
+                 rest; interrupt again for an emergency stop",
+                sig.name
             );
-            let _ = stop.send(StopRequest::Controlled);
+            let _ = stop.send(StopRequest::Controlled(sig.name));
         } else {
-            eprintln!("\ngyrocal: EMERGENCY STOP (interlock open)");
-            let _ = stop.send(StopRequest::Emergency);
+            say!("\ngyrocal: {}: EMERGENCY STOP (interlock open)", sig.name);
+            let _ = stop.send(StopRequest::Emergency(sig.name));
             if let Err(e) = table.emergency_stop().await {
-                eprintln!("gyrocal: emergency stop failed: {e}: STOP THE TABLE BY HAND");
+                say!("gyrocal: emergency stop failed: {e}: STOP THE TABLE BY HAND");
             }
         }
     }
@@ -380,7 +463,7 @@ async fn show_progress(mut rx: mpsc::UnboundedReceiver<Event>) {
                 bar.set_prefix(step_text.clone());
                 bar.set_position(position.saturating_sub(1) as u64);
                 if !tty {
-                    eprintln!("{step_text} ({eta})");
+                    say!("{step_text} ({eta})");
                 }
             }
             Event::Phase { phase, .. } => {
@@ -418,16 +501,58 @@ async fn show_progress(mut rx: mpsc::UnboundedReceiver<Event>) {
                 &bar,
                 format!("  retry ({}): {}", r.instrument, r.message),
             ),
+            Event::Stopping {
+                from_dps,
+                emergency,
+                deadline,
+            } => {
+                let how = if emergency {
+                    "emergency stop sent"
+                } else {
+                    "controlled stop sent"
+                };
+                let text = match from_dps {
+                    Some(r) if r.abs() > 1e-3 => format!(
+                        "{how}: table decelerating from {r:+.3} °/s … (waiting up to {} for rest)",
+                        hms(deadline.as_secs_f64())
+                    ),
+                    Some(r) => format!("{how}: table at {r:+.4} °/s, confirming rest …"),
+                    None => format!(
+                        "{how}: the table did not report its rate; waiting up to {} for rest …",
+                        hms(deadline.as_secs_f64())
+                    ),
+                };
+                bar.set_message("stopping the table");
+                line(tty, &bar, text);
+            }
+            Event::Rest(rest) => line(tty, &bar, rest_text(&rest)),
         }
     }
     bar.finish_and_clear();
+}
+
+/// The operator's line about the table at the end of a run: "at rest" only when the table
+/// said so.
+fn rest_text(rest: &TableRest) -> String {
+    match rest {
+        TableRest::AtRest { rate_dps, waited } => format!(
+            "table at rest ({rate_dps:+.4} °/s, mode OFF, after {:.1} s)",
+            waited.as_secs_f64()
+        ),
+        TableRest::NotConfirmed { reason } => {
+            format!("the table could NOT be confirmed at rest: stop it by hand ({reason})")
+        }
+        TableRest::NeverReached { reason } => {
+            format!("the table could NOT be confirmed at rest: {reason}; check it is not turning")
+        }
+    }
 }
 
 fn line(tty: bool, bar: &indicatif::ProgressBar, text: String) {
     if tty {
         bar.println(text);
     } else {
-        eprintln!("{text}");
+        say!("{text}");
     }
 }
 
@@ -450,22 +575,34 @@ fn resume_command(args: &RunArgs, dir: &Path) -> String {
     c
 }
 
-/// After the sequencer: fit, report, the closing summary; the exit code.
-fn finish(args: &RunArgs, dir: &Path, summary: &RunSummary, mut run: RunDir) -> anyhow::Result<u8> {
+/// After the sequencer: fit, report, the closing summary; the exit code. The last line says
+/// where the table was left whenever that is not "at rest, as the table reported".
+fn finish(
+    args: &RunArgs,
+    dir: &Path,
+    summary: &RunSummary,
+    mut run: RunDir,
+    signal: Option<StopSignal>,
+) -> anyhow::Result<u8> {
+    let rest_line = match &summary.table {
+        TableRest::AtRest { .. } => "the table is at rest".to_string(),
+        other => rest_text(other),
+    };
     match summary.status {
         Status::Complete => {}
         Status::Aborted => {
-            eprintln!(
-                "gyrocal: run aborted: {}\n  {} step(s) recorded this session; resume with: {}",
+            say!(
+                "gyrocal: run aborted: {}\n  {} step(s) recorded this session (a step cut short \
+                 is not recorded: it is measured afresh on resume); resume with: {}\n  {rest_line}",
                 summary.reason.as_deref().unwrap_or("stopped"),
                 summary.steps_recorded,
                 resume_command(args, dir)
             );
-            return Ok(EXIT_ABORTED);
+            return Ok(signal.map_or(EXIT_ABORTED, |s| s.exit_code));
         }
         Status::Failed | Status::Running => {
-            eprintln!(
-                "gyrocal: run failed: {}\n  the table was sent a stop; {} step(s) recorded this session; resume with: {}",
+            say!(
+                "gyrocal: run failed: {}\n  {} step(s) recorded this session; resume with: {}\n  {rest_line}",
                 summary.reason.as_deref().unwrap_or("unknown"),
                 summary.steps_recorded,
                 resume_command(args, dir)
@@ -477,9 +614,9 @@ fn finish(args: &RunArgs, dir: &Path, summary: &RunSummary, mut run: RunDir) -> 
         .with_context(|| format!("fitting {}", dir.display()))?;
     let mut out = String::new();
     crate::cmd::fit::human(&mut out, &analysis);
-    println!("{out}");
+    out!("{out}");
     if let Some(t) = &summary.timing {
-        println!(
+        out!(
             "timing: elapsed {} (run clock), physical bound {}, ratio {:.4} (acquisition {})",
             hms(t.elapsed_s),
             hms(t.bound_s),
@@ -490,10 +627,17 @@ fn finish(args: &RunArgs, dir: &Path, summary: &RunSummary, mut run: RunDir) -> 
     if !args.no_report {
         // the data and the fit are safe on disk already: a report failure is a warning
         match gyrocal_report::write_run_report(dir) {
-            Ok(path) => println!("report: {}", path.display()),
-            Err(e) => eprintln!("gyrocal: warning: no report: {e}"),
+            Ok(path) => out!("report: {}", path.display()),
+            Err(e) => say!("gyrocal: warning: no report: {e}"),
         }
     }
-    println!("run directory: {}", dir.display());
+    out!("run directory: {}", dir.display());
+    if !summary.table.is_at_rest() {
+        say!(
+            "gyrocal: all steps recorded, but {}",
+            rest_text(&summary.table)
+        );
+        return Ok(1);
+    }
     Ok(0)
 }

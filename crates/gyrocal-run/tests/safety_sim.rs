@@ -1,0 +1,360 @@
+//! Safety and data integrity of the sequencer against the simulated bench, in virtual time:
+//! a run ends only with the table at rest (or says plainly that it could not confirm it), a
+//! second stop request during the deceleration is the emergency stop, a panic still brings the
+//! table to rest, and a step the table did not hold for its whole acquisition is never
+//! recorded.
+
+#![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)] // test helpers
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use gyrocal_hp34401a::{DriverOptions, Hp34401a};
+use gyrocal_run::sequencer::table_config;
+use gyrocal_run::simulate::bench_config;
+use gyrocal_run::{
+    Event, Phase, Plan, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status,
+    StopRequest, TableRest, load,
+};
+use gyrocal_sim::bench::{Bench, BenchHandle};
+use gyrocal_sim::table::SimMode;
+use gyrocal_table::acl::AclTable;
+use gyrocal_table::{
+    Capabilities, Identity, RateStats, RateTable, RestReport, SettleCriteria, SettleReport,
+    StopHandle, TableError, TableState, TableStatus,
+};
+use tokio::sync::{mpsc, watch};
+use tokio::time::Instant;
+
+fn config(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../configs")
+        .join(name)
+}
+
+/// quick.toml with other rates.
+fn plan_with_rates(rates: &[f64]) -> Plan {
+    let path = config("quick.toml");
+    let mut doc: toml::Table = std::fs::read_to_string(&path).unwrap().parse().unwrap();
+    let plan = doc.get_mut("plan").unwrap().as_table_mut().unwrap();
+    plan.insert(
+        "rates_dps".into(),
+        toml::Value::Array(rates.iter().map(|r| toml::Value::Float(*r)).collect()),
+    );
+    Plan::from_toml_str(&toml::to_string(&doc).unwrap(), &path).unwrap()
+}
+
+fn new_run(plan: &Plan, dir: &Path) -> RunDir {
+    let meta = RunMeta {
+        gyrocal_version: "test".into(),
+        simulated: true,
+        ..RunMeta::default()
+    };
+    RunDir::create(dir, plan, meta).unwrap()
+}
+
+/// What the test's event hook asks for.
+type Hook = Box<dyn FnMut(&Event) -> Option<StopRequest> + Send>;
+
+/// Runs `plan` on `bench` with `table` (the bench's table driver, maybe wrapped), sending the
+/// stop requests `hook` returns for the events it sees. Returns the summary, every event, and
+/// the bench.
+async fn run_table<T: RateTable + 'static>(
+    plan: &Plan,
+    dmm: Hp34401a<gyrocal_link::StreamTransport<tokio::io::DuplexStream>>,
+    table: T,
+    dir: &Path,
+    mut hook: Hook,
+) -> (RunSummary, Vec<Event>) {
+    let (events_tx, mut events) = mpsc::unbounded_channel();
+    let mut seq = Sequencer::new(
+        plan.clone(),
+        dmm,
+        table,
+        new_run(plan, dir),
+        SequencerOptions::default(),
+    )
+    .with_events(events_tx);
+    let (stop_tx, stop_rx) = watch::channel(StopRequest::None);
+    let seen = tokio::spawn(async move {
+        let mut all = Vec::new();
+        while let Some(e) = events.recv().await {
+            if let Some(req) = hook(&e) {
+                let _ = stop_tx.send(req);
+            }
+            all.push(e);
+        }
+        all
+    });
+    let summary = seq.run(stop_rx).await;
+    drop(seq);
+    (summary, seen.await.unwrap())
+}
+
+async fn run_on_bench(
+    plan: &Plan,
+    bench: Bench,
+    dir: &Path,
+    hook: Hook,
+) -> (RunSummary, Vec<Event>, BenchHandle) {
+    let dmm = Hp34401a::new(bench.dmm, DriverOptions::default());
+    let table = AclTable::new(bench.table, table_config(plan));
+    let (summary, events) = run_table(plan, dmm, table, dir, hook).await;
+    (summary, events, bench.handle)
+}
+
+/// Asks for a controlled stop once step `step` acquires.
+fn stop_when_acquiring(step: usize) -> Hook {
+    Box::new(move |e| match e {
+        Event::Phase {
+            step: s,
+            phase: Phase::Acquiring,
+        } if *s == step => Some(StopRequest::Controlled("test")),
+        _ => None,
+    })
+}
+
+fn stopping_from(events: &[Event]) -> Option<f64> {
+    events.iter().find_map(|e| match e {
+        Event::Stopping { from_dps, .. } => *from_dps,
+        _ => None,
+    })
+}
+
+fn rest_event(events: &[Event]) -> Option<&TableRest> {
+    events.iter().rev().find_map(|e| match e {
+        Event::Rest(r) => Some(r),
+        _ => None,
+    })
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_stop_request_ends_the_run_only_once_the_table_is_at_rest() {
+    // stopped while acquiring at 20 °/s; at 10 °/s² the deceleration takes 2 s
+    let plan = plan_with_rates(&[0.0, 20.0]);
+    let tmp = tempfile::tempdir().unwrap();
+    let bench = Bench::spawn(bench_config(&plan));
+    let (summary, events, bench) = run_on_bench(
+        &plan,
+        bench,
+        &tmp.path().join("run"),
+        stop_when_acquiring(1),
+    )
+    .await;
+    // the moment `run` returns, the table is at rest: not decelerating, not turning
+    let now = Instant::now();
+    let rate = bench.table.actual_rate(now);
+    assert!(
+        rate.abs() < 0.01,
+        "run returned with the table at {rate} °/s"
+    );
+    assert_eq!(bench.table.mode(), SimMode::Off);
+    assert_eq!(summary.status, Status::Aborted);
+    assert!(
+        summary
+            .reason
+            .as_deref()
+            .unwrap()
+            .contains("stopped by test"),
+        "{:?}",
+        summary.reason
+    );
+    // the operator was told the deceleration started from ~20 °/s, then rest
+    let from = stopping_from(&events).expect("a Stopping event with the rate");
+    assert!((from - 20.0).abs() < 0.05, "decelerating from {from}");
+    let Some(TableRest::AtRest { waited, .. }) = rest_event(&events) else {
+        panic!("no at-rest event: {:?}", rest_event(&events));
+    };
+    assert!(
+        *waited >= Duration::from_millis(1900),
+        "a 2 s deceleration waited for only {waited:?}"
+    );
+    assert!(summary.table.is_at_rest(), "{:?}", summary.table);
+    // the interrupted step is not recorded
+    assert_eq!(load(&tmp.path().join("run")).unwrap().steps.len(), 1);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_second_request_during_the_deceleration_sends_the_emergency_stop() {
+    let plan = plan_with_rates(&[0.0, 20.0]);
+    let tmp = tempfile::tempdir().unwrap();
+    let bench = Bench::spawn(bench_config(&plan));
+    let mut first = stop_when_acquiring(1);
+    let hook: Hook = Box::new(move |e| match e {
+        Event::Stopping { .. } => Some(StopRequest::Emergency("test again")),
+        other => first(other),
+    });
+    let (summary, events, bench) = run_on_bench(&plan, bench, &tmp.path().join("run"), hook).await;
+    // the emergency stop opened the interlock; the run still ended with the table at rest
+    assert!(
+        !bench.table.interlock_closed(),
+        "no emergency stop was sent"
+    );
+    assert!(bench.table.actual_rate(Instant::now()).abs() < 0.01);
+    assert!(summary.table.is_at_rest(), "{:?}", summary.table);
+    assert_eq!(summary.status, Status::Aborted);
+    // the emergency stop cut the 2 s controlled deceleration short (abort profile at the
+    // table's 100 °/s² limit)
+    let Some(TableRest::AtRest { waited, .. }) = rest_event(&events) else {
+        panic!("no at-rest event");
+    };
+    assert!(*waited < Duration::from_millis(1500), "waited {waited:?}");
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_table_that_goes_silent_is_never_reported_at_rest() {
+    let plan = plan_with_rates(&[0.0, 10.0]);
+    let tmp = tempfile::tempdir().unwrap();
+    let bench = Bench::spawn(bench_config(&plan));
+    // silent halfway through step 1's 50 readings: it keeps turning at 10 °/s
+    let spec: gyrocal_sim::faults::FaultSpec = "table:silent@reading75".parse().unwrap();
+    let _faults = gyrocal_sim::faults::schedule(&[spec], &bench.handle, 1.0);
+    let (summary, events, bench) =
+        run_on_bench(&plan, bench, &tmp.path().join("run"), Box::new(|_| None)).await;
+    assert_eq!(summary.status, Status::Failed);
+    assert!(
+        matches!(summary.table, TableRest::NotConfirmed { .. }),
+        "{:?}",
+        summary.table
+    );
+    assert!(matches!(
+        rest_event(&events),
+        Some(TableRest::NotConfirmed { .. })
+    ));
+    // and that is the truth: the silent table still turns
+    assert!((bench.table.actual_rate(Instant::now()) - 10.0).abs() < 0.05);
+    assert_eq!(load(&tmp.path().join("run")).unwrap().steps.len(), 1);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_table_fault_at_the_end_of_an_acquisition_is_never_recorded() {
+    // the fault latches as the last reading of step 1 (readings 51..100) is taken: after the
+    // last monitoring sample of the acquisition, before the step would be written
+    for spec in ["table:fault@reading100", "table:fault@reading80"] {
+        let plan = plan_with_rates(&[0.0, 10.0, -10.0]);
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().join("run");
+        let bench = Bench::spawn(bench_config(&plan));
+        let spec_parsed: gyrocal_sim::faults::FaultSpec = spec.parse().unwrap();
+        let _faults = gyrocal_sim::faults::schedule(&[spec_parsed], &bench.handle, 1.0);
+        let (summary, _, bench) = run_on_bench(&plan, bench, &dir, Box::new(|_| None)).await;
+        assert_eq!(summary.status, Status::Failed, "{spec}");
+        let reason = summary.reason.unwrap();
+        assert!(
+            reason.contains("Tracking error limit exceeded"),
+            "{spec}: {reason}"
+        );
+        let steps: Vec<usize> = load(&dir).unwrap().steps.iter().map(|s| s.step).collect();
+        assert_eq!(steps, vec![0], "{spec}: step 1 must not be recorded");
+        assert!(summary.table.is_at_rest(), "{spec}: {:?}", summary.table);
+        assert!(bench.table.actual_rate(Instant::now()).abs() < 0.01);
+    }
+}
+
+/// The bench's ACL table, panicking at its `n`-th rate demand (a bug in the sequencer's
+/// stack, as far as the run can tell).
+struct PanicAtDemand<T> {
+    inner: T,
+    demands: usize,
+    panic_at: usize,
+}
+
+impl<T: RateTable> RateTable for PanicAtDemand<T> {
+    fn describe(&self) -> &str {
+        self.inner.describe()
+    }
+    fn state(&self) -> TableState {
+        self.inner.state()
+    }
+    fn capabilities(&self) -> Capabilities {
+        self.inner.capabilities()
+    }
+    async fn connect(&mut self) -> Result<Identity, TableError> {
+        self.inner.connect().await
+    }
+    async fn enable(&mut self) -> Result<(), TableError> {
+        self.inner.enable().await
+    }
+    async fn set_rate(&mut self, rate: f64, acceleration: f64) -> Result<(), TableError> {
+        self.demands += 1;
+        self.inner.set_rate(rate, acceleration).await?;
+        assert!(
+            self.demands != self.panic_at,
+            "injected panic at demand {}",
+            self.demands
+        );
+        Ok(())
+    }
+    async fn read_rate(&mut self) -> Result<f64, TableError> {
+        self.inner.read_rate().await
+    }
+    async fn read_position(&mut self) -> Result<f64, TableError> {
+        self.inner.read_position().await
+    }
+    async fn status(&mut self) -> Result<TableStatus, TableError> {
+        self.inner.status().await
+    }
+    async fn sample(&mut self) -> Result<f64, TableError> {
+        self.inner.sample().await
+    }
+    async fn wait_at_rate(
+        &mut self,
+        criteria: &SettleCriteria,
+    ) -> Result<SettleReport, TableError> {
+        self.inner.wait_at_rate(criteria).await
+    }
+    fn start_recording(&mut self) {
+        self.inner.start_recording();
+    }
+    fn stop_recording(&mut self) -> RateStats {
+        self.inner.stop_recording()
+    }
+    async fn heartbeat(&mut self) -> Result<(), TableError> {
+        self.inner.heartbeat().await
+    }
+    async fn stop(&mut self) -> Result<(), TableError> {
+        self.inner.stop().await
+    }
+    async fn emergency_stop(&mut self) -> Result<(), TableError> {
+        self.inner.emergency_stop().await
+    }
+    async fn wait_stopped(&mut self, timeout: Duration) -> Result<RestReport, TableError> {
+        self.inner.wait_stopped(timeout).await
+    }
+    fn take_retries(&mut self) -> Vec<String> {
+        self.inner.take_retries()
+    }
+    fn stop_handle(&self) -> StopHandle {
+        self.inner.stop_handle()
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_panic_in_the_sequencer_still_brings_the_table_to_rest() {
+    // the panic comes right after the −20 °/s demand was sent: the table is turning at
+    // +20 °/s and starts its ramp down
+    let plan = plan_with_rates(&[0.0, 20.0, -20.0]);
+    let tmp = tempfile::tempdir().unwrap();
+    let bench = Bench::spawn(bench_config(&plan));
+    let dmm = Hp34401a::new(bench.dmm, DriverOptions::default());
+    let table = PanicAtDemand {
+        inner: AclTable::new(bench.table, table_config(&plan)),
+        demands: 0,
+        panic_at: 3,
+    };
+    let (summary, _) = run_table(
+        &plan,
+        dmm,
+        table,
+        &tmp.path().join("run"),
+        Box::new(|_| None),
+    )
+    .await;
+    assert_eq!(summary.status, Status::Failed);
+    let reason = summary.reason.unwrap();
+    assert!(reason.contains("injected panic at demand 3"), "{reason}");
+    assert!(summary.table.is_at_rest(), "{:?}", summary.table);
+    assert!(bench.handle.table.actual_rate(Instant::now()).abs() < 0.01);
+    let m = load(&tmp.path().join("run")).unwrap().manifest;
+    assert_eq!(m.status, Status::Failed);
+}
