@@ -251,15 +251,39 @@ async fn a_table_fault_at_the_end_of_an_acquisition_is_never_recorded() {
     }
 }
 
-/// The bench's ACL table, panicking at its `n`-th rate demand (a bug in the sequencer's
-/// stack, as far as the run can tell).
-struct PanicAtDemand<T> {
+/// What a [`Hooked`] table does to a monitoring sample: given the demand and the number of
+/// samples at that demand so far (from 1), the rate to report.
+type Perturb = Box<dyn FnMut(f64, usize) -> f64 + Send>;
+
+/// The bench's ACL table with hooks: panics at its `panic_at`-th rate demand (a bug in the
+/// sequencer's stack, as far as the run can tell), and passes its monitoring samples through
+/// `perturb` (a disturbance the table itself does not report as a fault). It records its own
+/// samples, so the sequencer's statistics see the perturbed values.
+struct Hooked<T> {
     inner: T,
     demands: usize,
-    panic_at: usize,
+    panic_at: Option<usize>,
+    demand: f64,
+    at_demand: usize,
+    perturb: Perturb,
+    recorder: Option<Vec<f64>>,
 }
 
-impl<T: RateTable> RateTable for PanicAtDemand<T> {
+impl<T> Hooked<T> {
+    fn new(inner: T) -> Self {
+        Hooked {
+            inner,
+            demands: 0,
+            panic_at: None,
+            demand: 0.0,
+            at_demand: 0,
+            perturb: Box::new(|_, _| 0.0),
+            recorder: None,
+        }
+    }
+}
+
+impl<T: RateTable> RateTable for Hooked<T> {
     fn describe(&self) -> &str {
         self.inner.describe()
     }
@@ -278,8 +302,10 @@ impl<T: RateTable> RateTable for PanicAtDemand<T> {
     async fn set_rate(&mut self, rate: f64, acceleration: f64) -> Result<(), TableError> {
         self.demands += 1;
         self.inner.set_rate(rate, acceleration).await?;
+        self.demand = rate;
+        self.at_demand = 0;
         assert!(
-            self.demands != self.panic_at,
+            Some(self.demands) != self.panic_at,
             "injected panic at demand {}",
             self.demands
         );
@@ -295,7 +321,13 @@ impl<T: RateTable> RateTable for PanicAtDemand<T> {
         self.inner.status().await
     }
     async fn sample(&mut self) -> Result<f64, TableError> {
-        self.inner.sample().await
+        let rate = self.inner.sample().await?;
+        self.at_demand += 1;
+        let rate = rate + (self.perturb)(self.demand, self.at_demand);
+        if let Some(r) = self.recorder.as_mut() {
+            r.push(rate);
+        }
+        Ok(rate)
     }
     async fn wait_at_rate(
         &mut self,
@@ -304,10 +336,10 @@ impl<T: RateTable> RateTable for PanicAtDemand<T> {
         self.inner.wait_at_rate(criteria).await
     }
     fn start_recording(&mut self) {
-        self.inner.start_recording();
+        self.recorder = Some(Vec::new());
     }
     fn stop_recording(&mut self) -> RateStats {
-        self.inner.stop_recording()
+        RateStats::from_samples(&self.recorder.take().unwrap_or_default())
     }
     async fn heartbeat(&mut self) -> Result<(), TableError> {
         self.inner.heartbeat().await
@@ -329,6 +361,100 @@ impl<T: RateTable> RateTable for PanicAtDemand<T> {
     }
 }
 
+/// Runs `plan` on a fresh bench with the table wrapped by `hook`.
+async fn run_hooked(
+    plan: &Plan,
+    dir: &Path,
+    hook: impl FnOnce(&mut Hooked<AclTable<gyrocal_link::StreamTransport<tokio::io::DuplexStream>>>),
+) -> (RunSummary, BenchHandle) {
+    let bench = Bench::spawn(bench_config(plan));
+    let dmm = Hp34401a::new(bench.dmm, DriverOptions::default());
+    let mut table = Hooked::new(AclTable::new(bench.table, table_config(plan)));
+    hook(&mut table);
+    let (summary, _) = run_table(plan, dmm, table, dir, Box::new(|_| None)).await;
+    (summary, bench.handle)
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_step_the_table_did_not_hold_is_measured_again_once_it_holds() {
+    // one sample 0.5 °/s off during step 1's first acquisition (a knock on the table, say):
+    // that attempt is thrown away, the step measured again, the run completes
+    let plan = plan_with_rates(&[0.0, 10.0, -10.0]);
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let (summary, bench) = run_hooked(&plan, &dir, |t| {
+        let mut bumped = false;
+        t.perturb = Box::new(move |demand, k| {
+            if demand == 10.0 && k == 3 && !bumped {
+                bumped = true;
+                0.5
+            } else {
+                0.0
+            }
+        });
+    })
+    .await;
+    assert_eq!(summary.status, Status::Complete, "{:?}", summary.reason);
+    let data = load(&dir).unwrap();
+    let steps: Vec<usize> = data.steps.iter().map(|s| s.step).collect();
+    assert_eq!(steps, vec![0, 1, 2], "every step once");
+    // the refused attempt left no samples: exactly one step's worth per step
+    let samples = gyrocal_run::load_samples(&dir).unwrap();
+    assert_eq!(samples.iter().filter(|s| s.step == 1).count(), 50);
+    // the recorded step's table statistics are the clean second attempt's
+    let s1 = &data.steps[1];
+    assert!(
+        (s1.rate_meas_max_dps.unwrap() - 10.0).abs() < 0.005,
+        "{s1:?}"
+    );
+    // and the manifest says what happened
+    let retry = data
+        .manifest
+        .retries
+        .iter()
+        .find(|r| r.instrument == "table")
+        .expect("a table retry in the manifest");
+    assert_eq!(retry.step, Some(1));
+    assert!(
+        retry.message.contains("measuring it again") && retry.message.contains("+10.5"),
+        "{}",
+        retry.message
+    );
+    assert!(summary.table.is_at_rest());
+    assert!(bench.table.actual_rate(Instant::now()).abs() < 0.01);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_table_that_never_holds_the_rate_fails_the_run_without_recording_the_step() {
+    // every monitoring sample at 10 °/s is 0.1 °/s off: both attempts are refused
+    let plan = plan_with_rates(&[0.0, 10.0, -10.0]);
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let (summary, bench) = run_hooked(&plan, &dir, |t| {
+        t.perturb = Box::new(|demand, _| if demand == 10.0 { 0.1 } else { 0.0 });
+    })
+    .await;
+    assert_eq!(summary.status, Status::Failed);
+    let reason = summary.reason.unwrap();
+    assert!(
+        reason.contains("step 1 at 10 °/s not recorded") && reason.contains("+10.1"),
+        "{reason}"
+    );
+    let data = load(&dir).unwrap();
+    assert_eq!(
+        data.steps.iter().map(|s| s.step).collect::<Vec<_>>(),
+        vec![0]
+    );
+    assert!(
+        gyrocal_run::load_samples(&dir)
+            .unwrap()
+            .iter()
+            .all(|s| s.step == 0)
+    );
+    assert!(summary.table.is_at_rest());
+    assert!(bench.table.actual_rate(Instant::now()).abs() < 0.01);
+}
+
 #[tokio::test(start_paused = true)]
 async fn a_panic_in_the_sequencer_still_brings_the_table_to_rest() {
     // the panic comes right after the −20 °/s demand was sent: the table is turning at
@@ -337,11 +463,8 @@ async fn a_panic_in_the_sequencer_still_brings_the_table_to_rest() {
     let tmp = tempfile::tempdir().unwrap();
     let bench = Bench::spawn(bench_config(&plan));
     let dmm = Hp34401a::new(bench.dmm, DriverOptions::default());
-    let table = PanicAtDemand {
-        inner: AclTable::new(bench.table, table_config(&plan)),
-        demands: 0,
-        panic_at: 3,
-    };
+    let mut table = Hooked::new(AclTable::new(bench.table, table_config(&plan)));
+    table.panic_at = Some(3);
     let (summary, _) = run_table(
         &plan,
         dmm,
