@@ -11,14 +11,39 @@
 //! set_rate:   [:Mode:Rate 1]  :Limit:Acceleration R,1,<a>  :Demand:Rate 1,<w>  :System:Error?
 //! sample:     :Read:Rate? 1  *STB?  [:System:Error? ... when bit 0 or 7 is set]
 //! stop:       :Mode:Off 1            emergency: :Interlock:Open 1
+//! wait_stopped: (:Read:Rate? 1  :Mode? 1) every stop_poll_interval until at rest
 //! ```
+//!
+//! ## Retries on a flaky link
+//!
+//! A serial line to a table across the lab loses or corrupts a reply now and then. Every query
+//! of this dialect (`*IDN?`, `*STB?`, `:Mode?`, `:Read:Rate?`, `:Read:Position?`,
+//! `:System:Error?`) only reads state, so asking it again is harmless: after a reply that does
+//! not come ([`LinkError::Timeout`]), that is not text ([`LinkError::Garbled`], a noise byte) or
+//! that does not parse, the driver clears stale input and asks again, at most
+//! [`AclConfig::retries`] times. Commands (lines without `?`: a demand, a mode change, a stop)
+//! have no reply to check and are never repeated blindly; the error-queue read after them is a
+//! query and is retried. A disconnected or failed link is not retried.
+//!
+//! A query's timeout bounds the whole exchange, retries included: each attempt gets the time
+//! left divided by the attempts left (with the defaults a silent table gets three chances of
+//! ⅔ s within the 2 s heartbeat deadline; a reply garbled at once leaves more time for the
+//! next). So a table that went silent still fails a monitoring sample
+//! ([`RateTable::sample`], [`RateTable::heartbeat`]) within [`AclConfig::heartbeat_deadline`] of
+//! the unanswered query, as without retries. Only when the attempts are used up does a link
+//! failure fault the driver, as before; the error is that of the first attempt (it names the
+//! bytes received).
+//!
+//! Every retry is logged (`tracing::warn!`) and kept as a sentence for the run manifest
+//! ([`RateTable::take_retries`]). A `:System:Error?` whose reply was lost or garbled has already
+//! removed its entry from the table's queue: the note says that a table error may be missing.
 
 use std::future::Future;
 use std::pin::Pin;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
-use gyrocal_link::{LinkError, Transport, show_bytes};
+use gyrocal_link::{ErrorKind as LinkErrorKind, LinkError, Transport, show_bytes};
 use tokio::time::Instant;
 
 use crate::{
@@ -47,6 +72,11 @@ pub struct AclConfig {
     pub stop_tolerance: f64,
     /// Sampling interval of [`RateTable::wait_stopped`]. Default 100 ms.
     pub stop_poll_interval: Duration,
+    /// How many times an idempotent query is asked again after a lost, garbled or unparseable
+    /// reply, within the query's timeout (see the [module documentation](self)). Default 2: a
+    /// flaky link rarely hits two replies in a row, and three attempts still leave each ⅔ s of
+    /// the 2 s heartbeat deadline. 0 disables retries.
+    pub retries: u32,
 }
 
 impl Default for AclConfig {
@@ -58,6 +88,7 @@ impl Default for AclConfig {
             heartbeat_deadline: Duration::from_secs(2),
             stop_tolerance: 0.01,
             stop_poll_interval: Duration::from_millis(100),
+            retries: 2,
         }
     }
 }
@@ -207,6 +238,48 @@ pub struct AclTable<T> {
     demand: f64,
     ramp: Option<Ramp>,
     recorder: Option<RateAccumulator>,
+    /// Retry notes not yet taken by [`RateTable::take_retries`].
+    retries: Vec<String>,
+}
+
+/// One failed attempt at a query.
+enum Miss {
+    /// Nothing (or not a line of text) came back.
+    Link(LinkError),
+    /// A line came back that is not a valid reply.
+    Reply { reply: String, reason: &'static str },
+}
+
+impl Miss {
+    /// What went wrong, for a retry note.
+    fn describe(&self) -> String {
+        match self {
+            Miss::Link(LinkError::Timeout {
+                timeout, partial, ..
+            }) if partial.is_empty() => {
+                format!("no reply within {:.3} s", timeout.as_secs_f64())
+            }
+            Miss::Link(LinkError::Timeout {
+                timeout, partial, ..
+            }) => format!(
+                "no complete reply within {:.3} s (got {})",
+                timeout.as_secs_f64(),
+                show_bytes(partial)
+            ),
+            Miss::Link(LinkError::Garbled { reason, bytes, .. }) => {
+                format!("garbled reply {} ({reason})", show_bytes(bytes))
+            }
+            Miss::Link(e) => e.to_string(),
+            Miss::Reply { reply, reason } => {
+                format!("unusable reply {} ({reason})", show_bytes(reply.as_bytes()))
+            }
+        }
+    }
+}
+
+/// Whether asking again can help: a lost or corrupted reply can, a dead link cannot.
+fn retryable(e: &LinkError) -> bool {
+    matches!(e.kind(), LinkErrorKind::Timeout | LinkErrorKind::Garbled)
 }
 
 impl<T: Transport> std::fmt::Debug for AclTable<T> {
@@ -244,6 +317,7 @@ impl<T: Transport + 'static> AclTable<T> {
             demand: 0.0,
             ramp: None,
             recorder: None,
+            retries: Vec::new(),
         }
     }
 
@@ -291,30 +365,97 @@ impl<T: Transport + 'static> AclTable<T> {
         Ok(())
     }
 
-    /// Sends a query and returns its one-line reply.
-    async fn query(&self, line: &str, timeout: Duration) -> Result<String, TableError> {
+    /// Sends a query once and returns its one-line reply (no retry, no fault).
+    async fn exchange(&self, line: &str, timeout: Duration) -> Result<String, LinkError> {
         let mut link = self.shared.link.lock().await;
         if link.dirty {
             let dropped = link.transport.discard_input().await.unwrap_or(0);
             tracing::debug!(device = %self.shared.device, "cleared {dropped} stale bytes");
         }
         link.dirty = true;
-        let res = async {
-            link.transport.send_line(line).await?;
-            link.transport.read_line(Some(timeout)).await
-        }
-        .await;
-        match res {
-            Ok(reply) => {
-                link.dirty = false;
-                tracing::trace!(device = %self.shared.device, "> {line} < {reply}");
-                Ok(reply)
+        link.transport.send_line(line).await?;
+        let reply = link.transport.read_line(Some(timeout)).await?;
+        link.dirty = false;
+        tracing::trace!(device = %self.shared.device, "> {line} < {reply}");
+        Ok(reply)
+    }
+
+    /// Asks the idempotent query `line` until `parse` accepts the reply, at most
+    /// `1 + retries` times within `timeout` in total (see the module documentation). A dead link
+    /// faults the driver at once; a lost or garbled reply only when no attempt succeeded; an
+    /// unusable reply returns a [`TableError::Reply`] without faulting (as a single bad reply
+    /// always did).
+    async fn ask<R>(
+        &mut self,
+        line: &str,
+        timeout: Duration,
+        parse: impl Fn(&str) -> Result<R, &'static str>,
+    ) -> Result<R, TableError> {
+        let attempts = self.config.retries.saturating_add(1);
+        let deadline = Instant::now() + timeout;
+        let mut first: Option<Miss> = None;
+        let mut last = String::new();
+        let mut last_was_link = false;
+        for attempt in 1..=attempts {
+            let left = attempts - attempt + 1;
+            let budget = deadline.saturating_duration_since(Instant::now()) / left;
+            let miss = match self.exchange(line, budget).await {
+                Ok(reply) => match parse(&reply) {
+                    Ok(v) => return Ok(v),
+                    Err(reason) => Miss::Reply { reply, reason },
+                },
+                Err(e) if retryable(&e) => Miss::Link(e),
+                Err(e) => return Err(self.lost(line, e).await),
+            };
+            last = miss.describe();
+            last_was_link = matches!(miss, Miss::Link(_));
+            if attempt < attempts {
+                let mut note = format!(
+                    "`{line}`: {last}; asked again (retry {attempt} of {})",
+                    attempts - 1
+                );
+                if line.starts_with(":System:Error?") {
+                    note.push_str(
+                        "; the table had already removed the error-queue entry of that reply, \
+                         so a table error may be missing",
+                    );
+                }
+                self.note_retry(note);
+                // the reply may have been late or followed by more junk: clear it first
+                self.shared.link.lock().await.dirty = true;
             }
-            Err(e) => {
-                drop(link);
-                Err(self.lost(line, e).await)
-            }
+            first.get_or_insert(miss);
         }
+        let err = match first {
+            Some(Miss::Reply { reply, reason }) if attempts > 1 => self.reply_error(
+                line,
+                &reply,
+                &format!("{reason}; no usable reply in {attempts} attempts"),
+            ),
+            Some(Miss::Reply { reply, reason }) => self.reply_error(line, &reply, reason),
+            Some(Miss::Link(e)) => TableError::from_link(self.device(), line, e),
+            None => TableError::Reply {
+                device: self.device().to_string(),
+                command: line.to_string(),
+                reason: "no attempt was made".into(),
+                bytes: String::new(),
+            },
+        };
+        if attempts > 1 {
+            self.note_retry(format!(
+                "`{line}`: {last}; no usable reply in {attempts} attempts, gave up"
+            ));
+        }
+        if last_was_link && self.state() != TableState::Disconnected {
+            // The returned Fault is replaced by the more precise link error.
+            let _ = self.shared.fault(err.to_string()).await;
+        }
+        Err(err)
+    }
+
+    fn note_retry(&mut self, note: String) {
+        tracing::warn!(device = %self.shared.device, "{note}");
+        self.retries.push(note);
     }
 
     /// A link failure during an exchange: the table's motion is now unknown, so the driver
@@ -337,38 +478,53 @@ impl<T: Transport + 'static> AclTable<T> {
         }
     }
 
-    async fn query_number(&self, line: &str, timeout: Duration) -> Result<f64, TableError> {
-        let reply = self.query(line, timeout).await?;
-        match reply.trim().parse::<f64>() {
+    async fn query_number(&mut self, line: &str, timeout: Duration) -> Result<f64, TableError> {
+        self.ask(line, timeout, |reply| match reply.trim().parse::<f64>() {
             Ok(v) if v.is_finite() => Ok(v),
-            _ => Err(self.reply_error(line, &reply, "not a finite decimal number")),
-        }
+            _ => Err("not a finite decimal number"),
+        })
+        .await
     }
 
-    async fn query_stb(&self, timeout: Duration) -> Result<u8, TableError> {
-        let reply = self.query("*STB?", timeout).await?;
-        reply
-            .trim()
-            .parse::<u8>()
-            .map_err(|_| self.reply_error("*STB?", &reply, "not a status byte (0..=255)"))
+    async fn query_stb(&mut self, timeout: Duration) -> Result<u8, TableError> {
+        self.ask("*STB?", timeout, |reply| {
+            reply
+                .trim()
+                .parse::<u8>()
+                .map_err(|_| "not a status byte (0..=255)")
+        })
+        .await
+    }
+
+    async fn query_mode(&mut self) -> Result<TableMode, TableError> {
+        let line = format!(":Mode? {}", self.config.axis);
+        self.ask(&line, self.config.reply_timeout, |reply| {
+            parse_mode(reply).ok_or("unknown mode")
+        })
+        .await
     }
 
     /// Reads the error queue until `0,"No error"`; returns every (code, text) read.
-    async fn drain_errors(&self) -> Result<Vec<(i32, String)>, TableError> {
+    async fn drain_errors(&mut self) -> Result<Vec<(i32, String)>, TableError> {
         let mut errors = Vec::new();
         for _ in 0..MAX_QUEUE_READS {
             let line = ":System:Error?";
-            let reply = self.query(line, self.config.reply_timeout).await?;
-            let parsed = reply.split_once(',').and_then(|(code, text)| {
-                let code = code.trim().parse::<i32>().ok()?;
-                let text = text.trim();
-                let text = text.strip_prefix('"')?.strip_suffix('"')?;
-                Some((code, text.to_string()))
-            });
-            match parsed {
-                Some((0, _)) => return Ok(errors),
-                Some(e) => errors.push(e),
-                None => return Err(self.reply_error(line, &reply, "not `<code>,\"<text>\"`")),
+            let entry = self
+                .ask(line, self.config.reply_timeout, |reply| {
+                    reply
+                        .split_once(',')
+                        .and_then(|(code, text)| {
+                            let code = code.trim().parse::<i32>().ok()?;
+                            let text = text.trim();
+                            let text = text.strip_prefix('"')?.strip_suffix('"')?;
+                            Some((code, text.to_string()))
+                        })
+                        .ok_or("not `<code>,\"<text>\"`")
+                })
+                .await?;
+            match entry {
+                (0, _) => return Ok(errors),
+                e => errors.push(e),
             }
         }
         Err(TableError::Reply {
@@ -380,7 +536,7 @@ impl<T: Transport + 'static> AclTable<T> {
     }
 
     /// Reads the queue after a command batch; the first error is returned with its text.
-    async fn check_errors(&self, after: &[String]) -> Result<(), TableError> {
+    async fn check_errors(&mut self, after: &[String]) -> Result<(), TableError> {
         let errors = self.drain_errors().await?;
         let mut errors = errors.into_iter();
         match errors.next() {
@@ -516,24 +672,25 @@ impl<T: Transport + 'static> RateTable for AclTable<T> {
                 tracing::info!(device = %self.shared.device, "cleared {dropped} stale bytes");
             }
         }
-        let reply = self.query("*IDN?", self.config.reply_timeout).await?;
-        let fields: Vec<&str> = reply.split(',').map(str::trim).collect();
-        let [manufacturer, model, serial, version] = fields[..] else {
-            return Err(self.reply_error("*IDN?", &reply, "expected 4 comma-separated fields"));
-        };
-        let identity = Identity {
-            manufacturer: manufacturer.to_string(),
-            model: model.to_string(),
-            serial: serial.to_string(),
-            version: version.to_string(),
-        };
+        let (reply, identity) = self
+            .ask("*IDN?", self.config.reply_timeout, |reply| {
+                let fields: Vec<&str> = reply.split(',').map(str::trim).collect();
+                let [manufacturer, model, serial, version] = fields[..] else {
+                    return Err("expected 4 comma-separated fields");
+                };
+                let identity = Identity {
+                    manufacturer: manufacturer.to_string(),
+                    model: model.to_string(),
+                    serial: serial.to_string(),
+                    version: version.to_string(),
+                };
+                Ok((reply.to_string(), identity))
+            })
+            .await?;
         for (code, text) in self.drain_errors().await? {
             tracing::warn!(device = %self.shared.device, "stale table error: {code},\"{text}\"");
         }
-        let line = format!(":Mode? {}", self.config.axis);
-        let reply = self.query(&line, self.config.reply_timeout).await?;
-        let mode =
-            parse_mode(&reply).ok_or_else(|| self.reply_error(&line, &reply, "unknown mode"))?;
+        let mode = self.query_mode().await?;
         {
             let mut st = self.shared.status();
             st.fault = None;
@@ -638,10 +795,7 @@ impl<T: Transport + 'static> RateTable for AclTable<T> {
     }
 
     async fn status(&mut self) -> Result<TableStatus, TableError> {
-        let line = format!(":Mode? {}", self.config.axis);
-        let reply = self.query(&line, self.config.reply_timeout).await?;
-        let mode =
-            parse_mode(&reply).ok_or_else(|| self.reply_error(&line, &reply, "unknown mode"))?;
+        let mode = self.query_mode().await?;
         let status_byte = self.query_stb(self.config.reply_timeout).await?;
         Ok(TableStatus { mode, status_byte })
     }
@@ -766,5 +920,9 @@ impl<T: Transport + 'static> RateTable for AclTable<T> {
 
     fn stop_handle(&self) -> StopHandle {
         StopHandle::new(self.shared.clone())
+    }
+
+    fn take_retries(&mut self) -> Vec<String> {
+        std::mem::take(&mut self.retries)
     }
 }

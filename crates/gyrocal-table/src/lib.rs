@@ -364,4 +364,14 @@ pub trait RateTable: Send {
 
     /// A cloneable handle that can stop the table from another task or a signal handler.
     fn stop_handle(&self) -> StopHandle;
+
+    /// Takes the notes of the queries asked again since the last call (oldest first), one
+    /// human sentence each naming the query and what went wrong, such as
+    /// "`:Read:Rate? 1`: no reply within 0.667 s; asked again (retry 1 of 2)", so the
+    /// sequencer can record them in the run manifest: a run that succeeded on a flaky link
+    /// says so. The driver also logs each at `warn` level. The default (a driver that never
+    /// retries) has none.
+    fn take_retries(&mut self) -> Vec<String> {
+        Vec::new()
+    }
 }
