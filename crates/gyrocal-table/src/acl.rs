@@ -47,8 +47,9 @@ use gyrocal_link::{ErrorKind as LinkErrorKind, LinkError, Transport, show_bytes}
 use tokio::time::Instant;
 
 use crate::{
-    Capabilities, Identity, Limits, RateAccumulator, RateStats, RateTable, SettleCriteria,
-    SettleReport, StopHandle, StopKind, StopPath, TableError, TableMode, TableState, TableStatus,
+    Capabilities, Identity, Limits, RateAccumulator, RateStats, RateTable, RestReport,
+    SettleCriteria, SettleReport, StopHandle, StopKind, StopPath, TableError, TableMode,
+    TableState, TableStatus, stop_time,
 };
 
 /// Most errors read from the queue in one go (the queue is finite; a table that keeps
@@ -67,8 +68,9 @@ pub struct AclConfig {
     /// Reply deadline of monitoring samples and heartbeats; a table silent for longer is a
     /// fault. Default 2 s.
     pub heartbeat_deadline: Duration,
-    /// |rate| below which [`RateTable::wait_stopped`] considers the table stopped, deg/s.
-    /// Default 0.01.
+    /// |rate| at or below which [`RateTable::wait_stopped`] considers the table stopped (with
+    /// the mode OFF), deg/s. Default 0.01: twenty times the simulator's readback noise, well
+    /// below any calibration rate.
     pub stop_tolerance: f64,
     /// Sampling interval of [`RateTable::wait_stopped`]. Default 100 ms.
     pub stop_poll_interval: Duration,
@@ -237,6 +239,8 @@ pub struct AclTable<T> {
     config: AclConfig,
     demand: f64,
     ramp: Option<Ramp>,
+    /// The acceleration limit last sent, deg/s²: a controlled stop decelerates with it.
+    acceleration: Option<f64>,
     recorder: Option<RateAccumulator>,
     /// Retry notes not yet taken by [`RateTable::take_retries`].
     retries: Vec<String>,
@@ -316,6 +320,7 @@ impl<T: Transport + 'static> AclTable<T> {
             config,
             demand: 0.0,
             ramp: None,
+            acceleration: None,
             recorder: None,
             retries: Vec::new(),
         }
@@ -769,6 +774,7 @@ impl<T: Transport + 'static> RateTable for AclTable<T> {
         ));
         lines.push(format!(":Demand:Rate {axis},{}", Self::num(rate)));
         let start = Instant::now();
+        self.acceleration = Some(acceleration);
         self.commands(&lines).await?;
         self.shared.status().rate_mode = true;
         self.check_errors(&lines).await?;
@@ -895,11 +901,35 @@ impl<T: Transport + 'static> RateTable for AclTable<T> {
         self.shared.stop(StopKind::Emergency).await
     }
 
-    async fn wait_stopped(&mut self, timeout: Duration) -> Result<(), TableError> {
-        let deadline = Instant::now() + timeout;
+    async fn wait_stopped(&mut self, timeout: Duration) -> Result<RestReport, TableError> {
+        let start = Instant::now();
+        let deadline = start + timeout;
+        let mut last: (Option<f64>, Option<TableMode>) = (None, None);
+        let seen = |last: &(Option<f64>, Option<TableMode>)| match last {
+            (None, _) => "no rate measured yet".to_string(),
+            (Some(rate), None) => format!("last measured {rate} deg/s, mode not read"),
+            (Some(rate), Some(mode)) => format!("last measured {rate} deg/s in mode {mode}"),
+        };
         loop {
-            let rate = self.read_rate().await?;
-            if rate.abs() <= self.config.stop_tolerance {
+            let rate = match self.read_rate().await {
+                Ok(rate) => rate,
+                Err(e) => {
+                    let reason =
+                        format!("could not confirm the table at rest ({}): {e}", seen(&last));
+                    return Err(self.shared.fault(reason).await);
+                }
+            };
+            last = (Some(rate), None);
+            let mode = match self.query_mode().await {
+                Ok(mode) => mode,
+                Err(e) => {
+                    let reason =
+                        format!("could not confirm the table at rest ({}): {e}", seen(&last));
+                    return Err(self.shared.fault(reason).await);
+                }
+            };
+            last = (Some(rate), Some(mode));
+            if rate.abs() <= self.config.stop_tolerance && mode == TableMode::Off {
                 let mut st = self.shared.status();
                 if st.state != TableState::Faulted {
                     st.state = if st.interlock_closed {
@@ -908,14 +938,35 @@ impl<T: Transport + 'static> RateTable for AclTable<T> {
                         TableState::Connected
                     };
                 }
-                return Ok(());
+                return Ok(RestReport {
+                    rate_dps: rate,
+                    mode,
+                    waited: start.elapsed(),
+                });
             }
             if Instant::now() >= deadline {
-                let reason = format!("table still turning at {rate} deg/s {timeout:?} after stop");
+                let reason = format!(
+                    "table not at rest {timeout:?} after the stop: {} (rest is |rate| <= {} \
+                     deg/s in mode OFF)",
+                    seen(&last),
+                    self.config.stop_tolerance
+                );
                 return Err(self.shared.fault(reason).await);
             }
             tokio::time::sleep(self.config.stop_poll_interval).await;
         }
+    }
+
+    /// `|from_rate|/a · 1.5 + 5 s` ([`stop_time`]) with `a` the acceleration limit last sent
+    /// (which `:Mode:Off` decelerates with; a gentler ramp than the client maximum makes a
+    /// slower stop), else the client-side maximum. An emergency stop decelerates at the
+    /// table's own maximum, faster: the bound holds for it too.
+    fn stop_deadline(&self, from_rate: f64) -> Duration {
+        let a = self
+            .acceleration
+            .unwrap_or(self.config.limits.max_acceleration)
+            .min(self.config.limits.max_acceleration);
+        stop_time(from_rate, a)
     }
 
     fn stop_handle(&self) -> StopHandle {

@@ -124,6 +124,17 @@ pub enum TableMode {
     Abort,
 }
 
+impl fmt::Display for TableMode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            TableMode::Off => "OFF",
+            TableMode::Rate => "RATE",
+            TableMode::Position => "POSITION",
+            TableMode::Abort => "ABORT",
+        })
+    }
+}
+
 /// The table's identity, from `*IDN?`.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Identity {
@@ -242,6 +253,38 @@ pub struct SettleReport {
     pub window: RateStats,
 }
 
+/// What [`RateTable::wait_stopped`] saw when it confirmed the table at rest.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RestReport {
+    /// The measured rate that confirmed rest, deg/s (within the driver's stop tolerance).
+    pub rate_dps: f64,
+    /// The controller's mode at that moment ([`TableMode::Off`]: zero-rate hold, or servo off
+    /// after an emergency stop or an interlock opening).
+    pub mode: TableMode,
+    /// How long the wait took.
+    pub waited: Duration,
+}
+
+/// Margin added by [`RateTable::stop_deadline`] for reply latency, polling and settling at
+/// zero.
+pub const STOP_MARGIN: Duration = Duration::from_secs(5);
+
+/// Factor on the deceleration time in [`RateTable::stop_deadline`]: a jerk-limited S-curve
+/// stop takes longer than `|rate|/a`.
+pub const STOP_TIME_FACTOR: f64 = 1.5;
+
+/// `|rate|/acceleration · STOP_TIME_FACTOR + STOP_MARGIN`, for [`RateTable::stop_deadline`].
+/// A rate or acceleration that is not a usable number (NaN, infinite, an acceleration ≤ 0)
+/// gives no finite bound: then an hour, long enough that a caller's wait is not cut short by
+/// arithmetic, and still a bound.
+pub fn stop_time(from_rate: f64, acceleration: f64) -> Duration {
+    let secs = from_rate.abs() / acceleration * STOP_TIME_FACTOR;
+    match Duration::try_from_secs_f64(secs) {
+        Ok(d) if acceleration > 0.0 => d.saturating_add(STOP_MARGIN),
+        _ => Duration::from_secs(3600),
+    }
+}
+
 /// A rate table, whatever its dialect. Methods take `&mut self`: one task owns the driver; other
 /// tasks stop the table through a [`StopHandle`].
 ///
@@ -356,11 +399,34 @@ pub trait RateTable: Send {
     /// Always sends, whatever the state.
     fn emergency_stop(&mut self) -> impl Future<Output = Result<(), TableError>> + Send;
 
-    /// After a stop, waits until the measured rate is near zero (a fault after `timeout`).
+    /// After a stop, waits until the table is at rest and says what it saw. At rest means both
+    /// the measured |rate| within the driver's stop tolerance and the controller in
+    /// [`TableMode::Off`] (zero-rate hold, or servo off after an emergency stop or an interlock
+    /// opening, once the abort profile is done): a rate that merely passes through zero in
+    /// RATE mode, or a table held in POSITION mode, is not rest, and neither is an ABORT
+    /// profile still running.
+    ///
+    /// Not at rest within `timeout` is a [`TableErrorKind::Fault`] naming the last measured
+    /// rate and mode; so is a table that stops answering while it is waited for (the run must
+    /// not assume a table it cannot see has stopped). Bound `timeout` with
+    /// [`RateTable::stop_deadline`].
     fn wait_stopped(
         &mut self,
         timeout: Duration,
-    ) -> impl Future<Output = Result<(), TableError>> + Send;
+    ) -> impl Future<Output = Result<RestReport, TableError>> + Send;
+
+    /// How long a stop from `from_rate` (deg/s) may take before its absence is a fault: the
+    /// `timeout` to give [`RateTable::wait_stopped`].
+    ///
+    /// The default is `|from_rate|/max_acceleration · 1.5 + 5 s` ([`stop_time`]) with the
+    /// client-side acceleration limit of [`RateTable::capabilities`]: a controlled stop
+    /// decelerates at most at the table's acceleration limit, so it takes at least
+    /// `|rate|/a`; the factor covers a jerk-limited S-curve, the 5 s reply latency, polling
+    /// and settling at zero. A driver that knows a gentler limit is in force (ACL: the last
+    /// `:Limit:Acceleration` sent, which `:Mode:Off` also uses) overrides this.
+    fn stop_deadline(&self, from_rate: f64) -> Duration {
+        stop_time(from_rate, self.capabilities().max_acceleration)
+    }
 
     /// A cloneable handle that can stop the table from another task or a signal handler.
     fn stop_handle(&self) -> StopHandle;
