@@ -37,6 +37,14 @@
 //! Every retry is logged (`tracing::warn!`) and kept as a sentence for the run manifest
 //! ([`RateTable::take_retries`]). A `:System:Error?` whose reply was lost or garbled has already
 //! removed its entry from the table's queue: the note says that a table error may be missing.
+//!
+//! A limit of an untagged line protocol: a reply that comes *later* than its attempt's timeout
+//! but after the input was cleared is taken as the answer to the retry (the same question, so
+//! the same kind of answer). The retry's own reply then comes extra: the next query clears the
+//! input first after any retry, but a reply still in flight then is read in its place. Replies
+//! of the status queries (`*STB?`, `:Mode?`, `:System:Error?`) do not parse as each other, so
+//! such a mix-up is caught and retried; two numeric reads in a row (rate, then position) cannot
+//! be told apart. The simulator's `table:drop` loses replies for good, as a framing error does.
 
 use std::future::Future;
 use std::pin::Pin;
@@ -63,10 +71,12 @@ pub struct AclConfig {
     pub limits: Limits,
     /// The axis driven. Default 1.
     pub axis: u8,
-    /// Reply timeout of ordinary queries. Default 1 s.
+    /// Reply timeout of ordinary queries, retries included (each attempt gets a share).
+    /// Default 1 s.
     pub reply_timeout: Duration,
     /// Reply deadline of monitoring samples and heartbeats; a table silent for longer is a
-    /// fault. Default 2 s.
+    /// fault. Default 2 s. It bounds each query of a sample with its retries: a table that
+    /// goes silent fails the sample at most this long after its unanswered query was sent.
     pub heartbeat_deadline: Duration,
     /// |rate| at or below which [`RateTable::wait_stopped`] considers the table stopped (with
     /// the mode OFF), deg/s. Default 0.01: twenty times the simulator's readback noise, well
@@ -406,7 +416,14 @@ impl<T: Transport + 'static> AclTable<T> {
             let budget = deadline.saturating_duration_since(Instant::now()) / left;
             let miss = match self.exchange(line, budget).await {
                 Ok(reply) => match parse(&reply) {
-                    Ok(v) => return Ok(v),
+                    Ok(v) => {
+                        if attempt > 1 {
+                            // a late reply to an earlier attempt may have been taken for this
+                            // one; then this attempt's reply is still to come: clear it first
+                            self.shared.link.lock().await.dirty = true;
+                        }
+                        return Ok(v);
+                    }
                     Err(reason) => Miss::Reply { reply, reason },
                 },
                 Err(e) if retryable(&e) => Miss::Link(e),

@@ -30,7 +30,16 @@
 //!   tasks, with a [`StopGuard`] that stops the table if a scope unwinds;
 //! - **treats silence as a fault**: every sample is also a heartbeat with a deadline, and
 //!   [`RateTable::heartbeat`] polls an idle table; a table that stops answering moves the driver
-//!   to [`TableState::Faulted`] after a best-effort controlled stop.
+//!   to [`TableState::Faulted`] after a best-effort controlled stop;
+//! - **rides out a flaky link without hiding it**: a query whose reply is lost, garbled or
+//!   prefixed by line noise is asked again (queries only read state; commands are never
+//!   repeated), within the same deadline, so a silent table is still a fault in time; every
+//!   retry is logged and handed to the sequencer for the run manifest
+//!   ([`RateTable::take_retries`]);
+//! - **means rest when it says rest**: [`RateTable::wait_stopped`] returns only when the
+//!   measured rate is near zero *and* the controller is in OFF mode (a rate passing through zero
+//!   while reversing is not rest), bounded by [`RateTable::stop_deadline`], and reports what it
+//!   saw ([`RestReport`]).
 //!
 //! The multimeter is on another port, so the sequencer polls the table concurrently with an
 //! acquisition: `table.record_while(interval, dmm.read(500))` runs both in one task.
@@ -327,7 +336,8 @@ pub trait RateTable: Send {
 
     /// One monitored sample: the measured rate and a status check with the heartbeat deadline.
     /// A latched fault becomes a [`TableErrorKind::Fault`] with the table's text. The rate is
-    /// recorded when recording is on.
+    /// recorded when recording is on. A driver that retries lost replies does so inside the
+    /// deadline: a table that went silent fails the sample within it, retries or not.
     fn sample(&mut self) -> impl Future<Output = Result<f64, TableError>> + Send;
 
     /// Waits until the table is at the demanded rate (see [`SettleCriteria`]); the samples are
