@@ -397,9 +397,9 @@ impl<T: Transport + 'static> AclTable<T> {
 
     /// Asks the idempotent query `line` until `parse` accepts the reply, at most
     /// `1 + retries` times within `timeout` in total (see the module documentation). A dead link
-    /// faults the driver at once; a lost or garbled reply only when no attempt succeeded; an
-    /// unusable reply returns a [`TableError::Reply`] without faulting (as a single bad reply
-    /// always did).
+    /// faults the driver at once; a lost or garbled reply only when no attempt succeeded; when
+    /// every attempt got a line that does not parse, a [`TableError::Reply`] is returned
+    /// without faulting (as a single bad reply always was).
     async fn ask<R>(
         &mut self,
         line: &str,
@@ -410,7 +410,7 @@ impl<T: Transport + 'static> AclTable<T> {
         let deadline = Instant::now() + timeout;
         let mut first: Option<Miss> = None;
         let mut last = String::new();
-        let mut last_was_link = false;
+        let mut link_missed = false;
         for attempt in 1..=attempts {
             let left = attempts - attempt + 1;
             let budget = deadline.saturating_duration_since(Instant::now()) / left;
@@ -430,7 +430,7 @@ impl<T: Transport + 'static> AclTable<T> {
                 Err(e) => return Err(self.lost(line, e).await),
             };
             last = miss.describe();
-            last_was_link = matches!(miss, Miss::Link(_));
+            link_missed |= matches!(miss, Miss::Link(_));
             if attempt < attempts {
                 let mut note = format!(
                     "`{line}`: {last}; asked again (retry {attempt} of {})",
@@ -468,7 +468,9 @@ impl<T: Transport + 'static> AclTable<T> {
                 "`{line}`: {last}; no usable reply in {attempts} attempts, gave up"
             ));
         }
-        if last_was_link && self.state() != TableState::Disconnected {
+        // A link that lost or mangled a reply and never gave a usable one cannot be trusted
+        // with the table's motion: fault, as a single lost reply did before retries.
+        if link_missed && self.state() != TableState::Disconnected {
             // The returned Fault is replaced by the more precise link error.
             let _ = self.shared.fault(err.to_string()).await;
         }

@@ -313,3 +313,26 @@ async fn table_stop_handle_is_idempotent_and_works_from_another_task() {
     tokio::time::sleep(Duration::from_millis(10)).await;
     handle.guard().disarm();
 }
+
+#[tokio::test]
+async fn table_lost_then_unusable_replies_fault_the_driver() {
+    let script = connected(ScriptedTransport::new("table"))
+        .expect_line(":Read:Rate? 1")
+        .silence()
+        .query(":Read:Rate? 1", "x")
+        .query(":Read:Rate? 1", "y")
+        // a link that lost a reply and never gave a usable one: fault and stop
+        .expect_line(":Mode:Off 1");
+    let mut table = AclTable::new(script, AclConfig::default());
+    table.connect().await.unwrap();
+    let err = table.read_rate().await.unwrap_err();
+    assert_eq!(err.kind(), TableErrorKind::Timeout, "the first miss: {err}");
+    assert_eq!(table.state(), TableState::Faulted);
+    let notes = table.take_retries();
+    assert_eq!(notes.len(), 3, "{notes:#?}");
+    assert!(notes[1].contains("unusable reply \"x\""), "{notes:#?}");
+    assert!(
+        notes[2].contains("unusable reply \"y\"") && notes[2].ends_with("gave up"),
+        "{notes:#?}"
+    );
+}
