@@ -4,13 +4,14 @@
 //! spec    = device ":" action "@" trigger [ "x" count ]
 //! device  = "dmm" | "table"
 //! action  = dmm:   "timeout" | "garble" | "truncate" | "overload" | "disconnect"
-//!           table: "trip" | "fault" | "silent"
+//!           table: "trip" | "fault" | "silent" | "interlock" | "drop" | "garble" | "noise"
 //! trigger = "reading" N        the N-th reading the meter takes (N >= 1)
 //!         | "demand" N         the N-th `:Demand:Rate` the table sees (N >= 1)
 //!         | "t=" S ["s"]       S sim seconds after the bench started (S >= 0)
 //! count   = N >= 1, default 1: for overload the number of overload readings, for timeout,
-//!           garble and truncate the number of consecutive replies (readings) hit; not
-//!           allowed for disconnect and the table's actions
+//!           garble and truncate the number of consecutive replies (readings) hit; for the
+//!           table's drop, garble and noise the number of consecutive query replies hit; not
+//!           allowed for disconnect and the other table actions
 //! ```
 //!
 //! Examples: `dmm:timeout@reading100` (the reply carrying reading 100 never comes),
@@ -18,21 +19,34 @@
 //! `dmm:disconnect@reading300` (the meter drops its link for good instead of taking reading
 //! 300), `table:trip@demand4` (a rate trip latched halfway through the 4th demand's ramp),
 //! `table:fault@t=12s`, `table:silent@demand3` (the table ignores the 3rd demand and everything
-//! after it).
+//! after it), `table:interlock@demand2` (the door opens halfway through the 2nd demand's ramp),
+//! `table:drop@t=5s` (the next reply the table sends after 5 s is lost),
+//! `table:garble@demand3x2`, `table:noise@reading40`.
 //!
 //! What the actions do: `timeout` loses a reply (the meter says nothing), `garble` replaces a
 //! digit of a reply by `#`, `truncate` cuts a reply halfway without its terminator, `overload`
 //! makes readings ±9.9E37, `disconnect` closes the meter's end of its link and stops it; `trip`
 //! latches a rate trip (error 210), `fault` an injected fault (error 220), `silent` makes the
-//! table stop answering and executing anything (it keeps turning as it was).
+//! table stop answering and executing anything (it keeps turning as it was); `interlock` opens
+//! the interlock as a door or a hardware interlock would (abort profile to zero, servo off,
+//! mode ABORT then OFF, bit 0 of `*STB?` set, error 201 `"Interlock open"` queued, latched until
+//! `:Interlock:Reset`); the table's link faults hit the next query replies, after the query was
+//! executed: `drop` sends no reply line, `garble` replaces one character (the first digit, else
+//! the first character) by `#`, `noise` writes the byte 0xFF just before the reply (a glitch on
+//! a serial line; the reply then reads with a junk prefix and is not valid text). Commands have
+//! no reply and never use up a link fault. These are the faults a driver must retry (ask again)
+//! rather than give up on, so they do not end a run that retries.
 //!
 //! How they fire: a meter action on a `reading` trigger and a table action on a `demand`
 //! trigger are armed on the instrument itself and fire exactly there
 //! ([`crate::dmm::DmmHandle::inject_at_reading`], [`crate::table::TableHandle::arm_at_demand`]).
 //! Time triggers and the crossed ones (a meter action at a table demand, a table action at a
 //! meter reading) fire from a supervisor task within a few milliseconds of their moment: a
-//! meter action then hits the next reply (or the next readings), a table trip or fault latches
-//! at once, whatever the rate.
+//! meter action then hits the next reply (or the next readings), a table trip, fault or
+//! interlock opening latches at once, whatever the rate, and a table link fault hits the next
+//! replies. At `demandN` a table trip, fault or interlock opening latches halfway through that
+//! demand's ramp, and a link fault hits the replies that follow the demand (typically the
+//! driver's error-queue check).
 
 use std::fmt;
 use std::str::FromStr;
@@ -43,7 +57,7 @@ use tokio::time::Instant;
 
 use crate::bench::BenchHandle;
 use crate::dmm::Fault;
-use crate::table::DemandFault;
+use crate::table::{DemandFault, ReplyFault};
 
 /// The grammar, for command-line help.
 pub const GRAMMAR: &str = "\
@@ -52,13 +66,18 @@ SPEC = DEVICE:ACTION@TRIGGER[xCOUNT]
                  truncate (a reply stops halfway), overload (readings are +-9.9E37),
                  disconnect (the meter closes its link and is gone for good)
   table actions: trip (rate trip, error 210), fault (injected fault, error 220),
-                 silent (the table answers and executes nothing more)
+                 silent (the table answers and executes nothing more),
+                 interlock (the interlock opens: abort to zero, servo off, error 201),
+                 drop (a query reply is lost), garble (a character of a reply
+                 becomes #), noise (a 0xFF byte comes just before a reply)
   triggers:      readingN (the N-th reading the meter takes), demandN (the N-th
                  :Demand:Rate the table sees), t=Ss (S sim seconds after start)
   xCOUNT:        overload: that many readings; timeout/garble/truncate: that many
-                 consecutive replies (readings)
+                 consecutive replies (readings); table drop/garble/noise: that many
+                 consecutive query replies
   examples: dmm:garble@reading100  dmm:overload@reading50x5  dmm:disconnect@reading300
-            table:trip@demand4  table:fault@t=12s  table:silent@demand3";
+            table:trip@demand4  table:fault@t=12s  table:silent@demand3
+            table:interlock@demand2  table:drop@t=5s  table:garble@demand3x2";
 
 /// What a fault does.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -79,6 +98,14 @@ pub enum FaultAction {
     TableFault,
     /// The table stops answering and executing.
     TableSilent,
+    /// The table's interlock opens (door, hardware interlock).
+    TableInterlock,
+    /// Table query replies are lost.
+    TableDrop,
+    /// A character of table query replies becomes `#`.
+    TableGarble,
+    /// A noise byte (0xFF) comes just before table query replies.
+    TableNoise,
 }
 
 impl FaultAction {
@@ -93,6 +120,10 @@ impl FaultAction {
             FaultAction::TableTrip => "table:trip",
             FaultAction::TableFault => "table:fault",
             FaultAction::TableSilent => "table:silent",
+            FaultAction::TableInterlock => "table:interlock",
+            FaultAction::TableDrop => "table:drop",
+            FaultAction::TableGarble => "table:garble",
+            FaultAction::TableNoise => "table:noise",
         }
     }
 
@@ -103,6 +134,9 @@ impl FaultAction {
                 | FaultAction::DmmGarble
                 | FaultAction::DmmTruncate
                 | FaultAction::DmmOverload
+                | FaultAction::TableDrop
+                | FaultAction::TableGarble
+                | FaultAction::TableNoise
         )
     }
 
@@ -123,12 +157,23 @@ impl FaultAction {
         vec![one; usize::try_from(count).unwrap_or(1)]
     }
 
-    fn demand_fault(self) -> Option<DemandFault> {
+    /// The reply fault of a table link action.
+    fn reply_fault(self) -> Option<ReplyFault> {
+        match self {
+            FaultAction::TableDrop => Some(ReplyFault::Drop),
+            FaultAction::TableGarble => Some(ReplyFault::Garble),
+            FaultAction::TableNoise => Some(ReplyFault::Noise),
+            _ => None,
+        }
+    }
+
+    fn demand_fault(self, count: u32) -> Option<DemandFault> {
         match self {
             FaultAction::TableTrip => Some(DemandFault::Trip),
             FaultAction::TableFault => Some(DemandFault::Fault),
             FaultAction::TableSilent => Some(DemandFault::Silent),
-            _ => None,
+            FaultAction::TableInterlock => Some(DemandFault::Interlock),
+            a => a.reply_fault().map(|f| DemandFault::Reply(f, count)),
         }
     }
 }
@@ -213,10 +258,14 @@ impl FromStr for FaultSpec {
             "table:trip" => FaultAction::TableTrip,
             "table:fault" => FaultAction::TableFault,
             "table:silent" => FaultAction::TableSilent,
+            "table:interlock" => FaultAction::TableInterlock,
+            "table:drop" => FaultAction::TableDrop,
+            "table:garble" => FaultAction::TableGarble,
+            "table:noise" => FaultAction::TableNoise,
             other => {
                 return Err(err(format!(
                     "unknown action `{other}` (dmm: timeout, garble, truncate, overload, \
-                     disconnect; table: trip, fault, silent)"
+                     disconnect; table: trip, fault, silent, interlock, drop, garble, noise)"
                 )));
             }
         };
@@ -349,7 +398,7 @@ pub fn schedule(specs: &[FaultSpec], bench: &BenchHandle, time_scale: f64) -> Fa
                 }
             }
             (Trigger::Demand(n), false) => {
-                if let Some(f) = s.action.demand_fault() {
+                if let Some(f) = s.action.demand_fault(s.count) {
                     bench.table.arm_at_demand(n, f);
                 }
             }
@@ -380,7 +429,11 @@ pub fn schedule(specs: &[FaultSpec], bench: &BenchHandle, time_scale: f64) -> Fa
                         FaultAction::TableTrip => table.trip(),
                         FaultAction::TableFault => table.inject_fault(&message),
                         FaultAction::TableSilent => table.set_silent(true),
+                        FaultAction::TableInterlock => table.open_interlock(),
                         a => {
+                            if let Some(f) = a.reply_fault() {
+                                table.inject_reply_faults(f, s.count);
+                            }
                             for f in a.dmm_faults(s.count) {
                                 dmm_faults.inject(f);
                             }
@@ -442,5 +495,130 @@ mod tests {
             assert_eq!(e.spec, bad);
             assert!(e.to_string().contains(&format!("`{bad}`")), "{e}");
         }
+    }
+
+    #[test]
+    fn table_link_and_interlock_specs() {
+        for (text, action, trigger, count) in [
+            (
+                "table:interlock@demand2",
+                FaultAction::TableInterlock,
+                Trigger::Demand(2),
+                1,
+            ),
+            (
+                "table:interlock@t=3s",
+                FaultAction::TableInterlock,
+                Trigger::Time(3.0),
+                1,
+            ),
+            (
+                "table:drop@reading40",
+                FaultAction::TableDrop,
+                Trigger::Reading(40),
+                1,
+            ),
+            (
+                "table:drop@t=5sx3",
+                FaultAction::TableDrop,
+                Trigger::Time(5.0),
+                3,
+            ),
+            (
+                "table:garble@demand3x2",
+                FaultAction::TableGarble,
+                Trigger::Demand(3),
+                2,
+            ),
+            (
+                "TABLE:NOISE@demand1",
+                FaultAction::TableNoise,
+                Trigger::Demand(1),
+                1,
+            ),
+        ] {
+            let s: FaultSpec = text.parse().unwrap();
+            assert_eq!(
+                (s.action, s.trigger, s.count),
+                (action, trigger, count),
+                "{text}"
+            );
+            // the canonical form parses back to the same spec
+            assert_eq!(s.to_string().parse::<FaultSpec>().unwrap(), s);
+        }
+        assert_eq!(
+            "table:garble@demand3x2"
+                .parse::<FaultSpec>()
+                .unwrap()
+                .to_string(),
+            "table:garble@demand3x2"
+        );
+        for (bad, names) in [
+            (
+                "table:interlock@demand2x2",
+                "table:interlock takes no count",
+            ),
+            (
+                "table:drop@demand0",
+                "the demand number must be a whole number >= 1",
+            ),
+            (
+                "table:noise@demand1x0",
+                "the count must be a whole number >= 1",
+            ),
+            (
+                "table:garble@demand1x200000",
+                "count 200000 is above 100000",
+            ),
+            ("table:jam@demand1", "unknown action `table:jam`"),
+            ("table:drop", "expected DEVICE:ACTION@TRIGGER"),
+            ("table:drop@step2", "unknown trigger `step2`"),
+        ] {
+            let e = bad.parse::<FaultSpec>().unwrap_err();
+            let msg = e.to_string();
+            assert!(msg.contains(&format!("`{bad}`")), "{msg}");
+            assert!(msg.contains(names), "{bad}: {msg}");
+        }
+        // the help lists every table action
+        for a in ["interlock", "drop", "garble", "noise"] {
+            assert!(GRAMMAR.contains(a), "{a}");
+        }
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn table_faults_fire_from_the_schedule() {
+        use crate::bench::{Bench, BenchConfig};
+        use crate::table::SimMode;
+        use gyrocal_link::Transport;
+
+        let mut bench = Bench::spawn(BenchConfig::default());
+        let specs: Vec<FaultSpec> = ["table:drop@t=1sx2", "table:interlock@t=2s"]
+            .iter()
+            .map(|s| s.parse().unwrap())
+            .collect();
+        let mut schedule = schedule(&specs, &bench.handle, 1.0);
+        let link = &mut bench.table;
+        for c in [":Interlock:Close 1", ":Mode:Rate 1"] {
+            link.send_line(c).await.unwrap();
+        }
+        let t = Some(Duration::from_millis(100));
+        link.send_line("*STB?").await.unwrap();
+        assert_eq!(link.read_line(t).await.unwrap(), "0");
+        tokio::time::sleep(Duration::from_millis(1100)).await;
+        let status = schedule.status(&bench.handle);
+        assert!(status[0].fired && !status[1].fired, "{status:?}");
+        for q in ["*STB?", ":Mode? 1"] {
+            link.send_line(q).await.unwrap();
+            assert!(link.read_line(t).await.is_err(), "{q} answered");
+        }
+        link.send_line(":Mode? 1").await.unwrap();
+        assert_eq!(link.read_line(t).await.unwrap(), "RATE");
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        assert!(schedule.status(&bench.handle).iter().all(|s| s.fired));
+        assert!(!bench.handle.table.interlock_closed());
+        assert_eq!(bench.handle.table.mode(), SimMode::Off);
+        link.send_line(":System:Error?").await.unwrap();
+        assert_eq!(link.read_line(t).await.unwrap(), "201,\"Interlock open\"");
+        schedule.stop();
     }
 }

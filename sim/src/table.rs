@@ -9,12 +9,15 @@
 //! fault injected at a rate) are found analytically too, at the instant they happen.
 //!
 //! What it models: interlock reset/close/open with an abort profile, latched faults (rate trip,
-//! injected fault, a table that stops answering), RATE and OFF modes with the acceleration and
+//! injected fault, a hardware interlock that opens, a table that stops answering), a flaky link
+//! (lost, garbled and noise-prefixed replies, see [`ReplyFault`]), RATE and OFF modes with the acceleration and
 //! rate limits of RATE mode (an acceleration limit of 0 refuses demands, as on the real table),
 //! the error queue and `*STB?`, rate noise on the readback and a once-per-revolution ripple on
 //! the actual rate, position integrating the rate and wrapping at 360°.
 
 mod profile;
+#[cfg(test)]
+mod tests;
 
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -31,6 +34,11 @@ use profile::Segment;
 
 /// Longest error queue; further errors replace the last one with `-350,"Queue overflow"`.
 const QUEUE_LEN: usize = 16;
+
+/// The error of an interlock that opened by itself (door, hardware interlock): the code and
+/// text the manual gives for a demand refused with the interlock open, so one entry means
+/// "the interlock is open" whatever opened it.
+pub const INTERLOCK_OPEN: (i32, &str) = (201, "Interlock open");
 
 /// Amplitude (deg/s) and period (s) of the wobble of a table told never to settle.
 const NEVER_SETTLE_WOBBLE: (f64, f64) = (0.5, 2.0);
@@ -124,6 +132,62 @@ pub enum DemandFault {
     /// From that demand on (itself included) the table executes and answers nothing: it keeps
     /// doing what it did before.
     Silent,
+    /// The interlock opens (a door or a hardware interlock) halfway through that demand's ramp
+    /// (at once if the demand starts no ramp): see [`TableHandle::open_interlock`].
+    Interlock,
+    /// The next `n` query replies after that demand are hit by a [`ReplyFault`] (the demand
+    /// itself is executed normally; it has no reply).
+    Reply(ReplyFault, u32),
+}
+
+/// What happens to one query reply on a flaky link (see [`TableHandle::inject_reply_faults`]).
+/// The query is always executed (an error-queue entry read by a lost `:System:Error?` reply is
+/// gone); only the bytes on the wire differ.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ReplyFault {
+    /// No reply line is sent at all.
+    Drop,
+    /// One character of the reply becomes `#` (the first digit, or the first character of a
+    /// reply without digits), so a number, a status byte, a mode or an error entry no longer
+    /// parses. An `*IDN?` reply stays four comma-separated fields: no parser can tell.
+    Garble,
+    /// A noise byte, [`NOISE_BYTE`] (0xFF, what a serial receiver typically delivers for a
+    /// glitch on an idle line), is written just before the reply, so the reply line reads with
+    /// a junk prefix and is not valid text.
+    Noise,
+}
+
+/// The byte a [`ReplyFault::Noise`] puts before a reply.
+pub const NOISE_BYTE: u8 = 0xFF;
+
+/// Applies `fault` to `reply` (without its terminator); the bytes to write, LF included.
+fn faulty_reply(reply: &str, fault: Option<ReplyFault>) -> Vec<u8> {
+    let mut bytes = Vec::with_capacity(reply.len() + 2);
+    match fault {
+        None => bytes.extend_from_slice(reply.as_bytes()),
+        Some(ReplyFault::Drop) => return bytes,
+        Some(ReplyFault::Garble) => {
+            let at = reply.chars().position(|c| c.is_ascii_digit()).unwrap_or(0);
+            let garbled: String = reply
+                .chars()
+                .enumerate()
+                .map(|(i, c)| if i == at { '#' } else { c })
+                .collect();
+            let garbled = if garbled.is_empty() {
+                "#".into()
+            } else {
+                garbled
+            };
+            bytes.extend_from_slice(garbled.as_bytes());
+        }
+        Some(ReplyFault::Noise) => {
+            bytes.push(NOISE_BYTE);
+            bytes.extend_from_slice(reply.as_bytes());
+        }
+    }
+    bytes.push(b'\n');
+    bytes
 }
 
 /// The table's mode, as `:Mode? 1` reports it.
@@ -165,6 +229,10 @@ struct State {
     inject_after: Option<f64>,
     /// Sim time of an armed rate trip (error 210).
     trip_after: Option<f64>,
+    /// Sim time of an armed interlock opening (error 201).
+    interlock_after: Option<f64>,
+    /// Faults for the next query replies, in order.
+    reply_faults: VecDeque<ReplyFault>,
     /// `:Demand:Rate` commands seen (refused ones included).
     demands_seen: u64,
     /// Faults armed for a demand number.
@@ -276,6 +344,10 @@ impl State {
                 220,
                 &|_| message.clone(),
             );
+            let armed_interlock = self.interlock_after.map(|a| a.max(seg.t0));
+            consider(armed_interlock, INTERLOCK_OPEN.0, &|_| {
+                INTERLOCK_OPEN.1.into()
+            });
             let armed_trip = self.trip_after.map(|a| a.max(seg.t0));
             consider(armed_trip, 210, &|w| {
                 format!("Rate trip: {:.3} deg/s (armed trip)", seg.rate(w).abs())
@@ -305,6 +377,9 @@ impl State {
             }
             if code == 210 && armed_trip == Some(when) {
                 self.trip_after = None;
+            }
+            if code == INTERLOCK_OPEN.0 {
+                self.interlock_after = None;
             }
             self.latch(when, code, text);
         }
@@ -380,6 +455,8 @@ impl TableHandle {
                 inject_at_rate: faults.inject_at_rate,
                 inject_after: faults.inject_after,
                 trip_after: None,
+                interlock_after: None,
+                reply_faults: VecDeque::new(),
                 demands_seen: 0,
                 on_demand: Vec::new(),
                 rng: StdRng::seed_from_u64(seed),
@@ -475,6 +552,33 @@ impl TableHandle {
         st.latch(t, 210, format!("Rate trip: {rate:.3} deg/s (forced)"));
     }
 
+    /// Opens the interlock now, as a door switch or a hardware interlock does: the axis aborts
+    /// (abort profile to zero at the table's maximum acceleration, mode ABORT, then servo off
+    /// and mode OFF), the interlock-event bit (bit 0 of `*STB?`) is set, error
+    /// [`INTERLOCK_OPEN`] (`201,"Interlock open"`) is queued, and the event latches: the axis
+    /// needs `:Interlock:Reset` before `:Interlock:Close`. Nothing happens if the interlock is
+    /// already open (no servo to stop).
+    pub fn open_interlock(&self) {
+        let (mut st, t) = self.at(Instant::now());
+        if st.interlock_closed {
+            let (code, text) = INTERLOCK_OPEN;
+            st.latch(t, code, text.into());
+        }
+    }
+
+    /// The next `count` query replies are hit by `fault` (after any already pending).
+    pub fn inject_reply_faults(&self, fault: ReplyFault, count: u32) {
+        let mut st = self.lock();
+        for _ in 0..count {
+            st.reply_faults.push_back(fault);
+        }
+    }
+
+    /// Reply faults injected and not yet applied.
+    pub fn pending_reply_faults(&self) -> usize {
+        self.lock().reply_faults.len()
+    }
+
     /// Arms an injected fault at |rate| ≥ `rate` (latched at the exact instant, mid-ramp).
     pub fn inject_fault_at_rate(&self, rate: f64) {
         self.at(Instant::now()).0.inject_at_rate = Some(rate);
@@ -542,10 +646,19 @@ impl TableHandle {
             let text = String::from_utf8_lossy(&line);
             let text = text.trim_end_matches(['\n', '\r']);
             let replies = self.execute(text, Instant::now());
-            for r in replies {
-                if write.write_all(format!("{r}\n").as_bytes()).await.is_err() {
-                    return;
+            let mut bytes = Vec::new();
+            {
+                let mut st = self.lock();
+                for r in &replies {
+                    let fault = st.reply_faults.pop_front();
+                    if let Some(f) = fault {
+                        tracing::info!("sim table reply fault {f:?} on {r:?}");
+                    }
+                    bytes.extend(faulty_reply(r, fault));
                 }
+            }
+            if write.write_all(&bytes).await.is_err() {
+                return;
             }
             if write.flush().await.is_err() {
                 return;
@@ -787,6 +900,12 @@ fn command(st: &mut State, t: f64, nodes: &[String], query: bool, args: &[&str])
             match f {
                 DemandFault::Trip => st.trip_after = Some(mid),
                 DemandFault::Fault => st.inject_after = Some(mid),
+                DemandFault::Interlock => st.interlock_after = Some(mid),
+                DemandFault::Reply(fault, count) => {
+                    for _ in 0..count {
+                        st.reply_faults.push_back(fault);
+                    }
+                }
                 DemandFault::Silent => {}
             }
         }

@@ -11,19 +11,53 @@
 //! set_rate:   [:Mode:Rate 1]  :Limit:Acceleration R,1,<a>  :Demand:Rate 1,<w>  :System:Error?
 //! sample:     :Read:Rate? 1  *STB?  [:System:Error? ... when bit 0 or 7 is set]
 //! stop:       :Mode:Off 1            emergency: :Interlock:Open 1
+//! wait_stopped: (:Read:Rate? 1  :Mode? 1) every stop_poll_interval until at rest
 //! ```
+//!
+//! ## Retries on a flaky link
+//!
+//! A serial line to a table across the lab loses or corrupts a reply now and then. Every query
+//! of this dialect (`*IDN?`, `*STB?`, `:Mode?`, `:Read:Rate?`, `:Read:Position?`,
+//! `:System:Error?`) only reads state, so asking it again is harmless: after a reply that does
+//! not come ([`LinkError::Timeout`]), that is not text ([`LinkError::Garbled`], a noise byte) or
+//! that does not parse, the driver clears stale input and asks again, at most
+//! [`AclConfig::retries`] times. Commands (lines without `?`: a demand, a mode change, a stop)
+//! have no reply to check and are never repeated blindly; the error-queue read after them is a
+//! query and is retried. A disconnected or failed link is not retried.
+//!
+//! A query's timeout bounds the whole exchange, retries included: each attempt gets the time
+//! left divided by the attempts left (with the defaults a silent table gets three chances of
+//! ⅔ s within the 2 s heartbeat deadline; a reply garbled at once leaves more time for the
+//! next). So a table that went silent still fails a monitoring sample
+//! ([`RateTable::sample`], [`RateTable::heartbeat`]) within [`AclConfig::heartbeat_deadline`] of
+//! the unanswered query, as without retries. Only when the attempts are used up does a link
+//! failure fault the driver, as before; the error is that of the first attempt (it names the
+//! bytes received).
+//!
+//! Every retry is logged (`tracing::warn!`) and kept as a sentence for the run manifest
+//! ([`RateTable::take_retries`]). A `:System:Error?` whose reply was lost or garbled has already
+//! removed its entry from the table's queue: the note says that a table error may be missing.
+//!
+//! A limit of an untagged line protocol: a reply that comes *later* than its attempt's timeout
+//! but after the input was cleared is taken as the answer to the retry (the same question, so
+//! the same kind of answer). The retry's own reply then comes extra: the next query clears the
+//! input first after any retry, but a reply still in flight then is read in its place. Replies
+//! of the status queries (`*STB?`, `:Mode?`, `:System:Error?`) do not parse as each other, so
+//! such a mix-up is caught and retried; two numeric reads in a row (rate, then position) cannot
+//! be told apart. The simulator's `table:drop` loses replies for good, as a framing error does.
 
 use std::future::Future;
 use std::pin::Pin;
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
-use gyrocal_link::{LinkError, Transport, show_bytes};
+use gyrocal_link::{ErrorKind as LinkErrorKind, LinkError, Transport, show_bytes};
 use tokio::time::Instant;
 
 use crate::{
-    Capabilities, Identity, Limits, RateAccumulator, RateStats, RateTable, SettleCriteria,
-    SettleReport, StopHandle, StopKind, StopPath, TableError, TableMode, TableState, TableStatus,
+    Capabilities, Identity, Limits, RateAccumulator, RateStats, RateTable, RestReport,
+    SettleCriteria, SettleReport, StopHandle, StopKind, StopPath, TableError, TableMode,
+    TableState, TableStatus, stop_time,
 };
 
 /// Most errors read from the queue in one go (the queue is finite; a table that keeps
@@ -37,16 +71,24 @@ pub struct AclConfig {
     pub limits: Limits,
     /// The axis driven. Default 1.
     pub axis: u8,
-    /// Reply timeout of ordinary queries. Default 1 s.
+    /// Reply timeout of ordinary queries, retries included (each attempt gets a share).
+    /// Default 1 s.
     pub reply_timeout: Duration,
     /// Reply deadline of monitoring samples and heartbeats; a table silent for longer is a
-    /// fault. Default 2 s.
+    /// fault. Default 2 s. It bounds each query of a sample with its retries: a table that
+    /// goes silent fails the sample at most this long after its unanswered query was sent.
     pub heartbeat_deadline: Duration,
-    /// |rate| below which [`RateTable::wait_stopped`] considers the table stopped, deg/s.
-    /// Default 0.01.
+    /// |rate| at or below which [`RateTable::wait_stopped`] considers the table stopped (with
+    /// the mode OFF), deg/s. Default 0.01: twenty times the simulator's readback noise, well
+    /// below any calibration rate.
     pub stop_tolerance: f64,
     /// Sampling interval of [`RateTable::wait_stopped`]. Default 100 ms.
     pub stop_poll_interval: Duration,
+    /// How many times an idempotent query is asked again after a lost, garbled or unparseable
+    /// reply, within the query's timeout (see the [module documentation](self)). Default 2: a
+    /// flaky link rarely hits two replies in a row, and three attempts still leave each ⅔ s of
+    /// the 2 s heartbeat deadline. 0 disables retries.
+    pub retries: u32,
 }
 
 impl Default for AclConfig {
@@ -58,6 +100,7 @@ impl Default for AclConfig {
             heartbeat_deadline: Duration::from_secs(2),
             stop_tolerance: 0.01,
             stop_poll_interval: Duration::from_millis(100),
+            retries: 2,
         }
     }
 }
@@ -206,7 +249,51 @@ pub struct AclTable<T> {
     config: AclConfig,
     demand: f64,
     ramp: Option<Ramp>,
+    /// The acceleration limit last sent, deg/s²: a controlled stop decelerates with it.
+    acceleration: Option<f64>,
     recorder: Option<RateAccumulator>,
+    /// Retry notes not yet taken by [`RateTable::take_retries`].
+    retries: Vec<String>,
+}
+
+/// One failed attempt at a query.
+enum Miss {
+    /// Nothing (or not a line of text) came back.
+    Link(LinkError),
+    /// A line came back that is not a valid reply.
+    Reply { reply: String, reason: &'static str },
+}
+
+impl Miss {
+    /// What went wrong, for a retry note.
+    fn describe(&self) -> String {
+        match self {
+            Miss::Link(LinkError::Timeout {
+                timeout, partial, ..
+            }) if partial.is_empty() => {
+                format!("no reply within {:.3} s", timeout.as_secs_f64())
+            }
+            Miss::Link(LinkError::Timeout {
+                timeout, partial, ..
+            }) => format!(
+                "no complete reply within {:.3} s (got {})",
+                timeout.as_secs_f64(),
+                show_bytes(partial)
+            ),
+            Miss::Link(LinkError::Garbled { reason, bytes, .. }) => {
+                format!("garbled reply {} ({reason})", show_bytes(bytes))
+            }
+            Miss::Link(e) => e.to_string(),
+            Miss::Reply { reply, reason } => {
+                format!("unusable reply {} ({reason})", show_bytes(reply.as_bytes()))
+            }
+        }
+    }
+}
+
+/// Whether asking again can help: a lost or corrupted reply can, a dead link cannot.
+fn retryable(e: &LinkError) -> bool {
+    matches!(e.kind(), LinkErrorKind::Timeout | LinkErrorKind::Garbled)
 }
 
 impl<T: Transport> std::fmt::Debug for AclTable<T> {
@@ -243,7 +330,9 @@ impl<T: Transport + 'static> AclTable<T> {
             config,
             demand: 0.0,
             ramp: None,
+            acceleration: None,
             recorder: None,
+            retries: Vec::new(),
         }
     }
 
@@ -291,30 +380,106 @@ impl<T: Transport + 'static> AclTable<T> {
         Ok(())
     }
 
-    /// Sends a query and returns its one-line reply.
-    async fn query(&self, line: &str, timeout: Duration) -> Result<String, TableError> {
+    /// Sends a query once and returns its one-line reply (no retry, no fault).
+    async fn exchange(&self, line: &str, timeout: Duration) -> Result<String, LinkError> {
         let mut link = self.shared.link.lock().await;
         if link.dirty {
             let dropped = link.transport.discard_input().await.unwrap_or(0);
             tracing::debug!(device = %self.shared.device, "cleared {dropped} stale bytes");
         }
         link.dirty = true;
-        let res = async {
-            link.transport.send_line(line).await?;
-            link.transport.read_line(Some(timeout)).await
-        }
-        .await;
-        match res {
-            Ok(reply) => {
-                link.dirty = false;
-                tracing::trace!(device = %self.shared.device, "> {line} < {reply}");
-                Ok(reply)
+        link.transport.send_line(line).await?;
+        let reply = link.transport.read_line(Some(timeout)).await?;
+        link.dirty = false;
+        tracing::trace!(device = %self.shared.device, "> {line} < {reply}");
+        Ok(reply)
+    }
+
+    /// Asks the idempotent query `line` until `parse` accepts the reply, at most
+    /// `1 + retries` times within `timeout` in total (see the module documentation). A dead link
+    /// faults the driver at once; a lost or garbled reply only when no attempt succeeded; when
+    /// every attempt got a line that does not parse, a [`TableError::Reply`] is returned
+    /// without faulting (as a single bad reply always was).
+    async fn ask<R>(
+        &mut self,
+        line: &str,
+        timeout: Duration,
+        parse: impl Fn(&str) -> Result<R, &'static str>,
+    ) -> Result<R, TableError> {
+        let attempts = self.config.retries.saturating_add(1);
+        let deadline = Instant::now() + timeout;
+        let mut first: Option<Miss> = None;
+        let mut last = String::new();
+        let mut link_missed = false;
+        for attempt in 1..=attempts {
+            let left = attempts - attempt + 1;
+            let budget = deadline.saturating_duration_since(Instant::now()) / left;
+            let miss = match self.exchange(line, budget).await {
+                Ok(reply) => match parse(&reply) {
+                    Ok(v) => {
+                        if attempt > 1 {
+                            // a late reply to an earlier attempt may have been taken for this
+                            // one; then this attempt's reply is still to come: clear it first
+                            self.shared.link.lock().await.dirty = true;
+                        }
+                        return Ok(v);
+                    }
+                    Err(reason) => Miss::Reply { reply, reason },
+                },
+                Err(e) if retryable(&e) => Miss::Link(e),
+                Err(e) => return Err(self.lost(line, e).await),
+            };
+            last = miss.describe();
+            link_missed |= matches!(miss, Miss::Link(_));
+            if attempt < attempts {
+                let mut note = format!(
+                    "`{line}`: {last}; asked again (retry {attempt} of {})",
+                    attempts - 1
+                );
+                if line.starts_with(":System:Error?") {
+                    note.push_str(
+                        "; the table had already removed the error-queue entry of that reply, \
+                         so a table error may be missing",
+                    );
+                }
+                self.note_retry(note);
+                // the reply may have been late or followed by more junk: clear it first
+                self.shared.link.lock().await.dirty = true;
             }
-            Err(e) => {
-                drop(link);
-                Err(self.lost(line, e).await)
-            }
+            first.get_or_insert(miss);
         }
+        let err = match first {
+            Some(Miss::Reply { reply, reason }) if attempts > 1 => self.reply_error(
+                line,
+                &reply,
+                &format!("{reason}; no usable reply in {attempts} attempts"),
+            ),
+            Some(Miss::Reply { reply, reason }) => self.reply_error(line, &reply, reason),
+            Some(Miss::Link(e)) => TableError::from_link(self.device(), line, e),
+            None => TableError::Reply {
+                device: self.device().to_string(),
+                command: line.to_string(),
+                reason: "no attempt was made".into(),
+                bytes: String::new(),
+            },
+        };
+        if attempts > 1 {
+            self.note_retry(format!(
+                "`{line}`: {last}; no usable reply in {attempts} attempts, gave up"
+            ));
+        }
+        // A link that lost or mangled a reply and never gave a usable one cannot be trusted
+        // with the table's motion: fault, as a single lost reply did before retries.
+        if link_missed && self.state() != TableState::Disconnected {
+            // The returned Fault is replaced by the more precise link error.
+            let _ = self.shared.fault(err.to_string()).await;
+        }
+        Err(err)
+    }
+
+    fn note_retry(&mut self, note: String) {
+        tracing::warn!(device = %self.shared.device, "{note}");
+        self.retries.push(note);
     }
 
     /// A link failure during an exchange: the table's motion is now unknown, so the driver
@@ -337,38 +502,53 @@ impl<T: Transport + 'static> AclTable<T> {
         }
     }
 
-    async fn query_number(&self, line: &str, timeout: Duration) -> Result<f64, TableError> {
-        let reply = self.query(line, timeout).await?;
-        match reply.trim().parse::<f64>() {
+    async fn query_number(&mut self, line: &str, timeout: Duration) -> Result<f64, TableError> {
+        self.ask(line, timeout, |reply| match reply.trim().parse::<f64>() {
             Ok(v) if v.is_finite() => Ok(v),
-            _ => Err(self.reply_error(line, &reply, "not a finite decimal number")),
-        }
+            _ => Err("not a finite decimal number"),
+        })
+        .await
     }
 
-    async fn query_stb(&self, timeout: Duration) -> Result<u8, TableError> {
-        let reply = self.query("*STB?", timeout).await?;
-        reply
-            .trim()
-            .parse::<u8>()
-            .map_err(|_| self.reply_error("*STB?", &reply, "not a status byte (0..=255)"))
+    async fn query_stb(&mut self, timeout: Duration) -> Result<u8, TableError> {
+        self.ask("*STB?", timeout, |reply| {
+            reply
+                .trim()
+                .parse::<u8>()
+                .map_err(|_| "not a status byte (0..=255)")
+        })
+        .await
+    }
+
+    async fn query_mode(&mut self) -> Result<TableMode, TableError> {
+        let line = format!(":Mode? {}", self.config.axis);
+        self.ask(&line, self.config.reply_timeout, |reply| {
+            parse_mode(reply).ok_or("unknown mode")
+        })
+        .await
     }
 
     /// Reads the error queue until `0,"No error"`; returns every (code, text) read.
-    async fn drain_errors(&self) -> Result<Vec<(i32, String)>, TableError> {
+    async fn drain_errors(&mut self) -> Result<Vec<(i32, String)>, TableError> {
         let mut errors = Vec::new();
         for _ in 0..MAX_QUEUE_READS {
             let line = ":System:Error?";
-            let reply = self.query(line, self.config.reply_timeout).await?;
-            let parsed = reply.split_once(',').and_then(|(code, text)| {
-                let code = code.trim().parse::<i32>().ok()?;
-                let text = text.trim();
-                let text = text.strip_prefix('"')?.strip_suffix('"')?;
-                Some((code, text.to_string()))
-            });
-            match parsed {
-                Some((0, _)) => return Ok(errors),
-                Some(e) => errors.push(e),
-                None => return Err(self.reply_error(line, &reply, "not `<code>,\"<text>\"`")),
+            let entry = self
+                .ask(line, self.config.reply_timeout, |reply| {
+                    reply
+                        .split_once(',')
+                        .and_then(|(code, text)| {
+                            let code = code.trim().parse::<i32>().ok()?;
+                            let text = text.trim();
+                            let text = text.strip_prefix('"')?.strip_suffix('"')?;
+                            Some((code, text.to_string()))
+                        })
+                        .ok_or("not `<code>,\"<text>\"`")
+                })
+                .await?;
+            match entry {
+                (0, _) => return Ok(errors),
+                e => errors.push(e),
             }
         }
         Err(TableError::Reply {
@@ -380,7 +560,7 @@ impl<T: Transport + 'static> AclTable<T> {
     }
 
     /// Reads the queue after a command batch; the first error is returned with its text.
-    async fn check_errors(&self, after: &[String]) -> Result<(), TableError> {
+    async fn check_errors(&mut self, after: &[String]) -> Result<(), TableError> {
         let errors = self.drain_errors().await?;
         let mut errors = errors.into_iter();
         match errors.next() {
@@ -516,24 +696,25 @@ impl<T: Transport + 'static> RateTable for AclTable<T> {
                 tracing::info!(device = %self.shared.device, "cleared {dropped} stale bytes");
             }
         }
-        let reply = self.query("*IDN?", self.config.reply_timeout).await?;
-        let fields: Vec<&str> = reply.split(',').map(str::trim).collect();
-        let [manufacturer, model, serial, version] = fields[..] else {
-            return Err(self.reply_error("*IDN?", &reply, "expected 4 comma-separated fields"));
-        };
-        let identity = Identity {
-            manufacturer: manufacturer.to_string(),
-            model: model.to_string(),
-            serial: serial.to_string(),
-            version: version.to_string(),
-        };
+        let (reply, identity) = self
+            .ask("*IDN?", self.config.reply_timeout, |reply| {
+                let fields: Vec<&str> = reply.split(',').map(str::trim).collect();
+                let [manufacturer, model, serial, version] = fields[..] else {
+                    return Err("expected 4 comma-separated fields");
+                };
+                let identity = Identity {
+                    manufacturer: manufacturer.to_string(),
+                    model: model.to_string(),
+                    serial: serial.to_string(),
+                    version: version.to_string(),
+                };
+                Ok((reply.to_string(), identity))
+            })
+            .await?;
         for (code, text) in self.drain_errors().await? {
             tracing::warn!(device = %self.shared.device, "stale table error: {code},\"{text}\"");
         }
-        let line = format!(":Mode? {}", self.config.axis);
-        let reply = self.query(&line, self.config.reply_timeout).await?;
-        let mode =
-            parse_mode(&reply).ok_or_else(|| self.reply_error(&line, &reply, "unknown mode"))?;
+        let mode = self.query_mode().await?;
         {
             let mut st = self.shared.status();
             st.fault = None;
@@ -612,6 +793,7 @@ impl<T: Transport + 'static> RateTable for AclTable<T> {
         ));
         lines.push(format!(":Demand:Rate {axis},{}", Self::num(rate)));
         let start = Instant::now();
+        self.acceleration = Some(acceleration);
         self.commands(&lines).await?;
         self.shared.status().rate_mode = true;
         self.check_errors(&lines).await?;
@@ -638,10 +820,7 @@ impl<T: Transport + 'static> RateTable for AclTable<T> {
     }
 
     async fn status(&mut self) -> Result<TableStatus, TableError> {
-        let line = format!(":Mode? {}", self.config.axis);
-        let reply = self.query(&line, self.config.reply_timeout).await?;
-        let mode =
-            parse_mode(&reply).ok_or_else(|| self.reply_error(&line, &reply, "unknown mode"))?;
+        let mode = self.query_mode().await?;
         let status_byte = self.query_stb(self.config.reply_timeout).await?;
         Ok(TableStatus { mode, status_byte })
     }
@@ -741,12 +920,35 @@ impl<T: Transport + 'static> RateTable for AclTable<T> {
         self.shared.stop(StopKind::Emergency).await
     }
 
-    async fn wait_stopped(&mut self, timeout: Duration) -> Result<crate::RestReport, TableError> {
-        let t0 = Instant::now();
-        let deadline = Instant::now() + timeout;
+    async fn wait_stopped(&mut self, timeout: Duration) -> Result<RestReport, TableError> {
+        let start = Instant::now();
+        let deadline = start + timeout;
+        let mut last: (Option<f64>, Option<TableMode>) = (None, None);
+        let seen = |last: &(Option<f64>, Option<TableMode>)| match last {
+            (None, _) => "no rate measured yet".to_string(),
+            (Some(rate), None) => format!("last measured {rate} deg/s, mode not read"),
+            (Some(rate), Some(mode)) => format!("last measured {rate} deg/s in mode {mode}"),
+        };
         loop {
-            let rate = self.read_rate().await?;
-            if rate.abs() <= self.config.stop_tolerance {
+            let rate = match self.read_rate().await {
+                Ok(rate) => rate,
+                Err(e) => {
+                    let reason =
+                        format!("could not confirm the table at rest ({}): {e}", seen(&last));
+                    return Err(self.shared.fault(reason).await);
+                }
+            };
+            last = (Some(rate), None);
+            let mode = match self.query_mode().await {
+                Ok(mode) => mode,
+                Err(e) => {
+                    let reason =
+                        format!("could not confirm the table at rest ({}): {e}", seen(&last));
+                    return Err(self.shared.fault(reason).await);
+                }
+            };
+            last = (Some(rate), Some(mode));
+            if rate.abs() <= self.config.stop_tolerance && mode == TableMode::Off {
                 let mut st = self.shared.status();
                 if st.state != TableState::Faulted {
                     st.state = if st.interlock_closed {
@@ -755,21 +957,42 @@ impl<T: Transport + 'static> RateTable for AclTable<T> {
                         TableState::Connected
                     };
                 }
-                return Ok(crate::RestReport {
+                return Ok(RestReport {
                     rate_dps: rate,
-                    mode: TableMode::Off,
-                    waited: t0.elapsed(),
+                    mode,
+                    waited: start.elapsed(),
                 });
             }
             if Instant::now() >= deadline {
-                let reason = format!("table still turning at {rate} deg/s {timeout:?} after stop");
+                let reason = format!(
+                    "table not at rest {timeout:?} after the stop: {} (rest is |rate| <= {} \
+                     deg/s in mode OFF)",
+                    seen(&last),
+                    self.config.stop_tolerance
+                );
                 return Err(self.shared.fault(reason).await);
             }
             tokio::time::sleep(self.config.stop_poll_interval).await;
         }
     }
 
+    /// `|from_rate|/a · 1.5 + 5 s` ([`stop_time`]) with `a` the acceleration limit last sent
+    /// (which `:Mode:Off` decelerates with; a gentler ramp than the client maximum makes a
+    /// slower stop), else the client-side maximum. An emergency stop decelerates at the
+    /// table's own maximum, faster: the bound holds for it too.
+    fn stop_deadline(&self, from_rate: f64) -> Duration {
+        let a = self
+            .acceleration
+            .unwrap_or(self.config.limits.max_acceleration)
+            .min(self.config.limits.max_acceleration);
+        stop_time(from_rate, a)
+    }
+
     fn stop_handle(&self) -> StopHandle {
         StopHandle::new(self.shared.clone())
+    }
+
+    fn take_retries(&mut self) -> Vec<String> {
+        std::mem::take(&mut self.retries)
     }
 }

@@ -30,7 +30,16 @@
 //!   tasks, with a [`StopGuard`] that stops the table if a scope unwinds;
 //! - **treats silence as a fault**: every sample is also a heartbeat with a deadline, and
 //!   [`RateTable::heartbeat`] polls an idle table; a table that stops answering moves the driver
-//!   to [`TableState::Faulted`] after a best-effort controlled stop.
+//!   to [`TableState::Faulted`] after a best-effort controlled stop;
+//! - **rides out a flaky link without hiding it**: a query whose reply is lost, garbled or
+//!   prefixed by line noise is asked again (queries only read state; commands are never
+//!   repeated), within the same deadline, so a silent table is still a fault in time; every
+//!   retry is logged and handed to the sequencer for the run manifest
+//!   ([`RateTable::take_retries`]);
+//! - **means rest when it says rest**: [`RateTable::wait_stopped`] returns only when the
+//!   measured rate is near zero *and* the controller is in OFF mode (a rate passing through zero
+//!   while reversing is not rest), bounded by [`RateTable::stop_deadline`], and reports what it
+//!   saw ([`RestReport`]).
 //!
 //! The multimeter is on another port, so the sequencer polls the table concurrently with an
 //! acquisition: `table.record_while(interval, dmm.read(500))` runs both in one task.
@@ -124,6 +133,17 @@ pub enum TableMode {
     Abort,
 }
 
+impl fmt::Display for TableMode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            TableMode::Off => "OFF",
+            TableMode::Rate => "RATE",
+            TableMode::Position => "POSITION",
+            TableMode::Abort => "ABORT",
+        })
+    }
+}
+
 /// The table's identity, from `*IDN?`.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Identity {
@@ -194,17 +214,6 @@ impl TableStatus {
     }
 }
 
-/// What [`RateTable::wait_stopped`] saw when the table came to rest.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct RestReport {
-    /// The last measured rate, deg/s.
-    pub rate_dps: f64,
-    /// The table's mode then.
-    pub mode: TableMode,
-    /// How long the wait took.
-    pub waited: Duration,
-}
-
 /// How [`RateTable::wait_at_rate`] decides the table is at rate.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SettleCriteria {
@@ -253,6 +262,38 @@ pub struct SettleReport {
     pub window: RateStats,
 }
 
+/// What [`RateTable::wait_stopped`] saw when it confirmed the table at rest.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RestReport {
+    /// The measured rate that confirmed rest, deg/s (within the driver's stop tolerance).
+    pub rate_dps: f64,
+    /// The controller's mode at that moment ([`TableMode::Off`]: zero-rate hold, or servo off
+    /// after an emergency stop or an interlock opening).
+    pub mode: TableMode,
+    /// How long the wait took.
+    pub waited: Duration,
+}
+
+/// Margin added by [`RateTable::stop_deadline`] for reply latency, polling and settling at
+/// zero.
+pub const STOP_MARGIN: Duration = Duration::from_secs(5);
+
+/// Factor on the deceleration time in [`RateTable::stop_deadline`]: a jerk-limited S-curve
+/// stop takes longer than `|rate|/a`.
+pub const STOP_TIME_FACTOR: f64 = 1.5;
+
+/// `|rate|/acceleration · STOP_TIME_FACTOR + STOP_MARGIN`, for [`RateTable::stop_deadline`].
+/// A rate or acceleration that is not a usable number (NaN, infinite, an acceleration ≤ 0)
+/// gives no finite bound: then an hour, long enough that a caller's wait is not cut short by
+/// arithmetic, and still a bound.
+pub fn stop_time(from_rate: f64, acceleration: f64) -> Duration {
+    let secs = from_rate.abs() / acceleration * STOP_TIME_FACTOR;
+    match Duration::try_from_secs_f64(secs) {
+        Ok(d) if acceleration > 0.0 => d.saturating_add(STOP_MARGIN),
+        _ => Duration::from_secs(3600),
+    }
+}
+
 /// A rate table, whatever its dialect. Methods take `&mut self`: one task owns the driver; other
 /// tasks stop the table through a [`StopHandle`].
 ///
@@ -295,7 +336,8 @@ pub trait RateTable: Send {
 
     /// One monitored sample: the measured rate and a status check with the heartbeat deadline.
     /// A latched fault becomes a [`TableErrorKind::Fault`] with the table's text. The rate is
-    /// recorded when recording is on.
+    /// recorded when recording is on. A driver that retries lost replies does so inside the
+    /// deadline: a table that went silent fails the sample within it, retries or not.
     fn sample(&mut self) -> impl Future<Output = Result<f64, TableError>> + Send;
 
     /// Waits until the table is at the demanded rate (see [`SettleCriteria`]); the samples are
@@ -367,25 +409,45 @@ pub trait RateTable: Send {
     /// Always sends, whatever the state.
     fn emergency_stop(&mut self) -> impl Future<Output = Result<(), TableError>> + Send;
 
-    /// After a stop, waits until the measured rate is near zero (a fault after `timeout`).
+    /// After a stop, waits until the table is at rest and says what it saw. At rest means both
+    /// the measured |rate| within the driver's stop tolerance and the controller in
+    /// [`TableMode::Off`] (zero-rate hold, or servo off after an emergency stop or an interlock
+    /// opening, once the abort profile is done): a rate that merely passes through zero in
+    /// RATE mode, or a table held in POSITION mode, is not rest, and neither is an ABORT
+    /// profile still running.
+    ///
+    /// Not at rest within `timeout` is a [`TableErrorKind::Fault`] naming the last measured
+    /// rate and mode; so is a table that stops answering while it is waited for (the run must
+    /// not assume a table it cannot see has stopped). Bound `timeout` with
+    /// [`RateTable::stop_deadline`].
     fn wait_stopped(
         &mut self,
         timeout: Duration,
     ) -> impl Future<Output = Result<RestReport, TableError>> + Send;
 
-    /// The link retries since the last call (a lost or garbled reply asked again), as
-    /// sentences for the run's manifest. Default: none.
-    fn take_retries(&mut self) -> Vec<String> {
-        Vec::new()
-    }
-
-    /// How long a stop from `from_rate` may take: the table decelerates at most at its
-    /// acceleration limit; 1.5× that plus 5 s of margin for jerk and link latency.
+    /// How long a stop from `from_rate` (deg/s) may take before its absence is a fault: the
+    /// `timeout` to give [`RateTable::wait_stopped`].
+    ///
+    /// The default is `|from_rate|/max_acceleration · 1.5 + 5 s` ([`stop_time`]) with the
+    /// client-side acceleration limit of [`RateTable::capabilities`]: a controlled stop
+    /// decelerates at most at the table's acceleration limit, so it takes at least
+    /// `|rate|/a`; the factor covers a jerk-limited S-curve, the 5 s reply latency, polling
+    /// and settling at zero. A driver that knows a gentler limit is in force (ACL: the last
+    /// `:Limit:Acceleration` sent, which `:Mode:Off` also uses) overrides this.
     fn stop_deadline(&self, from_rate: f64) -> Duration {
-        let a = self.capabilities().max_acceleration;
-        Duration::from_secs_f64(from_rate.abs() / a * 1.5 + 5.0)
+        stop_time(from_rate, self.capabilities().max_acceleration)
     }
 
     /// A cloneable handle that can stop the table from another task or a signal handler.
     fn stop_handle(&self) -> StopHandle;
+
+    /// Takes the notes of the queries asked again since the last call (oldest first), one
+    /// human sentence each naming the query and what went wrong, such as
+    /// "`:Read:Rate? 1`: no reply within 0.667 s; asked again (retry 1 of 2)", so the
+    /// sequencer can record them in the run manifest: a run that succeeded on a flaky link
+    /// says so. The driver also logs each at `warn` level. The default (a driver that never
+    /// retries) has none.
+    fn take_retries(&mut self) -> Vec<String> {
+        Vec::new()
+    }
 }

@@ -142,8 +142,13 @@ async fn table_latched_fault_in_a_sample_faults_the_driver_and_stops() {
 }
 
 #[tokio::test]
-async fn table_silent_heartbeat_is_a_fault_after_a_stop_attempt() {
+async fn table_silent_heartbeat_is_a_fault_after_retries_and_a_stop_attempt() {
     let script = connected(ScriptedTransport::new("table"))
+        // asked three times (two retries), each after clearing stale input
+        .expect_line("*STB?")
+        .silence()
+        .expect_line("*STB?")
+        .silence()
         .expect_line("*STB?")
         .silence()
         .expect_line(":Mode:Off 1")
@@ -155,27 +160,125 @@ async fn table_silent_heartbeat_is_a_fault_after_a_stop_attempt() {
     assert_eq!(err.kind(), TableErrorKind::Timeout, "{err}");
     assert!(err.ends_run());
     assert_eq!(table.state(), TableState::Faulted);
+    let notes = table.take_retries();
+    assert_eq!(notes.len(), 3, "{notes:#?}");
+    assert!(
+        notes[0].starts_with("`*STB?`: no reply within") && notes[0].contains("(retry 1 of 2)"),
+        "{notes:#?}"
+    );
+    assert!(notes[1].contains("(retry 2 of 2)"), "{notes:#?}");
+    assert!(
+        notes[2].contains("no usable reply in 3 attempts, gave up"),
+        "{notes:#?}"
+    );
     table.heartbeat().await.unwrap();
+    assert!(table.take_retries().is_empty(), "taken once");
+}
+
+#[tokio::test]
+async fn table_without_retries_faults_on_the_first_silence() {
+    let script = connected(ScriptedTransport::new("table"))
+        .expect_line("*STB?")
+        .silence()
+        .expect_line(":Mode:Off 1");
+    let config = AclConfig {
+        retries: 0,
+        ..AclConfig::default()
+    };
+    let mut table = AclTable::new(script, config);
+    table.connect().await.unwrap();
+    let err = table.heartbeat().await.unwrap_err();
+    assert_eq!(err.kind(), TableErrorKind::Timeout, "{err}");
+    assert_eq!(table.state(), TableState::Faulted);
+    assert!(table.take_retries().is_empty());
+}
+
+#[tokio::test]
+async fn table_garbled_status_byte_is_asked_again() {
+    let script = connected(ScriptedTransport::new("table"))
+        .query("*STB?", "1#9")
+        .query("*STB?", "0");
+    let mut table = AclTable::new(script, AclConfig::default());
+    table.connect().await.unwrap();
+    table.heartbeat().await.unwrap();
+    assert_eq!(table.state(), TableState::Connected);
+    let notes = table.take_retries();
+    assert_eq!(
+        notes,
+        [
+            "`*STB?`: unusable reply \"1#9\" (not a status byte (0..=255)); asked again (retry 1 of 2)"
+        ]
+    );
+}
+
+#[tokio::test]
+async fn table_commands_are_never_resent_when_the_error_check_is_lost() {
+    let script = enabled(ScriptedTransport::new("table"))
+        .expect_line(":Limit:Acceleration R,1,5.000000")
+        .expect_line(":Demand:Rate 1,20.000000")
+        // the error-queue check loses its reply: only the query is asked again
+        .expect_line(":System:Error?")
+        .silence()
+        .query(":System:Error?", NO_ERROR)
+        .expect_line(":Limit:Acceleration R,1,5.000000")
+        .expect_line(":Demand:Rate 1,10.000000")
+        // lost three times: the demand is still not repeated; the driver faults and stops
+        .expect_line(":System:Error?")
+        .silence()
+        .expect_line(":System:Error?")
+        .silence()
+        .expect_line(":System:Error?")
+        .silence()
+        .expect_line(":Mode:Off 1");
+    let mut table = AclTable::new(script, AclConfig::default());
+    table.connect().await.unwrap();
+    table.enable().await.unwrap();
+    table.set_rate(20.0, 5.0).await.unwrap();
+    assert_eq!(table.state(), TableState::Ramping { target: 20.0 });
+    let notes = table.take_retries();
+    assert_eq!(notes.len(), 1, "{notes:#?}");
+    assert!(
+        notes[0].starts_with("`:System:Error?`: no reply"),
+        "{notes:#?}"
+    );
+    assert!(
+        notes[0].contains("a table error may be missing"),
+        "a lost error-queue reply may have lost an entry: {notes:#?}"
+    );
+    let err = table.set_rate(10.0, 5.0).await.unwrap_err();
+    assert_eq!(err.kind(), TableErrorKind::Timeout, "{err}");
+    assert_eq!(table.state(), TableState::Faulted);
 }
 
 #[tokio::test]
 async fn table_garbled_replies_name_the_bytes() {
     let script = connected(ScriptedTransport::new("table"))
+        // asked three times; the error names the first reply
         .query(":Read:Rate? 1", "1.0e\u{1}")
-        .query("*IDN?", "ACUTRONIC,ACUTROL3000");
+        .query(":Read:Rate? 1", "")
+        .query(":Read:Rate? 1", "?")
+        .query("*IDN?", "ACUTRONIC,ACUTROL3000")
+        .query("*IDN?", "ACUTRONIC")
+        .query("*IDN?", "");
     let mut table = AclTable::new(script, AclConfig::default());
     table.connect().await.unwrap();
     let err = table.read_rate().await.unwrap_err();
     assert_eq!(err.kind(), TableErrorKind::Link);
-    assert!(err.to_string().contains("\"1.0e\\x01\""), "{err}");
+    let msg = err.to_string();
+    assert!(msg.contains("\"1.0e\\x01\""), "{msg}");
+    assert!(msg.contains("no usable reply in 3 attempts"), "{msg}");
     let err = table.connect().await.unwrap_err();
     assert!(err.to_string().contains("4 comma-separated"), "{err}");
     // the stale error queue is drained on connect: an unreadable entry is an error too
+    let config = AclConfig {
+        retries: 0,
+        ..AclConfig::default()
+    };
     let mut t2 = AclTable::new(
         ScriptedTransport::new("t2")
             .query("*IDN?", "A,B,C,D")
             .query(":System:Error?", "oops"),
-        AclConfig::default(),
+        config,
     );
     let err = t2.connect().await.unwrap_err();
     assert!(err.to_string().contains("\"oops\""), "{err}");
@@ -209,4 +312,27 @@ async fn table_stop_handle_is_idempotent_and_works_from_another_task() {
     drop(guard);
     tokio::time::sleep(Duration::from_millis(10)).await;
     handle.guard().disarm();
+}
+
+#[tokio::test]
+async fn table_lost_then_unusable_replies_fault_the_driver() {
+    let script = connected(ScriptedTransport::new("table"))
+        .expect_line(":Read:Rate? 1")
+        .silence()
+        .query(":Read:Rate? 1", "x")
+        .query(":Read:Rate? 1", "y")
+        // a link that lost a reply and never gave a usable one: fault and stop
+        .expect_line(":Mode:Off 1");
+    let mut table = AclTable::new(script, AclConfig::default());
+    table.connect().await.unwrap();
+    let err = table.read_rate().await.unwrap_err();
+    assert_eq!(err.kind(), TableErrorKind::Timeout, "the first miss: {err}");
+    assert_eq!(table.state(), TableState::Faulted);
+    let notes = table.take_retries();
+    assert_eq!(notes.len(), 3, "{notes:#?}");
+    assert!(notes[1].contains("unusable reply \"x\""), "{notes:#?}");
+    assert!(
+        notes[2].contains("unusable reply \"y\"") && notes[2].ends_with("gave up"),
+        "{notes:#?}"
+    );
 }
