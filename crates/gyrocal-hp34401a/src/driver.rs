@@ -394,6 +394,12 @@ impl<T: Transport> Hp34401a<T> {
     ///
     /// A garbled reply to `SYST:ERR?` or `*ESR?` is returned as an error (the caller's retry
     /// budget counts it), as before.
+    ///
+    /// Limit: the driver looks for a power cycle only here, after a failed exchange. A power
+    /// cycle while the driver is idle (between two acquisitions) is caught by the next
+    /// exchange when the meter ignores or refuses commands in LOCAL, as the simulator does by
+    /// default and the manual's error 550 suggests for `READ?`; a meter that obeyed every
+    /// command in LOCAL would measure at its power-on settings until something fails.
     pub async fn recover(&mut self) -> Result<Recovery, Error> {
         let started = Instant::now();
         self.device_clear().await?;
