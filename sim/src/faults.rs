@@ -51,7 +51,7 @@ use crate::table::DemandFault;
 
 /// The grammar, for command-line help.
 pub const GRAMMAR: &str = "\
-SPEC = DEVICE:ACTION@TRIGGER[xCOUNT]
+SPEC = DEVICE:ACTION@TRIGGER[xCOUNT][/Ss]
   dmm actions:   timeout (a reply never comes), garble (a digit of a reply becomes #),
                  truncate (a reply stops halfway), overload (readings are +-9.9E37),
                  disconnect (the meter closes its link and is gone for good),
