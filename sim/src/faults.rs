@@ -1,9 +1,9 @@
 //! Fault schedules for a running bench, from a small text grammar (`gyrocal sim --fault`).
 //!
 //! ```text
-//! spec    = device ":" action "@" trigger [ "x" count ]
+//! spec    = device ":" action "@" trigger [ "x" count ] [ "/" S ["s"] ]
 //! device  = "dmm" | "table"
-//! action  = dmm:   "timeout" | "garble" | "truncate" | "overload" | "disconnect"
+//! action  = dmm:   "timeout" | "garble" | "truncate" | "overload" | "disconnect" | "powercycle"
 //!           table: "trip" | "fault" | "silent" | "interlock" | "drop" | "garble" | "noise"
 //! trigger = "reading" N        the N-th reading the meter takes (N >= 1)
 //!         | "demand" N         the N-th `:Demand:Rate` the table sees (N >= 1)
@@ -11,13 +11,16 @@
 //! count   = N >= 1, default 1: for overload the number of overload readings, for timeout,
 //!           garble and truncate the number of consecutive replies (readings) hit; for the
 //!           table's drop, garble and noise the number of consecutive query replies hit; not
-//!           allowed for disconnect and the other table actions
+//!           allowed for disconnect, powercycle and the other table actions
+//! "/" S   powercycle only: the off time in sim seconds (default the meter's `power_off_s`, 5)
 //! ```
 //!
 //! Examples: `dmm:timeout@reading100` (the reply carrying reading 100 never comes),
 //! `dmm:garble@reading100`, `dmm:overload@reading50x5` (readings 50 to 54 are overloads),
 //! `dmm:disconnect@reading300` (the meter drops its link for good instead of taking reading
-//! 300), `table:trip@demand4` (a rate trip latched halfway through the 4th demand's ramp),
+//! 300), `dmm:powercycle@reading250/8s` (the meter is switched off for 8 sim seconds instead
+//! of taking reading 250, and comes back in LOCAL with its power-on settings and an empty
+//! memory), `table:trip@demand4` (a rate trip latched halfway through the 4th demand's ramp),
 //! `table:fault@t=12s`, `table:silent@demand3` (the table ignores the 3rd demand and everything
 //! after it), `table:interlock@demand2` (the door opens halfway through the 2nd demand's ramp),
 //! `table:drop@t=5s` (the next reply the table sends after 5 s is lost),
@@ -25,7 +28,8 @@
 //!
 //! What the actions do: `timeout` loses a reply (the meter says nothing), `garble` replaces a
 //! digit of a reply by `#`, `truncate` cuts a reply halfway without its terminator, `overload`
-//! makes readings ±9.9E37, `disconnect` closes the meter's end of its link and stops it; `trip`
+//! makes readings ±9.9E37, `disconnect` closes the meter's end of its link and stops it,
+//! `powercycle` switches the meter off and on ([`crate::dmm::Fault::PowerCycle`]); `trip`
 //! latches a rate trip (error 210), `fault` an injected fault (error 220), `silent` makes the
 //! table stop answering and executing anything (it keeps turning as it was); `interlock` opens
 //! the interlock as a door or a hardware interlock would (abort profile to zero, servo off,
@@ -61,10 +65,12 @@ use crate::table::{DemandFault, ReplyFault};
 
 /// The grammar, for command-line help.
 pub const GRAMMAR: &str = "\
-SPEC = DEVICE:ACTION@TRIGGER[xCOUNT]
+SPEC = DEVICE:ACTION@TRIGGER[xCOUNT][/Ss]
   dmm actions:   timeout (a reply never comes), garble (a digit of a reply becomes #),
                  truncate (a reply stops halfway), overload (readings are +-9.9E37),
-                 disconnect (the meter closes its link and is gone for good)
+                 disconnect (the meter closes its link and is gone for good),
+                 powercycle (the meter is off for 5 s, or /Ss, then back in LOCAL
+                 with power-on settings and an empty memory)
   table actions: trip (rate trip, error 210), fault (injected fault, error 220),
                  silent (the table answers and executes nothing more),
                  interlock (the interlock opens: abort to zero, servo off, error 201),
@@ -75,7 +81,9 @@ SPEC = DEVICE:ACTION@TRIGGER[xCOUNT]
   xCOUNT:        overload: that many readings; timeout/garble/truncate: that many
                  consecutive replies (readings); table drop/garble/noise: that many
                  consecutive query replies
+  /Ss:           powercycle only: off for S sim seconds (default 5)
   examples: dmm:garble@reading100  dmm:overload@reading50x5  dmm:disconnect@reading300
+            dmm:powercycle@reading250  dmm:powercycle@t=30s/10s
             table:trip@demand4  table:fault@t=12s  table:silent@demand3
             table:interlock@demand2  table:drop@t=5s  table:garble@demand3x2";
 
@@ -92,6 +100,8 @@ pub enum FaultAction {
     DmmOverload,
     /// The meter closes its link and stops for good.
     DmmDisconnect,
+    /// The meter is switched off and on again.
+    DmmPowerCycle,
     /// The table latches a rate trip.
     TableTrip,
     /// The table latches an injected fault.
@@ -117,6 +127,7 @@ impl FaultAction {
             FaultAction::DmmTruncate => "dmm:truncate",
             FaultAction::DmmOverload => "dmm:overload",
             FaultAction::DmmDisconnect => "dmm:disconnect",
+            FaultAction::DmmPowerCycle => "dmm:powercycle",
             FaultAction::TableTrip => "table:trip",
             FaultAction::TableFault => "table:fault",
             FaultAction::TableSilent => "table:silent",
@@ -144,14 +155,16 @@ impl FaultAction {
         self.as_str().starts_with("dmm:")
     }
 
-    /// The meter faults this action injects (`count` of them, or one overload of `count`).
-    fn dmm_faults(self, count: u32) -> Vec<Fault> {
+    /// The meter faults this action injects (`count` of them, or one overload of `count`;
+    /// `off_s` for a power cycle).
+    fn dmm_faults(self, count: u32, off_s: Option<f64>) -> Vec<Fault> {
         let one = match self {
             FaultAction::DmmTimeout => Fault::NoReply,
             FaultAction::DmmGarble => Fault::Garble,
             FaultAction::DmmTruncate => Fault::Truncate,
             FaultAction::DmmOverload => return vec![Fault::Overload { readings: count }],
             FaultAction::DmmDisconnect => return vec![Fault::Disconnect],
+            FaultAction::DmmPowerCycle => return vec![Fault::PowerCycle { off_s }],
             _ => return Vec::new(),
         };
         vec![one; usize::try_from(count).unwrap_or(1)]
@@ -208,6 +221,9 @@ pub struct FaultSpec {
     pub trigger: Trigger,
     /// How many (see the grammar); 1 unless given.
     pub count: u32,
+    /// `dmm:powercycle` only: the off time in sim seconds (`/Ss`); `None` is the meter's
+    /// configured `power_off_s`.
+    pub off_s: Option<f64>,
 }
 
 impl fmt::Display for FaultSpec {
@@ -215,6 +231,9 @@ impl fmt::Display for FaultSpec {
         write!(f, "{}@{}", self.action.as_str(), self.trigger)?;
         if self.count != 1 {
             write!(f, "x{}", self.count)?;
+        }
+        if let Some(s) = self.off_s {
+            write!(f, "/{s}s")?;
         }
         Ok(())
     }
@@ -255,6 +274,7 @@ impl FromStr for FaultSpec {
             "dmm:truncate" => FaultAction::DmmTruncate,
             "dmm:overload" => FaultAction::DmmOverload,
             "dmm:disconnect" => FaultAction::DmmDisconnect,
+            "dmm:powercycle" => FaultAction::DmmPowerCycle,
             "table:trip" => FaultAction::TableTrip,
             "table:fault" => FaultAction::TableFault,
             "table:silent" => FaultAction::TableSilent,
@@ -265,11 +285,28 @@ impl FromStr for FaultSpec {
             other => {
                 return Err(err(format!(
                     "unknown action `{other}` (dmm: timeout, garble, truncate, overload, \
-                     disconnect; table: trip, fault, silent, interlock, drop, garble, noise)"
+                     disconnect, powercycle; table: trip, fault, silent, interlock, drop, \
+                     garble, noise)"
                 )));
             }
         };
-        let when = when.trim();
+        let (when, off_s) = match when.trim().rsplit_once('/') {
+            Some(_) if action != FaultAction::DmmPowerCycle => {
+                return Err(err(format!(
+                    "{} takes no off time (/Ss is for dmm:powercycle)",
+                    action.as_str()
+                )));
+            }
+            Some((w, s)) => match s.strip_suffix('s').unwrap_or(s).parse::<f64>() {
+                Ok(v) if (0.0..1e6).contains(&v) => (w, Some(v)),
+                _ => {
+                    return Err(err(format!(
+                        "the off time must be sim seconds >= 0, such as /8s, not `/{s}`"
+                    )));
+                }
+            },
+            None => (when.trim(), None),
+        };
         let (trigger_text, count) = match when.rsplit_once('x') {
             Some((t, c)) => (t, Some(positive(c, "the count").map_err(err)?)),
             None => (when, None),
@@ -307,6 +344,7 @@ impl FromStr for FaultSpec {
             action,
             trigger,
             count,
+            off_s,
         })
     }
 }
@@ -336,6 +374,8 @@ impl FaultSchedule {
         let demands = bench.table.demands_seen();
         let sim_s = self.started.elapsed().as_secs_f64() * self.time_scale;
         let dmm_gone = bench.dmm.is_finished();
+        let dmm_stats = bench.dmm.stats();
+        let power_cycling = dmm_stats.power_cycles > 0 || !dmm_stats.powered;
         self.specs
             .iter()
             .map(|s| {
@@ -344,6 +384,9 @@ impl FaultSchedule {
                         readings >= n
                             || (s.action == FaultAction::DmmDisconnect
                                 && dmm_gone
+                                && readings + 1 >= n)
+                            || (s.action == FaultAction::DmmPowerCycle
+                                && power_cycling
                                 && readings + 1 >= n)
                     }
                     Trigger::Demand(n) => demands >= n,
@@ -388,7 +431,12 @@ pub fn schedule(specs: &[FaultSpec], bench: &BenchHandle, time_scale: f64) -> Fa
     for s in specs {
         match (s.trigger, s.action.is_dmm()) {
             (Trigger::Reading(n), true) => {
-                for (i, f) in s.action.dmm_faults(s.count).into_iter().enumerate() {
+                for (i, f) in s
+                    .action
+                    .dmm_faults(s.count, s.off_s)
+                    .into_iter()
+                    .enumerate()
+                {
                     let offset = if matches!(f, Fault::Overload { .. }) {
                         0
                     } else {
@@ -434,7 +482,7 @@ pub fn schedule(specs: &[FaultSpec], bench: &BenchHandle, time_scale: f64) -> Fa
                             if let Some(f) = a.reply_fault() {
                                 table.inject_reply_faults(f, s.count);
                             }
-                            for f in a.dmm_faults(s.count) {
+                            for f in a.dmm_faults(s.count, s.off_s) {
                                 dmm_faults.inject(f);
                             }
                         }
@@ -477,6 +525,26 @@ mod tests {
             "dmm:timeout@t=0.5".parse::<FaultSpec>().unwrap().trigger,
             Trigger::Time(0.5)
         );
+        let s: FaultSpec = "dmm:powercycle@reading250".parse().unwrap();
+        assert_eq!(
+            (s.action, s.trigger, s.count, s.off_s),
+            (FaultAction::DmmPowerCycle, Trigger::Reading(250), 1, None)
+        );
+        assert_eq!(s.to_string(), "dmm:powercycle@reading250");
+        let s: FaultSpec = "DMM:PowerCycle@t=30s/7.5s".parse().unwrap();
+        assert_eq!((s.trigger, s.off_s), (Trigger::Time(30.0), Some(7.5)));
+        assert_eq!(s.to_string(), "dmm:powercycle@t=30s/7.5s");
+        assert_eq!(
+            s.action.dmm_faults(1, s.off_s),
+            [Fault::PowerCycle { off_s: Some(7.5) }]
+        );
+        assert_eq!(
+            "dmm:powercycle@demand3/0"
+                .parse::<FaultSpec>()
+                .unwrap()
+                .off_s,
+            Some(0.0)
+        );
         for bad in [
             "",
             "dmm:garble",
@@ -487,6 +555,10 @@ mod tests {
             "table:trip@demand4x2",
             "dmm:disconnect@reading3x2",
             "dmm:overload@reading3x0",
+            "dmm:powercycle@reading3x2",
+            "dmm:powercycle@reading3/-1s",
+            "dmm:powercycle@reading3/soon",
+            "dmm:timeout@reading3/5s",
             "dmm:timeout@t=-1s",
             "dmm:timeout@t=nan",
             "dmm:timeout@t=infs",

@@ -6,7 +6,7 @@ use gyrocal_link::{DEVICE_CLEAR, Transport};
 use tokio::time::Instant;
 
 use crate::timing::{MAX_SAMPLE_COUNT, MEMORY_READINGS, Strategy, Timing};
-use crate::{DcvConfig, Error, InstrumentError, Reading, TriggerSource, parse_reading};
+use crate::{DcvConfig, Error, ErrorKind, InstrumentError, Reading, TriggerSource, parse_reading};
 
 /// Driver settings that are not the meter's measurement configuration.
 #[derive(Debug, Clone, PartialEq)]
@@ -31,6 +31,12 @@ pub struct DriverOptions {
     /// inserts `*OPC?` and waits for its `1`. The meter's input buffer holds about 100.
     /// Default 80.
     pub in_flight_budget: usize,
+    /// How long [`Hp34401a::recover`] keeps trying to re-establish the link with a meter that
+    /// stopped answering (switched off, unplugged, rebooting) before it gives up with
+    /// [`Error::NotBack`]. Counted from the start of the recovery. Default 30 s.
+    pub reconnect_timeout: Duration,
+    /// Pause between two attempts to re-establish the link. Default 1 s.
+    pub reconnect_pause: Duration,
 }
 
 impl Default for DriverOptions {
@@ -43,6 +49,8 @@ impl Default for DriverOptions {
             lock_front_panel: false,
             clear_settle: Duration::from_millis(100),
             in_flight_budget: 80,
+            reconnect_timeout: Duration::from_secs(30),
+            reconnect_pause: Duration::from_secs(1),
         }
     }
 }
@@ -91,6 +99,73 @@ pub struct Progress {
 /// A progress callback (see [`Hp34401a::set_progress`]).
 pub type ProgressFn = Box<dyn FnMut(Progress) + Send>;
 
+/// Why [`Hp34401a::recover`] re-established the link instead of a plain device clear.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum LinkLoss {
+    /// The meter did not answer `SYST:ERR?` after the device clear: switched off, rebooting,
+    /// unplugged, or in LOCAL (a 34401A back from a power cycle is in LOCAL, where RS-232
+    /// queries may go unanswered).
+    NoAnswer,
+    /// The error queue held 550 "Command not allowed in local": the meter is in LOCAL (a power
+    /// cycle, or someone pressed LOCAL).
+    Local,
+    /// `*ESR?` had the Power On bit (128) set: the meter was switched off and on since the
+    /// driver cleared it (`*CLS` at connect), so its configuration and memory are gone.
+    PowerOn,
+}
+
+impl std::fmt::Display for LinkLoss {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            LinkLoss::NoAnswer => "the meter did not answer after a device clear",
+            LinkLoss::Local => "the meter reported 550 \"Command not allowed in local\"",
+            LinkLoss::PowerOn => "the meter's Power On status bit was set (power cycle)",
+        })
+    }
+}
+
+/// What [`Hp34401a::recover`] did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Recovery {
+    /// The entries that were in the meter's error queue after the device clear, oldest first
+    /// (empty when the meter had lost its queue).
+    pub errors: Vec<InstrumentError>,
+    /// True when the link was re-established as at connect (`SYST:REM`, `*CLS`, `*IDN?`, the
+    /// configuration applied again): readings in the meter's memory from before are gone, and
+    /// a caller should log this as a retry.
+    pub reestablished: bool,
+    /// Why the link was re-established (`None` for a plain device clear).
+    pub cause: Option<LinkLoss>,
+    /// Attempts at re-establishing the link (0 for a plain device clear).
+    pub attempts: u32,
+    /// How long the recovery took.
+    pub elapsed: Duration,
+}
+
+impl Recovery {
+    /// One line for a log or a run manifest.
+    pub fn describe(&self) -> String {
+        match self.cause {
+            Some(cause) => format!(
+                "link re-established ({cause}; {} attempt{}, {:.1} s): SYST:REM, *CLS, *IDN? and \
+                 the configuration sent again",
+                self.attempts,
+                if self.attempts == 1 { "" } else { "s" },
+                self.elapsed.as_secs_f64()
+            ),
+            None if self.errors.is_empty() => "device clear".to_string(),
+            None => format!(
+                "device clear; error queue: {}",
+                self.errors
+                    .iter()
+                    .map(ToString::to_string)
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            ),
+        }
+    }
+}
+
 /// The result of [`Hp34401a::acquire`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct Acquisition {
@@ -98,8 +173,11 @@ pub struct Acquisition {
     pub readings: Vec<Reading>,
     /// The strategy used (`Auto` resolved).
     pub strategy: Strategy,
-    /// Retries needed (each after a device clear).
+    /// Retries needed (each after a [`Hp34401a::recover`]).
     pub retries: u32,
+    /// What each of those recoveries did, in order ([`Recovery::reestablished`] tells a re-established
+    /// link, whose failed part was measured again after the configuration was sent again).
+    pub recoveries: Vec<Recovery>,
     /// When the acquisition started (tokio clock).
     pub started: Instant,
     /// How long it took.
@@ -116,6 +194,11 @@ impl Acquisition {
     pub fn overloads(&self) -> usize {
         self.readings.iter().filter(|r| r.is_overload()).count()
     }
+
+    /// How many of the recoveries re-established the link (a power cycle, a meter in LOCAL).
+    pub fn reestablished(&self) -> usize {
+        self.recoveries.iter().filter(|r| r.reestablished).count()
+    }
 }
 
 /// A memory burst in progress: from [`Hp34401a::arm_burst`] to [`Hp34401a::fetch`].
@@ -127,6 +210,8 @@ pub struct Burst {
     pub armed_at: Instant,
     /// Expected time from arming to the `1` of `*OPC?`.
     pub expected: Duration,
+    /// [`Hp34401a::link_epoch`] when armed: a burst from an older epoch is lost.
+    epoch: u64,
 }
 
 /// The HP 34401A driver, generic over its link.
@@ -141,6 +226,7 @@ pub struct Hp34401a<T: Transport> {
     config: Option<DcvConfig>,
     in_flight: usize,
     progress: Option<ProgressFn>,
+    epoch: u64,
 }
 
 impl<T: Transport> Hp34401a<T> {
@@ -153,6 +239,7 @@ impl<T: Transport> Hp34401a<T> {
             config: None,
             in_flight: 0,
             progress: None,
+            epoch: 0,
         }
     }
 
@@ -174,6 +261,13 @@ impl<T: Transport> Hp34401a<T> {
     /// The timing model of the applied configuration.
     pub fn timing(&self) -> Option<Timing> {
         self.config.as_ref().map(Timing::new)
+    }
+
+    /// How many times [`Hp34401a::recover`] has found the link lost (the meter dead, in LOCAL
+    /// or powered on again) since the driver was made. Bursts armed in an earlier epoch cannot
+    /// be fetched ([`Error::ReadingsLost`]).
+    pub fn link_epoch(&self) -> u64 {
+        self.epoch
     }
 
     /// The driver options.
@@ -200,12 +294,7 @@ impl<T: Transport> Hp34401a<T> {
     /// then the error queue drained (entries left from before are logged).
     pub async fn connect(&mut self) -> Result<&Identity, Error> {
         self.device_clear().await?;
-        let remote = if self.options.lock_front_panel {
-            "SYST:RWL"
-        } else {
-            "SYST:REM"
-        };
-        self.command(remote).await?;
+        self.command(self.remote_command()).await?;
         let reply = self.query("*IDN?", self.options.query_timeout).await?;
         let Some(id) = Identity::parse(&reply) else {
             return Err(Error::NotA34401A {
@@ -233,6 +322,13 @@ impl<T: Transport> Hp34401a<T> {
     pub async fn configure(&mut self, config: &DcvConfig) -> Result<(), Error> {
         config.validate()?;
         self.config = None;
+        self.apply(config, "configuring DC volts").await?;
+        self.config = Some(config.clone());
+        Ok(())
+    }
+
+    /// Sends `config`'s commands, then drains the error queue, which must be empty.
+    async fn apply(&mut self, config: &DcvConfig, context: &str) -> Result<(), Error> {
         for line in config.commands() {
             self.command(&line).await?;
         }
@@ -240,12 +336,19 @@ impl<T: Transport> Hp34401a<T> {
         if !errors.is_empty() {
             return Err(Error::Instrument {
                 device: self.device().to_string(),
-                context: "configuring DC volts".into(),
+                context: context.into(),
                 errors,
             });
         }
-        self.config = Some(config.clone());
         Ok(())
+    }
+
+    fn remote_command(&self) -> &'static str {
+        if self.options.lock_front_panel {
+            "SYST:RWL"
+        } else {
+            "SYST:REM"
+        }
     }
 
     /// Reads the whole error queue (until `+0,"No error"`), oldest first.
@@ -267,15 +370,171 @@ impl<T: Transport> Hp34401a<T> {
         Ok(out)
     }
 
-    /// Recovery after a timeout or a garbled reply: device clear (0x03), stale input thrown
-    /// away, error queue drained. Returns the errors that were in the queue.
-    pub async fn recover(&mut self) -> Result<Vec<InstrumentError>, Error> {
+    /// Recovery after a timeout or a garbled reply. It escalates:
+    ///
+    /// 1. a plain recovery, as cheap as it can be, since most failures are one lost or garbled
+    ///    reply: device clear (0x03), stale input thrown away, error queue drained
+    ///    (`SYST:ERR?`), then `*ESR?` to look at the Power On bit;
+    /// 2. when that shows the link lost ([`LinkLoss`]: no answer to `SYST:ERR?`, error 550
+    ///    "not allowed in local" in the queue, or the Power On bit set), the link is
+    ///    re-established as at connect: device clear, `SYST:REM` (or `SYST:RWL`), `*CLS`,
+    ///    `*IDN?` checked to be a 34401A, the configuration of [`Hp34401a::configure`] sent
+    ///    again, the error queue drained (it must be empty). A meter that does not answer is
+    ///    tried again every [`DriverOptions::reconnect_pause`] until
+    ///    [`DriverOptions::reconnect_timeout`] after the start of the recovery, then
+    ///    [`Error::NotBack`].
+    ///
+    /// Why not always the full sequence: a plain recovery costs two short exchanges and keeps
+    /// the meter's memory valid (a burst can be fetched again after a garbled `FETC?`); the full
+    /// one resends the configuration and makes every burst armed before it
+    /// [`Error::ReadingsLost`], which is only right when the meter may have lost them. A
+    /// 34401A back from a power cycle cannot be missed: it was dead for a while (the failed
+    /// exchange and `SYST:ERR?` time out), it comes back in LOCAL (550, or no answer), and its
+    /// Power On bit is set until `*CLS` (even a meter that answers in LOCAL shows it).
+    ///
+    /// A garbled reply to `SYST:ERR?` or `*ESR?` is returned as an error (the caller's retry
+    /// budget counts it), as before.
+    ///
+    /// Limit: the driver looks for a power cycle only here, after a failed exchange. A power
+    /// cycle while the driver is idle (between two acquisitions) is caught by the next
+    /// exchange when the meter ignores or refuses commands in LOCAL, as the simulator does by
+    /// default and the manual's error 550 suggests for `READ?`; a meter that obeyed every
+    /// command in LOCAL would measure at its power-on settings until something fails.
+    pub async fn recover(&mut self) -> Result<Recovery, Error> {
+        let started = Instant::now();
         self.device_clear().await?;
-        let errors = self.drain_errors().await?;
-        for e in &errors {
-            tracing::info!(device = self.device(), error = %e, "error queue entry after device clear");
+        let (errors, cause) = match self.drain_errors().await {
+            Ok(errors) => {
+                for e in &errors {
+                    tracing::info!(device = self.device(), error = %e, "error queue entry after device clear");
+                }
+                if errors.iter().any(|e| e.code == 550) {
+                    (errors, LinkLoss::Local)
+                } else {
+                    match self.power_on_bit().await {
+                        Ok(false) => {
+                            return Ok(Recovery {
+                                errors,
+                                reestablished: false,
+                                cause: None,
+                                attempts: 0,
+                                elapsed: started.elapsed(),
+                            });
+                        }
+                        Ok(true) => (errors, LinkLoss::PowerOn),
+                        Err(e) if e.kind() == ErrorKind::Timeout => (errors, LinkLoss::NoAnswer),
+                        Err(e) => return Err(e),
+                    }
+                }
+            }
+            Err(e) if e.kind() == ErrorKind::Timeout => (Vec::new(), LinkLoss::NoAnswer),
+            Err(e) => return Err(e),
+        };
+        // whatever the meter held may be gone: bursts armed until now cannot be fetched
+        self.epoch += 1;
+        tracing::warn!(device = self.device(), %cause, "multimeter link lost; re-establishing it");
+        let attempts = self.reestablish(started).await?;
+        let recovery = Recovery {
+            errors,
+            reestablished: true,
+            cause: Some(cause),
+            attempts,
+            elapsed: started.elapsed(),
+        };
+        tracing::warn!(device = self.device(), what = %recovery.describe(), "multimeter link re-established");
+        Ok(recovery)
+    }
+
+    /// `*ESR?`: whether the Power On bit (128) of the Standard Event register is set (the
+    /// query clears the register).
+    async fn power_on_bit(&mut self) -> Result<bool, Error> {
+        let reply = self.query("*ESR?", self.options.query_timeout).await?;
+        let value: u16 =
+            reply
+                .trim()
+                .trim_start_matches('+')
+                .parse()
+                .map_err(|_| Error::InvalidReply {
+                    device: self.device().to_string(),
+                    expected: "a number from *ESR?",
+                    bytes: reply.clone().into_bytes(),
+                })?;
+        Ok(value & 128 != 0)
+    }
+
+    /// Re-establishes the link until it works or `reconnect_timeout` after `started`; returns
+    /// the attempts made.
+    async fn reestablish(&mut self, started: Instant) -> Result<u32, Error> {
+        let deadline = started + self.options.reconnect_timeout;
+        let mut attempts = 0;
+        loop {
+            attempts += 1;
+            let error = match self.reestablish_once(deadline).await {
+                Ok(()) => return Ok(attempts),
+                Err(e) => e,
+            };
+            // no answer, a garbled answer, or (garbled) another identity: try again in time
+            let again = error.is_retryable() || error.kind() == ErrorKind::Identity;
+            if !again {
+                return Err(error);
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Err(Error::NotBack {
+                    device: self.device().to_string(),
+                    waited: now - started,
+                    last: Box::new(error),
+                });
+            }
+            tracing::info!(device = self.device(), attempt = attempts, %error, "multimeter not back yet");
+            tokio::time::sleep(self.options.reconnect_pause.min(deadline - now)).await;
         }
-        Ok(errors)
+    }
+
+    /// One attempt: device clear, `SYST:REM`, `*CLS`, `*IDN?` (its timeout cut at `deadline`),
+    /// the configuration again, the error queue drained (must be empty).
+    async fn reestablish_once(&mut self, deadline: Instant) -> Result<(), Error> {
+        self.device_clear().await?;
+        self.command(self.remote_command()).await?;
+        self.command("*CLS").await?;
+        let left = deadline.saturating_duration_since(Instant::now());
+        let timeout = self
+            .options
+            .query_timeout
+            .min(left)
+            .max(Duration::from_millis(100));
+        let reply = self.query("*IDN?", timeout).await?;
+        let Some(id) = Identity::parse(&reply) else {
+            return Err(Error::NotA34401A {
+                device: self.device().to_string(),
+                reply,
+            });
+        };
+        if self.identity.as_ref().is_some_and(|old| old.raw != id.raw) {
+            tracing::warn!(device = self.device(), idn = %id.raw, "another 34401A answers now");
+        }
+        self.identity = Some(id);
+        match self.config.clone() {
+            Some(config) => {
+                self.apply(
+                    &config,
+                    "re-applying the configuration after re-establishing the link",
+                )
+                .await
+            }
+            None => {
+                let errors = self.drain_errors().await?;
+                if errors.is_empty() {
+                    Ok(())
+                } else {
+                    Err(Error::Instrument {
+                        device: self.device().to_string(),
+                        context: "re-establishing the link".into(),
+                        errors,
+                    })
+                }
+            }
+        }
     }
 
     /// Acquires `n` readings with `strategy`, retrying each step (the stream, a memory burst, a
@@ -294,13 +553,14 @@ impl<T: Transport> Hp34401a<T> {
         );
         let mut readings = Vec::with_capacity(n);
         let mut failures = 0;
+        let mut recoveries = Vec::new();
         match strategy {
             Strategy::Stream | Strategy::Auto => {
                 while readings.len() < n {
                     let k = (n - readings.len()).min(MAX_SAMPLE_COUNT);
                     match self.stream(k, readings.len(), n, &timing).await {
                         Ok(r) => readings.extend(r),
-                        Err(e) => self.after_failure(e, &mut failures).await?,
+                        Err(e) => recoveries.push(self.after_failure(e, &mut failures).await?),
                     }
                 }
             }
@@ -310,7 +570,7 @@ impl<T: Transport> Hp34401a<T> {
                     let base = readings.len();
                     match self.burst(k, base, n).await {
                         Ok(r) => readings.extend(r),
-                        Err(e) => self.after_failure(e, &mut failures).await?,
+                        Err(e) => recoveries.push(self.after_failure(e, &mut failures).await?),
                     }
                 }
             }
@@ -331,7 +591,7 @@ impl<T: Transport> Hp34401a<T> {
                         }
                         Err(e) => {
                             counted = false;
-                            self.after_failure(e, &mut failures).await?;
+                            recoveries.push(self.after_failure(e, &mut failures).await?);
                         }
                     }
                 }
@@ -341,6 +601,7 @@ impl<T: Transport> Hp34401a<T> {
             readings,
             strategy,
             retries: failures,
+            recoveries,
             started,
             elapsed: started.elapsed(),
         })
@@ -363,11 +624,25 @@ impl<T: Transport> Hp34401a<T> {
             count: n,
             armed_at: Instant::now(),
             expected,
+            epoch: self.epoch,
         })
     }
 
-    /// Memory mode, second step: waits for the `1` that ends the burst.
+    /// [`Error::ReadingsLost`] for a burst armed before the link was last re-established.
+    fn check_epoch(&self, burst: &Burst) -> Result<(), Error> {
+        if burst.epoch == self.epoch {
+            return Ok(());
+        }
+        Err(Error::ReadingsLost {
+            device: self.device().to_string(),
+            count: burst.count,
+        })
+    }
+
+    /// Memory mode, second step: waits for the `1` that ends the burst. A burst armed before
+    /// the link was re-established is [`Error::ReadingsLost`] (nothing is read).
     pub async fn wait_burst(&mut self, burst: &Burst) -> Result<(), Error> {
+        self.check_epoch(burst)?;
         let deadline = burst.armed_at + self.scaled(burst.expected);
         let timeout = deadline
             .saturating_duration_since(Instant::now())
@@ -386,6 +661,10 @@ impl<T: Transport> Hp34401a<T> {
 
     /// Memory mode, third step: `FETC?` and the burst's readings, parsed as they arrive. The
     /// table can move meanwhile (it is on another link).
+    ///
+    /// A burst armed before [`Hp34401a::recover`] re-established the link (the meter was
+    /// power-cycled or found in LOCAL; its memory is empty or not this burst's) fails at once
+    /// with [`Error::ReadingsLost`], never with other readings: arm a new burst.
     pub async fn fetch(&mut self, burst: &Burst) -> Result<Vec<Reading>, Error> {
         self.fetch_progress(burst, 0, burst.count).await
     }
@@ -396,6 +675,7 @@ impl<T: Transport> Hp34401a<T> {
         base: usize,
         total: usize,
     ) -> Result<Vec<Reading>, Error> {
+        self.check_epoch(burst)?;
         let timing = self.acquisition_timing()?;
         self.send_query("FETC?").await?;
         let first = self.scaled(timing.command_time("FETC?") + timing.wire_time_per_reading());
@@ -499,8 +779,8 @@ impl<T: Transport> Hp34401a<T> {
         Ok(Timing::new(config))
     }
 
-    /// Decides after a failed step: retry (after recovery) or give up.
-    async fn after_failure(&mut self, error: Error, failures: &mut u32) -> Result<(), Error> {
+    /// Decides after a failed step: retry (after recovery, returned) or give up.
+    async fn after_failure(&mut self, error: Error, failures: &mut u32) -> Result<Recovery, Error> {
         let mut error = error;
         loop {
             if !error.is_retryable() {
@@ -522,7 +802,7 @@ impl<T: Transport> Hp34401a<T> {
                 "acquisition step failed; device clear and retry"
             );
             match self.recover().await {
-                Ok(_) => return Ok(()),
+                Ok(r) => return Ok(r),
                 Err(e) => error = e,
             }
         }

@@ -34,6 +34,12 @@ pub enum ErrorKind {
     Identity,
     /// The configuration or the request is invalid (nothing was sent).
     Config,
+    /// The meter stopped answering and did not come back within
+    /// [`crate::DriverOptions::reconnect_timeout`]. Not retryable.
+    Unreachable,
+    /// The readings of a memory burst were lost with the meter's memory (a power cycle, or the
+    /// link re-established since the burst was armed): the burst must be measured again.
+    ReadingsLost,
 }
 
 /// An error from the driver.
@@ -86,6 +92,35 @@ pub enum Error {
     /// An operation that needs `configure()` first.
     #[error("the meter is not configured: call configure() first")]
     NotConfigured,
+    /// The meter stopped answering (or came back from a power cycle and still did not answer)
+    /// and the driver gave up re-establishing the link after `waited`.
+    #[error(
+        "{device}: the multimeter did not come back within {}: is it powered and connected? \
+         (last attempt: {last})",
+        seconds(*waited)
+    )]
+    NotBack {
+        /// The link.
+        device: String,
+        /// How long the driver kept trying (about [`crate::DriverOptions::reconnect_timeout`]).
+        waited: std::time::Duration,
+        /// The last attempt's error.
+        #[source]
+        last: Box<Error>,
+    },
+    /// [`crate::Hp34401a::fetch`] (or `wait_burst`) of a burst armed before the link was
+    /// re-established: the meter's memory was cleared (it came back from a power cycle, or was
+    /// found in LOCAL and reconfigured), so its readings are gone; the driver sends nothing.
+    #[error(
+        "{device}: the multimeter's memory was cleared (power cycle?) since the burst of {count} \
+         readings was armed: the burst must be measured again"
+    )]
+    ReadingsLost {
+        /// The link.
+        device: String,
+        /// Readings the lost burst held.
+        count: usize,
+    },
     /// Recovery was tried `attempts - 1` times and the last attempt failed too.
     #[error("{device}: gave up after {attempts} attempts: {last}")]
     GaveUp {
@@ -97,6 +132,16 @@ pub enum Error {
         #[source]
         last: Box<Error>,
     },
+}
+
+/// `30 s`, `2.5 s`.
+fn seconds(d: std::time::Duration) -> String {
+    let s = d.as_secs_f64();
+    if (s - s.round()).abs() < 0.05 {
+        format!("{:.0} s", s)
+    } else {
+        format!("{s:.1} s")
+    }
 }
 
 fn list(errors: &[InstrumentError]) -> String {
@@ -122,11 +167,15 @@ impl Error {
             Error::Instrument { .. } => ErrorKind::Instrument,
             Error::InvalidReply { .. } | Error::WrongCount { .. } => ErrorKind::Garbled,
             Error::GaveUp { last, .. } => last.kind(),
+            Error::NotBack { .. } => ErrorKind::Unreachable,
+            Error::ReadingsLost { .. } => ErrorKind::ReadingsLost,
         }
     }
 
     /// Whether a device clear and another attempt may help: timeouts and garbled replies.
-    /// False for [`Error::GaveUp`] (the driver already retried).
+    /// False for [`Error::GaveUp`] (the driver already retried), [`Error::NotBack`] (the
+    /// driver already waited [`crate::DriverOptions::reconnect_timeout`]) and
+    /// [`Error::ReadingsLost`] (fetching again cannot help: arm a new burst).
     pub fn is_retryable(&self) -> bool {
         !matches!(self, Error::GaveUp { .. })
             && matches!(self.kind(), ErrorKind::Timeout | ErrorKind::Garbled)

@@ -17,7 +17,15 @@
 //!   [`timing`] model, which is public for run estimates;
 //! - overloads (±9.9E37) come back as [`Reading::Overload`], never as numbers;
 //! - after a timeout or a garbled reply the driver clears the device, drains the error queue and
-//!   retries; errors carry an [`ErrorKind`] and [`Error::is_retryable`].
+//!   retries; errors carry an [`ErrorKind`] and [`Error::is_retryable`];
+//! - a meter that stops answering, or comes back from a power cycle (in LOCAL, with its
+//!   power-on settings and an empty memory), is noticed by [`Hp34401a::recover`] (no answer
+//!   after the device clear, error 550, or the Power On bit of `*ESR?`), which then
+//!   re-establishes the link as at connect and sends the configuration again, for up to
+//!   [`DriverOptions::reconnect_timeout`] ([`Error::NotBack`] after that). The returned
+//!   [`Recovery`] (and [`Acquisition::recoveries`]) says so, for the run's log; `acquire` takes
+//!   the lost part again, and a burst armed before it cannot be fetched
+//!   ([`Error::ReadingsLost`]).
 //!
 //! ```no_run
 //! # async fn demo() -> Result<(), Box<dyn std::error::Error>> {
@@ -40,7 +48,8 @@ pub mod timing;
 
 pub use config::{AutoZero, DcvConfig, NPLC_VALUES, RANGES, TriggerSource};
 pub use driver::{
-    Acquisition, Burst, DriverOptions, Hp34401a, Identity, Progress, ProgressFn, parse_error,
+    Acquisition, Burst, DriverOptions, Hp34401a, Identity, LinkLoss, Progress, ProgressFn,
+    Recovery, parse_error,
 };
 pub use error::{Error, ErrorKind, InstrumentError};
 pub use reading::{OVERLOAD, Reading, parse_reading};

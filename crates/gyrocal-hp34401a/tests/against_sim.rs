@@ -5,10 +5,11 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use gyrocal_hp34401a::{
-    AutoZero, DcvConfig, DriverOptions, ErrorKind, Hp34401a, Reading, Strategy, Timing,
+    AutoZero, DcvConfig, DriverOptions, Error, ErrorKind, Hp34401a, LinkLoss, Reading, Strategy,
+    Timing,
 };
 use gyrocal_link::{DynStream, StreamTransport, memory_pair};
-use gyrocal_sim::dmm::{DmmConfig, DmmHandle, Fault, SimDmm};
+use gyrocal_sim::dmm::{DmmConfig, DmmHandle, Fault, LocalMode, SimDmm};
 use gyrocal_sim::signal::{Constant, FnOfTime};
 use tokio::time::Instant;
 
@@ -307,5 +308,212 @@ async fn close_returns_to_local() {
     let _link = dmm.close().await.unwrap();
     tokio::time::sleep(Duration::from_millis(100)).await;
     assert!(!sim.stats().remote);
+    sim.stop().await;
+}
+
+/// A meter on a slow ramp (0.1 V per second since the bench started, no noise), so each
+/// reading tells when it was integrated.
+async fn ramp_bench(cfg: DmmConfig) -> (Dmm, DmmHandle, Instant) {
+    let (link, dev) = memory_pair("sim-dmm");
+    let origin = Instant::now();
+    let cfg = DmmConfig {
+        noise_v: 0.0,
+        ..cfg
+    };
+    let sim = SimDmm::spawn(dev, cfg, Box::new(FnOfTime::new(|t| 0.1 * t)), 1);
+    let mut dmm = Hp34401a::new(link.boxed(), DriverOptions::default());
+    dmm.connect().await.unwrap();
+    dmm.configure(&nplc1()).await.unwrap();
+    (dmm, sim, origin)
+}
+
+/// Sim seconds since the bench started at which each reading was integrated (mid-window).
+fn reading_times(acq: &gyrocal_hp34401a::Acquisition) -> Vec<f64> {
+    acq.volts().iter().map(|v| v * 10.0).collect()
+}
+
+async fn power_cycle_mid_stream(local_mode: LocalMode, off_s: f64, cause: LinkLoss) {
+    let (mut dmm, sim, origin) = ramp_bench(DmmConfig {
+        local_mode,
+        ..DmmConfig::default()
+    })
+    .await;
+    let before = sim.readings_taken();
+    sim.inject_at_reading(before + 250, Fault::PowerCycle { off_s: Some(off_s) });
+    let t0 = origin.elapsed().as_secs_f64();
+    let acq = dmm.acquire(500, Strategy::Stream).await.unwrap();
+    assert_eq!(acq.readings.len(), 500);
+    assert_eq!(acq.overloads(), 0);
+    assert_eq!(acq.retries, 1);
+    assert_eq!(acq.reestablished(), 1, "{:?}", acq.recoveries);
+    assert_eq!(acq.recoveries[0].cause, Some(cause));
+    let st = sim.stats();
+    assert_eq!(st.power_cycles, 1);
+    assert!(st.remote);
+    // the plan's configuration is back, not the power-on one (NPLC 10)
+    assert_eq!(st.nplc, 1.0);
+    assert!(st.error_queue.is_empty(), "{:?}", st.error_queue);
+    // 249 readings lost with the power cycle, then the 500 again
+    assert_eq!(st.readings_taken - before, 249 + 500);
+    let times = reading_times(&acq);
+    // every reading after the meter came back (reading 250 would have been at about
+    // t0 + 0.02 + 250 * 0.0415 s; the meter was off for off_s from there)
+    let back = t0 + 0.02 + 249.0 * 0.0415 + off_s;
+    assert!(
+        times[0] > back,
+        "first reading at {} s, meter back at {back} s",
+        times[0]
+    );
+    // and every one at NPLC 1 with autozero (41.5 ms apart), not at the power-on NPLC 10
+    for w in times.windows(2) {
+        assert!((w[1] - w[0] - 0.0415).abs() < 1e-5, "{w:?}");
+    }
+    sim.stop().await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn power_cycle_mid_stream_is_reestablished_and_the_500_readings_taken_again() {
+    power_cycle_mid_stream(LocalMode::Refuse, 5.0, LinkLoss::NoAnswer).await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn power_cycle_of_a_meter_that_answers_in_local_is_seen_by_its_power_on_bit() {
+    // the sim's meter obeys in LOCAL and is back (after 0.5 s) before the stream times out:
+    // SYST:ERR? is answered after the device clear, and the Power On bit of *ESR? tells the
+    // power cycle
+    power_cycle_mid_stream(LocalMode::Obey, 0.5, LinkLoss::PowerOn).await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn power_cycle_in_poll_mode_takes_the_lost_reading_again() {
+    let (mut dmm, sim, _) = ramp_bench(DmmConfig::default()).await;
+    let before = sim.readings_taken();
+    sim.inject_at_reading(before + 20, Fault::PowerCycle { off_s: Some(2.0) });
+    let acq = dmm.acquire(40, Strategy::Poll).await.unwrap();
+    assert_eq!(acq.readings.len(), 40);
+    assert_eq!(acq.reestablished(), 1);
+    assert_eq!(sim.stats().nplc, 1.0);
+    assert_eq!(sim.readings_taken() - before, 40);
+    sim.stop().await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn power_cycle_during_a_memory_burst_is_measured_again_inside_acquire() {
+    let (mut dmm, sim, _) = ramp_bench(DmmConfig::default()).await;
+    let before = sim.readings_taken();
+    // in the second burst of 512
+    sim.inject_at_reading(before + 600, Fault::PowerCycle { off_s: None });
+    let acq = dmm.acquire(700, Strategy::Memory).await.unwrap();
+    assert_eq!(acq.readings.len(), 700);
+    assert_eq!(acq.reestablished(), 1);
+    let times = reading_times(&acq);
+    // the first burst is kept; the second (188 readings) measured again after the cycle
+    assert!(
+        times[512] - times[511] > 5.0,
+        "{} {}",
+        times[511],
+        times[512]
+    );
+    for w in times[512..].windows(2) {
+        assert!((w[1] - w[0] - 0.0415).abs() < 1e-5, "{w:?}");
+    }
+    assert_eq!(sim.readings_taken() - before, 512 + 87 + 188);
+    assert_eq!(sim.stats().nplc, 1.0);
+    sim.stop().await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn fetch_of_a_burst_lost_to_a_power_cycle_is_a_distinct_error() {
+    let (mut dmm, sim, _) = ramp_bench(DmmConfig::default()).await;
+    let b = dmm.arm_burst(100).await.unwrap();
+    dmm.wait_burst(&b).await.unwrap();
+    // the meter is switched off and on while the table moves
+    sim.inject(Fault::PowerCycle { off_s: Some(2.0) });
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    assert_eq!(sim.stats().memory_points, 0);
+    // the meter is in LOCAL: FETC? is not answered
+    let err = dmm.fetch(&b).await.unwrap_err();
+    assert!(err.is_retryable(), "{err}");
+    // the caller recovers as after any timeout, and learns the link was re-established
+    let r = dmm.recover().await.unwrap();
+    assert!(r.reestablished);
+    assert_eq!(r.cause, Some(LinkLoss::NoAnswer));
+    assert_eq!(sim.stats().nplc, 1.0);
+    // fetching again fails at once, clearly, instead of returning other data
+    let lines = sim.stats().lines_seen;
+    let err = dmm.fetch(&b).await.unwrap_err();
+    assert!(
+        matches!(err, Error::ReadingsLost { count: 100, .. }),
+        "{err}"
+    );
+    assert_eq!(err.kind(), ErrorKind::ReadingsLost);
+    assert!(!err.is_retryable());
+    assert!(
+        err.to_string().contains("the burst must be measured again"),
+        "{err}"
+    );
+    assert_eq!(sim.stats().lines_seen, lines, "nothing sent");
+    // a new burst works
+    let b = dmm.arm_burst(10).await.unwrap();
+    dmm.wait_burst(&b).await.unwrap();
+    assert_eq!(dmm.fetch(&b).await.unwrap().len(), 10);
+    sim.stop().await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_meter_that_stays_off_is_given_up_after_reconnect_timeout() {
+    let (mut dmm, sim, _) = ramp_bench(DmmConfig::default()).await;
+    sim.inject(Fault::PowerCycle {
+        off_s: Some(100_000.0),
+    });
+    tokio::time::sleep(Duration::from_millis(10)).await;
+    let t0 = Instant::now();
+    let err = dmm.recover().await.unwrap_err();
+    let waited = t0.elapsed();
+    assert_eq!(err.kind(), ErrorKind::Unreachable, "{err}");
+    assert!(!err.is_retryable());
+    assert!(
+        waited >= Duration::from_secs(30) && waited < Duration::from_millis(30_200),
+        "{waited:?}"
+    );
+    let msg = err.to_string();
+    assert!(
+        msg.contains(
+            "sim-dmm: the multimeter did not come back within 30 s: is it powered and connected?"
+        ),
+        "{msg}"
+    );
+    // through acquire: the stream's timeout, then the same 30 s, and no retry on top
+    let t0 = Instant::now();
+    let err = dmm.acquire(10, Strategy::Stream).await.unwrap_err();
+    assert!(matches!(err, Error::NotBack { .. }), "{err}");
+    let waited = t0.elapsed().as_secs_f64();
+    let read_timeout = Timing::new(&nplc1()).command_time("READ?").as_secs_f64();
+    assert!((31.0..33.0 + read_timeout).contains(&waited), "{waited}");
+    sim.stop().await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn reconnect_timeout_is_an_option() {
+    let (link, dev) = memory_pair("sim-dmm");
+    let sim = SimDmm::spawn(dev, DmmConfig::default(), Box::new(Constant(1.0)), 1);
+    let mut dmm = Hp34401a::new(
+        link.boxed(),
+        DriverOptions {
+            reconnect_timeout: Duration::from_secs(8),
+            ..DriverOptions::default()
+        },
+    );
+    dmm.connect().await.unwrap();
+    dmm.configure(&nplc1()).await.unwrap();
+    sim.inject(Fault::PowerCycle { off_s: Some(60.0) });
+    let t0 = Instant::now();
+    let err = dmm.recover().await.unwrap_err();
+    assert!(err.to_string().contains("within 8 s"), "{err}");
+    let waited = t0.elapsed();
+    assert!(
+        waited >= Duration::from_secs(8) && waited < Duration::from_millis(8_200),
+        "{waited:?}"
+    );
     sim.stop().await;
 }

@@ -1,7 +1,9 @@
 //! Transcript tests: the exact bytes the driver writes, against canned replies.
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
-use gyrocal_hp34401a::{DcvConfig, DriverOptions, Error, ErrorKind, Hp34401a, Reading, Strategy};
+use gyrocal_hp34401a::{
+    DcvConfig, DriverOptions, Error, ErrorKind, Hp34401a, LinkLoss, Reading, Strategy,
+};
 use gyrocal_link::ScriptedTransport;
 
 const IDN: &str = "HEWLETT-PACKARD,34401A,0,11-5-2";
@@ -204,12 +206,17 @@ async fn timeout_then_device_clear_drain_and_retry() {
         .expect_raw(&[0x03])
         .query("SYST:ERR?", "-410,\"Query INTERRUPTED\"")
         .query("SYST:ERR?", NO_ERROR)
+        // the Power On bit is clear: the meter kept its configuration, a plain retry
+        .query("*ESR?", "+4")
         .expect_line("SAMP:COUN 2")
         .query("READ?", "+1.00000000E+00,+2.00000000E+00");
     let mut dmm = ready(t).await;
     let acq = dmm.acquire(2, Strategy::Stream).await.unwrap();
     assert_eq!(acq.retries, 1);
     assert_eq!(acq.volts(), [1.0, 2.0]);
+    assert_eq!(acq.reestablished(), 0);
+    assert_eq!(acq.recoveries[0].errors[0].code, -410);
+    assert_eq!(dmm.link_epoch(), 0);
 }
 
 #[tokio::test(start_paused = true)]
@@ -219,6 +226,7 @@ async fn garbled_reading_names_the_bytes_and_gives_up() {
         .query("READ?", "+1.00000000E+00,+2.0#000000E+00")
         .expect_raw(&[0x03])
         .query("SYST:ERR?", NO_ERROR)
+        .query("*ESR?", "+0")
         .expect_line("SAMP:COUN 2")
         .query("READ?", "+1.00000000E+00,HELLO");
     let mut dmm = Hp34401a::new(
@@ -273,4 +281,176 @@ async fn acquire_needs_configure() {
     dmm.connect().await.unwrap();
     let err = dmm.acquire(1, Strategy::Stream).await.unwrap_err();
     assert_eq!(err.kind(), ErrorKind::Config);
+}
+
+/// The re-establish sequence after the link was found lost: device clear, `SYST:REM`, `*CLS`,
+/// `*IDN?`, the configuration of `configure` again, the error queue drained.
+fn reestablish_script(t: ScriptedTransport) -> ScriptedTransport {
+    configure_script(
+        t.expect_raw(&[0x03])
+            .expect_line("SYST:REM")
+            .expect_line("*CLS")
+            .query("*IDN?", IDN),
+    )
+}
+
+#[tokio::test(start_paused = true)]
+async fn no_answer_after_device_clear_reestablishes_the_link_and_streams_again() {
+    let t = configure_script(connect_script())
+        .expect_line("SAMP:COUN 2")
+        .expect_line("READ?")
+        .silence()
+        .expect_raw(&[0x03])
+        .expect_line("SYST:ERR?")
+        .silence();
+    let t = reestablish_script(t)
+        .expect_line("SAMP:COUN 2")
+        .query("READ?", "+1.00000000E+00,+2.00000000E+00");
+    let mut dmm = ready(t).await;
+    let acq = dmm.acquire(2, Strategy::Stream).await.unwrap();
+    assert_eq!(acq.volts(), [1.0, 2.0]);
+    assert_eq!(acq.retries, 1);
+    assert_eq!(acq.reestablished(), 1);
+    let r = &acq.recoveries[0];
+    assert!(r.reestablished);
+    assert_eq!(r.cause, Some(LinkLoss::NoAnswer));
+    assert_eq!(r.attempts, 1);
+    assert!(r.describe().contains("re-established"), "{}", r.describe());
+    assert_eq!(dmm.link_epoch(), 1);
+    assert_eq!(dmm.config(), Some(&nplc1()));
+}
+
+#[tokio::test(start_paused = true)]
+async fn power_on_bit_reestablishes_the_link() {
+    // a meter that answers in LOCAL (unpredictable per the manual) still shows its Power On bit
+    let t = configure_script(connect_script())
+        .expect_line("SAMP:COUN 1")
+        .expect_line("READ?")
+        .silence()
+        .expect_raw(&[0x03])
+        .query("SYST:ERR?", NO_ERROR)
+        .query("*ESR?", "+128");
+    let t = reestablish_script(t)
+        .expect_line("SAMP:COUN 1")
+        .query("READ?", "+1.00000000E+00");
+    let mut dmm = ready(t).await;
+    let acq = dmm.acquire(1, Strategy::Stream).await.unwrap();
+    assert_eq!(acq.recoveries[0].cause, Some(LinkLoss::PowerOn));
+}
+
+#[tokio::test(start_paused = true)]
+async fn error_550_reestablishes_the_link_and_reports_the_queue() {
+    // someone pressed LOCAL: the meter refused what followed with 550
+    let t = configure_script(connect_script())
+        .expect_raw(&[0x03])
+        .query("SYST:ERR?", "+550,\"Command not allowed in local\"")
+        .query("SYST:ERR?", NO_ERROR);
+    let t = reestablish_script(t);
+    let mut dmm = ready(t).await;
+    let r = dmm.recover().await.unwrap();
+    assert!(r.reestablished);
+    assert_eq!(r.cause, Some(LinkLoss::Local));
+    assert_eq!(r.errors[0].code, 550);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_meter_still_off_is_tried_again_after_a_pause() {
+    let t = configure_script(connect_script())
+        .expect_raw(&[0x03])
+        .expect_line("SYST:ERR?")
+        .silence()
+        // first attempt: the meter is still off
+        .expect_raw(&[0x03])
+        .expect_line("SYST:REM")
+        .expect_line("*CLS")
+        .expect_line("*IDN?")
+        .silence();
+    let t = reestablish_script(t);
+    let mut dmm = ready(t).await;
+    let t0 = tokio::time::Instant::now();
+    let r = dmm.recover().await.unwrap();
+    assert!(r.reestablished);
+    assert_eq!(r.attempts, 2);
+    // three device clears (100 ms each) and one pause (1 s); silences cost no virtual time here
+    assert_eq!(t0.elapsed(), std::time::Duration::from_millis(1300));
+}
+
+#[tokio::test(start_paused = true)]
+async fn fetch_of_a_burst_armed_before_a_reestablish_fails_without_sending() {
+    let t = configure_script(connect_script())
+        .expect_line("SAMP:COUN 2")
+        .query("INIT;*OPC?", "1")
+        .expect_raw(&[0x03])
+        .expect_line("SYST:ERR?")
+        .silence();
+    let t = reestablish_script(t);
+    let mut dmm = ready(t).await;
+    let b = dmm.arm_burst(2).await.unwrap();
+    dmm.wait_burst(&b).await.unwrap();
+    assert!(dmm.recover().await.unwrap().reestablished);
+    // nothing is sent: the script has no FETC?
+    let err = dmm.fetch(&b).await.unwrap_err();
+    assert!(matches!(err, Error::ReadingsLost { count: 2, .. }), "{err}");
+    assert_eq!(err.kind(), ErrorKind::ReadingsLost);
+    assert!(!err.is_retryable());
+    assert!(
+        err.to_string()
+            .contains("memory was cleared (power cycle?) since the burst of 2 readings was armed: the burst must be measured again"),
+        "{err}"
+    );
+    assert!(matches!(
+        dmm.wait_burst(&b).await,
+        Err(Error::ReadingsLost { .. })
+    ));
+}
+
+#[tokio::test(start_paused = true)]
+async fn memory_burst_lost_in_acquire_is_measured_again() {
+    let t = configure_script(connect_script())
+        .expect_line("SAMP:COUN 2")
+        .expect_line("INIT;*OPC?")
+        .silence()
+        .expect_raw(&[0x03])
+        .expect_line("SYST:ERR?")
+        .silence();
+    let t = reestablish_script(t)
+        .expect_line("SAMP:COUN 2")
+        .query("INIT;*OPC?", "1")
+        .query("FETC?", "+2.00000000E+00,+3.00000000E+00");
+    let mut dmm = ready(t).await;
+    let acq = dmm.acquire(2, Strategy::Memory).await.unwrap();
+    assert_eq!(acq.volts(), [2.0, 3.0]);
+    assert_eq!(acq.reestablished(), 1);
+}
+
+#[tokio::test(start_paused = true)]
+async fn another_instrument_after_the_reestablish_is_retried_then_named() {
+    let opts = DriverOptions {
+        reconnect_timeout: std::time::Duration::from_millis(250),
+        ..DriverOptions::default()
+    };
+    let t = configure_script(connect_script())
+        .expect_raw(&[0x03])
+        .expect_line("SYST:ERR?")
+        .silence()
+        .expect_raw(&[0x03])
+        .expect_line("SYST:REM")
+        .expect_line("*CLS")
+        .query("*IDN?", "FLUKE,8846A,123,1.0")
+        .expect_raw(&[0x03])
+        .expect_line("SYST:REM")
+        .expect_line("*CLS")
+        .query("*IDN?", "FLUKE,8846A,123,1.0");
+    let mut dmm = Hp34401a::new(t, opts);
+    dmm.connect().await.unwrap();
+    dmm.configure(&nplc1()).await.unwrap();
+    let err = dmm.recover().await.unwrap_err();
+    assert_eq!(err.kind(), ErrorKind::Unreachable);
+    assert!(!err.is_retryable());
+    let msg = err.to_string();
+    assert!(
+        msg.contains("dmm: the multimeter did not come back within"),
+        "{msg}"
+    );
+    assert!(msg.contains("FLUKE,8846A"), "{msg}");
 }

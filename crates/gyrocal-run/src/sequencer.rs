@@ -629,8 +629,8 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
         let limit = self.options.cleanup_timeout;
         if after_error {
             match tokio::time::timeout(limit, dmm.recover()).await {
-                Ok(Ok(errors)) if !errors.is_empty() => {
-                    tracing::info!(?errors, "multimeter error queue at the stop");
+                Ok(Ok(r)) if !r.errors.is_empty() => {
+                    tracing::info!(errors = ?r.errors, "multimeter error queue at the stop");
                 }
                 Ok(Ok(_)) => {}
                 Ok(Err(e)) => tracing::warn!(error = %e, "multimeter clear failed"),

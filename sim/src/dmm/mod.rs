@@ -4,8 +4,9 @@
 //! in-memory pipe in virtual time, or the master side of a pseudo-terminal in real time) as a
 //! tokio task. It follows `shared/docs/hp34401a.md`:
 //!
-//! - `SYST:REM` must come first (strict by default): before it, every other command is refused
-//!   with error 550 "Command not allowed in local" and queries are not answered;
+//! - `SYST:REM` must come first (strict by default): before it, the meter is in LOCAL and what
+//!   it does with the other commands is [`DmmConfig::local_mode`] (default: every other command
+//!   is refused with error 550 "Command not allowed in local" and queries are not answered);
 //! - long and short forms, case-insensitive; `;` chains within a subsystem, `;:` returns to the
 //!   root; several queries on one line answer `;`-separated on one line; every reply ends CR LF;
 //! - the five NPLC values (anything else -222 "Data out of range"); `INIT` stores at most 512
@@ -18,6 +19,17 @@
 //!   or -420 "Query UNTERMINATED" (no reply had begun), and the earlier replies are lost;
 //! - Ctrl-C (0x03) is the device clear: aborts the measurement, empties the input and output
 //!   buffers, keeps the configuration and the error queue;
+//! - a power cycle ([`Fault::PowerCycle`], `dmm:powercycle@...`): the meter is dead for the off
+//!   time ([`DmmConfig::power_off_s`], default 5 s; everything received is lost, nothing is
+//!   sent, a measurement in progress is lost) and comes back as after power-on: in LOCAL, with
+//!   the `*RST` settings (NPLC 10, autozero on, autorange...), empty reading memory, empty input
+//!   and output buffers, empty error queue, and the Power On bit (128) set in the Standard Event
+//!   register (`*ESR?` reads and clears it, as does `*CLS`; the other event bits are not
+//!   modelled);
+//! - `FETC?` with an empty reading memory (after power-on, `*RST`, or before any `INIT`) sends
+//!   no reply and queues -230 "Data stale" (the SCPI "data corrupt or stale" error that sibling
+//!   HP instruments' manuals give for `FETC?` in the idle state or after `*RST`, with no result
+//!   returned; unconfirmed for the 34401A itself);
 //! - timing from the doc's model on tokio's clock (so it runs in virtual time): the command's
 //!   characters on the wire, 20 ms to arm, per reading `delay + NPLC/f_line` (twice the
 //!   integration with autozero on), and output at 11 bits per character at the configured baud.
@@ -74,6 +86,14 @@ pub enum Fault {
         /// How many.
         readings: u32,
     },
+    /// The meter is switched off and on again: dead (deaf and mute) for `off_s` sim seconds
+    /// (`None`: [`DmmConfig::power_off_s`]), then back in LOCAL with the power-on state (see
+    /// the module documentation). Armed at a reading, the meter dies instead of taking it.
+    PowerCycle {
+        /// Off time in sim seconds; default [`DmmConfig::power_off_s`].
+        #[serde(default)]
+        off_s: Option<f64>,
+    },
     /// An entry pushed into the error queue.
     PushError {
         /// The code.
@@ -100,7 +120,16 @@ pub struct DmmConfig {
     /// `*IDN?` reply. Default [`DEFAULT_IDENTITY`].
     pub identity: String,
     /// Require `SYST:REM` (or `SYST:RWL`) before other commands take effect. Default true.
+    /// False is the same as `local_mode = "obey"`: the meter also starts (and comes back from a
+    /// power cycle) in remote.
     pub strict_remote: bool,
+    /// What the meter does with commands and queries received over RS-232 in LOCAL (before
+    /// `SYST:REM`, after `SYST:LOC` or a power cycle) when `strict_remote` is true. The manual
+    /// only says the results are then unpredictable; default `refuse`.
+    pub local_mode: LocalMode,
+    /// Off time of a power cycle ([`Fault::PowerCycle`] without its own), in sim seconds.
+    /// Default 5.
+    pub power_off_s: f64,
     /// Baud rate for the wire timing. Default 9600 (factory setting).
     pub baud: u32,
     /// Framing; every framing is 11 bits per character, so it does not change the timing.
@@ -125,6 +154,8 @@ impl Default for DmmConfig {
         DmmConfig {
             identity: DEFAULT_IDENTITY.to_string(),
             strict_remote: true,
+            local_mode: LocalMode::Refuse,
+            power_off_s: 5.0,
             baud: 9600,
             framing: Framing::EightNone,
             line_hz: 50,
@@ -151,6 +182,9 @@ impl DmmConfig {
         if !(self.noise_v.is_finite() && self.noise_v >= 0.0) {
             return Err(format!("noise_v {} must be >= 0", self.noise_v));
         }
+        if !(self.power_off_s.is_finite() && self.power_off_s >= 0.0) {
+            return Err(format!("power_off_s {} must be >= 0", self.power_off_s));
+        }
         if self.output_buffer < 17 {
             return Err(format!(
                 "output_buffer {} cannot hold a reading",
@@ -159,6 +193,24 @@ impl DmmConfig {
         }
         Ok(())
     }
+}
+
+/// What the simulated meter does in LOCAL with everything but `SYST:REM` and `SYST:RWL`.
+///
+/// The User's Guide says `SYST:REM` must be sent first over RS-232, otherwise "results are
+/// unpredictable", and lists error 550 "Command not allowed in local" for a `READ?` received
+/// in local over RS-232. `refuse` applies that error to every command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LocalMode {
+    /// Every command and query is refused with error 550 "Command not allowed in local"
+    /// queued; queries are not answered (so `SYST:ERR?` cannot read it before `SYST:REM`).
+    #[default]
+    Refuse,
+    /// Everything is ignored: nothing executed, nothing answered, nothing queued.
+    Ignore,
+    /// Everything is executed as in remote (only the remote flag differs).
+    Obey,
 }
 
 /// Counters and state a test can read through [`DmmHandle::stats`].
@@ -181,6 +233,15 @@ pub struct DmmStats {
     pub max_input_backlog: usize,
     /// Whether the meter is in remote.
     pub remote: bool,
+    /// Power cycles so far ([`Fault::PowerCycle`]).
+    pub power_cycles: u64,
+    /// Whether the meter is switched on (false during a power cycle's off time).
+    pub powered: bool,
+    /// The integration time now in force (`VOLT:DC:NPLC`), for tests that check a
+    /// reconfiguration.
+    pub nplc: f64,
+    /// Readings in the internal memory now.
+    pub memory_points: usize,
     /// The error queue now, oldest first.
     pub error_queue: Vec<(i32, String)>,
     /// True once the simulator has stopped (stop, disconnect, or the host closed the link).
@@ -343,6 +404,9 @@ fn sanitize(mut c: DmmConfig) -> DmmConfig {
             c.noise_v = d.noise_v;
         }
         c.output_buffer = c.output_buffer.max(17);
+        if !(c.power_off_s.is_finite() && c.power_off_s >= 0.0) {
+            c.power_off_s = d.power_off_s;
+        }
     }
     c
 }
@@ -468,7 +532,14 @@ struct Meter {
     at_reading: Vec<(u64, Fault)>,
     /// A reply fault for the reading at this index of the memory, applied by `FETC?`.
     memory_fault: Option<(usize, ReplyFault)>,
+    /// Standard Event register (only the Power On bit is modelled).
+    esr: u8,
+    /// Switched off until then (a power cycle).
+    off_until: Option<Instant>,
 }
+
+/// The Standard Event register's Power On bit.
+const ESR_PON: u8 = 128;
 
 fn scaled(cfg: &DmmConfig, d: Duration) -> Duration {
     d.div_f64(cfg.time_scale)
@@ -517,6 +588,8 @@ impl Meter {
             faults,
             at_reading: Vec::new(),
             memory_fault: None,
+            esr: ESR_PON,
+            off_until: None,
         }
     }
 
@@ -565,6 +638,9 @@ impl Meter {
 
     fn publish(&mut self) {
         self.counters.remote = self.remote;
+        self.counters.powered = self.off_until.is_none();
+        self.counters.nplc = self.set.nplc;
+        self.counters.memory_points = self.memory.len();
         self.counters.error_queue = self.errors.iter().cloned().collect();
         if let Ok(mut s) = self.stats.lock() {
             *s = self.counters.clone();
@@ -579,6 +655,9 @@ impl Meter {
     }
 
     fn next_wake(&self) -> Option<Instant> {
+        if self.off_until.is_some() {
+            return self.off_until;
+        }
         let mut wake: Option<Instant> = None;
         let mut consider = |t: Instant| wake = Some(wake.map_or(t, |w| w.min(t)));
         if let Some((_, due)) = &self.tx {
@@ -602,6 +681,10 @@ impl Meter {
     // ---- input -------------------------------------------------------------------------
 
     fn input(&mut self, bytes: &[u8]) {
+        if self.off_until.is_some() {
+            // switched off: whatever arrives is lost
+            return;
+        }
         let now = Instant::now();
         for &b in bytes {
             match b {
@@ -698,13 +781,57 @@ impl Meter {
             Fault::Garble => self.pending_reply_fault.push_back(ReplyFault::Garble),
             Fault::Truncate => self.pending_reply_fault.push_back(ReplyFault::Truncate),
             Fault::Disconnect => self.disconnect = true,
+            Fault::PowerCycle { off_s } => self.power_off(off_s),
             Fault::Overload { readings } => self.overloads_left += readings,
             Fault::PushError { code, message } => self.raise(code, &message),
         }
     }
 
+    /// Switches the meter off for `off_s` sim seconds (default `power_off_s`): the
+    /// measurement, the line being executed, everything buffered in and out is lost.
+    fn power_off(&mut self, off_s: Option<f64>) {
+        let off = off_s
+            .filter(|s| s.is_finite() && *s >= 0.0)
+            .unwrap_or(self.cfg.power_off_s);
+        let now = Instant::now().max(self.clock);
+        let until = now + scaled(&self.cfg, Duration::from_secs_f64(off.min(1e9)));
+        tracing::debug!(off_s = off, "simulated 34401A: power off");
+        // a power cycle while off restarts the off time
+        self.off_until = Some(self.off_until.map_or(until, |u| u.max(until)));
+        self.meas = None;
+        self.exec = None;
+        self.out.clear();
+        self.tx = None;
+        self.lines.clear();
+        self.inbuf.clear();
+    }
+
+    /// Back on at `t`, as after power-on: LOCAL (unless `strict_remote` is off), the `*RST`
+    /// settings, memory, buffers and error queue empty, the Power On event bit set.
+    fn power_on(&mut self, t: Instant) {
+        tracing::debug!("simulated 34401A: power on");
+        self.off_until = None;
+        self.counters.power_cycles += 1;
+        self.remote = !self.cfg.strict_remote;
+        self.set = Settings::default();
+        self.errors.clear();
+        self.memory.clear();
+        self.memory_fault = None;
+        self.esr = ESR_PON;
+        self.meas = None;
+        self.exec = None;
+        self.out.clear();
+        self.tx = None;
+        self.lines.clear();
+        self.inbuf.clear();
+        self.clock = self.clock.max(t);
+        self.in_wire_free = t;
+        self.out_wire_free = t;
+        self.out_time = t;
+    }
+
     /// Fires the faults armed for the reading about to be taken; true when the meter
-    /// disconnected instead.
+    /// disconnected or was switched off instead.
     fn reading_faults(&mut self, dest: Dest) -> bool {
         let next = self.counters.readings_taken + 1;
         let mut due = Vec::new();
@@ -727,6 +854,9 @@ impl Meter {
                     continue;
                 }
             };
+            if self.off_until.is_some() {
+                continue;
+            }
             match dest {
                 Dest::Memory => self.memory_fault = Some((self.memory.len(), reply_fault)),
                 Dest::Output => match self.exec.as_mut() {
@@ -737,7 +867,7 @@ impl Meter {
                 },
             }
         }
-        self.disconnect
+        self.disconnect || self.off_until.is_some()
     }
 
     fn scheduled_faults(&mut self) {
@@ -765,6 +895,11 @@ impl Meter {
     // ---- time --------------------------------------------------------------------------
 
     fn advance(&mut self, now: Instant) {
+        match self.off_until {
+            Some(t) if t <= now => self.power_on(t),
+            Some(_) => return,
+            None => {}
+        }
         loop {
             let mut progressed = false;
             if let Some(m) = self.meas.as_mut()
@@ -982,7 +1117,11 @@ impl Meter {
             let t = self.clock.min(now);
             self.execute(&unit, t);
             self.scheduled_faults();
-            if self.meas.is_some() || self.exec.is_none() || self.disconnect {
+            if self.meas.is_some()
+                || self.exec.is_none()
+                || self.disconnect
+                || self.off_until.is_some()
+            {
                 return true;
             }
         }
@@ -999,8 +1138,14 @@ impl Meter {
             return;
         };
         if !self.remote && !matches!(cmd, Cmd::Remote | Cmd::Rwlock) {
-            self.raise(550, "Command not allowed in local");
-            return;
+            match self.cfg.local_mode {
+                LocalMode::Refuse => {
+                    self.raise(550, "Command not allowed in local");
+                    return;
+                }
+                LocalMode::Ignore => return,
+                LocalMode::Obey => {}
+            }
         }
         if let Err((code, msg)) = self.command(cmd, u, now) {
             self.raise(code, msg);
@@ -1037,10 +1182,15 @@ impl Meter {
             (Cmd::Cls, false) => {
                 no_params()?;
                 self.errors.clear();
+                self.esr = 0;
             }
             (Cmd::Opc, true) => self.reply("1"),
             (Cmd::Opc | Cmd::Ese | Cmd::Sre, false) => {}
-            (Cmd::Esr | Cmd::Stb | Cmd::Ese | Cmd::Sre | Cmd::Tst, true) => self.reply("+0"),
+            (Cmd::Esr, true) => {
+                let v = std::mem::take(&mut self.esr);
+                self.reply(&format!("{v:+}"));
+            }
+            (Cmd::Stb | Cmd::Ese | Cmd::Sre | Cmd::Tst, true) => self.reply("+0"),
             (Cmd::Trg, false) => return Err((-211, "Trigger ignored")),
             (Cmd::Remote, false) => self.remote = true,
             (Cmd::Rwlock, false) => self.remote = true,
@@ -1411,3 +1561,6 @@ mod tests {
         assert!(toml::from_str::<DmmConfig>("bogus = 1").is_err());
     }
 }
+
+#[cfg(test)]
+mod power_cycle_tests;
