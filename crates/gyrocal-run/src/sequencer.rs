@@ -314,8 +314,14 @@ enum StepOutcome {
     Recorded,
     /// Its readings are in the meter's memory, to be fetched during the next ramp.
     Pending(PendingFetch),
-    /// The table did not hold the rate during the acquisition: nothing was recorded.
-    NotHeld(String),
+    /// Nothing was recorded and the step must be measured again: the table did not hold the
+    /// rate during the acquisition, or the meter lost the readings (a power cycle).
+    Again {
+        /// `table` or `dmm`: whose doing.
+        instrument: &'static str,
+        /// What happened.
+        detail: String,
+    },
 }
 
 /// A memory burst whose readings are still in the meter.
@@ -348,6 +354,8 @@ pub struct Sequencer<D: Transport, T: RateTable> {
     table_reached: bool,
     /// A rate was demanded in this session.
     moved: bool,
+    /// Steps whose readings the meter lost before they were fetched, to measure again.
+    lost: Vec<Step>,
 }
 
 impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
@@ -375,6 +383,7 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
             strategy_used: None,
             table_reached: false,
             moved: false,
+            lost: Vec::new(),
         }
     }
 
@@ -752,10 +761,14 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
                 .instrument(span)
                 .await?;
             self.log_table_retries(Some(step.index))?;
+            for lost in self.lost.drain(..) {
+                queue.push_front(lost);
+                total += 1;
+            }
             match outcome {
                 StepOutcome::Recorded => {}
                 StepOutcome::Pending(p) => pending = Some(p),
-                StepOutcome::NotHeld(detail) => {
+                StepOutcome::Again { instrument, detail } => {
                     let used = retried.entry(step.index).or_default();
                     if *used >= self.options.step_retries {
                         return Err(SequenceError::NotHeld {
@@ -767,7 +780,7 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
                     *used += 1;
                     self.log_retry(
                         Some(step.index),
-                        "table",
+                        instrument,
                         format!("step not recorded: {detail}; measuring it again"),
                     )?;
                     queue.push_front(step);
@@ -828,19 +841,33 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
             let ((settled, at), fetched) = tokio::join!(wait, fetch_with_retry(dmm, &p.burst));
             at_rate = at;
             // record the previous step before anything else can fail
-            let (readings, notes) = match fetched {
-                Ok(ok) => ok,
+            match fetched {
+                Ok((readings, notes)) => {
+                    for m in notes {
+                        self.log_retry(Some(p.step.index), "dmm", m)?;
+                    }
+                    self.record_fetched(p, readings)?;
+                }
                 Err((e, notes)) => {
                     for m in notes {
                         self.log_retry(Some(p.step.index), "dmm", m)?;
                     }
-                    return Err(e);
+                    if !readings_lost(&e) {
+                        return Err(e);
+                    }
+                    // the previous step's readings went with the meter's memory: it is
+                    // measured again right after this step
+                    self.log_retry(
+                        Some(p.step.index),
+                        "dmm",
+                        format!(
+                            "{e}; step {} is measured again after this one",
+                            p.step.index
+                        ),
+                    )?;
+                    self.lost.push(p.step);
                 }
-            };
-            for m in notes {
-                self.log_retry(Some(p.step.index), "dmm", m)?;
             }
-            self.record_fetched(p, readings)?;
             settled?;
         } else {
             self.table.wait_at_rate(&ctx.criteria).await?;
@@ -866,7 +893,7 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
             Strategy::Memory => {
                 let p = match self.acquire_memory(step, n).await? {
                     Ok(p) => p,
-                    Err(not_held) => return Ok(StepOutcome::NotHeld(not_held)),
+                    Err(again) => return Ok(again),
                 };
                 if self.options.overlap_fetch && !last {
                     return Ok(StepOutcome::Pending(p));
@@ -876,7 +903,15 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
                     phase: Phase::Fetching,
                 });
                 let fetched = self.fetch_monitored(&p.burst).await?;
-                let readings = self.retries_logged(p.step.index, fetched)?;
+                let readings = match self.retries_logged(p.step.index, fetched) {
+                    Err(e) if readings_lost(&e) => {
+                        return Ok(StepOutcome::Again {
+                            instrument: "dmm",
+                            detail: e.to_string(),
+                        });
+                    }
+                    other => other?,
+                };
                 self.record_fetched(p, readings)?;
                 Ok(StepOutcome::Recorded)
             }
@@ -1008,19 +1043,26 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
             .await?;
         let acq = acq?;
         let t_end = self.now_s();
-        if let Some(why) = self.check_hold(step, &mut stats).await? {
-            return Ok(StepOutcome::NotHeld(why));
-        }
-        if acq.retries > 0 {
+        for r in &acq.recoveries {
             self.log_retry(
                 Some(step.index),
                 "dmm",
-                format!(
-                    "{} acquisition retr{} after device clear (see log)",
-                    acq.retries,
-                    if acq.retries == 1 { "y" } else { "ies" }
-                ),
+                format!("acquisition retried: {}", r.describe()),
             )?;
+        }
+        let unexplained = (acq.retries as usize).saturating_sub(acq.recoveries.len());
+        if unexplained > 0 {
+            self.log_retry(
+                Some(step.index),
+                "dmm",
+                format!("{unexplained} acquisition retries after device clear (see log)"),
+            )?;
+        }
+        if let Some(why) = self.check_hold(step, &mut stats).await? {
+            return Ok(StepOutcome::Again {
+                instrument: "table",
+                detail: why,
+            });
         }
         self.record(step, &acq.readings, stats, acq.retries, t_start, t_end)?;
         Ok(StepOutcome::Recorded)
@@ -1033,7 +1075,7 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
         &mut self,
         step: &Step,
         n: usize,
-    ) -> Result<Result<PendingFetch, String>, SequenceError> {
+    ) -> Result<Result<PendingFetch, StepOutcome>, SequenceError> {
         self.progress_to_events();
         let t_start = self.now_s();
         let interval = self.options.sample_interval;
@@ -1057,16 +1099,21 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
                 Ok(b) => b,
                 Err(e) if e.is_retryable() && retries < retries_allowed => {
                     retries += 1;
-                    let msg =
-                        format!("memory burst failed ({e}); device clear and retry {retries}");
+                    let recovery = self.dmm_mut()?.recover().await?;
+                    let msg = format!(
+                        "memory burst failed ({e}); {}; burst measured again (retry {retries})",
+                        recovery.describe()
+                    );
                     self.log_retry(Some(step.index), "dmm", msg)?;
-                    self.dmm_mut()?.recover().await?;
                     continue;
                 }
                 Err(e) => return Err(e.into()),
             };
             if let Some(why) = self.check_hold(step, &mut s).await? {
-                return Ok(Err(why));
+                return Ok(Err(StepOutcome::Again {
+                    instrument: "table",
+                    detail: why,
+                }));
             }
             stats.push(s);
             if last {
@@ -1085,7 +1132,15 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
                 phase: Phase::Fetching,
             });
             let fetched = self.fetch_monitored(&burst).await?;
-            let got = self.retries_logged(step.index, fetched)?;
+            let got = match self.retries_logged(step.index, fetched) {
+                Err(e) if readings_lost(&e) => {
+                    return Ok(Err(StepOutcome::Again {
+                        instrument: "dmm",
+                        detail: e.to_string(),
+                    }));
+                }
+                other => other?,
+            };
             readings.extend(got);
             self.emit(Event::Phase {
                 step: step.index,
@@ -1189,15 +1244,26 @@ async fn fetch_with_retry<D: Transport>(dmm: &mut Hp34401a<D>, burst: &Burst) ->
             Ok(r) => return Ok((r, notes)),
             Err(e) if e.is_retryable() && tries < allowed => {
                 tries += 1;
-                notes.push(format!("FETC? failed ({e}); device clear and fetch again"));
                 tracing::warn!(error = %e, "FETC? failed; device clear and fetch again");
-                if let Err(e) = dmm.recover().await {
-                    return Err((e.into(), notes));
+                match dmm.recover().await {
+                    Ok(r) => notes.push(format!(
+                        "FETC? failed ({e}); {}; fetching again",
+                        r.describe()
+                    )),
+                    Err(e2) => {
+                        notes.push(format!("FETC? failed ({e})"));
+                        return Err((e2.into(), notes));
+                    }
                 }
             }
             Err(e) => return Err((e.into(), notes)),
         }
     }
+}
+
+/// The meter lost readings it still held (a power cycle): the step must be measured again.
+fn readings_lost(e: &SequenceError) -> bool {
+    matches!(e, SequenceError::Dmm(d) if d.kind() == gyrocal_hp34401a::ErrorKind::ReadingsLost)
 }
 
 /// The message of a caught panic.

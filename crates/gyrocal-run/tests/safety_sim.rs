@@ -481,3 +481,96 @@ async fn a_panic_in_the_sequencer_still_brings_the_table_to_rest() {
     let m = load(&tmp.path().join("run")).unwrap().manifest;
     assert_eq!(m.status, Status::Failed);
 }
+
+/// `plan` on a fresh bench with the fault specs `faults` scheduled; no stop requests.
+async fn run_with_faults(plan: &Plan, dir: &Path, faults: &[&str]) -> (RunSummary, BenchHandle) {
+    let bench = Bench::spawn(bench_config(plan));
+    let specs: Vec<gyrocal_sim::faults::FaultSpec> =
+        faults.iter().map(|f| f.parse().unwrap()).collect();
+    let _schedule = gyrocal_sim::faults::schedule(&specs, &bench.handle, 1.0);
+    let (summary, _, handle) = run_on_bench(plan, bench, dir, Box::new(|_| None)).await;
+    (summary, handle)
+}
+
+/// Every step of `plan` recorded exactly once with all its samples.
+fn assert_every_step_once(plan: &Plan, dir: &Path) {
+    let data = load(dir).unwrap();
+    let mut steps: Vec<usize> = data.steps.iter().map(|s| s.step).collect();
+    steps.sort_unstable();
+    let n = plan.schedule().len();
+    assert_eq!(steps, (0..n).collect::<Vec<_>>(), "every step exactly once");
+    let per = plan.samples_per_rate() as usize;
+    let samples = gyrocal_run::load_samples(dir).unwrap();
+    for k in 0..n {
+        assert_eq!(
+            samples.iter().filter(|s| s.step == k).count(),
+            per,
+            "step {k}"
+        );
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_meter_power_cycle_mid_stream_is_recovered_and_the_run_completes() {
+    // the meter is off for 5 s in the middle of step 1's readings, then back in LOCAL with
+    // its power-on settings: the driver re-establishes remote mode and the configuration,
+    // and takes the lost readings again
+    let plan = plan_with_rates(&[0.0, 10.0, -10.0]);
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let (summary, bench) = run_with_faults(&plan, &dir, &["dmm:powercycle@reading75"]).await;
+    assert_eq!(summary.status, Status::Complete, "{:?}", summary.reason);
+    assert_every_step_once(&plan, &dir);
+    let m = load(&dir).unwrap().manifest;
+    let retry = m
+        .retries
+        .iter()
+        .find(|r| r.instrument == "dmm" && r.step == Some(1))
+        .expect("the power cycle is in the manifest");
+    assert!(
+        retry.message.contains("re-established"),
+        "{}",
+        retry.message
+    );
+    // the meter measures at the plan's NPLC again, not its power-on 10 PLC
+    let stats = bench.dmm.stats();
+    assert_eq!(stats.power_cycles, 1);
+    assert_eq!(stats.nplc, 1.0);
+    assert!(summary.table.is_at_rest());
+}
+
+#[tokio::test(start_paused = true)]
+async fn readings_lost_with_the_meters_memory_are_measured_again() {
+    // memory mode; the meter power-cycles as the 3rd demand is sent, so step 1's last burst,
+    // still in the meter to be fetched during that ramp, is lost: step 1 is measured again
+    // after step 2, and the run completes with every step once
+    let path = config("quick.toml");
+    let mut doc: toml::Table = std::fs::read_to_string(&path).unwrap().parse().unwrap();
+    let dmm = doc.get_mut("dmm").unwrap().as_table_mut().unwrap();
+    dmm.insert("nplc".into(), toml::Value::Float(0.02));
+    dmm.insert("autozero".into(), toml::Value::Boolean(false));
+    dmm.insert("acquisition".into(), toml::Value::String("memory".into()));
+    let plan = Plan::from_toml_str(&toml::to_string(&doc).unwrap(), &path).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let (summary, bench) = run_with_faults(&plan, &dir, &["dmm:powercycle@demand3/2s"]).await;
+    assert_eq!(summary.status, Status::Complete, "{:?}", summary.reason);
+    assert_every_step_once(&plan, &dir);
+    let data = load(&dir).unwrap();
+    let order: Vec<usize> = data.steps.iter().map(|s| s.step).collect();
+    assert_eq!(
+        order,
+        vec![0, 2, 1, 3, 4],
+        "step 1 measured again after step 2"
+    );
+    assert!(
+        data.manifest
+            .retries
+            .iter()
+            .any(|r| r.step == Some(1) && r.message.contains("measured again after this one")),
+        "{:?}",
+        data.manifest.retries
+    );
+    assert_eq!(bench.dmm.stats().power_cycles, 1);
+    assert!(summary.table.is_at_rest());
+}
