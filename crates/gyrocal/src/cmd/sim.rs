@@ -43,7 +43,7 @@ pub struct SimArgs {
     /// Seed of every random stream; overrides the configuration's.
     #[arg(long, value_name = "N")]
     pub seed: Option<u64>,
-    /// Schedule a fault (repeatable): DEVICE:ACTION@TRIGGER[xCOUNT], such as
+    /// Schedule a fault (repeatable): DEVICE:ACTION@TRIGGER[xCOUNT][/Ss], such as
     /// dmm:garble@reading100 or table:trip@demand4 (see below).
     #[arg(long = "fault", value_name = "SPEC")]
     pub faults: Vec<String>,
@@ -63,7 +63,7 @@ then, on SIGINT or SIGTERM, one more line before exiting with 0:
   {\"exit\": \"SIGINT\", \"table\": {\"mode\", \"demanded_rate\", \"actual_rate\", \"stopped\",
    \"interlock_closed\", \"fault\", \"silent\", \"demands_seen\"}, \"dmm\": {\"readings_taken\",
    \"commands_seen\", \"lines_seen\", \"queries_answered\", \"device_clears\", \"errors_raised\",
-   \"remote\", \"stopped\"}, \"faults\": [{\"spec\", \"fired\"}]}
+   \"remote\", \"stopped\", \"power_cycles\", \"nplc\"}, \"faults\": [{\"spec\", \"fired\"}]}
 Clients may close a port and open the same path again; the simulators keep their state.
 
 Fault specs (--fault, repeatable):
@@ -252,6 +252,8 @@ fn final_state(signal: &str, bench: &BenchHandle, schedule: &FaultSchedule) -> V
             "errors_raised": d.errors_raised,
             "remote": d.remote,
             "stopped": d.stopped,
+            "power_cycles": d.power_cycles,
+            "nplc": d.nplc,
         },
         "faults": schedule.status(bench).iter().map(|s| json!({
             "spec": s.spec,
