@@ -202,6 +202,9 @@ fn sigint_mid_run_stops_the_table_and_the_run_resumes_to_completion() {
     let table = final_table_state(&stderr);
     assert_eq!(table["demanded_dps"].as_f64(), Some(0.0), "{table}");
     assert_ne!(table["mode"], "Rate", "{table}");
+    // at rest when gyrocal let go of the bench, not merely sent a stop
+    assert_eq!(table["stopped"], true, "{table}");
+    assert!(stderr.contains("table at rest"), "{stderr}");
 
     resume_simulated(&plan, &dir);
     check_complete(&dir, 19, 500);
