@@ -57,6 +57,11 @@ pub fn load_input(path: &Path) -> Result<Input, ReportError> {
         load_run(path)
     } else if path.is_file() {
         load_csv(path)
+    } else if path.exists() {
+        // a device or a pipe (/dev/zero): never read an endless input
+        Err(ReportError::NotAFile {
+            path: path.to_path_buf(),
+        })
     } else {
         Err(ReportError::NotFound {
             path: path.to_path_buf(),

@@ -290,6 +290,14 @@ fn check_refuses_endless_and_out_of_range_plans_with_exit_2() {
 }
 
 #[test]
+fn report_of_an_endless_input_exits_2_at_once() {
+    let started = std::time::Instant::now();
+    let out = gyrocal(&["report", "/dev/zero", "--out", "/nonexistent/r.html"]);
+    assert_user_error(&out, "/dev/zero: not a run directory or a regular file");
+    assert!(started.elapsed() < std::time::Duration::from_secs(20));
+}
+
+#[test]
 fn report_input_with_a_duplicated_column_exits_2_naming_both() {
     let tmp = tempfile::tempdir().unwrap();
     let path = tmp.path().join("dup.csv");
