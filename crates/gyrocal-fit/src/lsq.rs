@@ -141,6 +141,15 @@ pub(crate) fn check(data: &Dataset, model: Model) -> Result<(), FitError> {
 pub fn check_rates(rates: &[f64], model: Model) -> Result<(), FitError> {
     let needed = model.coefficient_count();
     let distinct_all = distinct(rates.iter().copied());
+    // Distinct rates first: it is the actionable figure (more readings at the same rates
+    // cannot determine a polynomial), and fewer points than coefficients implies it.
+    if model != Model::Split && distinct_all >= 2 && distinct_all < needed {
+        return Err(FitError::RankDeficient {
+            model,
+            needed,
+            distinct: distinct_all,
+        });
+    }
     if model != Model::Split && rates.len() < needed {
         return Err(FitError::TooFewPoints {
             model,

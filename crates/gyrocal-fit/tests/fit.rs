@@ -368,9 +368,9 @@ fn data_that_cannot_determine_a_model_is_an_error() {
     let two = Dataset::from_pairs([(0.0, 0.0), (1.0, 0.36)]);
     assert!(matches!(
         fit_least_squares(&two, Model::Quadratic, Weighting::Auto),
-        Err(FitError::TooFewPoints {
+        Err(FitError::RankDeficient {
             needed: 3,
-            points: 2,
+            distinct: 2,
             ..
         })
     ));

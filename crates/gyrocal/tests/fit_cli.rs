@@ -218,7 +218,7 @@ fn fewer_points_than_coefficients() {
         "rate_dps,volts\n0,0.0088\n1,0.37\n2,0.73\n",
         &["--model", "cubic"],
         4,
-        "has only 3 points",
+        "the cubic model has 4 coefficients and needs at least 4 distinct rates; the data have 3",
     );
 }
 

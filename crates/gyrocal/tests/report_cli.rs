@@ -207,7 +207,7 @@ fn a_complete_run_with_three_rates_fits_reports_and_names_the_skipped_cubic() {
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
     assert!(
         html.contains(
-            "not fitted: cubic — the cubic model has 4 coefficients but the data has only 3 points"
+            "not fitted: cubic — the cubic model has 4 coefficients and needs at least 4 distinct rates; the data have 3"
         ),
         "report.html does not name the skipped model"
     );

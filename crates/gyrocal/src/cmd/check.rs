@@ -48,15 +48,16 @@ pub fn model_warnings(plan: &Plan, path: &std::path::Path) -> Vec<String> {
     let mut distinct = rates.clone();
     distinct.sort_by(f64::total_cmp);
     distinct.dedup();
+    let list: Vec<String> = distinct.iter().map(f64::to_string).collect();
     gyrocal_fit::unsupported_models(&rates, &gyrocal_fit::Options::default().models)
         .into_iter()
         .map(|s| {
             format!(
-                "{}: the schedule has {} distinct rate(s): the fit will skip the {} model ({} coefficients): {}",
+                "{}: the schedule has {} distinct rates ({} °/s): the fit will skip the {} model: {}",
                 path.display(),
                 distinct.len(),
+                list.join(", "),
                 s.model,
-                s.model.coefficient_count(),
                 s.reason
             )
         })
