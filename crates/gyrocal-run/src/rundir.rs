@@ -108,8 +108,9 @@ pub const MAX_MANIFEST_BYTES: u64 = 64 * 1024 * 1024;
 /// The most bytes read from `steps.csv` (64 MiB, some 400 000 steps; a plan of the largest
 /// size gyrocal accepts stays below it).
 pub const MAX_STEPS_BYTES: u64 = 64 * 1024 * 1024;
-/// The most bytes read from `samples.csv` (4 GiB, about 100 million readings: weeks of
-/// readings at the 34401A's rates).
+/// The largest `samples.csv` accepted (4 GiB, about 100 million readings: weeks of readings
+/// at the 34401A's rates). A resume streams the file (it never holds it in memory);
+/// [`load_samples`] reads it whole.
 pub const MAX_SAMPLES_BYTES: u64 = 4 * 1024 * 1024 * 1024;
 /// The most bytes read from `fit.json` by the report (64 MiB).
 pub const MAX_FIT_BYTES: u64 = 64 * 1024 * 1024;
@@ -710,9 +711,8 @@ impl RunDir {
 
         // samples.csv: keep the finished steps' rows, drop everything from the first other row.
         let sapath = path.join(SAMPLES_CSV);
-        let (samples_bytes, torn_samples) =
-            read_repaired(&sapath, &[&SAMPLES_HEADER], MAX_SAMPLES_BYTES)?;
-        let (keep_len, dropped) = scan_samples(&sapath, &samples_bytes, &schedule, &expected)?;
+        let (samples_len, torn_samples) = repair_samples(&sapath)?;
+        let (keep_len, dropped) = scan_samples(&sapath, samples_len, &schedule, &expected)?;
         truncate(&sapath, keep_len)?;
         truncate(&spath, steps_bytes.len() as u64)?;
 
@@ -1223,6 +1223,63 @@ fn read_repaired(path: &Path, accepted: &[&[&str]], cap: u64) -> Result<(Vec<u8>
     Ok((upgraded, torn))
 }
 
+/// Prepares samples.csv for a resume without reading it whole: finds the end of its last
+/// complete line (a torn tail is dropped later by the truncation), checks the header, and
+/// writes the header into an empty file. Returns (length of the complete lines, torn bytes).
+fn repair_samples(path: &Path) -> Result<(u64, u64), RunError> {
+    use std::io::{Read as _, Seek as _, SeekFrom};
+    let mut file = File::open(path).map_err(io(path, "read"))?;
+    let meta = file.metadata().map_err(io(path, "read"))?;
+    if !meta.is_file() {
+        return Err(RunError::Inconsistent {
+            path: path.to_path_buf(),
+            message: "not a regular file".into(),
+        });
+    }
+    let len = meta.len();
+    if len > MAX_SAMPLES_BYTES {
+        return Err(RunError::TooLarge {
+            path: path.to_path_buf(),
+            cap: MAX_SAMPLES_BYTES,
+        });
+    }
+    // The last newline, reading backwards in blocks.
+    let mut keep = 0u64;
+    let mut end = len;
+    let mut block = vec![0u8; 64 * 1024];
+    while end > 0 {
+        let start = end.saturating_sub(block.len() as u64);
+        let n = usize::try_from(end - start).unwrap_or(block.len());
+        let buf = block.get_mut(..n).unwrap_or_default();
+        file.seek(SeekFrom::Start(start))
+            .map_err(io(path, "read"))?;
+        file.read_exact(buf).map_err(io(path, "read"))?;
+        if let Some(i) = buf.iter().rposition(|&b| b == b'\n') {
+            keep = start + i as u64 + 1;
+            break;
+        }
+        end = start;
+    }
+    let torn = len - keep;
+    if keep == 0 {
+        let mut h = SAMPLES_HEADER.join(",").into_bytes();
+        h.push(b'\n');
+        fs::write(path, &h).map_err(io(path, "write"))?;
+        return Ok((h.len() as u64, torn));
+    }
+    let mut first = Vec::new();
+    file.seek(SeekFrom::Start(0)).map_err(io(path, "read"))?;
+    (&mut file)
+        .take(4096.min(keep))
+        .read_to_end(&mut first)
+        .map_err(io(path, "read"))?;
+    check_header(path, &first, &[&SAMPLES_HEADER])?;
+    if torn > 0 {
+        tracing::warn!(file = %path.display(), bytes = torn, "dropping a torn last line");
+    }
+    Ok((keep, torn))
+}
+
 /// Rewrites CSV rows written with the columns `old` for the columns `new` (which contain every
 /// column of `old`): an empty cell for each new column. The rows are gyrocal's own (numbers,
 /// no quoting), so a row is one line and a cell is between commas.
@@ -1309,21 +1366,27 @@ fn parse_steps(path: &Path, bytes: &[u8], schedule: &[Step]) -> Result<Vec<StepR
 
 /// Checks the finished steps' rows in samples.csv and finds where the unfinished rows start.
 /// Returns (bytes to keep, rows dropped).
+///
+/// Streams the first `len` bytes of the file (its complete lines, see [`repair_samples`]): a
+/// long run's samples.csv is never held in memory.
 fn scan_samples(
     path: &Path,
-    bytes: &[u8],
+    len: u64,
     schedule: &[Step],
     expected: &BTreeMap<usize, u64>,
 ) -> Result<(u64, u64), RunError> {
+    use std::io::Read as _;
+    let file = File::open(path).map_err(io(path, "read"))?;
     let mut rdr = csv::ReaderBuilder::new()
         .has_headers(true)
-        .from_reader(bytes);
+        .from_reader(std::io::BufReader::new(file.take(len)));
     let mut counts: BTreeMap<usize, u64> = BTreeMap::new();
     let mut cut: Option<u64> = None;
     let mut dropped = 0u64;
     let mut rec = csv::StringRecord::new();
     // The header's end, in case there is no row at all.
-    let mut keep = bytes.iter().position(|&b| b == b'\n').map_or(0, |i| i + 1) as u64;
+    rdr.headers().map_err(|e| csv_read(path, &e))?;
+    let mut keep = rdr.position().byte();
     loop {
         match rdr.read_record(&mut rec) {
             Ok(false) => break,

@@ -658,3 +658,27 @@ fn huge_or_endless_run_files_are_refused_naming_them() {
     );
     assert!(started.elapsed() < std::time::Duration::from_secs(10));
 }
+
+#[test]
+fn a_samples_csv_over_its_cap_is_refused_on_resume_from_its_size() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let mut rd = RunDir::create(&dir, &plan(), meta()).unwrap();
+    run_step(&mut rd, 0, true);
+    drop(rd);
+    OpenOptions::new()
+        .write(true)
+        .open(dir.join(SAMPLES_CSV))
+        .unwrap()
+        .set_len(gyrocal_run::rundir::MAX_SAMPLES_BYTES + 1)
+        .unwrap();
+    let started = std::time::Instant::now();
+    let msg = RunDir::open_for_resume(&dir, &plan())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        msg.contains("samples.csv") && msg.contains("4096 MiB"),
+        "{msg}"
+    );
+    assert!(started.elapsed() < std::time::Duration::from_secs(5));
+}
