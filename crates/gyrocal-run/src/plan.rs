@@ -203,10 +203,10 @@ struct RawFile {
 struct RawPlan {
     name: Option<S<String>>,
     rates_dps: S<Vec<S<f64>>>,
-    samples_per_rate: S<i64>,
+    samples_per_rate: S<RawInt>,
     settle_s: Option<S<f64>>,
-    repeat: Option<S<i64>>,
-    whole_revolutions: Option<S<i64>>,
+    repeat: Option<S<RawInt>>,
+    whole_revolutions: Option<S<RawInt>>,
 }
 
 #[derive(Deserialize)]
@@ -214,7 +214,7 @@ struct RawPlan {
 struct RawTable {
     dialect: Option<S<String>>,
     port: S<String>,
-    baud: Option<S<i64>>,
+    baud: Option<S<RawInt>>,
     max_rate_dps: S<f64>,
     acceleration_dps2: S<f64>,
     rate_tolerance_dps: Option<S<f64>>,
@@ -226,19 +226,19 @@ struct RawTable {
 #[serde(deny_unknown_fields)]
 struct RawDmm {
     port: S<String>,
-    baud: Option<S<i64>>,
+    baud: Option<S<RawInt>>,
     framing: Option<S<String>>,
     range_v: Option<S<f64>>,
     nplc: Option<S<f64>>,
     autozero: Option<S<bool>>,
-    line_hz: Option<S<i64>>,
+    line_hz: Option<S<RawInt>>,
     acquisition: Option<S<String>>,
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawSimulation {
-    seed: Option<S<i64>>,
+    seed: Option<S<RawInt>>,
     scale_factor: Option<S<f64>>,
     bias: Option<S<f64>>,
     k2: Option<S<f64>>,
@@ -249,6 +249,89 @@ struct RawSimulation {
     latitude_deg: Option<S<f64>>,
     rate_noise_dps: Option<S<f64>>,
     ripple_dps: Option<S<f64>>,
+}
+
+/// An integer key as written. Any TOML value is accepted at this stage, so that whatever was
+/// written (an integer beyond 64 bits, a float, a string) is refused naming the key and the
+/// allowed values, like an integer out of range, instead of as a serde type error.
+enum RawInt {
+    /// A 64-bit integer (range-checked by validation).
+    Int(i64),
+    /// Anything else, as it reads in an error message, and whether it is a whole number (an
+    /// integer beyond 64 bits).
+    Other(String, bool),
+}
+
+impl<'de> Deserialize<'de> for RawInt {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl<'de> serde::de::Visitor<'de> for V {
+            type Value = RawInt;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("a whole number")
+            }
+            fn visit_i64<E>(self, v: i64) -> Result<RawInt, E> {
+                Ok(RawInt::Int(v))
+            }
+            fn visit_u64<E>(self, v: u64) -> Result<RawInt, E> {
+                Ok(i64::try_from(v)
+                    .map_or_else(|_| RawInt::Other(v.to_string(), true), RawInt::Int))
+            }
+            fn visit_i128<E>(self, v: i128) -> Result<RawInt, E> {
+                Ok(i64::try_from(v)
+                    .map_or_else(|_| RawInt::Other(v.to_string(), true), RawInt::Int))
+            }
+            fn visit_u128<E>(self, v: u128) -> Result<RawInt, E> {
+                Ok(i64::try_from(v)
+                    .map_or_else(|_| RawInt::Other(v.to_string(), true), RawInt::Int))
+            }
+            fn visit_f64<E>(self, v: f64) -> Result<RawInt, E> {
+                Ok(RawInt::Other(format!("{v:?}"), false))
+            }
+            fn visit_bool<E>(self, v: bool) -> Result<RawInt, E> {
+                Ok(RawInt::Other(v.to_string(), false))
+            }
+            fn visit_str<E>(self, v: &str) -> Result<RawInt, E> {
+                Ok(RawInt::Other(format!("{v:?}"), false))
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+/// The values an integer key allows.
+enum IntRule {
+    /// `lo..=hi`.
+    Range(u64, u64),
+    /// One of these.
+    OneOf(&'static [u32]),
+}
+
+fn int_rule(key: &str) -> IntRule {
+    match key {
+        "plan.samples_per_rate" => IntRule::Range(1, MAX_SAMPLES_PER_RATE.into()),
+        "plan.repeat" => IntRule::Range(1, MAX_REPEAT.into()),
+        "plan.whole_revolutions" => IntRule::Range(0, MAX_WHOLE_REVOLUTIONS.into()),
+        "table.baud" | "dmm.baud" => IntRule::OneOf(&BAUD_RATES),
+        "dmm.line_hz" => IntRule::OneOf(&LINE_HZ),
+        _ => IntRule::Range(0, i64::MAX.unsigned_abs()), // simulation.seed
+    }
+}
+
+/// The message for an integer key whose value (`shown`, as written) is not allowed.
+fn int_error(key: &str, shown: &str, whole: bool) -> String {
+    let what = if whole {
+        "is out of range"
+    } else {
+        "is not a whole number"
+    };
+    match int_rule(key) {
+        IntRule::Range(lo, hi) => format!("= {shown} {what} ({lo} to {hi})"),
+        IntRule::OneOf(allowed) if whole => {
+            format!("must be one of {allowed:?} (got {shown})")
+        }
+        IntRule::OneOf(allowed) => format!("= {shown} {what} (one of {allowed:?})"),
+    }
 }
 
 /// Spans of the values present in the file, keyed by `section.key` (`plan.rates_dps[2]`).
@@ -264,6 +347,20 @@ impl Spans {
         match v {
             Some(v) => self.take(key, v),
             None => default,
+        }
+    }
+    /// An integer key (`default` when absent); a value that is not a 64-bit integer is an
+    /// error `(key, message)`.
+    fn int(
+        &mut self,
+        key: &'static str,
+        v: Option<S<RawInt>>,
+        default: i64,
+    ) -> Result<i64, (&'static str, String)> {
+        match v.map(|v| self.take(key, v)) {
+            None => Ok(default),
+            Some(RawInt::Int(i)) => Ok(i),
+            Some(RawInt::Other(shown, whole)) => Err((key, int_error(key, &shown, whole))),
         }
     }
 }
@@ -889,15 +986,15 @@ fn raw_to_doc(raw: RawFile, sp: &mut Spans) -> Result<PlanDoc, (&'static str, St
     let plan = PlanSectionDoc {
         name: sp.opt("plan.name", p.name, String::new()),
         rates_dps,
-        samples_per_rate: sp.take("plan.samples_per_rate", p.samples_per_rate),
+        samples_per_rate: sp.int("plan.samples_per_rate", Some(p.samples_per_rate), 0)?,
         settle_s: sp.opt("plan.settle_s", p.settle_s, 10.0),
-        repeat: sp.opt("plan.repeat", p.repeat, 1),
-        whole_revolutions: sp.opt("plan.whole_revolutions", p.whole_revolutions, 0),
+        repeat: sp.int("plan.repeat", p.repeat, 1)?,
+        whole_revolutions: sp.int("plan.whole_revolutions", p.whole_revolutions, 0)?,
     };
     let table = TableDoc {
         dialect: sp.opt("table.dialect", t.dialect, "acl".into()),
         port: sp.take("table.port", t.port),
-        baud: sp.opt("table.baud", t.baud, 9600),
+        baud: sp.int("table.baud", t.baud, 9600)?,
         max_rate_dps: sp.take("table.max_rate_dps", t.max_rate_dps),
         acceleration_dps2: sp.take("table.acceleration_dps2", t.acceleration_dps2),
         rate_tolerance_dps: sp.opt("table.rate_tolerance_dps", t.rate_tolerance_dps, 0.001),
@@ -906,23 +1003,23 @@ fn raw_to_doc(raw: RawFile, sp: &mut Spans) -> Result<PlanDoc, (&'static str, St
     };
     let dmm = DmmDoc {
         port: sp.take("dmm.port", m.port),
-        baud: sp.opt("dmm.baud", m.baud, 9600),
+        baud: sp.int("dmm.baud", m.baud, 9600)?,
         framing: sp.opt("dmm.framing", m.framing, "8N2".into()),
         range_v: sp.opt("dmm.range_v", m.range_v, 10.0),
         nplc: sp.opt("dmm.nplc", m.nplc, 1.0),
         autozero: sp.opt("dmm.autozero", m.autozero, true),
-        line_hz: sp.opt("dmm.line_hz", m.line_hz, 50),
+        line_hz: sp.int("dmm.line_hz", m.line_hz, 50)?,
         acquisition: sp.opt("dmm.acquisition", m.acquisition, "auto".into()),
     };
     let simulation = match raw.simulation {
         None => d,
         Some(s) => Simulation {
             seed: {
-                let seed = sp.opt("simulation.seed", s.seed, 1);
+                let seed = sp.int("simulation.seed", s.seed, 1)?;
                 u64::try_from(seed).map_err(|_| {
                     (
                         "simulation.seed",
-                        format!("= {seed} is out of range (0 to {})", i64::MAX),
+                        int_error("simulation.seed", &seed.to_string(), true),
                     )
                 })?
             },
@@ -1003,7 +1100,7 @@ impl Ctx<'_> {
     fn one_of_u32(&self, path: &str, v: i64, allowed: &[u32]) -> Result<u32, PlanError> {
         match u32::try_from(v) {
             Ok(u) if allowed.contains(&u) => Ok(u),
-            _ => Err(self.err(path, format!("must be one of {allowed:?} (got {v})"))),
+            _ => Err(self.err(path, int_error(path, &v.to_string(), true))),
         }
     }
 
@@ -1011,7 +1108,7 @@ impl Ctx<'_> {
     fn int_in(&self, path: &str, v: i64, lo: u32, hi: u32) -> Result<u32, PlanError> {
         match u32::try_from(v) {
             Ok(u) if (lo..=hi).contains(&u) => Ok(u),
-            _ => Err(self.err(path, format!("= {v} is out of range ({lo} to {hi})"))),
+            _ => Err(self.err(path, int_error(path, &v.to_string(), true))),
         }
     }
 

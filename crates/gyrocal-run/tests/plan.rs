@@ -415,6 +415,30 @@ fn integer_keys_out_of_range_name_the_key_the_value_and_the_range() {
     let cases: &[(&str, &str, u32, &str)] = &[
         (
             "samples_per_rate = 10",
+            "samples_per_rate = 99999999999999999999",
+            4,
+            "[plan] samples_per_rate = 99999999999999999999 is out of range (1 to 1000000)",
+        ),
+        (
+            "samples_per_rate = 10",
+            "samples_per_rate = 1.5",
+            4,
+            "[plan] samples_per_rate = 1.5 is not a whole number (1 to 1000000)",
+        ),
+        (
+            "samples_per_rate = 10",
+            "samples_per_rate = \"ten\"",
+            4,
+            "[plan] samples_per_rate = \"ten\" is not a whole number (1 to 1000000)",
+        ),
+        (
+            "port = \"/dev/ttyUSB0\"",
+            "port = \"/dev/ttyUSB0\"\nbaud = 9600.0",
+            11,
+            "[dmm] baud = 9600.0 is not a whole number (one of [300, 600, 1200, 2400, 4800, 9600])",
+        ),
+        (
+            "samples_per_rate = 10",
             "samples_per_rate = -3",
             4,
             "samples_per_rate = -3 is out of range (1 to 1000000)",
