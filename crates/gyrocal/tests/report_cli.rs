@@ -313,3 +313,30 @@ fn report_input_with_a_duplicated_column_exits_2_naming_both() {
         "dup.csv: line 1: the header names column `rate_dps` twice (columns 1 and 3)",
     );
 }
+
+#[test]
+fn a_run_whose_directory_fails_half_way_leaves_nothing_behind() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = plan_with_rates(tmp.path(), "[0, 1, -1, 10, -10]");
+    // A path whose lock and CSV files can be created but whose manifest cannot (its temporary
+    // file's path exceeds PATH_MAX): the creation fails half way, as on a full disk.
+    let base = tmp.path().join("runs");
+    let mut dir = base.clone();
+    while dir.as_os_str().len() + 201 < 4080 {
+        dir.push("d".repeat(200));
+    }
+    let rest = 4080 - dir.as_os_str().len() - 1;
+    dir.push("r".repeat(rest));
+    let out = gyrocal(&[
+        "run",
+        plan.to_str().unwrap(),
+        "--simulate",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains(".manifest.json.tmp"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(!base.exists(), "the failed creation left files behind");
+}
