@@ -53,12 +53,17 @@ pub fn model_warnings(plan: &Plan, path: &std::path::Path) -> Vec<String> {
         .into_iter()
         .map(|s| {
             format!(
-                "{}: the schedule has {} distinct rates ({} °/s): the fit will skip the {} model: {}",
+                "{}: the schedule has {} distinct rates ({} °/s): the fit will skip the {} model: {}{}",
                 path.display(),
                 distinct.len(),
                 list.join(", "),
                 s.model,
-                s.reason
+                s.reason,
+                if s.model == gyrocal_fit::Model::Split {
+                    " (so no asymmetry, K+ or K-)"
+                } else {
+                    ""
+                }
             )
         })
         .collect()
