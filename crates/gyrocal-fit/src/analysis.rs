@@ -4,7 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::data::{Dataset, Weighting};
 use crate::error::FitError;
-use crate::lsq::{assemble, check, fit_least_squares};
+use crate::lsq::{assemble, check, check_rates, fit_least_squares};
 use crate::metrics::{Metrics, repeatability_ppm};
 use crate::model::{Coefficients, Fit, Method, Model, NeuronTrace};
 use crate::neuron::{NeuronOptions, train};
@@ -25,6 +25,12 @@ pub struct Options {
     pub weighting: Weighting,
     /// Side of the error-surface grid (0: no surface).
     pub surface_size: usize,
+    /// What to do with a requested model the data cannot determine (too few distinct rates,
+    /// one turning direction only): `true` (the default) skips it and records why in
+    /// [`Analysis::skipped`]; `false` makes it an error (for models the user asked for by
+    /// name). The linear model underlies the metrics: data that cannot determine it is an
+    /// error either way.
+    pub skip_unsupported: bool,
 }
 
 impl Default for Options {
@@ -35,6 +41,7 @@ impl Default for Options {
             neuron: NeuronOptions::default(),
             weighting: Weighting::Auto,
             surface_size: 41,
+            skip_unsupported: true,
         }
     }
 }
@@ -49,6 +56,11 @@ pub struct Analysis {
     pub points: usize,
     /// The fits, least squares first (in model order), then the neuron.
     pub fits: Vec<Fit>,
+    /// The requested models that were not fitted because the data cannot determine them, with
+    /// the reason, in model order (empty when every requested model was fitted). Absent in
+    /// documents written before this field existed.
+    #[serde(default)]
+    pub skipped: Vec<Skipped>,
     /// The model with the smallest residual standard error `sqrt(SSE/(N − p))` among the
     /// least-squares fits (which penalises extra coefficients), when there is one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -69,6 +81,43 @@ impl Analysis {
     }
 }
 
+/// A requested model that was not fitted, and why (e.g. `cubic`: "the cubic model has 4
+/// coefficients and needs at least 4 distinct rates; the data have 3"). In JSON:
+/// `{"model": "cubic", "reason": "..."}`.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Skipped {
+    /// The model (by every method: the neuron fits only the linear model, which is never
+    /// skipped).
+    pub model: Model,
+    /// Why the data cannot determine it, in words.
+    pub reason: String,
+}
+
+/// Which of `models` data measured at `rates` cannot determine, with the reasons: the models
+/// [`analyze`] will skip (by the same rule, [`check_rates`]). For a plan checker: pass the
+/// schedule's rates, one per step.
+///
+/// ```
+/// use gyrocal_fit::{Model, unsupported_models};
+/// let skipped = unsupported_models(&[0.0, 10.0, -10.0], &Model::ALL);
+/// assert_eq!(skipped.len(), 1);
+/// assert_eq!(skipped[0].model, Model::Cubic);
+/// ```
+pub fn unsupported_models(rates: &[f64], models: &[Model]) -> Vec<Skipped> {
+    let mut models = models.to_vec();
+    models.sort();
+    models.dedup();
+    models
+        .into_iter()
+        .filter_map(|model| {
+            check_rates(rates, model).err().map(|e| Skipped {
+                model,
+                reason: e.to_string(),
+            })
+        })
+        .collect()
+}
+
 /// The analyses of several data sets (runs of the same gyro) and the repeatability across them.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct MultiAnalysis {
@@ -83,9 +132,12 @@ pub struct MultiAnalysis {
 
 /// Fits the requested models by the requested methods and computes the metrics.
 ///
-/// Errors when a requested model cannot be fitted to the data (too few points, too few distinct
-/// rates, split model without both directions), or when the options select nothing (e.g. only
-/// the neuron, which fits the linear model, with only the quadratic model).
+/// A requested model the data cannot determine (too few distinct rates, split model without
+/// both directions) is skipped and listed in [`Analysis::skipped`] with the reason, unless
+/// `opts.skip_unsupported` is off, which makes it an error. Errors when the data cannot
+/// determine even the linear model (fewer than two distinct rates, a non-finite value), or
+/// when the options select nothing (e.g. only the neuron, which fits the linear model, with
+/// only the quadratic model).
 pub fn analyze(data: &Dataset, opts: &Options) -> Result<Analysis, FitError> {
     let _span =
         tracing::debug_span!("analyze", source = ?data.source, points = data.len()).entered();
@@ -103,9 +155,22 @@ pub fn analyze(data: &Dataset, opts: &Options) -> Result<Analysis, FitError> {
     // The linear model underlies the metrics, so the data must support it in any case.
     check(data, Model::Linear)?;
     let mut fits = Vec::new();
+    let mut skipped = Vec::new();
     if ls {
         for &m in &models {
-            fits.push(fit_least_squares(data, m, opts.weighting)?);
+            // The rule first (the reason a user can act on), then the solver, whose rank
+            // check may still refuse nearly coincident rates.
+            match check(data, m).and_then(|()| fit_least_squares(data, m, opts.weighting)) {
+                Ok(fit) => fits.push(fit),
+                Err(e) if opts.skip_unsupported && m != Model::Linear => {
+                    tracing::info!(model = %m, reason = %e, "model skipped");
+                    skipped.push(Skipped {
+                        model: m,
+                        reason: e.to_string(),
+                    });
+                }
+                Err(e) => return Err(e),
+            }
         }
     }
     if neuron {
@@ -133,6 +198,7 @@ pub fn analyze(data: &Dataset, opts: &Options) -> Result<Analysis, FitError> {
         source: data.source.clone(),
         points: data.len(),
         fits,
+        skipped,
         best_model,
         metrics,
         error_surface,

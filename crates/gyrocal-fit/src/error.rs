@@ -27,7 +27,9 @@ pub enum FitError {
         distinct: usize,
     },
     /// The rates cannot determine the model's coefficients (e.g. a cubic on 3 distinct rates).
-    #[error("the {model} model needs {needed} distinct rates but the data has only {distinct}")]
+    #[error(
+        "the {model} model has {needed} coefficients and needs at least {needed} distinct rates; the data have {distinct}"
+    )]
     RankDeficient {
         /// The model that was asked for.
         model: Model,

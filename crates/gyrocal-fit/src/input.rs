@@ -7,11 +7,19 @@
 //! `volts_std`/`n` cells mean "not given".
 //!
 //! This module parses from any [`Read`]; it never opens files. Errors name the source (the name
-//! the caller passes, usually the file name) and the line.
+//! the caller passes, usually the file name) and the line. A column name that appears twice
+//! (case-insensitively) is an error naming both positions. The input is read whole, up to
+//! [`MAX_INPUT_BYTES`] (64 MiB, several hundred thousand rows; a calibration's steps CSV is a
+//! few kilobytes): a larger or endless input (`/dev/zero`) is an error after reading at most
+//! that much, never a memory exhaustion.
 
 use std::io::Read;
 
 use crate::data::{Dataset, Point};
+
+/// The most bytes [`parse_csv`] reads: 64 MiB. A larger input is refused with
+/// [`InputError::TooLarge`].
+pub const MAX_INPUT_BYTES: u64 = 64 * 1024 * 1024;
 
 /// Why a CSV input could not be read. Every variant names the source; most name the line.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -33,6 +41,33 @@ pub enum InputError {
         column: &'static str,
         /// The columns that are there, comma-separated.
         found: String,
+    },
+    /// Two columns have the same name (compared case-insensitively, as columns are found).
+    #[error(
+        "{file}: line {line}: the header names column `{name}` twice (columns {first} and {second}); which one is meant is ambiguous"
+    )]
+    DuplicateColumn {
+        /// Source name.
+        file: String,
+        /// Line of the header.
+        line: u64,
+        /// The name as written the second time.
+        name: String,
+        /// 1-based position of the first column of that name.
+        first: usize,
+        /// 1-based position of the second.
+        second: usize,
+    },
+    /// The input is larger than [`MAX_INPUT_BYTES`] (or endless).
+    #[error(
+        "{file}: larger than the {} MiB limit for a data file (a steps CSV is a few kilobytes); is it the right file?",
+        cap / (1024 * 1024)
+    )]
+    TooLarge {
+        /// Source name.
+        file: String,
+        /// The limit, bytes.
+        cap: u64,
     },
     /// A cell is not a valid value.
     #[error("{file}: line {line}: column `{column}`: {reason}: `{value}`")]
@@ -65,8 +100,9 @@ impl InputError {
     /// The line the error refers to.
     pub fn line(&self) -> u64 {
         match self {
-            InputError::NoHeader { .. } => 1,
+            InputError::NoHeader { .. } | InputError::TooLarge { .. } => 1,
             InputError::MissingColumn { line, .. }
+            | InputError::DuplicateColumn { line, .. }
             | InputError::BadValue { line, .. }
             | InputError::Csv { line, .. } => *line,
         }
@@ -85,18 +121,26 @@ impl InputError {
 /// assert_eq!(data.points[1].rate_dps, 1.0);
 /// assert_eq!(data.points[1].line, Some(4));
 /// ```
-pub fn parse_csv<R: Read>(mut reader: R, source: &str) -> Result<Dataset, InputError> {
+pub fn parse_csv<R: Read>(reader: R, source: &str) -> Result<Dataset, InputError> {
     let file = source.to_string();
     // The csv reader's own line count skips comment lines after the header, so lines are
-    // computed from byte offsets over the whole input (calibration files are small).
+    // computed from byte offsets over the whole input (calibration files are small; the cap
+    // keeps a wrong or endless file from exhausting memory).
     let mut bytes = Vec::new();
     reader
+        .take(MAX_INPUT_BYTES + 1)
         .read_to_end(&mut bytes)
         .map_err(|e| InputError::Csv {
             file: file.clone(),
             line: 1,
             message: format!("cannot read: {e}"),
         })?;
+    if bytes.len() as u64 > MAX_INPUT_BYTES {
+        return Err(InputError::TooLarge {
+            file,
+            cap: MAX_INPUT_BYTES,
+        });
+    }
     let newlines: Vec<u64> = bytes
         .iter()
         .enumerate()
@@ -150,6 +194,24 @@ pub fn parse_csv<R: Read>(mut reader: R, source: &str) -> Result<Dataset, InputE
         return Err(InputError::NoHeader { file });
     }
     let header_line = headers.position().map_or(1, line_of);
+    for (j, name) in headers.iter().enumerate() {
+        if name.is_empty() {
+            continue;
+        }
+        if let Some(i) = headers
+            .iter()
+            .take(j)
+            .position(|h| h.eq_ignore_ascii_case(name))
+        {
+            return Err(InputError::DuplicateColumn {
+                file,
+                line: header_line,
+                name: name.to_string(),
+                first: i + 1,
+                second: j + 1,
+            });
+        }
+    }
     let find = |name: &str| headers.iter().position(|h| h.eq_ignore_ascii_case(name));
     let found = headers.iter().collect::<Vec<_>>().join(", ");
     let missing = |column| InputError::MissingColumn {

@@ -32,7 +32,9 @@
 //!
 //! * [`input::parse_csv`] reads a data set.
 //! * [`analyze`] fits the requested models and methods and computes the metrics; the result is
-//!   the JSON document `gyrocal fit --json` prints. [`analyze_many`] does the same for several
+//!   the JSON document `gyrocal fit --json` prints. Models the data cannot determine are
+//!   skipped and listed with the reason ([`Analysis::skipped`]); [`check_rates`] is that rule,
+//!   and [`unsupported_models`] applies it to a plan's schedule before a run. [`analyze_many`] does the same for several
 //!   data sets and adds the repeatability.
 //! * [`fit_least_squares`] and [`neuron::train`] are the individual estimators;
 //!   [`Fit::compensate`] turns an output voltage back into a rate.
@@ -49,11 +51,14 @@ mod model;
 pub mod neuron;
 mod surface;
 
-pub use analysis::{Analysis, MultiAnalysis, Options, analyze, analyze_many, fit_neuron};
+pub use analysis::{
+    Analysis, MultiAnalysis, Options, Skipped, analyze, analyze_many, fit_neuron,
+    unsupported_models,
+};
 pub use data::{Dataset, Point, Weighting};
 pub use error::FitError;
-pub use lsq::fit_least_squares;
-pub use metrics::{Metrics, NONLINEARITY_NORMALISATION, repeatability_ppm};
+pub use lsq::{check_rates, fit_least_squares};
+pub use metrics::{Metrics, NONLINEARITY_NORMALISATION, NotComputed, repeatability_ppm};
 pub use model::{Coefficients, Fit, Method, Model, NeuronTrace, Residual};
 pub use neuron::{NeuronOptions, NeuronStatus};
 pub use surface::ErrorSurface;

@@ -118,12 +118,42 @@ pub(crate) fn check(data: &Dataset, model: Model) -> Result<(), FitError> {
             return Err(FitError::NonFinite { index });
         }
     }
+    check_rates(&data.rates(), model)
+}
+
+/// Whether data measured at `rates` (one point per rate, repeats included, in any order) can
+/// determine `model`; the error says why not.
+///
+/// This is the one rule for "can this model be fitted": [`crate::analyze`] skips the models
+/// it rejects, and a plan checker calls it on a schedule's rates to warn before a run which
+/// models the fit will skip. It needs as many points as the model has coefficients, at least
+/// two distinct rates, as many distinct rates as coefficients for the polynomial models, and
+/// for the split model at least two distinct rates on each side of zero (zero counts on both).
+/// Non-finite rates are the caller's concern (parsed input never holds one).
+///
+/// ```
+/// use gyrocal_fit::{Model, check_rates};
+/// assert!(check_rates(&[0.0, 1.0, -1.0, 10.0, -10.0], Model::Cubic).is_ok());
+/// let e = check_rates(&[0.0, 1.0, 10.0], Model::Cubic).unwrap_err();
+/// assert!(e.to_string().contains("the data have 3"));
+/// assert!(check_rates(&[0.0, 1.0, 10.0], Model::Split).is_err());
+/// ```
+pub fn check_rates(rates: &[f64], model: Model) -> Result<(), FitError> {
     let needed = model.coefficient_count();
-    let distinct_all = data.distinct_rates();
-    if model != Model::Split && data.len() < needed {
+    let distinct_all = distinct(rates.iter().copied());
+    // Distinct rates first: it is the actionable figure (more readings at the same rates
+    // cannot determine a polynomial), and fewer points than coefficients implies it.
+    if model != Model::Split && distinct_all >= 2 && distinct_all < needed {
+        return Err(FitError::RankDeficient {
+            model,
+            needed,
+            distinct: distinct_all,
+        });
+    }
+    if model != Model::Split && rates.len() < needed {
         return Err(FitError::TooFewPoints {
             model,
-            points: data.len(),
+            points: rates.len(),
             needed,
         });
     }
@@ -134,8 +164,8 @@ pub(crate) fn check(data: &Dataset, model: Model) -> Result<(), FitError> {
     }
     match model {
         Model::Split => {
-            let pos = distinct(data.points.iter().map(|p| p.rate_dps).filter(|w| *w >= 0.0));
-            let neg = distinct(data.points.iter().map(|p| p.rate_dps).filter(|w| *w <= 0.0));
+            let pos = distinct(rates.iter().copied().filter(|w| *w >= 0.0));
+            let neg = distinct(rates.iter().copied().filter(|w| *w <= 0.0));
             if pos < 2 {
                 return Err(FitError::SplitNeedsBothSigns {
                     side: "positive",

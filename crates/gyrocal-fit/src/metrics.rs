@@ -4,7 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::data::{Dataset, Weighting};
 use crate::error::FitError;
-use crate::lsq::fit_least_squares;
+use crate::lsq::{check, fit_least_squares};
 use crate::model::Model;
 
 /// How [`Metrics::nonlinearity_ppm`] is normalised (also written into the JSON).
@@ -39,6 +39,23 @@ pub struct Metrics {
     pub bias_dph: f64,
     /// Repeatability `std(K_i, ddof=1)/mean(K_i)` over several data sets, ppm; null for one.
     pub repeatability_ppm: Option<f64>,
+    /// The metrics above that are null because the data cannot support them, with the reason
+    /// (e.g. `asymmetry_ppm` when the data has one turning direction only). Empty when every
+    /// metric the data set can have was computed (a single data set's `repeatability_ppm` is
+    /// null without an entry: it needs several). Absent in documents written before this
+    /// field existed.
+    #[serde(default)]
+    pub not_computed: Vec<NotComputed>,
+}
+
+/// A metric that could not be computed, and why. In JSON:
+/// `{"metric": "asymmetry_ppm", "reason": "..."}`.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct NotComputed {
+    /// The metric's key in [`Metrics`] (`asymmetry_ppm`, `scale_factor_positive`, ...).
+    pub metric: String,
+    /// Why, in words.
+    pub reason: String,
 }
 
 impl Metrics {
@@ -46,7 +63,8 @@ impl Metrics {
     /// [`repeatability_ppm`]).
     ///
     /// The line and the two half-lines are least-squares fits with the given weighting. The
-    /// asymmetry is `None` when the split model cannot be fitted (one direction missing).
+    /// asymmetry, K+ and K− are `None`, with the reason in [`Metrics::not_computed`], when the
+    /// split model cannot be fitted (one direction missing).
     pub fn compute(data: &Dataset, weighting: Weighting) -> Result<Self, FitError> {
         let line = fit_least_squares(data, Model::Linear, weighting)?;
         let k = line.scale_factor;
@@ -57,13 +75,34 @@ impl Metrics {
             .fold(0.0_f64, |m, p| m.max(p.volts.abs()));
         let max_dev = line.max_abs_residual;
         let nonlinearity_ppm = if fm > 0.0 { max_dev / fm * 1e6 } else { 0.0 };
-        let split = fit_least_squares(data, Model::Split, weighting).ok();
+        let mut not_computed = Vec::new();
+        let split = check(data, Model::Split)
+            .and_then(|()| fit_least_squares(data, Model::Split, weighting));
         let (kp, kn) = match &split {
-            Some(s) => (s.coefficients.k_pos, s.coefficients.k_neg),
-            None => (None, None),
+            Ok(s) => (s.coefficients.k_pos, s.coefficients.k_neg),
+            Err(e) => {
+                for metric in [
+                    "asymmetry_ppm",
+                    "scale_factor_positive",
+                    "scale_factor_negative",
+                ] {
+                    not_computed.push(NotComputed {
+                        metric: metric.to_string(),
+                        reason: format!("needs the split model: {e}"),
+                    });
+                }
+                (None, None)
+            }
         };
         let asymmetry_ppm = match (kp, kn) {
             (Some(p), Some(n)) if p + n != 0.0 => Some((p - n).abs() / ((p + n) / 2.0).abs() * 1e6),
+            (Some(_), Some(_)) => {
+                not_computed.push(NotComputed {
+                    metric: "asymmetry_ppm".to_string(),
+                    reason: "K+ + K- is zero: the mean scale factor is zero".to_string(),
+                });
+                None
+            }
             _ => None,
         };
         let bias_dps = if k != 0.0 { f0 / k } else { 0.0 };
@@ -79,6 +118,7 @@ impl Metrics {
             bias_dps,
             bias_dph: bias_dps * SECONDS_PER_HOUR,
             repeatability_ppm: None,
+            not_computed,
         })
     }
 }

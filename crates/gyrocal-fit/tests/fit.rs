@@ -368,9 +368,9 @@ fn data_that_cannot_determine_a_model_is_an_error() {
     let two = Dataset::from_pairs([(0.0, 0.0), (1.0, 0.36)]);
     assert!(matches!(
         fit_least_squares(&two, Model::Quadratic, Weighting::Auto),
-        Err(FitError::TooFewPoints {
+        Err(FitError::RankDeficient {
             needed: 3,
-            points: 2,
+            distinct: 2,
             ..
         })
     ));
@@ -541,4 +541,163 @@ fn online_only_neuron_at_its_pass_limit_is_not_called_converged() {
     let nn = fit_neuron(&whole_turn_shaped(), &opts, Weighting::Auto).unwrap();
     assert!(!nn.converged);
     assert_eq!(nn.neuron.unwrap().status, NeuronStatus::MaxPasses);
+}
+
+#[test]
+fn models_the_data_cannot_determine_are_skipped_with_the_reason() {
+    // Three rates: every model but the cubic (4 coefficients).
+    let three = Dataset::from_pairs([
+        (0.0, 0.0088),
+        (10.0, 3.6208),
+        (-10.0, -3.6032),
+        (10.0, 3.6209),
+    ]);
+    let a = analyze(&three, &Options::default()).unwrap();
+    let fitted: Vec<Model> = a
+        .fits
+        .iter()
+        .filter(|f| f.method == Method::LeastSquares)
+        .map(|f| f.model)
+        .collect();
+    assert_eq!(fitted, [Model::Linear, Model::Quadratic, Model::Split]);
+    assert_eq!(a.skipped.len(), 1);
+    assert_eq!(a.skipped[0].model, Model::Cubic);
+    assert!(
+        a.skipped[0].reason.contains("4 coefficients")
+            && a.skipped[0].reason.contains("the data have 3"),
+        "{}",
+        a.skipped[0].reason
+    );
+    assert!(a.fit(Method::Neuron, Model::Linear).is_some());
+    let v = serde_json::to_value(&a).unwrap();
+    assert_eq!(v["skipped"][0]["model"], "cubic");
+    assert!(v["skipped"][0]["reason"].is_string());
+    let back: Analysis = serde_json::from_value(v).unwrap();
+    assert_eq!(back, a);
+
+    // One turning direction: no split model, and no asymmetry, K+ or K-, each with the reason.
+    let one_way =
+        Dataset::from_pairs([0.0, 1.0, 3.0, 10.0, 20.0].map(|w| (w, 0.0088 + 0.3612 * w)));
+    let a = analyze(&one_way, &Options::default()).unwrap();
+    assert_eq!(
+        a.skipped.iter().map(|s| s.model).collect::<Vec<_>>(),
+        [Model::Split]
+    );
+    assert!(
+        a.skipped[0].reason.contains("negative side"),
+        "{:?}",
+        a.skipped
+    );
+    assert!(a.fit(Method::LeastSquares, Model::Cubic).is_some());
+    let m = &a.metrics;
+    assert_eq!(
+        (
+            m.asymmetry_ppm,
+            m.scale_factor_positive,
+            m.scale_factor_negative
+        ),
+        (None, None, None)
+    );
+    let missing: Vec<&str> = m.not_computed.iter().map(|n| n.metric.as_str()).collect();
+    assert_eq!(
+        missing,
+        [
+            "asymmetry_ppm",
+            "scale_factor_positive",
+            "scale_factor_negative"
+        ]
+    );
+    assert!(m.not_computed[0].reason.contains("both turning directions"));
+    let v = serde_json::to_value(&a).unwrap();
+    assert!(v["metrics"]["asymmetry_ppm"].is_null());
+    assert_eq!(v["metrics"]["not_computed"][0]["metric"], "asymmetry_ppm");
+
+    // Complete data: nothing skipped, nothing missing, and the fields are there (empty).
+    let a = analyze(&paper(), &Options::default()).unwrap();
+    assert!(a.skipped.is_empty() && a.metrics.not_computed.is_empty());
+    let v = serde_json::to_value(&a).unwrap();
+    assert_eq!(v["skipped"], serde_json::json!([]));
+
+    // A document written before the fields existed still reads.
+    let mut old = v.clone();
+    old.as_object_mut().unwrap().remove("skipped");
+    old["metrics"]
+        .as_object_mut()
+        .unwrap()
+        .remove("not_computed");
+    let back: Analysis = serde_json::from_value(old).unwrap();
+    assert!(back.skipped.is_empty());
+}
+
+#[test]
+fn models_asked_for_by_name_are_an_error_when_the_data_cannot_determine_them() {
+    let three = Dataset::from_pairs([
+        (0.0, 0.0088),
+        (10.0, 3.6208),
+        (-10.0, -3.6032),
+        (0.0, 0.0089),
+    ]);
+    let strict = Options {
+        models: vec![Model::Linear, Model::Cubic],
+        skip_unsupported: false,
+        ..Options::default()
+    };
+    assert!(matches!(
+        analyze(&three, &strict),
+        Err(FitError::RankDeficient {
+            model: Model::Cubic,
+            needed: 4,
+            distinct: 3
+        })
+    ));
+    // Not even a line: an error however the options read.
+    let same = Dataset::from_pairs([(1.0, 0.36), (1.0, 0.37)]);
+    assert!(matches!(
+        analyze(&same, &Options::default()),
+        Err(FitError::TooFewDistinctRates { distinct: 1 })
+    ));
+}
+
+#[test]
+fn the_rule_for_a_schedule_is_the_rule_of_the_fit() {
+    use gyrocal_fit::{check_rates, unsupported_models};
+    let schedule = [0.0, 10.0, -10.0, 0.0, 10.0, -10.0];
+    let skipped = unsupported_models(&schedule, &Model::ALL);
+    assert_eq!(
+        skipped.iter().map(|s| s.model).collect::<Vec<_>>(),
+        [Model::Cubic]
+    );
+    let data = Dataset::from_pairs(schedule.map(|w| (w, 0.0088 + 0.3612 * w)));
+    let a = analyze(&data, &Options::default()).unwrap();
+    assert_eq!(a.skipped, skipped);
+    assert!(check_rates(&[0.0, 1.0, 2.0, 3.0], Model::Split).is_err());
+    assert!(check_rates(&[0.0, 1.0, -1.0, 2.0, -2.0], Model::Split).is_ok());
+}
+
+#[test]
+fn csv_with_a_duplicated_column_names_both_positions() {
+    let e = parse_csv(
+        "rate_dps,volts,n,Volts\n0,0.1,1,0.2\n".as_bytes(),
+        "dup.csv",
+    )
+    .unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.starts_with("dup.csv: line 1:") && msg.contains("columns 2 and 4"),
+        "{msg}"
+    );
+    assert!(matches!(e, InputError::DuplicateColumn { .. }));
+}
+
+#[test]
+fn endless_input_is_refused_at_the_cap() {
+    let started = std::time::Instant::now();
+    let e = parse_csv(std::io::repeat(b'0'), "/dev/zero").unwrap_err();
+    assert!(matches!(e, InputError::TooLarge { .. }), "{e}");
+    let msg = e.to_string();
+    assert!(
+        msg.starts_with("/dev/zero:") && msg.contains("64 MiB"),
+        "{msg}"
+    );
+    assert!(started.elapsed() < std::time::Duration::from_secs(20));
 }

@@ -267,6 +267,27 @@ fn summary(html: &mut String, a: &Analysis, sfx: &str, input: &Input) {
                 "computed by the report (gyrocal-fit, default options)".to_string(),
         }
     );
+    if !a.skipped.is_empty() {
+        let _ = writeln!(html, "<ul class=\"skipped\" id=\"skipped{sfx}\">");
+        for s in &a.skipped {
+            let _ = writeln!(
+                html,
+                "<li>not fitted: {} — {}</li>",
+                esc(s.model.name()),
+                esc(&s.reason)
+            );
+        }
+        html.push_str("</ul>\n");
+    }
+    // The reason a metric is missing, appended to its definition.
+    let why = |metric: &str| {
+        m.not_computed
+            .iter()
+            .find(|n| n.metric == metric)
+            .map_or_else(String::new, |n| {
+                format!(" <strong>Not computed: {}</strong>", esc(&n.reason))
+            })
+    };
     html.push_str("<table class=\"summary\">\n<tr><th>Quantity</th><th>Value</th><th>Std error</th><th>Unit</th><th>Definition</th></tr>\n");
     let mut row = |key: &str,
                    name: &str,
@@ -317,7 +338,7 @@ fn summary(html: &mut String, a: &Analysis, sfx: &str, input: &Input) {
         opt(m.asymmetry_ppm, |v| format!("{v:.1}")),
         None,
         "ppm",
-        "|K+ − K−| / ((K+ + K−)/2)".into(),
+        format!("|K+ − K−| / ((K+ + K−)/2){}", why("asymmetry_ppm")),
     );
     row(
         "k-pos",
@@ -325,7 +346,10 @@ fn summary(html: &mut String, a: &Analysis, sfx: &str, input: &Input) {
         opt(m.scale_factor_positive, |v| format!("{v:.7}")),
         None,
         "V/(°/s)",
-        "least-squares line of the ω ≥ 0 points".into(),
+        format!(
+            "least-squares line of the ω ≥ 0 points{}",
+            why("scale_factor_positive")
+        ),
     );
     row(
         "k-neg",
@@ -333,7 +357,10 @@ fn summary(html: &mut String, a: &Analysis, sfx: &str, input: &Input) {
         opt(m.scale_factor_negative, |v| format!("{v:.7}")),
         None,
         "V/(°/s)",
-        "least-squares line of the ω ≤ 0 points".into(),
+        format!(
+            "least-squares line of the ω ≤ 0 points{}",
+            why("scale_factor_negative")
+        ),
     );
     row(
         "bias-dps",
@@ -357,7 +384,10 @@ fn summary(html: &mut String, a: &Analysis, sfx: &str, input: &Input) {
         opt(m.repeatability_ppm, |v| format!("{v:.1}")),
         None,
         "ppm",
-        "std(K<sub>i</sub>, ddof = 1) / mean(K<sub>i</sub>) over the runs in this report (— for one run)".into(),
+        format!(
+            "std(K<sub>i</sub>, ddof = 1) / mean(K<sub>i</sub>) over the runs in this report (— for one run){}",
+            why("repeatability_ppm")
+        ),
     );
     row(
         "best-model",

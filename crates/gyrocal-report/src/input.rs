@@ -1,12 +1,12 @@
 //! What a report is made from: a run directory or a bare steps CSV, read and fitted.
 
-use std::fs::{self, File};
+use std::fs::File;
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
-use gyrocal_fit::{Analysis, Dataset, Model, MultiAnalysis, Options, Weighting};
+use gyrocal_fit::{Analysis, Dataset, MultiAnalysis, Options};
 use gyrocal_run::Manifest;
-use gyrocal_run::rundir::{FIT_JSON, MANIFEST_JSON};
+use gyrocal_run::rundir::{FIT_JSON, MANIFEST_JSON, MAX_FIT_BYTES};
 
 use crate::ReportError;
 
@@ -57,6 +57,11 @@ pub fn load_input(path: &Path) -> Result<Input, ReportError> {
         load_run(path)
     } else if path.is_file() {
         load_csv(path)
+    } else if path.exists() {
+        // a device or a pipe (/dev/zero): never read an endless input
+        Err(ReportError::NotAFile {
+            path: path.to_path_buf(),
+        })
     } else {
         Err(ReportError::NotFound {
             path: path.to_path_buf(),
@@ -86,11 +91,7 @@ pub(crate) fn load_run(dir: &Path) -> Result<Input, ReportError> {
         .collect();
     let fit_path = dir.join(FIT_JSON);
     let (analysis, fit_source) = if fit_path.exists() {
-        let bytes = fs::read(&fit_path).map_err(|source| ReportError::Io {
-            path: fit_path.clone(),
-            action: "read",
-            source,
-        })?;
+        let bytes = gyrocal_run::rundir::read_capped(&fit_path, MAX_FIT_BYTES)?;
         let value: serde_json::Value =
             serde_json::from_slice(&bytes).map_err(|e| ReportError::FitDocument {
                 path: fit_path.clone(),
@@ -215,21 +216,9 @@ fn analysis_from_json(path: &Path, value: serde_json::Value) -> Result<Analysis,
     }
 }
 
-/// Fits the data with the default options, leaving out the models the data cannot determine
-/// (as `gyrocal fit` does); an error only when not even a line can be fitted.
+/// Fits the data with the default options: models the data cannot determine are skipped and
+/// listed in the analysis (as `gyrocal fit` and a run do); an error only when not even a line
+/// can be fitted.
 pub(crate) fn fit(data: &Dataset) -> Result<Analysis, String> {
-    let mut opts = Options::default();
-    match gyrocal_fit::analyze(data, &opts) {
-        Ok(a) => Ok(a),
-        Err(first) => {
-            opts.models.retain(|&m| {
-                gyrocal_fit::fit_least_squares(data, m, Weighting::Auto).is_ok()
-                    || m == Model::Linear
-            });
-            gyrocal_fit::analyze(data, &opts).map_err(|e| {
-                tracing::warn!(error = %first, "fit with every model failed");
-                e.to_string()
-            })
-        }
-    }
+    gyrocal_fit::analyze(data, &Options::default()).map_err(|e| e.to_string())
 }

@@ -79,6 +79,15 @@ pub enum ReportError {
         /// The path given.
         path: PathBuf,
     },
+    /// The path exists but is neither a directory nor a regular file (a device, a pipe).
+    #[error(
+        "{}: not a run directory or a regular file (a device or a pipe is not read)",
+        path.display()
+    )]
+    NotAFile {
+        /// The path given.
+        path: PathBuf,
+    },
     /// No input was given.
     #[error("nothing to report: give at least one run directory or steps CSV")]
     NoInput,
@@ -101,6 +110,7 @@ impl ReportError {
             | ReportError::Input(_)
             | ReportError::FitDocument { .. }
             | ReportError::NotFound { .. }
+            | ReportError::NotAFile { .. }
             | ReportError::NoInput => true,
             ReportError::Io { action, .. } => *action == "read",
             ReportError::Plot { .. } => false,

@@ -104,6 +104,7 @@ fn make_run(dir: &Path, spec: &RunSpec<'_>) {
             rate_meas_std_dps: Some(2e-4),
             rate_meas_min_dps: Some(w + rate_err - 5e-4),
             rate_meas_max_dps: Some(w + rate_err + 5e-4),
+            rate_samples: Some(20),
             volts: mean,
             volts_std: Some(var.sqrt()),
             n: N,
@@ -493,8 +494,9 @@ fn malformed_steps_csv_is_an_error_naming_the_file_and_line() {
     let steps = dir.join(STEPS_CSV);
     let text = fs::read_to_string(&steps).unwrap();
     let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let volts = lines[0].split(',').position(|c| c == "volts").unwrap();
     let mut fields: Vec<&str> = lines[1].split(',').collect();
-    fields[7] = "1.2.3"; // volts
+    fields[volts] = "1.2.3";
     lines[1] = fields.join(",");
     fs::write(&steps, lines.join("\n") + "\n").unwrap();
     let err = write_run_report(&dir).unwrap_err();

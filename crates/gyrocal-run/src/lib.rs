@@ -62,7 +62,9 @@ pub fn dataset_from_steps(steps: &[StepRecord], source: &str) -> gyrocal_fit::Da
 }
 
 /// Fits a run directory's steps with `options`, stores the analysis in the manifest and in
-/// `fit.json`, and returns it.
+/// `fit.json`, and returns it. With the default options, models the data cannot determine are
+/// skipped and listed in the analysis (`skipped`), so a complete run always gets its
+/// `fit.json`; only data that cannot determine a line is an error.
 ///
 /// When the plan repeats its schedule (`repeat` > 1), the repeatability
 /// `std(K_i, ddof = 1) / mean(K_i)` is computed from the least-squares line of each pass on
@@ -77,6 +79,7 @@ pub fn fit_run(
     let passes: std::collections::BTreeSet<u32> = data.steps.iter().map(|s| s.pass).collect();
     if passes.len() > 1 {
         let mut ks = Vec::with_capacity(passes.len());
+        let mut failed = None;
         for pass in &passes {
             let steps: Vec<StepRecord> = data
                 .steps
@@ -84,15 +87,36 @@ pub fn fit_run(
                 .filter(|s| s.pass == *pass)
                 .cloned()
                 .collect();
-            let line = gyrocal_fit::fit_least_squares(
+            match gyrocal_fit::fit_least_squares(
                 &dataset_from_steps(&steps, &source),
                 gyrocal_fit::Model::Linear,
                 options.weighting,
-            )?;
-            tracing::info!(pass, k = line.scale_factor, "scale factor of one pass");
-            ks.push(line.scale_factor);
+            ) {
+                Ok(line) => {
+                    tracing::info!(pass, k = line.scale_factor, "scale factor of one pass");
+                    ks.push(line.scale_factor);
+                }
+                // A pass that cannot determine a line (e.g. an incomplete run's last pass)
+                // costs the repeatability, never the fit of the whole run.
+                Err(e) => {
+                    failed = Some(format!("pass {pass}: {e}"));
+                    break;
+                }
+            }
         }
-        analysis.metrics.repeatability_ppm = gyrocal_fit::repeatability_ppm(&ks);
+        match failed {
+            None => analysis.metrics.repeatability_ppm = gyrocal_fit::repeatability_ppm(&ks),
+            Some(reason) => {
+                tracing::warn!(%reason, "no repeatability");
+                analysis
+                    .metrics
+                    .not_computed
+                    .push(gyrocal_fit::NotComputed {
+                        metric: "repeatability_ppm".to_string(),
+                        reason: format!("needs a line per pass: {reason}"),
+                    });
+            }
+        }
     }
     let value = serde_json::to_value(&analysis).map_err(|e| FitRunError::Json(e.to_string()))?;
     run.set_fit(value)?;

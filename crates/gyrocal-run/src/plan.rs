@@ -41,6 +41,9 @@ use toml::Spanned;
 pub const HARD_MAX_RATE_DPS: f64 = 1000.0;
 /// Hard ceiling for `[table] acceleration_dps2`, in °/s². Same reasoning as [`HARD_MAX_RATE_DPS`].
 pub const HARD_MAX_ACCELERATION_DPS2: f64 = 1000.0;
+/// The largest plan file read: 1 MiB. A plan is a few kilobytes; anything larger (or an
+/// endless file such as `/dev/zero`) is refused after reading at most this much.
+pub const MAX_PLAN_BYTES: u64 = 1024 * 1024;
 /// Upper bound for `[plan] samples_per_rate`: one million readings is about 11.5 hours at the
 /// 34401A's 24 readings/s (NPLC 1, autozero on); more is certainly a typo.
 pub const MAX_SAMPLES_PER_RATE: u32 = 1_000_000;
@@ -103,6 +106,18 @@ pub enum PlanError {
         /// The I/O error.
         source: std::io::Error,
     },
+    /// The plan file is larger than [`MAX_PLAN_BYTES`] (or endless).
+    #[error(
+        "{}: larger than the {} KiB limit for a plan (a plan is a few kilobytes); is it the right file?",
+        path.display(),
+        cap / 1024
+    )]
+    TooLarge {
+        /// The file.
+        path: PathBuf,
+        /// The limit, bytes.
+        cap: u64,
+    },
     /// TOML syntax error, unknown key, missing key or wrong type (stage 1).
     #[error("{location}: {}{message}", section.as_ref().map(|s| format!("[{s}] ")).unwrap_or_default())]
     Syntax {
@@ -128,10 +143,11 @@ pub enum PlanError {
 }
 
 impl PlanError {
-    /// The location of the error, when it has one (not for [`PlanError::Read`]).
+    /// The location of the error, when it has one (not for [`PlanError::Read`] and
+    /// [`PlanError::TooLarge`]).
     pub fn location(&self) -> Option<&Location> {
         match self {
-            PlanError::Read { .. } => None,
+            PlanError::Read { .. } | PlanError::TooLarge { .. } => None,
             PlanError::Syntax { location, .. } | PlanError::Invalid { location, .. } => {
                 Some(location)
             }
@@ -187,10 +203,10 @@ struct RawFile {
 struct RawPlan {
     name: Option<S<String>>,
     rates_dps: S<Vec<S<f64>>>,
-    samples_per_rate: S<u32>,
+    samples_per_rate: S<RawInt>,
     settle_s: Option<S<f64>>,
-    repeat: Option<S<u32>>,
-    whole_revolutions: Option<S<u32>>,
+    repeat: Option<S<RawInt>>,
+    whole_revolutions: Option<S<RawInt>>,
 }
 
 #[derive(Deserialize)]
@@ -198,7 +214,7 @@ struct RawPlan {
 struct RawTable {
     dialect: Option<S<String>>,
     port: S<String>,
-    baud: Option<S<u32>>,
+    baud: Option<S<RawInt>>,
     max_rate_dps: S<f64>,
     acceleration_dps2: S<f64>,
     rate_tolerance_dps: Option<S<f64>>,
@@ -210,19 +226,19 @@ struct RawTable {
 #[serde(deny_unknown_fields)]
 struct RawDmm {
     port: S<String>,
-    baud: Option<S<u32>>,
+    baud: Option<S<RawInt>>,
     framing: Option<S<String>>,
     range_v: Option<S<f64>>,
     nplc: Option<S<f64>>,
     autozero: Option<S<bool>>,
-    line_hz: Option<S<u32>>,
+    line_hz: Option<S<RawInt>>,
     acquisition: Option<S<String>>,
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawSimulation {
-    seed: Option<S<u64>>,
+    seed: Option<S<RawInt>>,
     scale_factor: Option<S<f64>>,
     bias: Option<S<f64>>,
     k2: Option<S<f64>>,
@@ -233,6 +249,89 @@ struct RawSimulation {
     latitude_deg: Option<S<f64>>,
     rate_noise_dps: Option<S<f64>>,
     ripple_dps: Option<S<f64>>,
+}
+
+/// An integer key as written. Any TOML value is accepted at this stage, so that whatever was
+/// written (an integer beyond 64 bits, a float, a string) is refused naming the key and the
+/// allowed values, like an integer out of range, instead of as a serde type error.
+enum RawInt {
+    /// A 64-bit integer (range-checked by validation).
+    Int(i64),
+    /// Anything else, as it reads in an error message, and whether it is a whole number (an
+    /// integer beyond 64 bits).
+    Other(String, bool),
+}
+
+impl<'de> Deserialize<'de> for RawInt {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl<'de> serde::de::Visitor<'de> for V {
+            type Value = RawInt;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("a whole number")
+            }
+            fn visit_i64<E>(self, v: i64) -> Result<RawInt, E> {
+                Ok(RawInt::Int(v))
+            }
+            fn visit_u64<E>(self, v: u64) -> Result<RawInt, E> {
+                Ok(i64::try_from(v)
+                    .map_or_else(|_| RawInt::Other(v.to_string(), true), RawInt::Int))
+            }
+            fn visit_i128<E>(self, v: i128) -> Result<RawInt, E> {
+                Ok(i64::try_from(v)
+                    .map_or_else(|_| RawInt::Other(v.to_string(), true), RawInt::Int))
+            }
+            fn visit_u128<E>(self, v: u128) -> Result<RawInt, E> {
+                Ok(i64::try_from(v)
+                    .map_or_else(|_| RawInt::Other(v.to_string(), true), RawInt::Int))
+            }
+            fn visit_f64<E>(self, v: f64) -> Result<RawInt, E> {
+                Ok(RawInt::Other(format!("{v:?}"), false))
+            }
+            fn visit_bool<E>(self, v: bool) -> Result<RawInt, E> {
+                Ok(RawInt::Other(v.to_string(), false))
+            }
+            fn visit_str<E>(self, v: &str) -> Result<RawInt, E> {
+                Ok(RawInt::Other(format!("{v:?}"), false))
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+/// The values an integer key allows.
+enum IntRule {
+    /// `lo..=hi`.
+    Range(u64, u64),
+    /// One of these.
+    OneOf(&'static [u32]),
+}
+
+fn int_rule(key: &str) -> IntRule {
+    match key {
+        "plan.samples_per_rate" => IntRule::Range(1, MAX_SAMPLES_PER_RATE.into()),
+        "plan.repeat" => IntRule::Range(1, MAX_REPEAT.into()),
+        "plan.whole_revolutions" => IntRule::Range(0, MAX_WHOLE_REVOLUTIONS.into()),
+        "table.baud" | "dmm.baud" => IntRule::OneOf(&BAUD_RATES),
+        "dmm.line_hz" => IntRule::OneOf(&LINE_HZ),
+        _ => IntRule::Range(0, i64::MAX.unsigned_abs()), // simulation.seed
+    }
+}
+
+/// The message for an integer key whose value (`shown`, as written) is not allowed.
+fn int_error(key: &str, shown: &str, whole: bool) -> String {
+    let what = if whole {
+        "is out of range"
+    } else {
+        "is not a whole number"
+    };
+    match int_rule(key) {
+        IntRule::Range(lo, hi) => format!("= {shown} {what} ({lo} to {hi})"),
+        IntRule::OneOf(allowed) if whole => {
+            format!("must be one of {allowed:?} (got {shown})")
+        }
+        IntRule::OneOf(allowed) => format!("= {shown} {what} (one of {allowed:?})"),
+    }
 }
 
 /// Spans of the values present in the file, keyed by `section.key` (`plan.rates_dps[2]`).
@@ -248,6 +347,20 @@ impl Spans {
         match v {
             Some(v) => self.take(key, v),
             None => default,
+        }
+    }
+    /// An integer key (`default` when absent); a value that is not a 64-bit integer is an
+    /// error `(key, message)`.
+    fn int(
+        &mut self,
+        key: &'static str,
+        v: Option<S<RawInt>>,
+        default: i64,
+    ) -> Result<i64, (&'static str, String)> {
+        match v.map(|v| self.take(key, v)) {
+            None => Ok(default),
+            Some(RawInt::Int(i)) => Ok(i),
+            Some(RawInt::Other(shown, whole)) => Err((key, int_error(key, &shown, whole))),
         }
     }
 }
@@ -280,14 +393,14 @@ pub struct PlanSectionDoc {
     pub name: String,
     /// Rates in the order applied, °/s.
     pub rates_dps: Vec<f64>,
-    /// Readings per rate.
-    pub samples_per_rate: u32,
+    /// Readings per rate (integers are wide here, range-checked by validation).
+    pub samples_per_rate: i64,
     /// Dwell after the table is at rate, s.
     pub settle_s: f64,
     /// Passes over the whole schedule.
-    pub repeat: u32,
+    pub repeat: i64,
     /// Whole table turns to acquire over at each non-zero rate (0: off).
-    pub whole_revolutions: u32,
+    pub whole_revolutions: i64,
 }
 
 /// `[table]` as parsed.
@@ -299,7 +412,7 @@ pub struct TableDoc {
     /// Serial device path or `tcp://HOST:PORT`.
     pub port: String,
     /// Serial baud rate.
-    pub baud: u32,
+    pub baud: i64,
     /// Client-side rate limit, °/s.
     pub max_rate_dps: f64,
     /// Acceleration limit, °/s².
@@ -319,7 +432,7 @@ pub struct DmmDoc {
     /// Serial device path or `tcp://HOST:PORT`.
     pub port: String,
     /// Serial baud rate.
-    pub baud: u32,
+    pub baud: i64,
     /// `8N2`, `7E2` or `7O2`.
     pub framing: String,
     /// DC range, V.
@@ -329,7 +442,7 @@ pub struct DmmDoc {
     /// Autozero on or off.
     pub autozero: bool,
     /// Mains frequency, Hz.
-    pub line_hz: u32,
+    pub line_hz: i64,
     /// `auto`, `stream`, `memory` or `poll`.
     pub acquisition: String,
 }
@@ -642,10 +755,29 @@ impl Step {
 
 impl Plan {
     /// Reads and validates a plan file; errors name `path`.
+    /// A file larger than [`MAX_PLAN_BYTES`] is refused after reading at most that much.
     pub fn from_file(path: &Path) -> Result<Plan, PlanError> {
-        let src = std::fs::read_to_string(path).map_err(|source| PlanError::Read {
+        use std::io::Read as _;
+        let read_err = |source| PlanError::Read {
             path: path.to_path_buf(),
             source,
+        };
+        let file = std::fs::File::open(path).map_err(read_err)?;
+        let mut bytes = Vec::new();
+        file.take(MAX_PLAN_BYTES + 1)
+            .read_to_end(&mut bytes)
+            .map_err(read_err)?;
+        if bytes.len() as u64 > MAX_PLAN_BYTES {
+            return Err(PlanError::TooLarge {
+                path: path.to_path_buf(),
+                cap: MAX_PLAN_BYTES,
+            });
+        }
+        let src = String::from_utf8(bytes).map_err(|e| {
+            read_err(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!("not UTF-8 text (byte {})", e.utf8_error().valid_up_to()),
+            ))
         })?;
         Plan::from_toml_str(&src, path)
     }
@@ -672,14 +804,12 @@ impl Plan {
         })?;
         let mut spans = Spans::default();
         let doc = raw_to_doc(raw, &mut spans);
-        validate(
-            doc,
-            &Ctx {
-                origin,
-                src: Some(src),
-                spans: &spans,
-            },
-        )
+        let cx = Ctx {
+            origin,
+            src: Some(src),
+            spans: &spans,
+        };
+        validate(doc.map_err(|(key, message)| cx.err(key, message))?, &cx)
     }
 
     /// Validates a plain document (e.g. read back from a manifest); errors carry `origin`
@@ -701,15 +831,15 @@ impl Plan {
             plan: PlanSectionDoc {
                 name: self.name.clone(),
                 rates_dps: self.rates_dps.clone(),
-                samples_per_rate: self.samples_per_rate,
+                samples_per_rate: self.samples_per_rate.into(),
                 settle_s: self.settle.as_secs_f64(),
-                repeat: self.repeat,
-                whole_revolutions: self.whole_revolutions,
+                repeat: self.repeat.into(),
+                whole_revolutions: self.whole_revolutions.into(),
             },
             table: TableDoc {
                 dialect: self.table.dialect.as_str().into(),
                 port: self.table.port.to_string(),
-                baud: self.table.baud,
+                baud: self.table.baud.into(),
                 max_rate_dps: self.table.max_rate_dps,
                 acceleration_dps2: self.table.acceleration_dps2,
                 rate_tolerance_dps: self.table.rate_tolerance_dps,
@@ -718,12 +848,12 @@ impl Plan {
             },
             dmm: DmmDoc {
                 port: self.dmm.port.to_string(),
-                baud: self.dmm.baud,
+                baud: self.dmm.baud.into(),
                 framing: self.dmm.framing.as_str().into(),
                 range_v: self.dmm.range_v,
                 nplc: self.dmm.nplc,
                 autozero: self.dmm.autozero,
-                line_hz: self.dmm.line_hz,
+                line_hz: self.dmm.line_hz.into(),
                 acquisition: self.dmm.acquisition.as_str().into(),
             },
             simulation: self.simulation.clone(),
@@ -840,7 +970,9 @@ impl<'de> Deserialize<'de> for Plan {
 // Stage 2: validation
 // ---------------------------------------------------------------------------------------------
 
-fn raw_to_doc(raw: RawFile, sp: &mut Spans) -> PlanDoc {
+/// The raw file with defaults filled in. The one check here is the simulation seed's sign (the
+/// seed is unsigned where the rest of the plan is validated); the error is `(key, message)`.
+fn raw_to_doc(raw: RawFile, sp: &mut Spans) -> Result<PlanDoc, (&'static str, String)> {
     let d = Simulation::default();
     let p = raw.plan;
     let rates = sp.take("plan.rates_dps", p.rates_dps);
@@ -854,15 +986,15 @@ fn raw_to_doc(raw: RawFile, sp: &mut Spans) -> PlanDoc {
     let plan = PlanSectionDoc {
         name: sp.opt("plan.name", p.name, String::new()),
         rates_dps,
-        samples_per_rate: sp.take("plan.samples_per_rate", p.samples_per_rate),
+        samples_per_rate: sp.int("plan.samples_per_rate", Some(p.samples_per_rate), 0)?,
         settle_s: sp.opt("plan.settle_s", p.settle_s, 10.0),
-        repeat: sp.opt("plan.repeat", p.repeat, 1),
-        whole_revolutions: sp.opt("plan.whole_revolutions", p.whole_revolutions, 0),
+        repeat: sp.int("plan.repeat", p.repeat, 1)?,
+        whole_revolutions: sp.int("plan.whole_revolutions", p.whole_revolutions, 0)?,
     };
     let table = TableDoc {
         dialect: sp.opt("table.dialect", t.dialect, "acl".into()),
         port: sp.take("table.port", t.port),
-        baud: sp.opt("table.baud", t.baud, 9600),
+        baud: sp.int("table.baud", t.baud, 9600)?,
         max_rate_dps: sp.take("table.max_rate_dps", t.max_rate_dps),
         acceleration_dps2: sp.take("table.acceleration_dps2", t.acceleration_dps2),
         rate_tolerance_dps: sp.opt("table.rate_tolerance_dps", t.rate_tolerance_dps, 0.001),
@@ -871,18 +1003,26 @@ fn raw_to_doc(raw: RawFile, sp: &mut Spans) -> PlanDoc {
     };
     let dmm = DmmDoc {
         port: sp.take("dmm.port", m.port),
-        baud: sp.opt("dmm.baud", m.baud, 9600),
+        baud: sp.int("dmm.baud", m.baud, 9600)?,
         framing: sp.opt("dmm.framing", m.framing, "8N2".into()),
         range_v: sp.opt("dmm.range_v", m.range_v, 10.0),
         nplc: sp.opt("dmm.nplc", m.nplc, 1.0),
         autozero: sp.opt("dmm.autozero", m.autozero, true),
-        line_hz: sp.opt("dmm.line_hz", m.line_hz, 50),
+        line_hz: sp.int("dmm.line_hz", m.line_hz, 50)?,
         acquisition: sp.opt("dmm.acquisition", m.acquisition, "auto".into()),
     };
     let simulation = match raw.simulation {
         None => d,
         Some(s) => Simulation {
-            seed: sp.opt("simulation.seed", s.seed, d.seed),
+            seed: {
+                let seed = sp.int("simulation.seed", s.seed, 1)?;
+                u64::try_from(seed).map_err(|_| {
+                    (
+                        "simulation.seed",
+                        int_error("simulation.seed", &seed.to_string(), true),
+                    )
+                })?
+            },
             scale_factor: sp.opt("simulation.scale_factor", s.scale_factor, d.scale_factor),
             bias: sp.opt("simulation.bias", s.bias, d.bias),
             k2: sp.opt("simulation.k2", s.k2, d.k2),
@@ -899,12 +1039,12 @@ fn raw_to_doc(raw: RawFile, sp: &mut Spans) -> PlanDoc {
             ripple_dps: sp.opt("simulation.ripple_dps", s.ripple_dps, d.ripple_dps),
         },
     };
-    PlanDoc {
+    Ok(PlanDoc {
         plan,
         table,
         dmm,
         simulation,
-    }
+    })
 }
 
 struct Ctx<'a> {
@@ -957,11 +1097,18 @@ impl Ctx<'_> {
         }
     }
 
-    fn one_of_u32(&self, path: &str, v: u32, allowed: &[u32]) -> Result<u32, PlanError> {
-        if allowed.contains(&v) {
-            Ok(v)
-        } else {
-            Err(self.err(path, format!("must be one of {allowed:?} (got {v})")))
+    fn one_of_u32(&self, path: &str, v: i64, allowed: &[u32]) -> Result<u32, PlanError> {
+        match u32::try_from(v) {
+            Ok(u) if allowed.contains(&u) => Ok(u),
+            _ => Err(self.err(path, int_error(path, &v.to_string(), true))),
+        }
+    }
+
+    /// An integer key: `v` must be in `lo..=hi` (both within `u32`).
+    fn int_in(&self, path: &str, v: i64, lo: u32, hi: u32) -> Result<u32, PlanError> {
+        match u32::try_from(v) {
+            Ok(u) if (lo..=hi).contains(&u) => Ok(u),
+            _ => Err(self.err(path, int_error(path, &v.to_string(), true))),
         }
     }
 
@@ -1047,6 +1194,19 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
     }
 
     // [plan]
+    let samples_per_rate = cx.int_in(
+        "plan.samples_per_rate",
+        p.samples_per_rate,
+        1,
+        MAX_SAMPLES_PER_RATE,
+    )?;
+    let repeat = cx.int_in("plan.repeat", p.repeat, 1, MAX_REPEAT)?;
+    let whole_revolutions = cx.int_in(
+        "plan.whole_revolutions",
+        p.whole_revolutions,
+        0,
+        MAX_WHOLE_REVOLUTIONS,
+    )?;
     let mut rates = Vec::with_capacity(p.rates_dps.len());
     for (i, &r) in p.rates_dps.iter().enumerate() {
         let key = format!("plan.rates_dps[{i}]");
@@ -1057,15 +1217,15 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
                 format!("|{r}| exceeds [table] max_rate_dps = {max_rate}"),
             ));
         }
-        if p.whole_revolutions > 0 && r != 0.0 {
-            let span = f64::from(p.whole_revolutions) * 360.0 / r.abs();
+        if whole_revolutions > 0 && r != 0.0 {
+            let span = f64::from(whole_revolutions) * 360.0 / r.abs();
             if span > MAX_DURATION_S {
                 return Err(cx.err(
                     &key,
                     format!(
                         "{r} deg/s needs {span:.0} s for {} whole revolution(s), over the \
                          {MAX_DURATION_S} s limit of one step",
-                        p.whole_revolutions
+                        whole_revolutions
                     ),
                 ));
             }
@@ -1084,31 +1244,7 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
             ),
         ));
     }
-    if p.samples_per_rate == 0 || p.samples_per_rate > MAX_SAMPLES_PER_RATE {
-        return Err(cx.err(
-            "plan.samples_per_rate",
-            format!(
-                "must be in 1..={MAX_SAMPLES_PER_RATE} (got {})",
-                p.samples_per_rate
-            ),
-        ));
-    }
     let settle = cx.duration("plan.settle_s", p.settle_s, false)?;
-    if p.repeat == 0 || p.repeat > MAX_REPEAT {
-        return Err(cx.err(
-            "plan.repeat",
-            format!("must be in 1..={MAX_REPEAT} (got {})", p.repeat),
-        ));
-    }
-    if p.whole_revolutions > MAX_WHOLE_REVOLUTIONS {
-        return Err(cx.err(
-            "plan.whole_revolutions",
-            format!(
-                "must be in 0..={MAX_WHOLE_REVOLUTIONS} (got {})",
-                p.whole_revolutions
-            ),
-        ));
-    }
 
     // [dmm]
     let dmm_port = cx.port("dmm.port", &m.port)?;
@@ -1186,10 +1322,10 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
     Ok(Plan {
         name: p.name,
         rates_dps: rates,
-        samples_per_rate: p.samples_per_rate,
+        samples_per_rate,
         settle,
-        repeat: p.repeat,
-        whole_revolutions: p.whole_revolutions,
+        repeat,
+        whole_revolutions,
         table: TableSettings {
             dialect,
             port: table_port,

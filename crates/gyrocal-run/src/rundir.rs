@@ -27,7 +27,16 @@
 //!   steps, checks their sample counts, and truncates `samples.csv` to the end of the last
 //!   finished step's rows.
 //!
-//! One process at a time: the directory is not locked against a second writer.
+//! One process at a time: a writer holds an OS lock on `.lock` (released even by a crash).
+//!
+//! # Bounds and failures
+//!
+//! Every file is read with a size limit ([`MAX_MANIFEST_BYTES`], [`MAX_STEPS_BYTES`],
+//! [`MAX_SAMPLES_BYTES`], [`MAX_FIT_BYTES`]) and must be a regular file: a huge or endless file
+//! is an error naming it, never a memory exhaustion. A header naming a column twice is an error
+//! naming both positions. [`RunDir::create`] is all or nothing (a failure removes what it
+//! created), and a directory left half created by a crash during creation is reused by the
+//! next `create` ([`RunDir::is_half_created`]).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs::{self, File, OpenOptions};
@@ -55,7 +64,28 @@ pub const FORMAT_VERSION: u32 = 1;
 /// Columns of `samples.csv`, in order.
 pub const SAMPLES_HEADER: [&str; 6] = ["step", "index", "t_s", "rate_dps", "volts", "overload"];
 /// Columns of `steps.csv`, in order.
-pub const STEPS_HEADER: [&str; 14] = [
+pub const STEPS_HEADER: [&str; 15] = [
+    "step",
+    "pass",
+    "rate_dps",
+    "rate_meas_dps",
+    "rate_meas_std_dps",
+    "rate_meas_min_dps",
+    "rate_meas_max_dps",
+    "rate_samples",
+    "volts",
+    "volts_std",
+    "n",
+    "overloads",
+    "retries",
+    "t_start_s",
+    "t_end_s",
+];
+
+/// Columns of `steps.csv` as gyrocal wrote them before `rate_samples` existed. Such a file
+/// still reads; a resume rewrites it with [`STEPS_HEADER`] (an empty `rate_samples` in the old
+/// rows) before appending.
+pub const STEPS_HEADER_V1: [&str; 14] = [
     "step",
     "pass",
     "rate_dps",
@@ -71,6 +101,19 @@ pub const STEPS_HEADER: [&str; 14] = [
     "t_start_s",
     "t_end_s",
 ];
+
+/// The most bytes read from `manifest.json` (64 MiB; a manifest is kilobytes, a megabyte or
+/// two with a large fit document).
+pub const MAX_MANIFEST_BYTES: u64 = 64 * 1024 * 1024;
+/// The most bytes read from `steps.csv` (64 MiB, some 400 000 steps; a plan of the largest
+/// size gyrocal accepts stays below it).
+pub const MAX_STEPS_BYTES: u64 = 64 * 1024 * 1024;
+/// The largest `samples.csv` accepted (4 GiB, about 100 million readings: weeks of readings
+/// at the 34401A's rates). A resume streams the file (it never holds it in memory);
+/// [`load_samples`] reads it whole.
+pub const MAX_SAMPLES_BYTES: u64 = 4 * 1024 * 1024 * 1024;
+/// The most bytes read from `fit.json` by the report (64 MiB).
+pub const MAX_FIT_BYTES: u64 = 64 * 1024 * 1024;
 
 // ---------------------------------------------------------------------------------------------
 // Errors
@@ -101,6 +144,18 @@ pub enum RunError {
     NotEmpty {
         /// The directory.
         path: PathBuf,
+    },
+    /// A file of the run directory is larger than gyrocal ever writes it (or endless).
+    #[error(
+        "{}: larger than the {} MiB limit for this file; it is not a file gyrocal wrote",
+        path.display(),
+        cap / (1024 * 1024)
+    )]
+    TooLarge {
+        /// The file.
+        path: PathBuf,
+        /// The limit, bytes.
+        cap: u64,
     },
     /// A CSV row or header that does not parse or does not fit the plan.
     #[error("{}:{line}: {message}", path.display())]
@@ -220,6 +275,11 @@ pub struct StepRecord {
     pub rate_meas_min_dps: Option<f64>,
     /// Maximum measured rate, °/s.
     pub rate_meas_max_dps: Option<f64>,
+    /// Number of table rate samples taken during the acquisition (the basis of the
+    /// `rate_meas_*` figures); empty when not recorded, and in files written before the column
+    /// existed.
+    #[serde(default)]
+    pub rate_samples: Option<u64>,
     /// Mean of the valid readings, V.
     pub volts: f64,
     /// Sample standard deviation of the valid readings, V (empty when `n = 1`).
@@ -373,6 +433,45 @@ pub struct RunData {
 /// The lock file inside a run directory (see [`RunDir`]).
 pub const LOCK_FILE: &str = ".lock";
 
+/// The temporary file of an atomic manifest replacement.
+const MANIFEST_TMP: &str = ".manifest.json.tmp";
+
+/// Removes what a failed [`RunDir::create`] may have written (its fixed file names only;
+/// missing ones are fine). The lock file goes last.
+fn remove_skeleton(dir: &Path) {
+    for name in [
+        MANIFEST_JSON,
+        MANIFEST_TMP,
+        SAMPLES_CSV,
+        STEPS_CSV,
+        LOCK_FILE,
+    ] {
+        let f = dir.join(name);
+        match fs::remove_file(&f) {
+            Ok(()) => tracing::debug!(file = %f.display(), "removed a file of a failed creation"),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => tracing::warn!(file = %f.display(), error = %e, "cannot remove"),
+        }
+    }
+}
+
+/// True when the file is empty or holds only a (possibly torn) header line of one of `headers`.
+fn holds_at_most_header(path: &Path, headers: &[&[&str]]) -> bool {
+    let longest = headers
+        .iter()
+        .map(|h| h.join(",").len() + 2)
+        .max()
+        .unwrap_or(0);
+    let Ok(bytes) = read_capped(path, longest as u64) else {
+        return false;
+    };
+    headers.iter().any(|h| {
+        let full = format!("{}\n", h.join(","));
+        let crlf = format!("{}\r\n", h.join(","));
+        full.as_bytes().starts_with(&bytes) || crlf.as_bytes().starts_with(&bytes)
+    })
+}
+
 /// Takes the run directory's exclusive lock.
 fn lock_dir(dir: &Path) -> Result<File, RunError> {
     let path = dir.join(LOCK_FILE);
@@ -420,18 +519,126 @@ pub struct RunDir {
 
 impl RunDir {
     /// Creates a new run directory (or fills an existing empty one) for `plan`, writes both CSV
-    /// headers and a `running` manifest. Refuses a directory that holds anything.
+    /// headers and a `running` manifest. Refuses a directory that holds anything but what an
+    /// interrupted creation leaves ([`RunDir::is_half_created`]), which it reuses.
+    ///
+    /// Creation is all or nothing: when a step fails (disk full, permissions), the files this
+    /// call created are removed again, and so are the directories it created (the run directory
+    /// and missing parents, when empty); a directory that existed before is left in place,
+    /// empty. The error names the file that could not be written.
     pub fn create(path: &Path, plan: &Plan, meta: RunMeta) -> Result<RunDir, RunError> {
-        if path.exists() {
-            let mut entries = fs::read_dir(path).map_err(io(path, "read the directory"))?;
-            if entries.next().is_some() {
+        if path.exists() && !Self::is_half_created(path)? {
+            return Err(RunError::NotEmpty {
+                path: path.to_path_buf(),
+            });
+        }
+        // The directories this call creates, deepest first, for the cleanup.
+        let mut created_dirs = Vec::new();
+        let mut p = path;
+        while !p.as_os_str().is_empty() && fs::symlink_metadata(p).is_err() {
+            created_dirs.push(p.to_path_buf());
+            match p.parent() {
+                Some(parent) => p = parent,
+                None => break,
+            }
+        }
+        let remove_dirs = |dirs: &[PathBuf]| {
+            for d in dirs {
+                // only empty ones: what someone else put there meanwhile stays
+                if fs::remove_dir(d).is_ok() {
+                    tracing::debug!(dir = %d.display(), "removed a directory of a failed creation");
+                }
+            }
+        };
+        if let Err(e) = fs::create_dir_all(path) {
+            remove_dirs(&created_dirs);
+            return Err(io(path, "create the directory")(e));
+        }
+        let lock = match lock_dir(path) {
+            Ok(lock) => lock,
+            // Another process holds the lock: it is creating or writing this run; touch nothing.
+            Err(e @ RunError::Locked { .. }) => return Err(e),
+            Err(e) => {
+                // Without the lock, only a directory this call created is cleaned.
+                if !created_dirs.is_empty() {
+                    remove_skeleton(path);
+                }
+                remove_dirs(&created_dirs);
+                return Err(e);
+            }
+        };
+        // Under the lock, the directory must still be empty or half created (another process
+        // may have finished creating it between the check above and the lock).
+        let result = match Self::is_half_created(path) {
+            Ok(true) => Self::create_locked(path, plan, meta, lock),
+            Ok(false) => {
                 return Err(RunError::NotEmpty {
                     path: path.to_path_buf(),
                 });
             }
+            Err(e) => Err(e),
+        };
+        match result {
+            Ok(rd) => Ok(rd),
+            Err(e) => {
+                tracing::warn!(dir = %path.display(), error = %e, "run directory creation failed; removing what it created");
+                remove_skeleton(path);
+                remove_dirs(&created_dirs);
+                Err(e)
+            }
         }
-        fs::create_dir_all(path).map_err(io(path, "create the directory"))?;
-        let lock = lock_dir(path)?;
+    }
+
+    /// True when `path` is a directory that is empty or holds only what an interrupted
+    /// [`RunDir::create`] leaves (a crash, a kill or a power cut between its first file and its
+    /// manifest): no `manifest.json` (so no run ever started in it and no reading was ever
+    /// taken), and nothing but `.lock`, `.manifest.json.tmp` and `samples.csv` / `steps.csv`
+    /// holding at most their header. `gyrocal run --out DIR` and `--resume DIR` start the run
+    /// in such a directory instead of refusing it. Errors only when the directory cannot be
+    /// read.
+    pub fn is_half_created(path: &Path) -> Result<bool, RunError> {
+        if !path.is_dir() {
+            return Ok(false);
+        }
+        let entries = fs::read_dir(path).map_err(io(path, "read the directory"))?;
+        for entry in entries {
+            let entry = entry.map_err(io(path, "read the directory"))?;
+            let name = entry.file_name();
+            let Some(name) = name.to_str() else {
+                return Ok(false);
+            };
+            let file = entry.path();
+            let regular = fs::symlink_metadata(&file).is_ok_and(|m| m.is_file());
+            let ok = match name {
+                LOCK_FILE | MANIFEST_TMP => regular,
+                SAMPLES_CSV => regular && holds_at_most_header(&file, &[&SAMPLES_HEADER]),
+                STEPS_CSV => {
+                    regular && holds_at_most_header(&file, &[&STEPS_HEADER, &STEPS_HEADER_V1])
+                }
+                _ => false,
+            };
+            if !ok {
+                return Ok(false);
+            }
+        }
+        Ok(true)
+    }
+
+    fn create_locked(
+        path: &Path,
+        plan: &Plan,
+        meta: RunMeta,
+        lock: File,
+    ) -> Result<RunDir, RunError> {
+        // A half-created directory's CSVs start again from nothing.
+        for name in [SAMPLES_CSV, STEPS_CSV] {
+            let f = path.join(name);
+            match fs::remove_file(&f) {
+                Ok(()) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => return Err(io(&f, "remove")(e)),
+            }
+        }
         let samples = open_csv(&path.join(SAMPLES_CSV), &SAMPLES_HEADER, true)?;
         let steps = open_csv(&path.join(STEPS_CSV), &STEPS_HEADER, true)?;
         let now = now_utc();
@@ -493,7 +700,8 @@ impl RunDir {
 
         // steps.csv: repair the tail, then every row must fit the schedule.
         let spath = path.join(STEPS_CSV);
-        let (steps_bytes, torn_steps) = read_repaired(&spath, &STEPS_HEADER)?;
+        let (steps_bytes, torn_steps) =
+            read_repaired(&spath, &[&STEPS_HEADER, &STEPS_HEADER_V1], MAX_STEPS_BYTES)?;
         let records = parse_steps(&spath, &steps_bytes, &schedule)?;
         let done: BTreeSet<usize> = records.iter().map(|r| r.step).collect();
         let expected: BTreeMap<usize, u64> = records
@@ -503,8 +711,8 @@ impl RunDir {
 
         // samples.csv: keep the finished steps' rows, drop everything from the first other row.
         let sapath = path.join(SAMPLES_CSV);
-        let (samples_bytes, torn_samples) = read_repaired(&sapath, &SAMPLES_HEADER)?;
-        let (keep_len, dropped) = scan_samples(&sapath, &samples_bytes, &schedule, &expected)?;
+        let (samples_len, torn_samples) = repair_samples(&sapath)?;
+        let (keep_len, dropped) = scan_samples(&sapath, samples_len, &schedule, &expected)?;
         truncate(&sapath, keep_len)?;
         truncate(&spath, steps_bytes.len() as u64)?;
 
@@ -851,9 +1059,9 @@ impl RunDir {
 pub fn load(dir: &Path) -> Result<RunData, RunError> {
     let manifest = read_manifest(&dir.join(MANIFEST_JSON))?;
     let spath = dir.join(STEPS_CSV);
-    let bytes = fs::read(&spath).map_err(io(&spath, "read"))?;
+    let bytes = read_capped(&spath, MAX_STEPS_BYTES)?;
     let (bytes, _) = complete_lines(&bytes);
-    check_header(&spath, bytes, &STEPS_HEADER)?;
+    check_header(&spath, bytes, &[&STEPS_HEADER, &STEPS_HEADER_V1])?;
     let schedule = manifest.plan.schedule();
     let steps = parse_steps(&spath, bytes, &schedule)?;
     Ok(RunData { manifest, steps })
@@ -862,9 +1070,9 @@ pub fn load(dir: &Path) -> Result<RunData, RunError> {
 /// Reads every complete row of samples.csv (a torn last line is ignored).
 pub fn load_samples(dir: &Path) -> Result<Vec<SampleRow>, RunError> {
     let path = dir.join(SAMPLES_CSV);
-    let bytes = fs::read(&path).map_err(io(&path, "read"))?;
+    let bytes = read_capped(&path, MAX_SAMPLES_BYTES)?;
     let (bytes, _) = complete_lines(&bytes);
-    check_header(&path, bytes, &SAMPLES_HEADER)?;
+    check_header(&path, bytes, &[&SAMPLES_HEADER])?;
     let mut rdr = csv::ReaderBuilder::new()
         .has_headers(true)
         .from_reader(bytes);
@@ -875,8 +1083,38 @@ pub fn load_samples(dir: &Path) -> Result<Vec<SampleRow>, RunError> {
     Ok(out)
 }
 
+/// Reads a file of a run directory whole, refusing anything but a regular file and more than
+/// `cap` bytes (checked from the size first, then by reading at most `cap + 1` bytes, so a file
+/// that grows or never ends costs at most `cap` bytes of memory).
+pub fn read_capped(path: &Path, cap: u64) -> Result<Vec<u8>, RunError> {
+    use std::io::Read as _;
+    let file = File::open(path).map_err(io(path, "read"))?;
+    let meta = file.metadata().map_err(io(path, "read"))?;
+    if !meta.is_file() {
+        return Err(RunError::Inconsistent {
+            path: path.to_path_buf(),
+            message: "not a regular file".into(),
+        });
+    }
+    let too_large = || RunError::TooLarge {
+        path: path.to_path_buf(),
+        cap,
+    };
+    if meta.len() > cap {
+        return Err(too_large());
+    }
+    let mut bytes = Vec::with_capacity(usize::try_from(meta.len()).unwrap_or(0));
+    file.take(cap.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(io(path, "read"))?;
+    if bytes.len() as u64 > cap {
+        return Err(too_large());
+    }
+    Ok(bytes)
+}
+
 fn read_manifest(path: &Path) -> Result<Manifest, RunError> {
-    let bytes = fs::read(path).map_err(io(path, "read"))?;
+    let bytes = read_capped(path, MAX_MANIFEST_BYTES)?;
     let m: Manifest = serde_json::from_slice(&bytes).map_err(|e| RunError::Json {
         path: path.to_path_buf(),
         line: e.line(),
@@ -915,27 +1153,50 @@ fn complete_lines(bytes: &[u8]) -> (&[u8], u64) {
     )
 }
 
-fn check_header(path: &Path, bytes: &[u8], header: &[&str]) -> Result<(), RunError> {
+/// Checks the first line against the accepted headers (current first); returns the index of
+/// the one found. A column name that appears twice is named with both positions.
+fn check_header(path: &Path, bytes: &[u8], accepted: &[&[&str]]) -> Result<usize, RunError> {
     let first = bytes.split(|&b| b == b'\n').next().unwrap_or_default();
     let first = first.strip_suffix(b"\r").unwrap_or(first);
-    let want = header.join(",");
-    if first != want.as_bytes() {
-        return Err(RunError::Csv {
-            path: path.to_path_buf(),
-            line: 1,
-            message: format!(
-                "header is {:?}, expected {want:?}",
-                String::from_utf8_lossy(first)
-            ),
-        });
+    let text = String::from_utf8_lossy(first);
+    let names: Vec<&str> = text.split(',').collect();
+    for (j, name) in names.iter().enumerate() {
+        if let Some(i) = names.iter().take(j).position(|n| n == name) {
+            return Err(RunError::Csv {
+                path: path.to_path_buf(),
+                line: 1,
+                message: format!(
+                    "the header names column `{name}` twice (columns {} and {})",
+                    i + 1,
+                    j + 1
+                ),
+            });
+        }
     }
-    Ok(())
+    if let Some(k) = accepted
+        .iter()
+        .position(|h| h.len() == names.len() && h.iter().zip(&names).all(|(a, b)| a == b))
+    {
+        return Ok(k);
+    }
+    Err(RunError::Csv {
+        path: path.to_path_buf(),
+        line: 1,
+        message: format!(
+            "header is {text:?}, expected {:?}",
+            accepted.first().map(|h| h.join(",")).unwrap_or_default()
+        ),
+    })
 }
 
 /// Reads a CSV for resume: drops a torn last line; an empty file (or one with only a torn
-/// header) gets its header back. Returns the repaired content and the bytes dropped.
-fn read_repaired(path: &Path, header: &[&str]) -> Result<(Vec<u8>, u64), RunError> {
-    let bytes = fs::read(path).map_err(io(path, "read"))?;
+/// header) gets its header back; a file with an older accepted header (`accepted[1..]`) is
+/// rewritten, atomically, with the current one (`accepted[0]`), each old row getting an empty
+/// cell in every column the old header lacks (see `upgrade_steps`). Returns the repaired
+/// content and the bytes dropped.
+fn read_repaired(path: &Path, accepted: &[&[&str]], cap: u64) -> Result<(Vec<u8>, u64), RunError> {
+    let header = accepted.first().copied().unwrap_or_default();
+    let bytes = read_capped(path, cap)?;
     let (keep, torn) = complete_lines(&bytes);
     if keep.is_empty() {
         let mut h = header.join(",").into_bytes();
@@ -943,11 +1204,109 @@ fn read_repaired(path: &Path, header: &[&str]) -> Result<(Vec<u8>, u64), RunErro
         fs::write(path, &h).map_err(io(path, "write"))?;
         return Ok((h, torn));
     }
-    check_header(path, keep, header)?;
+    let which = check_header(path, keep, accepted)?;
     if torn > 0 {
         tracing::warn!(file = %path.display(), bytes = torn, "dropping a torn last line");
     }
-    Ok((keep.to_vec(), torn))
+    if which == 0 {
+        return Ok((keep.to_vec(), torn));
+    }
+    let old = accepted.get(which).copied().unwrap_or_default();
+    let upgraded = upgrade_steps(keep, old, header);
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    write_atomic(dir, &name, &upgraded)?;
+    tracing::info!(file = %path.display(), "rewrote an older header with the current columns");
+    Ok((upgraded, torn))
+}
+
+/// Prepares samples.csv for a resume without reading it whole: finds the end of its last
+/// complete line (a torn tail is dropped later by the truncation), checks the header, and
+/// writes the header into an empty file. Returns (length of the complete lines, torn bytes).
+fn repair_samples(path: &Path) -> Result<(u64, u64), RunError> {
+    use std::io::{Read as _, Seek as _, SeekFrom};
+    let mut file = File::open(path).map_err(io(path, "read"))?;
+    let meta = file.metadata().map_err(io(path, "read"))?;
+    if !meta.is_file() {
+        return Err(RunError::Inconsistent {
+            path: path.to_path_buf(),
+            message: "not a regular file".into(),
+        });
+    }
+    let len = meta.len();
+    if len > MAX_SAMPLES_BYTES {
+        return Err(RunError::TooLarge {
+            path: path.to_path_buf(),
+            cap: MAX_SAMPLES_BYTES,
+        });
+    }
+    // The last newline, reading backwards in blocks.
+    let mut keep = 0u64;
+    let mut end = len;
+    let mut block = vec![0u8; 64 * 1024];
+    while end > 0 {
+        let start = end.saturating_sub(block.len() as u64);
+        let n = usize::try_from(end - start).unwrap_or(block.len());
+        let buf = block.get_mut(..n).unwrap_or_default();
+        file.seek(SeekFrom::Start(start))
+            .map_err(io(path, "read"))?;
+        file.read_exact(buf).map_err(io(path, "read"))?;
+        if let Some(i) = buf.iter().rposition(|&b| b == b'\n') {
+            keep = start + i as u64 + 1;
+            break;
+        }
+        end = start;
+    }
+    let torn = len - keep;
+    if keep == 0 {
+        let mut h = SAMPLES_HEADER.join(",").into_bytes();
+        h.push(b'\n');
+        fs::write(path, &h).map_err(io(path, "write"))?;
+        return Ok((h.len() as u64, torn));
+    }
+    let mut first = Vec::new();
+    file.seek(SeekFrom::Start(0)).map_err(io(path, "read"))?;
+    (&mut file)
+        .take(4096.min(keep))
+        .read_to_end(&mut first)
+        .map_err(io(path, "read"))?;
+    check_header(path, &first, &[&SAMPLES_HEADER])?;
+    if torn > 0 {
+        tracing::warn!(file = %path.display(), bytes = torn, "dropping a torn last line");
+    }
+    Ok((keep, torn))
+}
+
+/// Rewrites CSV rows written with the columns `old` for the columns `new` (which contain every
+/// column of `old`): an empty cell for each new column. The rows are gyrocal's own (numbers,
+/// no quoting), so a row is one line and a cell is between commas.
+fn upgrade_steps(bytes: &[u8], old: &[&str], new: &[&str]) -> Vec<u8> {
+    let map: Vec<Option<usize>> = new
+        .iter()
+        .map(|c| old.iter().position(|o| o == c))
+        .collect();
+    let mut out = new.join(",").into_bytes();
+    out.push(b'\n');
+    for line in bytes.split(|&b| b == b'\n').skip(1) {
+        let line = line.strip_suffix(b"\r").unwrap_or(line);
+        if line.is_empty() {
+            continue;
+        }
+        let cells: Vec<&[u8]> = line.split(|&b| b == b',').collect();
+        for (k, m) in map.iter().enumerate() {
+            if k > 0 {
+                out.push(b',');
+            }
+            if let Some(cell) = m.and_then(|i| cells.get(i)) {
+                out.extend_from_slice(cell);
+            }
+        }
+        out.push(b'\n');
+    }
+    out
 }
 
 fn parse_steps(path: &Path, bytes: &[u8], schedule: &[Step]) -> Result<Vec<StepRecord>, RunError> {
@@ -957,6 +1316,8 @@ fn parse_steps(path: &Path, bytes: &[u8], schedule: &[Step]) -> Result<Vec<StepR
     let mut seen = BTreeSet::new();
     let mut out = Vec::new();
     let mut rec = csv::StringRecord::new();
+    // by name: files written before `rate_samples` existed lack that column
+    let headers = rdr.headers().map_err(|e| csv_read(path, &e))?.clone();
     loop {
         match rdr.read_record(&mut rec) {
             Ok(false) => break,
@@ -971,7 +1332,9 @@ fn parse_steps(path: &Path, bytes: &[u8], schedule: &[Step]) -> Result<Vec<StepR
             line,
             message,
         };
-        let r: StepRecord = rec.deserialize(None).map_err(|e| bad(e.to_string()))?;
+        let r: StepRecord = rec
+            .deserialize(Some(&headers))
+            .map_err(|e| bad(e.to_string()))?;
         let Some(s) = schedule.get(r.step) else {
             return Err(bad(format!(
                 "step {} is not in the plan's schedule",
@@ -1003,21 +1366,27 @@ fn parse_steps(path: &Path, bytes: &[u8], schedule: &[Step]) -> Result<Vec<StepR
 
 /// Checks the finished steps' rows in samples.csv and finds where the unfinished rows start.
 /// Returns (bytes to keep, rows dropped).
+///
+/// Streams the first `len` bytes of the file (its complete lines, see [`repair_samples`]): a
+/// long run's samples.csv is never held in memory.
 fn scan_samples(
     path: &Path,
-    bytes: &[u8],
+    len: u64,
     schedule: &[Step],
     expected: &BTreeMap<usize, u64>,
 ) -> Result<(u64, u64), RunError> {
+    use std::io::Read as _;
+    let file = File::open(path).map_err(io(path, "read"))?;
     let mut rdr = csv::ReaderBuilder::new()
         .has_headers(true)
-        .from_reader(bytes);
+        .from_reader(std::io::BufReader::new(file.take(len)));
     let mut counts: BTreeMap<usize, u64> = BTreeMap::new();
     let mut cut: Option<u64> = None;
     let mut dropped = 0u64;
     let mut rec = csv::StringRecord::new();
     // The header's end, in case there is no row at all.
-    let mut keep = bytes.iter().position(|&b| b == b'\n').map_or(0, |i| i + 1) as u64;
+    rdr.headers().map_err(|e| csv_read(path, &e))?;
+    let mut keep = rdr.position().byte();
     loop {
         match rdr.read_record(&mut rec) {
             Ok(false) => break,

@@ -404,3 +404,109 @@ fn plan_round_trips_through_json() {
     let err = serde_json::from_str::<Plan>(&tampered).unwrap_err();
     assert!(err.to_string().contains("acceleration_dps2"), "{err}");
 }
+
+#[test]
+fn integer_keys_out_of_range_name_the_key_the_value_and_the_range() {
+    let err = bad("samples_per_rate = 10", "samples_per_rate = 1000000000000");
+    assert_eq!(
+        err.to_string(),
+        "configs/bad.toml:4:20: [plan] samples_per_rate = 1000000000000 is out of range (1 to 1000000)"
+    );
+    let cases: &[(&str, &str, u32, &str)] = &[
+        (
+            "samples_per_rate = 10",
+            "samples_per_rate = 99999999999999999999",
+            4,
+            "[plan] samples_per_rate = 99999999999999999999 is out of range (1 to 1000000)",
+        ),
+        (
+            "samples_per_rate = 10",
+            "samples_per_rate = 1.5",
+            4,
+            "[plan] samples_per_rate = 1.5 is not a whole number (1 to 1000000)",
+        ),
+        (
+            "samples_per_rate = 10",
+            "samples_per_rate = \"ten\"",
+            4,
+            "[plan] samples_per_rate = \"ten\" is not a whole number (1 to 1000000)",
+        ),
+        (
+            "port = \"/dev/ttyUSB0\"",
+            "port = \"/dev/ttyUSB0\"\nbaud = 9600.0",
+            11,
+            "[dmm] baud = 9600.0 is not a whole number (one of [300, 600, 1200, 2400, 4800, 9600])",
+        ),
+        (
+            "samples_per_rate = 10",
+            "samples_per_rate = -3",
+            4,
+            "samples_per_rate = -3 is out of range (1 to 1000000)",
+        ),
+        (
+            "samples_per_rate = 10",
+            "samples_per_rate = 10\nrepeat = 4294967297",
+            5,
+            "[plan] repeat = 4294967297 is out of range (1 to 1000)",
+        ),
+        (
+            "samples_per_rate = 10",
+            "samples_per_rate = 10\nwhole_revolutions = -1",
+            5,
+            "[plan] whole_revolutions = -1 is out of range (0 to 1000)",
+        ),
+        (
+            "max_rate_dps = 20",
+            "max_rate_dps = 20\nbaud = 4294967296",
+            8,
+            "[table] baud must be one of [300, 600, 1200, 2400, 4800, 9600] (got 4294967296)",
+        ),
+        (
+            "port = \"/dev/ttyUSB0\"",
+            "port = \"/dev/ttyUSB0\"\nbaud = -9600",
+            11,
+            "[dmm] baud must be one of",
+        ),
+        (
+            "port = \"/dev/ttyUSB0\"",
+            "port = \"/dev/ttyUSB0\"\nline_hz = 9223372036854775807",
+            11,
+            "[dmm] line_hz must be one of [50, 60] (got 9223372036854775807)",
+        ),
+        (
+            "port = \"/dev/ttyUSB0\"",
+            "port = \"/dev/ttyUSB0\"\n[simulation]\nseed = -1",
+            12,
+            "[simulation] seed = -1 is out of range (0 to 9223372036854775807)",
+        ),
+    ];
+    for (from, to, line, needle) in cases {
+        let err = bad(from, to);
+        assert_at(&err, *line, needle);
+    }
+}
+
+#[test]
+fn plan_files_larger_than_the_cap_are_refused_before_being_read_whole() {
+    let started = std::time::Instant::now();
+    let err = Plan::from_file(Path::new("/dev/zero")).unwrap_err();
+    assert!(matches!(err, PlanError::TooLarge { .. }), "{err}");
+    assert_eq!(
+        err.to_string(),
+        "/dev/zero: larger than the 1024 KiB limit for a plan (a plan is a few kilobytes); is it the right file?"
+    );
+    assert!(started.elapsed() < std::time::Duration::from_secs(5));
+    // A real file just over the cap; one just under parses as usual (comments are fine).
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("big.toml");
+    let cap = gyrocal_run::plan::MAX_PLAN_BYTES as usize;
+    let mut text = GOOD.to_string();
+    text.push_str(&"#".repeat(cap - text.len() - 1));
+    text.push('\n');
+    std::fs::write(&path, &text).unwrap();
+    Plan::from_file(&path).unwrap();
+    text.push('\n');
+    std::fs::write(&path, &text).unwrap();
+    let err = Plan::from_file(&path).unwrap_err();
+    assert!(err.to_string().contains("big.toml"), "{err}");
+}

@@ -65,6 +65,7 @@ fn run_step(rd: &mut RunDir, step: usize, record: bool) {
             rate_meas_std_dps: Some(1e-4),
             rate_meas_min_dps: Some(s.rate_dps - 2e-4),
             rate_meas_max_dps: Some(s.rate_dps + 2e-4),
+            rate_samples: Some(12),
             volts: mean,
             volts_std: Some(1e-6),
             n: good.len() as u64,
@@ -363,6 +364,7 @@ fn protocol_violations_are_refused() {
         rate_meas_std_dps: None,
         rate_meas_min_dps: None,
         rate_meas_max_dps: None,
+        rate_samples: None,
         volts: 1.0,
         volts_std: None,
         n: 3,
@@ -486,4 +488,197 @@ fn dropping_a_partial_first_step_keeps_the_header_in_place() {
     let _rd = RunDir::open_for_resume(&dir, &p).unwrap();
     // exactly the header is left: the partial row is cut at its own start, not at the file's
     assert_eq!(fs::read(dir.join(SAMPLES_CSV)).unwrap(), header);
+}
+
+/// A directory path (under `base`, not created) whose `samples.csv`, `steps.csv` and `.lock`
+/// fit within Linux's PATH_MAX (4096 bytes with the NUL) but whose `.manifest.json.tmp` does
+/// not: creating the run directory fails half way, at the manifest, with ENAMETOOLONG, after
+/// the lock and both CSV files were created. A real failure, reproducible without a full disk
+/// or a test hook (and as root, whom permissions do not stop).
+fn manifest_fails_path(base: &Path) -> std::path::PathBuf {
+    const LEN: usize = 4080; // + "/samples.csv" = 4092 < 4096; + "/.manifest.json.tmp" = 4099
+    let mut p = base.to_path_buf();
+    while p.as_os_str().len() + 1 + 200 < LEN {
+        p.push("d".repeat(200));
+    }
+    let rest = LEN - p.as_os_str().len() - 1;
+    assert!((1..=255).contains(&rest));
+    p.push("r".repeat(rest));
+    assert_eq!(p.as_os_str().len(), LEN);
+    p
+}
+
+#[test]
+fn a_creation_that_fails_half_way_removes_what_it_created() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = manifest_fails_path(tmp.path());
+    let err = RunDir::create(&dir, &plan(), meta()).unwrap_err();
+    let msg = err.to_string();
+    assert!(
+        matches!(err, RunError::Io { .. }) && msg.contains(".manifest.json.tmp"),
+        "{msg}"
+    );
+    // Nothing is left: not the run directory, not the parents the creation made.
+    assert!(!dir.exists());
+    assert_eq!(fs::read_dir(tmp.path()).unwrap().count(), 0);
+
+    // A directory that existed before is left in place, empty.
+    fs::create_dir_all(&dir).unwrap();
+    RunDir::create(&dir, &plan(), meta()).unwrap_err();
+    assert!(dir.is_dir());
+    assert_eq!(fs::read_dir(&dir).unwrap().count(), 0);
+}
+
+#[test]
+fn a_half_created_directory_is_reused_and_one_with_data_is_not() {
+    let tmp = tempfile::tempdir().unwrap();
+    // What a kill between the first file and the manifest leaves.
+    let dir = tmp.path().join("half");
+    fs::create_dir(&dir).unwrap();
+    fs::write(dir.join(".lock"), b"").unwrap();
+    fs::write(
+        dir.join(SAMPLES_CSV),
+        b"step,index,t_s,rate_dps,volts,overload\n",
+    )
+    .unwrap();
+    fs::write(dir.join(STEPS_CSV), b"step,pass,rate_d").unwrap(); // torn header
+    fs::write(dir.join(".manifest.json.tmp"), b"{\"format_ver").unwrap();
+    assert!(RunDir::is_half_created(&dir).unwrap());
+    let mut rd = RunDir::create(&dir, &plan(), meta()).unwrap();
+    run_step(&mut rd, 0, true);
+    drop(rd);
+    let data = load(&dir).unwrap();
+    assert_eq!(data.steps.len(), 1);
+    assert!(!RunDir::is_half_created(&dir).unwrap());
+
+    // A readings row means a run took data there: never reused, never emptied.
+    let dir = tmp.path().join("data");
+    fs::create_dir(&dir).unwrap();
+    let samples = b"step,index,t_s,rate_dps,volts,overload\n0,0,0.1,0,0.0088,0\n";
+    fs::write(dir.join(SAMPLES_CSV), samples).unwrap();
+    assert!(!RunDir::is_half_created(&dir).unwrap());
+    let err = RunDir::create(&dir, &plan(), meta()).unwrap_err();
+    assert!(matches!(err, RunError::NotEmpty { .. }), "{err}");
+    assert_eq!(fs::read(dir.join(SAMPLES_CSV)).unwrap(), samples);
+}
+
+#[test]
+fn rate_samples_round_trip_and_older_steps_csv_still_read_and_resume() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let mut rd = RunDir::create(&dir, &plan(), meta()).unwrap();
+    run_step(&mut rd, 0, true);
+    run_step(&mut rd, 1, true);
+    drop(rd);
+    let text = fs::read_to_string(dir.join(STEPS_CSV)).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let pos = |c: &str| header.iter().position(|h| *h == c).unwrap();
+    assert_eq!(pos("rate_samples"), pos("rate_meas_max_dps") + 1);
+    assert_eq!(load(&dir).unwrap().steps[0].rate_samples, Some(12));
+
+    // The same run as an older gyrocal wrote it: no rate_samples column.
+    let old: String = text
+        .lines()
+        .map(|l| {
+            let mut cells: Vec<&str> = l.split(',').collect();
+            cells.remove(pos("rate_samples"));
+            cells.join(",") + "\n"
+        })
+        .collect();
+    fs::write(dir.join(STEPS_CSV), &old).unwrap();
+    let data = load(&dir).unwrap();
+    assert_eq!(data.steps.len(), 2);
+    assert_eq!(data.steps[1].rate_samples, None);
+    assert_eq!(data.steps[1].n, 6);
+    // A resume upgrades the file to the current columns and appends in them.
+    let mut rd = RunDir::open_for_resume(&dir, &plan()).unwrap();
+    assert_eq!(rd.done_steps().len(), 2);
+    run_step(&mut rd, 2, true);
+    drop(rd);
+    let text = fs::read_to_string(dir.join(STEPS_CSV)).unwrap();
+    assert!(text.starts_with(&gyrocal_run::rundir::STEPS_HEADER.join(",")));
+    assert!(text.lines().all(|l| l.split(',').count() == 15), "{text}");
+    let steps = load(&dir).unwrap().steps;
+    assert_eq!(
+        steps.iter().map(|s| s.rate_samples).collect::<Vec<_>>(),
+        [None, None, Some(12)]
+    );
+}
+
+#[test]
+fn a_duplicated_column_is_named_with_both_positions() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let mut rd = RunDir::create(&dir, &plan(), meta()).unwrap();
+    run_step(&mut rd, 0, true);
+    drop(rd);
+    let text = fs::read_to_string(dir.join(STEPS_CSV)).unwrap();
+    let dup = text.replacen("volts_std", "volts", 1);
+    fs::write(dir.join(STEPS_CSV), dup).unwrap();
+    let msg = load(&dir).unwrap_err().to_string();
+    assert!(
+        msg.contains("steps.csv:1:") && msg.contains("`volts` twice (columns 9 and 10)"),
+        "{msg}"
+    );
+    let msg = RunDir::open_for_resume(&dir, &plan())
+        .unwrap_err()
+        .to_string();
+    assert!(msg.contains("twice"), "{msg}");
+}
+
+#[test]
+fn huge_or_endless_run_files_are_refused_naming_them() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let mut rd = RunDir::create(&dir, &plan(), meta()).unwrap();
+    run_step(&mut rd, 0, true);
+    drop(rd);
+    // A steps.csv past its cap (sparse: no disk used).
+    let steps = OpenOptions::new()
+        .write(true)
+        .open(dir.join(STEPS_CSV))
+        .unwrap();
+    steps
+        .set_len(gyrocal_run::rundir::MAX_STEPS_BYTES + 1)
+        .unwrap();
+    let started = std::time::Instant::now();
+    let msg = load(&dir).unwrap_err().to_string();
+    assert!(msg.contains("steps.csv") && msg.contains("64 MiB"), "{msg}");
+    let msg = RunDir::open_for_resume(&dir, &plan())
+        .unwrap_err()
+        .to_string();
+    assert!(msg.contains("steps.csv") && msg.contains("64 MiB"), "{msg}");
+    // An endless manifest: a device where the file should be.
+    fs::remove_file(dir.join(MANIFEST_JSON)).unwrap();
+    std::os::unix::fs::symlink("/dev/zero", dir.join(MANIFEST_JSON)).unwrap();
+    let msg = load(&dir).unwrap_err().to_string();
+    assert!(
+        msg.contains("manifest.json") && msg.contains("not a regular file"),
+        "{msg}"
+    );
+    assert!(started.elapsed() < std::time::Duration::from_secs(10));
+}
+
+#[test]
+fn a_samples_csv_over_its_cap_is_refused_on_resume_from_its_size() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let mut rd = RunDir::create(&dir, &plan(), meta()).unwrap();
+    run_step(&mut rd, 0, true);
+    drop(rd);
+    OpenOptions::new()
+        .write(true)
+        .open(dir.join(SAMPLES_CSV))
+        .unwrap()
+        .set_len(gyrocal_run::rundir::MAX_SAMPLES_BYTES + 1)
+        .unwrap();
+    let started = std::time::Instant::now();
+    let msg = RunDir::open_for_resume(&dir, &plan())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        msg.contains("samples.csv") && msg.contains("4096 MiB"),
+        "{msg}"
+    );
+    assert!(started.elapsed() < std::time::Duration::from_secs(5));
 }

@@ -218,7 +218,7 @@ fn fewer_points_than_coefficients() {
         "rate_dps,volts\n0,0.0088\n1,0.37\n2,0.73\n",
         &["--model", "cubic"],
         4,
-        "has only 3 points",
+        "the cubic model has 4 coefficients and needs at least 4 distinct rates; the data have 3",
     );
 }
 
@@ -239,5 +239,128 @@ fn split_without_both_signs() {
         &["--model", "split"],
         4,
         "negative side",
+    );
+}
+
+#[test]
+fn three_rates_skip_the_cubic_model_with_the_reason_and_exit_0() {
+    let tmp = tempfile::tempdir().unwrap();
+    let csv = write(
+        &tmp,
+        "three.csv",
+        "rate_dps,volts\n0,0.0088\n10,3.6208\n-10,-3.6032\n10,3.6211\n-10,-3.6030\n0,0.0091\n",
+    );
+    let out = gyrocal(&["fit", "--json", &csv]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let skipped = v["skipped"].as_array().unwrap();
+    assert_eq!(skipped.len(), 1, "{skipped:?}");
+    assert_eq!(skipped[0]["model"], "cubic");
+    let reason = skipped[0]["reason"].as_str().unwrap();
+    assert!(
+        reason.contains("4 coefficients") && reason.contains("the data have 3"),
+        "{reason}"
+    );
+    let models: Vec<&str> = v["fits"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["model"].as_str().unwrap())
+        .collect();
+    assert!(!models.contains(&"cubic"), "{models:?}");
+    let out = gyrocal(&["fit", &csv]);
+    assert!(out.status.success());
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        text.contains("not fitted: cubic — the cubic model has 4 coefficients"),
+        "{text}"
+    );
+}
+
+#[test]
+fn one_direction_skips_split_and_says_why_asymmetry_is_missing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let csv = write(
+        &tmp,
+        "up.csv",
+        "rate_dps,volts\n0,0.0088\n1,0.3700\n5,1.8148\n10,3.6208\n20,7.2328\n",
+    );
+    let out = gyrocal(&["fit", "--json", &csv]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["skipped"][0]["model"], "split");
+    assert!(
+        v["skipped"][0]["reason"]
+            .as_str()
+            .unwrap()
+            .contains("negative side")
+    );
+    assert!(v["metrics"]["asymmetry_ppm"].is_null());
+    let nc = v["metrics"]["not_computed"].as_array().unwrap();
+    assert!(
+        nc.iter().any(|n| n["metric"] == "asymmetry_ppm"
+            && n["reason"].as_str().unwrap().contains("turning directions")),
+        "{nc:?}"
+    );
+    let out = gyrocal(&["fit", &csv]);
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(text.contains("not fitted: split — "), "{text}");
+    assert!(
+        text.contains("asymmetry             not computed: needs the split model"),
+        "{text}"
+    );
+}
+
+#[test]
+fn a_model_asked_for_by_name_that_the_data_cannot_determine_exits_2() {
+    bad(
+        "rate_dps,volts\n0,0.0088\n10,3.6208\n-10,-3.6032\n10,3.6211\n",
+        &["--model", "cubic"],
+        5,
+        "asked for with --model",
+    );
+}
+
+#[test]
+fn a_duplicated_column_exits_2_naming_both() {
+    bad(
+        "rate_dps,volts,VOLTS\n0,0.0088,1\n1,0.37,1\n",
+        &[],
+        1,
+        "column `VOLTS` twice (columns 2 and 3)",
+    );
+}
+
+#[test]
+fn endless_and_huge_inputs_exit_2_quickly() {
+    let started = std::time::Instant::now();
+    let out = gyrocal(&["fit", "/dev/zero"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("/dev/zero: larger than the 64 MiB limit"),
+        "{err}"
+    );
+    // A regular file over the cap is refused from its size (sparse: no disk used).
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("huge.csv");
+    let f = std::fs::File::create(&path).unwrap();
+    f.set_len(64 * 1024 * 1024 + 1).unwrap();
+    let out = gyrocal(&["fit", path.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("huge.csv: larger than"), "{err}");
+    assert!(
+        started.elapsed() < std::time::Duration::from_secs(30),
+        "{:?}",
+        started.elapsed()
     );
 }

@@ -74,6 +74,7 @@ fn small_run(dir: &Path) {
             rate_meas_std_dps: None,
             rate_meas_min_dps: None,
             rate_meas_max_dps: None,
+            rate_samples: None,
             volts: 0.0088 + 0.3612 * w + 1e-5 * w * w,
             volts_std: Some(1e-4),
             n: 3,
@@ -155,4 +156,187 @@ fn run_directory_without_steps_csv_exits_2_naming_it() {
     std::fs::remove_file(dir.join("steps.csv")).unwrap();
     let out = gyrocal(&["report", dir.to_str().unwrap()]);
     assert_user_error(&out, "steps.csv");
+}
+
+/// configs/quick.toml with `rates_dps` replaced, written into `dir`.
+fn plan_with_rates(dir: &Path, rates: &str) -> PathBuf {
+    let quick = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/quick.toml");
+    let text = std::fs::read_to_string(quick).unwrap();
+    let from = "rates_dps = [0, 1, -1, 10, -10]";
+    assert!(text.contains(from));
+    let path = dir.join("plan.toml");
+    std::fs::write(&path, text.replace(from, &format!("rates_dps = {rates}"))).unwrap();
+    path
+}
+
+/// Checks the plan (which must warn about `model`), runs it on the simulated bench (which must
+/// complete with exit 0) and returns the run directory.
+fn run_skipping(tmp: &Path, rates: &str, model: &str) -> PathBuf {
+    let plan = plan_with_rates(tmp, rates);
+    let out = gyrocal(&["check", plan.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let err = stderr(&out);
+    assert!(
+        err.contains("warning:")
+            && err.contains("plan.toml")
+            && err.contains(&format!("the fit will skip the {model} model")),
+        "{err}"
+    );
+    let dir = tmp.join("run");
+    let out = gyrocal(&[
+        "run",
+        plan.to_str().unwrap(),
+        "--simulate",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains(&format!("not fitted: {model} — ")), "{text}");
+    dir
+}
+
+#[test]
+fn a_complete_run_with_three_rates_fits_reports_and_names_the_skipped_cubic() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = run_skipping(tmp.path(), "[0, 10, -10]", "cubic");
+    let fit: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("fit.json")).unwrap()).unwrap();
+    assert_eq!(fit["skipped"][0]["model"], "cubic");
+    assert_eq!(fit["skipped"].as_array().unwrap().len(), 1);
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert!(
+        html.contains(
+            "not fitted: cubic — the cubic model has 4 coefficients and needs at least 4 distinct rates; the data have 3"
+        ),
+        "report.html does not name the skipped model"
+    );
+    // The same data as a bare CSV, through the report's own fit.
+    let out = gyrocal(&[
+        "report",
+        dir.join("steps.csv").to_str().unwrap(),
+        "--out",
+        tmp.path().join("csv.html").to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let html = std::fs::read_to_string(tmp.path().join("csv.html")).unwrap();
+    assert!(html.contains("not fitted: cubic — "));
+}
+
+#[test]
+fn a_complete_run_in_one_direction_fits_and_says_why_there_is_no_asymmetry() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = run_skipping(tmp.path(), "[0, 1, 10, 15]", "split");
+    let fit: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("fit.json")).unwrap()).unwrap();
+    assert_eq!(fit["skipped"][0]["model"], "split");
+    assert!(fit["metrics"]["asymmetry_ppm"].is_null());
+    assert_eq!(fit["metrics"]["not_computed"][0]["metric"], "asymmetry_ppm");
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert!(html.contains("not fitted: split — the split model needs both turning directions"));
+    assert!(html.contains("Not computed: needs the split model"));
+}
+
+#[test]
+fn a_run_directory_left_half_created_is_reused_by_out_and_by_resume() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = plan_with_rates(tmp.path(), "[0, 10, -10, 1, -1]");
+    // What an interrupted creation leaves: the lock and the CSV headers, no manifest.
+    let half = |name: &str| {
+        let dir = tmp.path().join(name);
+        std::fs::create_dir(&dir).unwrap();
+        std::fs::write(dir.join(".lock"), b"").unwrap();
+        std::fs::write(dir.join("samples.csv"), b"").unwrap();
+        // a torn header
+        std::fs::write(dir.join("steps.csv"), b"step,pass").unwrap();
+        dir
+    };
+    for (name, flag) in [("again", "--out"), ("resumed", "--resume")] {
+        let dir = half(name);
+        let out = gyrocal(&[
+            "run",
+            plan.to_str().unwrap(),
+            "--simulate",
+            flag,
+            dir.to_str().unwrap(),
+        ]);
+        assert_eq!(out.status.code(), Some(0), "{flag}: {}", stderr(&out));
+        let m: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.join("manifest.json")).unwrap()).unwrap();
+        assert_eq!(m["status"], "complete", "{flag}");
+        assert_eq!(m["steps_done"].as_array().unwrap().len(), 5, "{flag}");
+        assert!(dir.join("fit.json").is_file() && dir.join("report.html").is_file());
+    }
+}
+
+#[test]
+fn check_refuses_endless_and_out_of_range_plans_with_exit_2() {
+    let started = std::time::Instant::now();
+    let out = gyrocal(&["check", "/dev/zero"]);
+    assert_user_error(&out, "/dev/zero: larger than the 1024 KiB limit for a plan");
+    assert!(started.elapsed() < std::time::Duration::from_secs(20));
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = plan_with_rates(tmp.path(), "[0, 1, -1, 10, -10]");
+    let text = std::fs::read_to_string(&plan)
+        .unwrap()
+        .replace("samples_per_rate = 50", "samples_per_rate = 1000000000000");
+    std::fs::write(&plan, text).unwrap();
+    let out = gyrocal(&["check", plan.to_str().unwrap()]);
+    assert_user_error(
+        &out,
+        "[plan] samples_per_rate = 1000000000000 is out of range (1 to 1000000)",
+    );
+    assert!(stderr(&out).contains("plan.toml:"), "{}", stderr(&out));
+}
+
+#[test]
+fn report_of_an_endless_input_exits_2_at_once() {
+    let started = std::time::Instant::now();
+    let out = gyrocal(&["report", "/dev/zero", "--out", "/nonexistent/r.html"]);
+    assert_user_error(&out, "/dev/zero: not a run directory or a regular file");
+    assert!(started.elapsed() < std::time::Duration::from_secs(20));
+}
+
+#[test]
+fn report_input_with_a_duplicated_column_exits_2_naming_both() {
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("dup.csv");
+    std::fs::write(&path, "rate_dps,volts,rate_dps\n0,0.0088,0\n1,0.37,1\n").unwrap();
+    let out = gyrocal(&[
+        "report",
+        path.to_str().unwrap(),
+        "--out",
+        tmp.path().join("r.html").to_str().unwrap(),
+    ]);
+    assert_user_error(
+        &out,
+        "dup.csv: line 1: the header names column `rate_dps` twice (columns 1 and 3)",
+    );
+}
+
+#[test]
+fn a_run_whose_directory_fails_half_way_leaves_nothing_behind() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = plan_with_rates(tmp.path(), "[0, 1, -1, 10, -10]");
+    // A path whose lock and CSV files can be created but whose manifest cannot (its temporary
+    // file's path exceeds PATH_MAX): the creation fails half way, as on a full disk.
+    let base = tmp.path().join("runs");
+    let mut dir = base.clone();
+    while dir.as_os_str().len() + 201 < 4080 {
+        dir.push("d".repeat(200));
+    }
+    let rest = 4080 - dir.as_os_str().len() - 1;
+    dir.push("r".repeat(rest));
+    let out = gyrocal(&[
+        "run",
+        plan.to_str().unwrap(),
+        "--simulate",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains(".manifest.json.tmp"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(!base.exists(), "the failed creation left files behind");
 }

@@ -1,5 +1,8 @@
 //! `gyrocal check PLAN`: validate a plan against the instruments' limits and print its
-//! schedule with the duration each step will take, from the instruments' timing models.
+//! schedule with the duration each step will take, from the instruments' timing models. It
+//! warns (on stderr; exit 0) about the default models the schedule's data cannot determine,
+//! which the fit at the end of the run will skip, by the fit's own rule
+//! ([`gyrocal_fit::unsupported_models`]).
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -33,7 +36,37 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
     let steps = plan.schedule();
     let est = estimate::estimate(&plan, &steps, 0.0);
     print!("{}", render(&plan, &args.plan, &est));
+    for w in model_warnings(&plan, &args.plan) {
+        eprintln!("gyrocal: warning: {w}");
+    }
     Ok(())
+}
+
+/// One line per default model the plan's schedule cannot support: the fit will skip it.
+pub fn model_warnings(plan: &Plan, path: &std::path::Path) -> Vec<String> {
+    let rates: Vec<f64> = plan.schedule().iter().map(|s| s.rate_dps).collect();
+    let mut distinct = rates.clone();
+    distinct.sort_by(f64::total_cmp);
+    distinct.dedup();
+    let list: Vec<String> = distinct.iter().map(f64::to_string).collect();
+    gyrocal_fit::unsupported_models(&rates, &gyrocal_fit::Options::default().models)
+        .into_iter()
+        .map(|s| {
+            format!(
+                "{}: the schedule has {} distinct rates ({} °/s): the fit will skip the {} model: {}{}",
+                path.display(),
+                distinct.len(),
+                list.join(", "),
+                s.model,
+                s.reason,
+                if s.model == gyrocal_fit::Model::Split {
+                    " (so no asymmetry, K+ or K-)"
+                } else {
+                    ""
+                }
+            )
+        })
+        .collect()
 }
 
 /// Formats seconds as `1 h 02 min 03.4 s`, `2 min 03.4 s` or `3.42 s`.

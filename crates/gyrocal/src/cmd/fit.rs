@@ -66,7 +66,8 @@ pub struct FitArgs {
     /// Print exactly one JSON document on stdout instead of the human report.
     #[arg(long)]
     pub json: bool,
-    /// Model to fit (repeatable). Default: all.
+    /// Model to fit (repeatable). Default: every model the data can determine (the others are
+    /// skipped with the reason). A model named here that the data cannot determine is an error.
     #[arg(long = "model", value_enum, value_name = "MODEL")]
     pub models: Vec<ModelArg>,
     /// Method to use (repeatable). Default: least squares for every model plus the neuron on the
@@ -135,15 +136,30 @@ impl FitArgs {
             } else {
                 Weighting::Auto
             },
+            // Models asked for by name must be fitted; the default "every model" skips the
+            // ones the data cannot determine and says so.
+            skip_unsupported: self.models.is_empty(),
             ..defaults
         })
     }
 }
 
-/// Reads one file into a data set; errors name the file (and the line, from the parser).
+/// Reads one file into a data set; errors name the file (and the line, from the parser). A
+/// file larger than [`input::MAX_INPUT_BYTES`] is refused before it is read; an endless one
+/// (`/dev/zero`, a pipe) after that many bytes.
 fn read(path: &PathBuf) -> anyhow::Result<Dataset> {
     let name = path.display().to_string();
     let file = File::open(path).map_err(|e| BadInput(format!("{name}: cannot open: {e}")))?;
+    if let Ok(meta) = file.metadata()
+        && meta.is_file()
+        && meta.len() > input::MAX_INPUT_BYTES
+    {
+        let e = input::InputError::TooLarge {
+            file: name,
+            cap: input::MAX_INPUT_BYTES,
+        };
+        return Err(BadInput(e.to_string()).into());
+    }
     input::parse_csv(BufReader::new(file), &name).map_err(|e| BadInput(e.to_string()).into())
 }
 
@@ -154,25 +170,18 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     for path in &args.files {
         let data = read(path)?;
         let _span = tracing::info_span!("fit", file = %path.display()).entered();
-        let mut opts = opts.clone();
-        if args.models.is_empty() && data.check_model(Model::Linear).is_ok() {
-            // Default "every model": leave out the ones this data cannot determine; data that
-            // cannot determine even a line is still an error.
-            opts.models.retain(|&m| match data.check_model(m) {
-                Ok(()) => true,
-                Err(e) => {
-                    tracing::warn!(file = %path.display(), "skipping the {m} model: {e}");
-                    false
-                }
-            });
-        }
         let analysis = analyze(&data, &opts).map_err(|e| {
             let name = path.display();
             let place = match data.last_line() {
                 Some(l) => format!("line {l} (end of data)"),
                 None => "no data rows".to_string(),
             };
-            BadInput(format!("{name}: {place}: {e}"))
+            let hint = if args.models.is_empty() {
+                ""
+            } else {
+                " (asked for with --model; without --model the models the data cannot determine are skipped)"
+            };
+            BadInput(format!("{name}: {place}: {e}{hint}"))
         })?;
         analyses.push(analysis);
     }
@@ -243,6 +252,12 @@ pub(crate) fn human(out: &mut String, a: &Analysis) {
         }
     );
     let _ = writeln!(out);
+    for s in &a.skipped {
+        let _ = writeln!(out, "not fitted: {} — {}", s.model, s.reason);
+    }
+    if !a.skipped.is_empty() {
+        let _ = writeln!(out);
+    }
     let _ = writeln!(out, "fits (K [V/(°/s)], K0 [V]; ± one standard error)");
     for f in &a.fits {
         let c = &f.coefficients;
@@ -406,10 +421,12 @@ pub(crate) fn human(out: &mut String, a: &Analysis) {
             );
         }
         _ => {
-            let _ = writeln!(
-                out,
-                "  asymmetry             n/a (needs both turning directions)"
-            );
+            let reason = m
+                .not_computed
+                .iter()
+                .find(|n| n.metric == "asymmetry_ppm")
+                .map_or("needs both turning directions", |n| n.reason.as_str());
+            let _ = writeln!(out, "  asymmetry             not computed: {reason}");
         }
     }
     if let Some(r) = m.repeatability_ppm {

@@ -162,6 +162,24 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
 }
 
 fn open_run_dir(args: &RunArgs, plan: &Plan) -> anyhow::Result<(PathBuf, RunDir)> {
+    let meta = RunMeta {
+        gyrocal_version: env!("CARGO_PKG_VERSION").into(),
+        simulated: args.simulate,
+        ..RunMeta::default()
+    };
+    // A directory whose creation was interrupted holds no data: the run starts in it.
+    if let Some(dir) = &args.resume
+        && RunDir::is_half_created(dir).unwrap_or(false)
+    {
+        eprintln!(
+            "{}: the run never started (no manifest.json); starting it in this directory",
+            dir.display()
+        );
+        let run =
+            RunDir::create(dir, plan, meta).map_err(|e| BadInput(format!("--resume: {e}")))?;
+        attach_log(dir);
+        return Ok((dir.clone(), run));
+    }
     if let Some(dir) = &args.resume {
         let run =
             RunDir::open_for_resume(dir, plan).map_err(|e| BadInput(format!("--resume: {e}")))?;
@@ -179,11 +197,6 @@ fn open_run_dir(args: &RunArgs, plan: &Plan) -> anyhow::Result<(PathBuf, RunDir)
         Some(d) => d.clone(),
         None => default_dir(&args.plan),
     };
-    let meta = RunMeta {
-        gyrocal_version: env!("CARGO_PKG_VERSION").into(),
-        simulated: args.simulate,
-        ..RunMeta::default()
-    };
     let run = RunDir::create(&dir, plan, meta).map_err(|e| BadInput(e.to_string()))?;
     attach_log(&dir);
     Ok((dir, run))
@@ -194,10 +207,12 @@ fn open_run_dir(args: &RunArgs, plan: &Plan) -> anyhow::Result<(PathBuf, RunDir)
 /// the manifest's `simulated` flag (the rest is checked by the resume itself).
 fn check_resume_mode(dir: &Path, simulate: bool) -> anyhow::Result<()> {
     let path = dir.join(gyrocal_run::rundir::MANIFEST_JSON);
-    let Ok(text) = std::fs::read_to_string(&path) else {
-        return Ok(()); // the resume names the missing or unreadable manifest itself
+    let Ok(bytes) =
+        gyrocal_run::rundir::read_capped(&path, gyrocal_run::rundir::MAX_MANIFEST_BYTES)
+    else {
+        return Ok(()); // the resume names the missing, unreadable or oversized manifest itself
     };
-    let simulated = serde_json::from_str::<serde_json::Value>(&text)
+    let simulated = serde_json::from_slice::<serde_json::Value>(&bytes)
         .ok()
         .and_then(|m| m.get("simulated").and_then(serde_json::Value::as_bool));
     if let Some(simulated) = simulated
