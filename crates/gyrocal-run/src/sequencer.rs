@@ -1200,7 +1200,7 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
             rate_meas_std_dps: (measured && stats.std.is_finite()).then_some(stats.std),
             rate_meas_min_dps: measured.then_some(stats.min),
             rate_meas_max_dps: measured.then_some(stats.max),
-            rate_samples: None,
+            rate_samples: measured.then_some(stats.count),
             volts: mean,
             volts_std: std,
             n: volts.len() as u64,

@@ -574,3 +574,29 @@ async fn readings_lost_with_the_meters_memory_are_measured_again() {
     assert_eq!(bench.dmm.stats().power_cycles, 1);
     assert!(summary.table.is_at_rest());
 }
+
+#[tokio::test(start_paused = true)]
+async fn every_step_is_covered_by_table_samples_over_its_whole_acquisition() {
+    // the table is sampled at the start of the acquisition, every 200 ms during it, and once
+    // more after the last reading: a step's row counts them
+    let plan = plan_with_rates(&[0.0, 10.0, -10.0, 1.0]);
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let (summary, _) = run_with_faults(&plan, &dir, &[]).await;
+    assert_eq!(summary.status, Status::Complete, "{:?}", summary.reason);
+    let interval = SequencerOptions::default().sample_interval.as_secs_f64();
+    for s in load(&dir).unwrap().steps {
+        let window = s.t_end_s - s.t_start_s;
+        let at_least = (window / interval).floor() as u64 + 1;
+        let n = s.rate_samples.expect("rate_samples recorded");
+        assert!(
+            n >= at_least,
+            "step {}: {n} table samples over a {window:.3} s acquisition (want >= {at_least})",
+            s.step
+        );
+        // and every one of them was at the demand
+        for v in [s.rate_meas_min_dps.unwrap(), s.rate_meas_max_dps.unwrap()] {
+            assert!((v - s.rate_dps).abs() < 0.005, "step {}: {v}", s.step);
+        }
+    }
+}

@@ -134,6 +134,10 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
     if let Some(dir) = &args.resume {
         check_resume_mode(dir, args.simulate)?;
     }
+    // what `check` warns about, said again before the instruments move
+    for w in crate::cmd::check::model_warnings(&plan, &args.plan) {
+        say!("gyrocal: warning: {w}");
+    }
     let mut faults = Vec::with_capacity(args.sim_faults.len());
     for text in &args.sim_faults {
         let spec: gyrocal_sim::faults::FaultSpec =
