@@ -567,30 +567,38 @@ fn e2e_clean_run_completes_and_its_fit_matches_the_truth() {
 /// with a retry logged against that step.
 fn retried_fault_completes(spec: &str) {
     let tmp = tempfile::tempdir().unwrap();
-    let (plan, sim, dir) = start(tmp.path(), &[spec]);
-    let end = Run::start(&plan, &sim, &out_args(&dir), None).wait();
-    assert_eq!(end.code, Some(0), "{end:?}");
-    check_complete(&dir);
-    let m = manifest(&dir);
-    let retries = m["retries"].as_array().unwrap();
-    assert!(!retries.is_empty(), "a retry is logged: {m}");
-    assert!(
-        retries
-            .iter()
-            .all(|r| r["instrument"] == "dmm" && r["step"] == 1),
-        "{retries:?}"
-    );
+    let (end, last, dir) = completes_with_retries(tmp.path(), spec, "dmm");
     let row = &steps(&dir)[1];
     assert!(num::<u32>(row, "retries") >= 1, "{row:?}");
     assert!(end.stderr.contains("retry (dmm)"), "{}", end.stderr);
-    let last = sim.finish();
-    eprintln!("simulator at the end: {last}");
-    assert!(fault_fired(&last, spec), "{last}");
     assert!(
         last["dmm"]["device_clears"].as_u64().unwrap() >= 1,
         "{last}"
     );
+}
+
+/// Runs the plan with one fault `spec` that must be ridden through: the run completes, every
+/// retry in the manifest is `instrument`'s, and the fault fired. Returns the run's end, the
+/// simulator's final state and the run directory (in `tmp`).
+fn completes_with_retries(tmp: &Path, spec: &str, instrument: &str) -> (Ended, Value, PathBuf) {
+    let (plan, sim, dir) = start(tmp, &[spec]);
+    let end = Run::start(&plan, &sim, &out_args(&dir), None).wait();
+    assert_eq!(end.code, Some(0), "{spec}: {end:?}");
+    check_complete(&dir);
+    let m = manifest(&dir);
+    let retries = m["retries"].as_array().unwrap();
+    assert!(!retries.is_empty(), "{spec}: a retry is logged: {m}");
+    assert!(
+        retries
+            .iter()
+            .all(|r| r["instrument"] == instrument && r["step"] == 1),
+        "{spec}: {retries:?}"
+    );
+    let last = sim.finish();
+    eprintln!("simulator at the end: {last}");
+    assert!(fault_fired(&last, spec), "{last}");
     assert_table_parked(&last);
+    (end, last, dir)
 }
 
 #[test]
@@ -1089,28 +1097,17 @@ fn e2e_interlock_opened_mid_acquisition_is_never_recorded() {
 /// One table link transient during step 1: retried, logged against the table, run complete.
 fn table_transient_is_retried(spec: &str) {
     let tmp = tempfile::tempdir().unwrap();
-    let (plan, sim, dir) = start(tmp.path(), &[spec]);
-    let end = Run::start(&plan, &sim, &out_args(&dir), None).wait();
-    assert_eq!(end.code, Some(0), "{spec}: {end:?}");
-    check_complete(&dir);
+    let (end, _, dir) = completes_with_retries(tmp.path(), spec, "table");
     let m = manifest(&dir);
-    let table_retries: Vec<&Value> = m["retries"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|r| r["instrument"] == "table")
-        .collect();
-    assert!(!table_retries.is_empty(), "{spec}: no table retry in {m}");
     assert!(
-        table_retries
+        m["retries"]
+            .as_array()
+            .unwrap()
             .iter()
             .any(|r| r["message"].as_str().unwrap().contains("asked again")),
-        "{table_retries:?}"
+        "{m}"
     );
     assert!(end.stderr.contains("retry (table)"), "{}", end.stderr);
-    let last = sim.finish();
-    assert!(fault_fired(&last, spec), "{last}");
-    assert_table_parked(&last);
 }
 
 #[test]
