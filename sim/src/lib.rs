@@ -14,6 +14,7 @@
 pub mod bench;
 pub mod dmm;
 pub mod faults;
+pub mod from_plan;
 pub mod gyro;
 pub mod signal;
 pub mod table;

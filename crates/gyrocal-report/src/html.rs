@@ -3,8 +3,8 @@
 
 use std::fmt::Write as _;
 
+use gyrocal_files::Status;
 use gyrocal_fit::{Analysis, Fit, Method, Model, MultiAnalysis, NeuronStatus};
-use gyrocal_run::Status;
 
 use crate::input::{FitSource, Input};
 use crate::{Report, ReportError, plots};

@@ -4,9 +4,9 @@ use std::fs::File;
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
+use gyrocal_files::Manifest;
+use gyrocal_files::rundir::{FIT_JSON, MANIFEST_JSON, MAX_FIT_BYTES};
 use gyrocal_fit::{Analysis, Dataset, MultiAnalysis, Options};
-use gyrocal_run::Manifest;
-use gyrocal_run::rundir::{FIT_JSON, MANIFEST_JSON, MAX_FIT_BYTES};
 
 use crate::ReportError;
 
@@ -77,8 +77,8 @@ pub(crate) fn load_run(dir: &Path) -> Result<Input, ReportError> {
             path: dir.to_path_buf(),
         });
     }
-    let run = gyrocal_run::load(dir)?;
-    let data = gyrocal_run::dataset_from_steps(&run.steps, &dir.display().to_string());
+    let run = gyrocal_files::load(dir)?;
+    let data = gyrocal_files::dataset_from_steps(&run.steps, &dir.display().to_string());
     let steps = run
         .steps
         .iter()
@@ -91,7 +91,7 @@ pub(crate) fn load_run(dir: &Path) -> Result<Input, ReportError> {
         .collect();
     let fit_path = dir.join(FIT_JSON);
     let (analysis, fit_source) = if fit_path.exists() {
-        let bytes = gyrocal_run::rundir::read_capped(&fit_path, MAX_FIT_BYTES)?;
+        let bytes = gyrocal_files::rundir::read_capped(&fit_path, MAX_FIT_BYTES)?;
         let value: serde_json::Value =
             serde_json::from_slice(&bytes).map_err(|e| ReportError::FitDocument {
                 path: fit_path.clone(),

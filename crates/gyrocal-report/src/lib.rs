@@ -41,14 +41,14 @@ use std::path::{Path, PathBuf};
 
 pub use input::{FitSource, Input, load_input};
 
-use gyrocal_run::rundir::REPORT_HTML;
+use gyrocal_files::rundir::REPORT_HTML;
 
 /// Why a report could not be made. Every variant names the file concerned.
 #[derive(Debug, thiserror::Error)]
 pub enum ReportError {
     /// The run directory could not be read (missing or malformed manifest.json or steps.csv).
     #[error(transparent)]
-    Run(#[from] gyrocal_run::RunError),
+    Run(#[from] gyrocal_files::RunError),
     /// A bare CSV data set could not be parsed.
     #[error(transparent)]
     Input(#[from] gyrocal_fit::input::InputError),

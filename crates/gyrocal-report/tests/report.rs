@@ -7,10 +7,10 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
+use gyrocal_files::rundir::{FIT_JSON, STEPS_CSV};
+use gyrocal_files::{Instruments, Plan, RunDir, RunMeta, Sample, Status, StepRecord};
 use gyrocal_fit::{Analysis, Options, analyze};
 use gyrocal_report::{ReportError, load_input, render_many, render_steps_csv, write_run_report};
-use gyrocal_run::rundir::{FIT_JSON, STEPS_CSV};
-use gyrocal_run::{Instruments, Plan, RunDir, RunMeta, Sample, Status, StepRecord};
 
 const RATES: [f64; 19] = [
     0.0, 0.1, -0.1, 0.3, -0.3, 0.7, -0.7, 1.0, -1.0, 3.0, -3.0, 7.0, -7.0, 10.0, -10.0, 15.0,
@@ -116,8 +116,8 @@ fn make_run(dir: &Path, spec: &RunSpec<'_>) {
         .unwrap();
     }
     if spec.with_fit {
-        let run = gyrocal_run::load(dir).unwrap();
-        let data = gyrocal_run::dataset_from_steps(&run.steps, &dir.display().to_string());
+        let run = gyrocal_files::load(dir).unwrap();
+        let data = gyrocal_files::dataset_from_steps(&run.steps, &dir.display().to_string());
         let a = analyze(&data, &Options::default()).unwrap();
         rd.set_fit(serde_json::to_value(&a).unwrap()).unwrap();
     }
@@ -255,7 +255,7 @@ fn run_report_has_every_section_and_plot() {
     assert!(html.contains("paper schedule (test)"));
     assert!(html.contains("ACUTRONIC ACUTROL &lt;sim&gt;"));
     assert!(html.contains("0.1.0-test"));
-    let manifest = gyrocal_run::load(&dir).unwrap().manifest;
+    let manifest = gyrocal_files::load(&dir).unwrap().manifest;
     assert!(html.contains(&manifest.plan_hash));
     // The paper's table: one row per rate.
     let table_start = html.find("class=\"residuals\"").unwrap();

@@ -10,9 +10,9 @@ use std::path::Path;
 use criterion::{Criterion, criterion_group, criterion_main};
 use gyrocal_hp34401a::{DriverOptions, Hp34401a};
 use gyrocal_run::sequencer::table_config;
-use gyrocal_run::simulate::bench_config;
 use gyrocal_run::{Plan, RunDir, RunMeta, Sequencer, SequencerOptions, Status, StopRequest};
 use gyrocal_sim::bench::Bench;
+use gyrocal_sim::from_plan::bench_config;
 use gyrocal_table::acl::AclTable;
 
 fn run_once(plan: &Plan) -> f64 {

@@ -11,12 +11,12 @@ use std::time::Duration;
 
 use gyrocal_hp34401a::{DriverOptions, Hp34401a};
 use gyrocal_run::sequencer::table_config;
-use gyrocal_run::simulate::bench_config;
 use gyrocal_run::{
     Event, Phase, Plan, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status,
     StopRequest, TableRest, load,
 };
 use gyrocal_sim::bench::{Bench, BenchHandle};
+use gyrocal_sim::from_plan::bench_config;
 use gyrocal_sim::table::SimMode;
 use gyrocal_table::acl::AclTable;
 use gyrocal_table::{

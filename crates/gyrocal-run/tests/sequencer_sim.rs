@@ -8,12 +8,12 @@ use std::time::Duration;
 
 use gyrocal_hp34401a::{DriverOptions, Hp34401a};
 use gyrocal_run::sequencer::table_config;
-use gyrocal_run::simulate::bench_config;
 use gyrocal_run::{
     Plan, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status, StopRequest, fit_run,
     load, load_samples,
 };
 use gyrocal_sim::bench::{Bench, BenchHandle};
+use gyrocal_sim::from_plan::bench_config;
 use gyrocal_table::acl::AclTable;
 use tokio::sync::watch;
 

@@ -259,7 +259,7 @@ async fn execute(
     faults: &[gyrocal_sim::faults::FaultSpec],
 ) -> anyhow::Result<(PathBuf, RunSummary, RunDir, Option<StopSignal>)> {
     if args.simulate {
-        let mut cfg = gyrocal_run::simulate::bench_config(&plan);
+        let mut cfg = gyrocal_sim::from_plan::bench_config(&plan);
         if let Some(x) = args.sim_time_scale {
             cfg.time_scale = x;
         }
@@ -293,7 +293,7 @@ async fn execute(
         let d = plan.dmm();
         let dmm_opts = LinkOptions {
             baud: d.baud,
-            framing: d.framing.into(),
+            framing: gyrocal_run::link_framing(d.framing),
             ..LinkOptions::default()
         };
         let dmm = gyrocal_link::open(&d.port.to_string(), &dmm_opts)

@@ -121,7 +121,7 @@ fn load_config(path: &Path) -> Result<BenchConfig> {
     if table.contains_key("plan") || table.contains_key("simulation") {
         let plan = gyrocal_run::Plan::from_toml_str(&src, path)
             .map_err(|e| BadInput(one_line(&e.to_string())))?;
-        Ok(gyrocal_run::simulate::bench_config(&plan))
+        Ok(gyrocal_sim::from_plan::bench_config(&plan))
     } else {
         toml::from_str::<BenchConfig>(&src).map_err(|e| {
             BadInput(format!(

@@ -6,7 +6,7 @@
 
 use std::path::Path;
 
-use gyrocal_run::Plan;
+use gyrocal_files::Plan;
 use proptest::prelude::*;
 
 const QUICK: &str = include_str!("../../../configs/quick.toml");

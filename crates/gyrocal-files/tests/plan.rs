@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use gyrocal_run::plan::{Acquire, Acquisition, Framing, Plan, PlanError, Port};
+use gyrocal_files::plan::{Acquire, Acquisition, Framing, Plan, PlanError, Port};
 
 fn configs_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs")
@@ -499,7 +499,7 @@ fn plan_files_larger_than_the_cap_are_refused_before_being_read_whole() {
     // A real file just over the cap; one just under parses as usual (comments are fine).
     let tmp = tempfile::tempdir().unwrap();
     let path = tmp.path().join("big.toml");
-    let cap = gyrocal_run::plan::MAX_PLAN_BYTES as usize;
+    let cap = gyrocal_files::plan::MAX_PLAN_BYTES as usize;
     let mut text = GOOD.to_string();
     text.push_str(&"#".repeat(cap - text.len() - 1));
     text.push('\n');

@@ -7,8 +7,8 @@ use std::fs::{self, OpenOptions};
 use std::io::Write;
 use std::path::Path;
 
-use gyrocal_run::rundir::{MANIFEST_JSON, SAMPLES_CSV, STEPS_CSV};
-use gyrocal_run::{
+use gyrocal_files::rundir::{MANIFEST_JSON, SAMPLES_CSV, STEPS_CSV};
+use gyrocal_files::{
     Instruments, Plan, Retry, RunDir, RunError, RunMeta, Sample, Status, StepRecord, load,
     load_samples,
 };
@@ -183,7 +183,7 @@ fn a_full_run_writes_what_the_fit_needs() {
     let leftovers: Vec<_> = fs::read_dir(&dir)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .filter(|n| n != gyrocal_run::rundir::LOCK_FILE)
+        .filter(|n| n != gyrocal_files::rundir::LOCK_FILE)
         .filter(|n| n.starts_with('.') || n.ends_with(".tmp"))
         .collect();
     assert!(leftovers.is_empty(), "{leftovers:?}");
@@ -459,7 +459,10 @@ fn a_run_directory_in_use_is_refused_until_its_writer_is_gone() {
     let mut first = RunDir::create(&dir, &p, meta()).unwrap();
     run_step(&mut first, 0, true);
     let err = RunDir::open_for_resume(&dir, &p).unwrap_err();
-    assert!(matches!(err, gyrocal_run::RunError::Locked { .. }), "{err}");
+    assert!(
+        matches!(err, gyrocal_files::RunError::Locked { .. }),
+        "{err}"
+    );
     assert!(err.to_string().contains("in use"), "{err}");
     // the refused second writer changed nothing
     assert_eq!(load(&dir).unwrap().steps.len(), 1);
@@ -596,7 +599,7 @@ fn rate_samples_round_trip_and_older_steps_csv_still_read_and_resume() {
     run_step(&mut rd, 2, true);
     drop(rd);
     let text = fs::read_to_string(dir.join(STEPS_CSV)).unwrap();
-    assert!(text.starts_with(&gyrocal_run::rundir::STEPS_HEADER.join(",")));
+    assert!(text.starts_with(&gyrocal_files::rundir::STEPS_HEADER.join(",")));
     assert!(text.lines().all(|l| l.split(',').count() == 15), "{text}");
     let steps = load(&dir).unwrap().steps;
     assert_eq!(
@@ -639,7 +642,7 @@ fn huge_or_endless_run_files_are_refused_naming_them() {
         .open(dir.join(STEPS_CSV))
         .unwrap();
     steps
-        .set_len(gyrocal_run::rundir::MAX_STEPS_BYTES + 1)
+        .set_len(gyrocal_files::rundir::MAX_STEPS_BYTES + 1)
         .unwrap();
     let started = std::time::Instant::now();
     let msg = load(&dir).unwrap_err().to_string();
@@ -670,7 +673,7 @@ fn a_samples_csv_over_its_cap_is_refused_on_resume_from_its_size() {
         .write(true)
         .open(dir.join(SAMPLES_CSV))
         .unwrap()
-        .set_len(gyrocal_run::rundir::MAX_SAMPLES_BYTES + 1)
+        .set_len(gyrocal_files::rundir::MAX_SAMPLES_BYTES + 1)
         .unwrap();
     let started = std::time::Instant::now();
     let msg = RunDir::open_for_resume(&dir, &plan())

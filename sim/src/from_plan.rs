@@ -17,9 +17,9 @@
 //! The gyro's own white noise is switched off, so `noise_v` alone sets the reading scatter
 //! and a plan reads as what it means.
 
-use gyrocal_sim::bench::BenchConfig;
+use gyrocal_files::{Framing, Plan};
 
-use crate::plan::Plan;
+use crate::bench::BenchConfig;
 
 /// The bench configuration for `plan`'s `[simulation]` section, at real instrument timing
 /// (`time_scale` 1; set it for a real-time bench).
@@ -46,6 +46,10 @@ pub fn bench_config(plan: &Plan) -> BenchConfig {
     b.dmm.noise_v = s.noise_v;
     b.dmm.baud = plan.dmm().baud;
     b.dmm.line_hz = plan.dmm().line_hz;
-    b.dmm.framing = plan.dmm().framing.into();
+    b.dmm.framing = match plan.dmm().framing {
+        Framing::N8 => gyrocal_link::Framing::EightNone,
+        Framing::E7 => gyrocal_link::Framing::SevenEven,
+        Framing::O7 => gyrocal_link::Framing::SevenOdd,
+    };
     b
 }

@@ -554,16 +554,6 @@ impl Framing {
     }
 }
 
-impl From<Framing> for gyrocal_link::Framing {
-    fn from(f: Framing) -> Self {
-        match f {
-            Framing::N8 => gyrocal_link::Framing::EightNone,
-            Framing::E7 => gyrocal_link::Framing::SevenEven,
-            Framing::O7 => gyrocal_link::Framing::SevenOdd,
-        }
-    }
-}
-
 /// How the multimeter acquires a step's readings (see `hp34401a.md`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Acquisition {

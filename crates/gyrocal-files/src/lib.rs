@@ -1,0 +1,125 @@
+//! gyrocal-files: the files a calibration is made of, on paper and on disk. Synchronous, no
+//! instrument and no async code: the sequencer writes these formats, and the report, the fit
+//! and the CLI read them without pulling in drivers, a runtime or the simulator.
+//!
+//! - [`plan`]: the operator's test plan. A TOML file is parsed into raw serde structs that
+//!   reject unknown keys and keep every value's position, then validated into a typed
+//!   [`Plan`] (instrument limits, durations, enums, ports) whose errors name the file, the
+//!   line, the column and the key. The plan expands into a stable [`Step`] schedule and has a
+//!   content hash that a resume checks.
+//! - [`rundir`]: the durable run directory. Every raw reading is appended to `samples.csv` and
+//!   flushed per chunk; every finished step is appended to `steps.csv` and fsynced (after the
+//!   samples) before the sequencer moves on; `manifest.json` is replaced atomically at every
+//!   change. After a crash, even a `SIGKILL` in the middle of a write,
+//!   [`RunDir::open_for_resume`] keeps every finished step, drops the partial step's readings
+//!   and a torn last line, and tells the sequencer where to continue.
+//! - [`fit_run`]: a run directory's steps fitted, the analysis stored beside them.
+
+pub mod plan;
+pub mod rundir;
+mod time;
+
+pub use plan::{
+    Acquire, Acquisition, DmmSettings, Framing, Location, Plan, PlanDoc, PlanError, Port,
+    Simulation, Step, TableDialect, TableSettings,
+};
+pub use rundir::{
+    Instruments, Manifest, Resume, Retry, RunData, RunDir, RunError, RunMeta, Sample, SampleRow,
+    Status, StepRecord, Timing, load, load_samples,
+};
+pub use time::rfc3339_utc;
+
+/// The fitting crate's data set from a run's recorded steps: the demanded rate (as in the
+/// method; the measured rate is reported separately), the mean voltage, its spread and count
+/// (so least squares can weight by the standard error of each mean).
+pub fn dataset_from_steps(steps: &[StepRecord], source: &str) -> gyrocal_fit::Dataset {
+    gyrocal_fit::Dataset {
+        source: Some(source.to_string()),
+        points: steps
+            .iter()
+            .map(|s| gyrocal_fit::Point {
+                rate_dps: s.rate_dps,
+                volts: s.volts,
+                volts_std: s.volts_std,
+                n: Some(s.n),
+                line: None,
+            })
+            .collect(),
+    }
+}
+
+/// Fits a run directory's steps with `options`, stores the analysis in the manifest and in
+/// `fit.json`, and returns it. With the default options, models the data cannot determine are
+/// skipped and listed in the analysis (`skipped`), so a complete run always gets its
+/// `fit.json`; only data that cannot determine a line is an error.
+///
+/// When the plan repeats its schedule (`repeat` > 1), the repeatability
+/// `std(K_i, ddof = 1) / mean(K_i)` is computed from the least-squares line of each pass on
+/// its own and reported in the metrics; the other figures come from all passes together.
+pub fn fit_run(
+    run: &mut RunDir,
+    options: &gyrocal_fit::Options,
+) -> Result<gyrocal_fit::Analysis, FitRunError> {
+    let data = load(run.path())?;
+    let source = run.path().join("steps.csv").display().to_string();
+    let mut analysis = gyrocal_fit::analyze(&dataset_from_steps(&data.steps, &source), options)?;
+    let passes: std::collections::BTreeSet<u32> = data.steps.iter().map(|s| s.pass).collect();
+    if passes.len() > 1 {
+        let mut ks = Vec::with_capacity(passes.len());
+        let mut failed = None;
+        for pass in &passes {
+            let steps: Vec<StepRecord> = data
+                .steps
+                .iter()
+                .filter(|s| s.pass == *pass)
+                .cloned()
+                .collect();
+            match gyrocal_fit::fit_least_squares(
+                &dataset_from_steps(&steps, &source),
+                gyrocal_fit::Model::Linear,
+                options.weighting,
+            ) {
+                Ok(line) => {
+                    tracing::info!(pass, k = line.scale_factor, "scale factor of one pass");
+                    ks.push(line.scale_factor);
+                }
+                // A pass that cannot determine a line (e.g. an incomplete run's last pass)
+                // costs the repeatability, never the fit of the whole run.
+                Err(e) => {
+                    failed = Some(format!("pass {pass}: {e}"));
+                    break;
+                }
+            }
+        }
+        match failed {
+            None => analysis.metrics.repeatability_ppm = gyrocal_fit::repeatability_ppm(&ks),
+            Some(reason) => {
+                tracing::warn!(%reason, "no repeatability");
+                analysis
+                    .metrics
+                    .not_computed
+                    .push(gyrocal_fit::NotComputed {
+                        metric: "repeatability_ppm".to_string(),
+                        reason: format!("needs a line per pass: {reason}"),
+                    });
+            }
+        }
+    }
+    let value = serde_json::to_value(&analysis).map_err(|e| FitRunError::Json(e.to_string()))?;
+    run.set_fit(value)?;
+    Ok(analysis)
+}
+
+/// Why [`fit_run`] failed.
+#[derive(Debug, thiserror::Error)]
+pub enum FitRunError {
+    /// Reading or writing the run directory.
+    #[error(transparent)]
+    Run(#[from] RunError),
+    /// The fit itself (too few points, ...).
+    #[error("fit: {0}")]
+    Fit(#[from] gyrocal_fit::FitError),
+    /// Serialising the analysis.
+    #[error("fit result could not be serialised: {0}")]
+    Json(String),
+}
