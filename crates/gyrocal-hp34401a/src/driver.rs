@@ -313,8 +313,13 @@ impl<T: Transport> Hp34401a<T> {
 
     /// Hands the meter back to its front panel (`SYST:LOC`) and returns the link.
     pub async fn close(mut self) -> Result<T, Error> {
-        self.command("SYST:LOC").await?;
+        self.local().await?;
         Ok(self.link)
+    }
+
+    /// Hands the meter back to its front panel (`SYST:LOC`), keeping the driver.
+    pub async fn local(&mut self) -> Result<(), Error> {
+        self.command("SYST:LOC").await
     }
 
     /// Configures DC volts. `config` is validated before anything is sent; afterwards the error

@@ -181,3 +181,22 @@ impl Error {
             && matches!(self.kind(), ErrorKind::Timeout | ErrorKind::Garbled)
     }
 }
+
+impl gyrocal_meter::MeterError for Error {
+    fn kind(&self) -> gyrocal_meter::ErrorKind {
+        use gyrocal_meter::ErrorKind as K;
+        match self {
+            // the driver already retried: not retryable again, whatever the last failure was
+            Error::GaveUp { .. } => K::Other,
+            _ => match Error::kind(self) {
+                ErrorKind::Timeout => K::Timeout,
+                ErrorKind::Disconnected => K::Disconnected,
+                ErrorKind::Garbled => K::Garbled,
+                ErrorKind::Instrument => K::Instrument,
+                ErrorKind::Unreachable => K::Unreachable,
+                ErrorKind::ReadingsLost => K::ReadingsLost,
+                ErrorKind::Io | ErrorKind::Identity | ErrorKind::Config => K::Other,
+            },
+        }
+    }
+}

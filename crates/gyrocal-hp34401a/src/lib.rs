@@ -43,6 +43,7 @@
 mod config;
 mod driver;
 mod error;
+mod meter;
 mod reading;
 pub mod timing;
 
@@ -52,5 +53,6 @@ pub use driver::{
     Recovery, parse_error,
 };
 pub use error::{Error, ErrorKind, InstrumentError};
+pub use meter::{Hp34401aMeter, PendingBurst};
 pub use reading::{OVERLOAD, Reading, parse_reading};
 pub use timing::{Strategy, Timing};

@@ -1,36 +1,7 @@
 //! Readings as the meter sends them: `SD.DDDDDDDDESDD`, e.g. `+1.00010310E+01`.
 
-use serde::{Deserialize, Serialize};
-
-/// The value the meter sends for an overload (`+9.90000000E+37`, or negative).
-pub const OVERLOAD: f64 = 9.9e37;
-
-/// One reading.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub enum Reading {
-    /// A voltage, in volts.
-    Volts(f64),
-    /// The input was beyond the range (the meter sent ±9.9E37). Never a number to average.
-    Overload {
-        /// True for +9.9E37, false for -9.9E37.
-        positive: bool,
-    },
-}
-
-impl Reading {
-    /// The voltage, or `None` for an overload.
-    pub fn volts(self) -> Option<f64> {
-        match self {
-            Reading::Volts(v) => Some(v),
-            Reading::Overload { .. } => None,
-        }
-    }
-
-    /// True for an overload.
-    pub fn is_overload(self) -> bool {
-        matches!(self, Reading::Overload { .. })
-    }
-}
+// The reading type is the multimeter role's: every meter hands the run the same readings.
+pub use gyrocal_meter::{OVERLOAD, Reading};
 
 /// Parses one reading. Accepts any exponent (`+0.00000000E-05` has been seen from real meters)
 /// and the plain-number forms a sibling meter might send; rejects anything else with `None`.

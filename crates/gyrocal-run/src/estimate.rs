@@ -36,6 +36,32 @@ pub fn dcv_config(plan: &Plan) -> DcvConfig {
     }
 }
 
+/// The DC-volts settings a plan's `[dmm]` section asks any meter for.
+pub fn dc_volts(plan: &Plan) -> gyrocal_meter::DcVolts {
+    let d = plan.dmm();
+    gyrocal_meter::DcVolts {
+        range_v: Some(d.range_v),
+        nplc: d.nplc,
+        autozero: d.autozero,
+        line_hz: d.line_hz,
+    }
+}
+
+/// The 34401A on `link` as a plan sets it up (its acquisition strategy and the link's baud
+/// rate for the timing model), in the multimeter role.
+pub fn hp34401a<T: gyrocal_link::Transport>(
+    link: T,
+    plan: &Plan,
+    options: gyrocal_hp34401a::DriverOptions,
+) -> gyrocal_hp34401a::Hp34401aMeter<T> {
+    gyrocal_hp34401a::Hp34401aMeter::new(
+        link,
+        options,
+        strategy(plan.dmm().acquisition),
+        plan.dmm().baud,
+    )
+}
+
 /// The driver strategy a plan's `acquisition` key names.
 pub fn strategy(acquisition: Acquisition) -> Strategy {
     match acquisition {

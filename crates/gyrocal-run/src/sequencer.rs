@@ -21,8 +21,7 @@
 use std::collections::{HashMap, VecDeque};
 use std::time::Duration;
 
-use gyrocal_hp34401a::{Burst, Hp34401a, Reading, Strategy, Timing};
-use gyrocal_link::Transport;
+use gyrocal_meter::{Acquired, ErrorKind, Measured, MeterError, Multimeter, Reading};
 use gyrocal_table::{RateStats, RateTable, SettleCriteria, StopHandle, TableError, TableMode};
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
@@ -120,8 +119,8 @@ pub enum Event {
         done: usize,
         /// Expected duration of the remaining steps.
         estimate: Duration,
-        /// The strategy the acquisition uses.
-        strategy: Strategy,
+        /// How the multimeter acquires (`stream`, `memory`, ...).
+        acquisition: &'static str,
     },
     /// A step begins (`position` counts from 1 within this session).
     StepStarted {
@@ -205,7 +204,7 @@ impl Default for SequencerOptions {
 pub enum SequenceError {
     /// The multimeter failed (after its own retries).
     #[error("multimeter: {0}")]
-    Dmm(Box<gyrocal_hp34401a::Error>),
+    Dmm(Box<dyn MeterError>),
     /// The rate table failed or faulted.
     #[error("rate table: {0}")]
     Table(Box<TableError>),
@@ -252,11 +251,9 @@ fn stopped_text(req: &StopRequest) -> String {
 }
 
 // The drivers' errors carry context (device, command, bytes) and are large; boxed, the
-// sequencer's results stay small on every `?` path.
-impl From<gyrocal_hp34401a::Error> for SequenceError {
-    fn from(e: gyrocal_hp34401a::Error) -> Self {
-        SequenceError::Dmm(Box::new(e))
-    }
+// sequencer's results stay small on every `?` path. A meter's error keeps its kind.
+fn dmm_error<E: MeterError>(e: E) -> SequenceError {
+    SequenceError::Dmm(Box::new(e))
 }
 
 impl From<TableError> for SequenceError {
@@ -304,16 +301,15 @@ struct StepContext {
     criteria: SettleCriteria,
     accel: f64,
     dwell: Duration,
-    strategy: Strategy,
     reading_time: Duration,
 }
 
 /// How a step ended (errors aside).
-enum StepOutcome {
+enum StepOutcome<P> {
     /// Its readings and row are on disk.
     Recorded,
     /// Its readings are in the meter's memory, to be fetched during the next ramp.
-    Pending(PendingFetch),
+    Pending(P),
     /// Nothing was recorded and the step must be measured again: the table did not hold the
     /// rate during the acquisition, or the meter lost the readings (a power cycle).
     Again {
@@ -324,23 +320,21 @@ enum StepOutcome {
     },
 }
 
-/// A memory burst whose readings are still in the meter.
-struct PendingFetch {
+/// A step whose last readings are still in the meter.
+struct PendingFetch<P> {
     step: Step,
-    burst: Burst,
-    /// Readings of the step's earlier bursts.
-    readings: Vec<Reading>,
+    pending: P,
     stats: RateStats,
-    retries: u32,
     t_start: f64,
     t_end: f64,
 }
 
-/// The sequencer. Build it with the connected-or-not drivers, the run directory and the plan,
-/// then call [`Sequencer::run`].
-pub struct Sequencer<D: Transport, T: RateTable> {
+/// The sequencer. Build it with the multimeter and the rate table (any [`Multimeter`], any
+/// [`RateTable`]: the CLI chooses them from the plan), the run directory and the plan, then
+/// call [`Sequencer::run`].
+pub struct Sequencer<M: Multimeter, T: RateTable> {
     plan: Plan,
-    dmm: Option<Hp34401a<D>>,
+    dmm: Option<M>,
     table: T,
     stop_handle: StopHandle,
     run: RunDir,
@@ -349,7 +343,6 @@ pub struct Sequencer<D: Transport, T: RateTable> {
     origin: Instant,
     offset_s: f64,
     recorded: usize,
-    strategy_used: Option<Strategy>,
     /// The table identified itself in this session.
     table_reached: bool,
     /// A rate was demanded in this session.
@@ -358,15 +351,9 @@ pub struct Sequencer<D: Transport, T: RateTable> {
     lost: Vec<Step>,
 }
 
-impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
+impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
     /// A sequencer for `plan` writing to `run` (fresh or opened for resume).
-    pub fn new(
-        plan: Plan,
-        dmm: Hp34401a<D>,
-        table: T,
-        run: RunDir,
-        options: SequencerOptions,
-    ) -> Self {
+    pub fn new(plan: Plan, dmm: M, table: T, run: RunDir, options: SequencerOptions) -> Self {
         let stop_handle = table.stop_handle();
         let offset_s = run.manifest().elapsed_s;
         Sequencer {
@@ -380,7 +367,6 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
             origin: Instant::now(),
             offset_s,
             recorded: 0,
-            strategy_used: None,
             table_reached: false,
             moved: false,
             lost: Vec::new(),
@@ -629,8 +615,8 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
         rest
     }
 
-    /// Device clear (after an interrupted exchange), then `SYST:LOC`; bounded in time, errors
-    /// logged (the run's outcome is already decided).
+    /// Recovery (after an interrupted exchange), then back to the front panel; bounded in
+    /// time, errors logged (the run's outcome is already decided).
     async fn release_dmm(&mut self, after_error: bool) {
         let Some(mut dmm) = self.dmm.take() else {
             return;
@@ -638,16 +624,13 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
         let limit = self.options.cleanup_timeout;
         if after_error {
             match tokio::time::timeout(limit, dmm.recover()).await {
-                Ok(Ok(r)) if !r.errors.is_empty() => {
-                    tracing::info!(errors = ?r.errors, "multimeter error queue at the stop");
-                }
-                Ok(Ok(_)) => {}
+                Ok(Ok(note)) => tracing::info!(%note, "multimeter recovered at the stop"),
                 Ok(Err(e)) => tracing::warn!(error = %e, "multimeter clear failed"),
                 Err(_) => tracing::warn!("multimeter clear timed out"),
             }
         }
-        match tokio::time::timeout(limit, dmm.close()).await {
-            Ok(Ok(_)) => {}
+        match tokio::time::timeout(limit, dmm.release()).await {
+            Ok(Ok(())) => {}
             Ok(Err(e)) => tracing::warn!(error = %e, "multimeter did not go back to local"),
             Err(_) => tracing::warn!("multimeter did not go back to local in time"),
         }
@@ -675,7 +658,7 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
         let Some(dmm) = self.dmm.as_mut() else {
             return Err(released());
         };
-        let dmm_id = dmm.connect().await?.raw.clone();
+        let dmm_id = dmm.connect().await.map_err(dmm_error)?.raw;
         let t = self.table.connect().await?;
         self.table_reached = true;
         let table_id = format!("{},{},{},{}", t.manufacturer, t.model, t.serial, t.version);
@@ -688,12 +671,11 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
             table: Some(table_id),
         })?;
 
-        let dcv = estimate::dcv_config(&self.plan);
+        let dcv = estimate::dc_volts(&self.plan);
         let dmm = self.dmm_mut()?;
-        dmm.configure(&dcv).await?;
-        let timing = Timing::new(&dcv);
-        let strategy = timing.resolve(estimate::strategy(self.plan.dmm().acquisition));
-        self.strategy_used = Some(strategy);
+        dmm.configure(&dcv).await.map_err(dmm_error)?;
+        let reading_time = dmm.reading_time().unwrap_or(Duration::ZERO);
+        let acquisition = dmm.acquisition();
         self.table.enable().await?;
 
         let steps = self.run.remaining_steps();
@@ -702,13 +684,13 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
             steps: steps.len(),
             done: self.run.done_steps().len(),
             estimate: est.total,
-            strategy,
+            acquisition,
         });
         tracing::info!(
             steps = steps.len(),
             estimate_s = est.total.as_secs_f64(),
             bound_s = est.bound.as_secs_f64(),
-            ?strategy,
+            acquisition,
             "starting the schedule"
         );
 
@@ -729,10 +711,9 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
             criteria,
             accel,
             dwell,
-            strategy,
-            reading_time: timing.reading_time(),
+            reading_time,
         };
-        let mut pending: Option<PendingFetch> = None;
+        let mut pending: Option<PendingFetch<M::Pending>> = None;
         // A step the table did not hold is measured again at once; the queue makes that (and
         // the session's step count) explicit.
         let mut queue: VecDeque<Step> = steps.iter().copied().collect();
@@ -804,7 +785,7 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
             bound_s: bound,
             elapsed_s,
             ratio: if ratio.is_finite() { ratio } else { 1.0 },
-            acquisition: Some(strategy_name(strategy).into()),
+            acquisition: Some(acquisition.into()),
         })
     }
 
@@ -814,10 +795,10 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
     async fn measure_step(
         &mut self,
         step: &Step,
-        pending: Option<PendingFetch>,
+        pending: Option<PendingFetch<M::Pending>>,
         last: bool,
         ctx: &StepContext,
-    ) -> Result<StepOutcome, SequenceError> {
+    ) -> Result<StepOutcome<PendingFetch<M::Pending>>, SequenceError> {
         let at_rate;
         self.moved = true;
         self.table.set_rate(step.rate_dps, ctx.accel).await?;
@@ -838,34 +819,36 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
                 let r = table.wait_at_rate(&ctx.criteria).await;
                 (r, Instant::now())
             };
-            let ((settled, at), fetched) = tokio::join!(wait, fetch_with_retry(dmm, &p.burst));
+            let PendingFetch {
+                step: p_step,
+                pending: p_pending,
+                stats: p_stats,
+                t_start: p_start,
+                t_end: p_end,
+            } = p;
+            let ((settled, at), fetched) = tokio::join!(wait, dmm.collect(p_pending));
             at_rate = at;
             // record the previous step before anything else can fail
             match fetched {
-                Ok((readings, notes)) => {
-                    for m in notes {
-                        self.log_retry(Some(p.step.index), "dmm", m)?;
-                    }
-                    self.record_fetched(p, readings)?;
+                Ok(acq) => {
+                    self.record_acquired(&p_step, acq, p_stats, p_start, p_end)?;
                 }
-                Err((e, notes)) => {
-                    for m in notes {
-                        self.log_retry(Some(p.step.index), "dmm", m)?;
-                    }
+                Err(e) => {
+                    let e = dmm_error(e);
                     if !readings_lost(&e) {
                         return Err(e);
                     }
                     // the previous step's readings went with the meter's memory: it is
                     // measured again right after this step
                     self.log_retry(
-                        Some(p.step.index),
+                        Some(p_step.index),
                         "dmm",
                         format!(
                             "{e}; step {} is measured again after this one",
-                            p.step.index
+                            p_step.index
                         ),
                     )?;
-                    self.lost.push(p.step);
+                    self.lost.push(p_step);
                 }
             }
             settled?;
@@ -889,33 +872,44 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
             phase: Phase::Acquiring,
         });
         let n = usize::try_from(step.sample_count(ctx.reading_time)).unwrap_or(usize::MAX);
-        match ctx.strategy {
-            Strategy::Memory => {
-                let p = match self.acquire_memory(step, n).await? {
-                    Ok(p) => p,
-                    Err(again) => return Ok(again),
-                };
-                if self.options.overlap_fetch && !last {
-                    return Ok(StepOutcome::Pending(p));
-                }
-                self.emit(Event::Phase {
-                    step: step.index,
-                    phase: Phase::Fetching,
-                });
-                let fetched = self.fetch_monitored(&p.burst).await?;
-                let readings = match self.retries_logged(p.step.index, fetched) {
-                    Err(e) if readings_lost(&e) => {
-                        return Ok(StepOutcome::Again {
-                            instrument: "dmm",
-                            detail: e.to_string(),
-                        });
-                    }
-                    other => other?,
-                };
-                self.record_fetched(p, readings)?;
+        let may_defer = self.options.overlap_fetch && !last;
+        self.progress_to_events();
+        let t_start = self.now_s();
+        let interval = self.options.sample_interval;
+        let Self { table, dmm, .. } = self;
+        let dmm = dmm.as_mut().ok_or_else(released)?;
+        let (measured, mut stats) = table
+            .record_while(interval, dmm.measure(n, may_defer))
+            .await?;
+        let measured = measured.map_err(dmm_error)?;
+        let t_end = self.now_s();
+        // the meter's recoveries are logged whatever the table did
+        if let Measured::Complete(acq) = &measured {
+            for note in &acq.notes {
+                self.log_retry(Some(step.index), "dmm", note.clone())?;
+            }
+        }
+        if let Some(why) = self.check_hold(step, &mut stats).await? {
+            return Ok(StepOutcome::Again {
+                instrument: "table",
+                detail: why,
+            });
+        }
+        match measured {
+            Measured::Complete(acq) => {
+                let Acquired {
+                    readings, retries, ..
+                } = acq;
+                self.record(step, &readings, stats, retries, t_start, t_end)?;
                 Ok(StepOutcome::Recorded)
             }
-            s => self.acquire_direct(step, n, s).await,
+            Measured::Pending(pending) => Ok(StepOutcome::Pending(PendingFetch {
+                step: *step,
+                pending,
+                stats,
+                t_start,
+                t_end,
+            })),
         }
     }
 
@@ -978,185 +972,34 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
         Ok(())
     }
 
-    /// A `FETC?` that overlaps with nothing: the table keeps being sampled (the heartbeat)
-    /// while the readings come over; those samples are not the step's (the meter is not
-    /// measuring), so their statistics are dropped.
-    async fn fetch_monitored(&mut self, burst: &Burst) -> Result<FetchResult, SequenceError> {
-        let interval = self.options.sample_interval;
-        let Self { table, dmm, .. } = self;
-        let dmm = dmm.as_mut().ok_or_else(released)?;
-        let (fetched, _not_measuring) = table
-            .record_while(interval, fetch_with_retry(dmm, burst))
-            .await?;
-        Ok(fetched)
-    }
-
-    /// Logs a fetch's retries in the manifest and passes its result on.
-    fn retries_logged(
-        &mut self,
-        step: usize,
-        fetched: FetchResult,
-    ) -> Result<Vec<Reading>, SequenceError> {
-        let (result, notes) = match fetched {
-            Ok((r, notes)) => (Ok(r), notes),
-            Err((e, notes)) => (Err(e), notes),
-        };
-        for m in notes {
-            self.log_retry(Some(step), "dmm", m)?;
-        }
-        result
-    }
-
-    fn dmm_mut(&mut self) -> Result<&mut Hp34401a<D>, SequenceError> {
+    fn dmm_mut(&mut self) -> Result<&mut M, SequenceError> {
         self.dmm.as_mut().ok_or_else(released)
     }
 
     fn progress_to_events(&mut self) {
         let tx = self.events.clone();
         if let Some(dmm) = self.dmm.as_mut() {
-            match tx {
-                Some(tx) => dmm.set_progress(move |p| {
-                    let _ = tx.send(Event::Acquiring {
-                        done: p.done,
-                        total: p.total,
-                    });
-                }),
-                None => dmm.clear_progress(),
-            }
+            dmm.set_progress(tx.map(|tx| {
+                Box::new(move |done, total| {
+                    let _ = tx.send(Event::Acquiring { done, total });
+                }) as gyrocal_meter::ProgressFn
+            }));
         }
     }
 
-    /// Stream or poll: the meter's readings arrive while the table is sampled.
-    async fn acquire_direct(
+    /// Logs the recoveries of a collected transfer and writes the step.
+    fn record_acquired(
         &mut self,
         step: &Step,
-        n: usize,
-        strategy: Strategy,
-    ) -> Result<StepOutcome, SequenceError> {
-        self.progress_to_events();
-        let t_start = self.now_s();
-        let interval = self.options.sample_interval;
-        let Self { table, dmm, .. } = self;
-        let dmm = dmm.as_mut().ok_or_else(released)?;
-        let (acq, mut stats) = table
-            .record_while(interval, dmm.acquire(n, strategy))
-            .await?;
-        let acq = acq?;
-        let t_end = self.now_s();
-        for r in &acq.recoveries {
-            self.log_retry(
-                Some(step.index),
-                "dmm",
-                format!("acquisition retried: {}", r.describe()),
-            )?;
-        }
-        let unexplained = (acq.retries as usize).saturating_sub(acq.recoveries.len());
-        if unexplained > 0 {
-            self.log_retry(
-                Some(step.index),
-                "dmm",
-                format!("{unexplained} acquisition retries after device clear (see log)"),
-            )?;
-        }
-        if let Some(why) = self.check_hold(step, &mut stats).await? {
-            return Ok(StepOutcome::Again {
-                instrument: "table",
-                detail: why,
-            });
-        }
-        self.record(step, &acq.readings, stats, acq.retries, t_start, t_end)?;
-        Ok(StepOutcome::Recorded)
-    }
-
-    /// Memory mode: every burst but the last is armed, waited for and fetched; the last is
-    /// armed and waited for, and its fetch returned as pending. The table is checked after
-    /// every burst, before its readings are accepted (`Ok(Err(why))`: it did not hold).
-    async fn acquire_memory(
-        &mut self,
-        step: &Step,
-        n: usize,
-    ) -> Result<Result<PendingFetch, StepOutcome>, SequenceError> {
-        self.progress_to_events();
-        let t_start = self.now_s();
-        let interval = self.options.sample_interval;
-        let retries_allowed = self.dmm_mut()?.options().retries;
-        let mut readings = Vec::with_capacity(n);
-        let mut stats = Vec::new();
-        let mut retries = 0u32;
-        let max = gyrocal_hp34401a::timing::MEMORY_READINGS;
-        loop {
-            let k = (n - readings.len()).min(max);
-            let last = readings.len() + k >= n;
-            let Self { table, dmm, .. } = self;
-            let dmm = dmm.as_mut().ok_or_else(released)?;
-            let burst = async {
-                let b = dmm.arm_burst(k).await?;
-                dmm.wait_burst(&b).await?;
-                Ok::<_, gyrocal_hp34401a::Error>(b)
-            };
-            let (burst, mut s) = table.record_while(interval, burst).await?;
-            let burst = match burst {
-                Ok(b) => b,
-                Err(e) if e.is_retryable() && retries < retries_allowed => {
-                    retries += 1;
-                    let recovery = self.dmm_mut()?.recover().await?;
-                    let msg = format!(
-                        "memory burst failed ({e}); {}; burst measured again (retry {retries})",
-                        recovery.describe()
-                    );
-                    self.log_retry(Some(step.index), "dmm", msg)?;
-                    continue;
-                }
-                Err(e) => return Err(e.into()),
-            };
-            if let Some(why) = self.check_hold(step, &mut s).await? {
-                return Ok(Err(StepOutcome::Again {
-                    instrument: "table",
-                    detail: why,
-                }));
-            }
-            stats.push(s);
-            if last {
-                return Ok(Ok(PendingFetch {
-                    step: *step,
-                    burst,
-                    readings,
-                    stats: merge_stats(&stats),
-                    retries,
-                    t_start,
-                    t_end: self.now_s(),
-                }));
-            }
-            self.emit(Event::Phase {
-                step: step.index,
-                phase: Phase::Fetching,
-            });
-            let fetched = self.fetch_monitored(&burst).await?;
-            let got = match self.retries_logged(step.index, fetched) {
-                Err(e) if readings_lost(&e) => {
-                    return Ok(Err(StepOutcome::Again {
-                        instrument: "dmm",
-                        detail: e.to_string(),
-                    }));
-                }
-                other => other?,
-            };
-            readings.extend(got);
-            self.emit(Event::Phase {
-                step: step.index,
-                phase: Phase::Acquiring,
-            });
-        }
-    }
-
-    fn record_fetched(
-        &mut self,
-        p: PendingFetch,
-        mut last: Vec<Reading>,
+        acq: Acquired,
+        stats: RateStats,
+        t_start: f64,
+        t_end: f64,
     ) -> Result<(), SequenceError> {
-        let mut readings = p.readings;
-        readings.append(&mut last);
-        self.record(&p.step, &readings, p.stats, p.retries, p.t_start, p.t_end)
+        for note in acq.notes {
+            self.log_retry(Some(step.index), "dmm", note)?;
+        }
+        self.record(step, &acq.readings, stats, acq.retries, t_start, t_end)
     }
 
     /// Writes a complete step: samples (flushed), then the step row (fsynced).
@@ -1225,46 +1068,24 @@ impl<D: Transport + 'static, T: RateTable> Sequencer<D, T> {
     }
 }
 
-/// Readings with the retry notes, or the error with the notes so far.
-type FetchResult = Result<(Vec<Reading>, Vec<String>), (SequenceError, Vec<String>)>;
-
 fn released() -> SequenceError {
-    SequenceError::from(gyrocal_hp34401a::Error::Config(
-        "multimeter already released".into(),
-    ))
+    SequenceError::Dmm(Box::new(Released))
 }
 
-/// `FETC?` with retries: the readings stay in the meter's memory until the next `INIT`, so a
-/// garbled transfer is fetched again after a device clear.
-async fn fetch_with_retry<D: Transport>(dmm: &mut Hp34401a<D>, burst: &Burst) -> FetchResult {
-    let mut notes = Vec::new();
-    let allowed = dmm.options().retries;
-    let mut tries = 0;
-    loop {
-        match dmm.fetch(burst).await {
-            Ok(r) => return Ok((r, notes)),
-            Err(e) if e.is_retryable() && tries < allowed => {
-                tries += 1;
-                tracing::warn!(error = %e, "FETC? failed; device clear and fetch again");
-                match dmm.recover().await {
-                    Ok(r) => notes.push(format!(
-                        "FETC? failed ({e}); {}; fetching again",
-                        r.describe()
-                    )),
-                    Err(e2) => {
-                        notes.push(format!("FETC? failed ({e})"));
-                        return Err((e2.into(), notes));
-                    }
-                }
-            }
-            Err(e) => return Err((e.into(), notes)),
-        }
+/// The multimeter was used after the sequencer handed it back (a bug).
+#[derive(Debug, thiserror::Error)]
+#[error("multimeter already released")]
+struct Released;
+
+impl MeterError for Released {
+    fn kind(&self) -> ErrorKind {
+        ErrorKind::Other
     }
 }
 
 /// The meter lost readings it still held (a power cycle): the step must be measured again.
 fn readings_lost(e: &SequenceError) -> bool {
-    matches!(e, SequenceError::Dmm(d) if d.kind() == gyrocal_hp34401a::ErrorKind::ReadingsLost)
+    matches!(e, SequenceError::Dmm(d) if d.kind() == ErrorKind::ReadingsLost)
 }
 
 /// The message of a caught panic.
@@ -1274,15 +1095,6 @@ fn panic_text(panic: &Box<dyn std::any::Any + Send>) -> String {
         .map(|s| s.to_string())
         .or_else(|| panic.downcast_ref::<String>().cloned())
         .unwrap_or_else(|| "unknown panic".into())
-}
-
-fn strategy_name(s: Strategy) -> &'static str {
-    match s {
-        Strategy::Stream => "stream",
-        Strategy::Memory => "memory",
-        Strategy::Poll => "poll",
-        Strategy::Auto => "auto",
-    }
 }
 
 /// Mean and sample standard deviation (`None` for one value).

@@ -9,7 +9,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use gyrocal_hp34401a::{DriverOptions, Hp34401a};
+use gyrocal_hp34401a::DriverOptions;
 use gyrocal_run::sequencer::table_config;
 use gyrocal_run::{
     Event, Phase, Plan, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status,
@@ -61,7 +61,7 @@ type Hook = Box<dyn FnMut(&Event) -> Option<StopRequest> + Send>;
 /// the bench.
 async fn run_table<T: RateTable + 'static>(
     plan: &Plan,
-    dmm: Hp34401a<gyrocal_link::StreamTransport<tokio::io::DuplexStream>>,
+    dmm: gyrocal_hp34401a::Hp34401aMeter<gyrocal_link::StreamTransport<tokio::io::DuplexStream>>,
     table: T,
     dir: &Path,
     mut hook: Hook,
@@ -97,7 +97,7 @@ async fn run_on_bench(
     dir: &Path,
     hook: Hook,
 ) -> (RunSummary, Vec<Event>, BenchHandle) {
-    let dmm = Hp34401a::new(bench.dmm, DriverOptions::default());
+    let dmm = gyrocal_run::estimate::hp34401a(bench.dmm, plan, DriverOptions::default());
     let table = AclTable::new(bench.table, table_config(plan));
     let (summary, events) = run_table(plan, dmm, table, dir, hook).await;
     (summary, events, bench.handle)
@@ -368,7 +368,7 @@ async fn run_hooked(
     hook: impl FnOnce(&mut Hooked<AclTable<gyrocal_link::StreamTransport<tokio::io::DuplexStream>>>),
 ) -> (RunSummary, BenchHandle) {
     let bench = Bench::spawn(bench_config(plan));
-    let dmm = Hp34401a::new(bench.dmm, DriverOptions::default());
+    let dmm = gyrocal_run::estimate::hp34401a(bench.dmm, plan, DriverOptions::default());
     let mut table = Hooked::new(AclTable::new(bench.table, table_config(plan)));
     hook(&mut table);
     let (summary, _) = run_table(plan, dmm, table, dir, Box::new(|_| None)).await;
@@ -462,7 +462,7 @@ async fn a_panic_in_the_sequencer_still_brings_the_table_to_rest() {
     let plan = plan_with_rates(&[0.0, 20.0, -20.0]);
     let tmp = tempfile::tempdir().unwrap();
     let bench = Bench::spawn(bench_config(&plan));
-    let dmm = Hp34401a::new(bench.dmm, DriverOptions::default());
+    let dmm = gyrocal_run::estimate::hp34401a(bench.dmm, &plan, DriverOptions::default());
     let mut table = Hooked::new(AclTable::new(bench.table, table_config(&plan)));
     table.panic_at = Some(3);
     let (summary, _) = run_table(
@@ -599,4 +599,35 @@ async fn every_step_is_covered_by_table_samples_over_its_whole_acquisition() {
             assert!((v - s.rate_dps).abs() < 0.005, "step {}: {v}", s.step);
         }
     }
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_retried_fetch_is_counted_once_in_steps_csv_and_the_manifest() {
+    // memory mode: step 1's readings are fetched while the table ramps to step 2, and that
+    // FETC? reply is garbled once: fetched again after a device clear; the step's row and the
+    // manifest count the same one retry
+    let path = config("quick.toml");
+    let mut doc: toml::Table = std::fs::read_to_string(&path).unwrap().parse().unwrap();
+    let dmm = doc.get_mut("dmm").unwrap().as_table_mut().unwrap();
+    dmm.insert("nplc".into(), toml::Value::Float(0.02));
+    dmm.insert("autozero".into(), toml::Value::Boolean(false));
+    dmm.insert("acquisition".into(), toml::Value::String("memory".into()));
+    let plan = Plan::from_toml_str(&toml::to_string(&doc).unwrap(), &path).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let (summary, _) = run_with_faults(&plan, &dir, &["dmm:garble@reading75"]).await;
+    assert_eq!(summary.status, Status::Complete, "{:?}", summary.reason);
+    assert_every_step_once(&plan, &dir);
+    let data = load(&dir).unwrap();
+    for s in &data.steps {
+        let logged = data
+            .manifest
+            .retries
+            .iter()
+            .filter(|r| r.instrument == "dmm" && r.step == Some(s.step))
+            .count() as u32;
+        assert_eq!(s.retries, logged, "step {}: steps.csv vs manifest", s.step);
+    }
+    let s1 = data.steps.iter().find(|s| s.step == 1).unwrap();
+    assert_eq!(s1.retries, 1, "{:?}", data.manifest.retries);
 }

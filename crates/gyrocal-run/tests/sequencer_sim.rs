@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use gyrocal_hp34401a::{DriverOptions, Hp34401a};
+use gyrocal_hp34401a::DriverOptions;
 use gyrocal_run::sequencer::table_config;
 use gyrocal_run::{
     Plan, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status, StopRequest, fit_run,
@@ -55,7 +55,7 @@ async fn run_with(
     run: RunDir,
     stop_after: Option<usize>,
 ) -> (RunSummary, BenchHandle) {
-    let dmm = Hp34401a::new(bench.dmm, DriverOptions::default());
+    let dmm = gyrocal_run::estimate::hp34401a(bench.dmm, plan, DriverOptions::default());
     let table = AclTable::new(bench.table, table_config(plan));
     let (events_tx, mut events) = tokio::sync::mpsc::unbounded_channel();
     let mut seq = Sequencer::new(plan.clone(), dmm, table, run, SequencerOptions::default())

@@ -22,7 +22,7 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use clap::Args;
-use gyrocal_hp34401a::{DriverOptions, Hp34401a};
+use gyrocal_hp34401a::DriverOptions;
 use gyrocal_link::{LinkOptions, Transport};
 use gyrocal_run::sequencer::table_config;
 use gyrocal_run::{
@@ -323,7 +323,7 @@ where
     D: Transport + 'static,
     T: Transport + 'static,
 {
-    let dmm = Hp34401a::new(dmm_link, DriverOptions::default());
+    let dmm = gyrocal_run::estimate::hp34401a(dmm_link, &plan, DriverOptions::default());
     let table = AclTable::new(table_link, table_config(&plan));
     let (tx, rx) = mpsc::unbounded_channel();
     let mut seq =
@@ -458,7 +458,7 @@ async fn show_progress(mut rx: mpsc::UnboundedReceiver<Event>) {
                 steps,
                 done,
                 estimate,
-                strategy,
+                acquisition,
             } => {
                 bar.set_length(steps as u64);
                 line(
@@ -466,7 +466,7 @@ async fn show_progress(mut rx: mpsc::UnboundedReceiver<Event>) {
                     &bar,
                     format!(
                         "{steps} steps to run ({done} already done), acquisition {}, estimated {}",
-                        crate::cmd::check::strategy_name(strategy),
+                        acquisition,
                         hms(estimate.as_secs_f64())
                     ),
                 );

@@ -1,0 +1,199 @@
+//! # gyrocal-meter
+//!
+//! The multimeter role: what a calibration run needs from a DC voltmeter, whatever the model
+//! and the link. The sequencer is generic over [`Multimeter`]; the CLI chooses the meter from
+//! the plan (the edge), as ripgrep chooses its matcher and hands it to a generic search.
+//!
+//! Why a role and not the driver: a run's logic (measure while the table holds the rate, let a
+//! transfer overlap the next ramp, retry on a timeout, re-measure readings the meter lost) is
+//! the same for every meter; what differs (a 512-reading memory fetched in bursts, a 50,000-
+//! reading memory drained while it fills, streaming over RS-232) is the meter's business, behind
+//! [`Multimeter::measure`] and [`Multimeter::collect`].
+//!
+//! Errors expose a [`ErrorKind`] through [`MeterError::kind`], in the manner of embedded-hal's
+//! `Error::kind()`: generic code decides on kinds (retry a [`ErrorKind::Timeout`], measure again
+//! after [`ErrorKind::ReadingsLost`]) without knowing the backend.
+
+use std::future::Future;
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+
+/// The value meters send for an overload (`+9.90000000E+37`, or negative).
+pub const OVERLOAD: f64 = 9.9e37;
+
+/// One reading.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub enum Reading {
+    /// A voltage, in volts.
+    Volts(f64),
+    /// The input was beyond the range (the meter sent ±9.9E37). Never a number to average.
+    Overload {
+        /// True for +9.9E37, false for -9.9E37.
+        positive: bool,
+    },
+}
+
+impl Reading {
+    /// The voltage, or `None` for an overload.
+    pub fn volts(self) -> Option<f64> {
+        match self {
+            Reading::Volts(v) => Some(v),
+            Reading::Overload { .. } => None,
+        }
+    }
+
+    /// True for an overload.
+    pub fn is_overload(self) -> bool {
+        matches!(self, Reading::Overload { .. })
+    }
+}
+
+/// What kind of failure, for callers that decide without knowing the meter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum ErrorKind {
+    /// No (complete) reply in time. Retryable after a recovery.
+    Timeout,
+    /// The link went away. Not retryable without reopening it.
+    Disconnected,
+    /// A reply the protocol does not allow. Retryable after a recovery.
+    Garbled,
+    /// The meter reported errors (its error queue).
+    Instrument,
+    /// Readings still in the meter were lost (a power cycle): measure them again.
+    ReadingsLost,
+    /// The meter stopped answering and did not come back in time.
+    Unreachable,
+    /// Anything else (configuration refused before sending, identity, I/O).
+    Other,
+}
+
+impl ErrorKind {
+    /// Whether a recovery and a retry of the same exchange may succeed.
+    pub fn is_retryable(self) -> bool {
+        matches!(self, ErrorKind::Timeout | ErrorKind::Garbled)
+    }
+}
+
+/// A meter's error: a message naming the device, and a kind.
+pub trait MeterError: std::error::Error + Send + Sync + 'static {
+    /// The kind of failure.
+    fn kind(&self) -> ErrorKind;
+}
+
+/// The meter's identity, from `*IDN?` (or the model's own query).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Identity {
+    /// The reply as received.
+    pub raw: String,
+    /// Manufacturer.
+    pub manufacturer: String,
+    /// Model.
+    pub model: String,
+    /// Serial number (`0` on a 34401A).
+    pub serial: String,
+    /// Firmware version.
+    pub version: String,
+}
+
+/// DC voltage settings a plan asks for; each meter checks them against its own facts.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DcVolts {
+    /// Fixed range, volts (`None`: autorange).
+    pub range_v: Option<f64>,
+    /// Integration time, power-line cycles.
+    pub nplc: f64,
+    /// Autozero on.
+    pub autozero: bool,
+    /// Mains frequency, Hz.
+    pub line_hz: u32,
+}
+
+/// Readings taken, with what it cost to get them.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Acquired {
+    /// Every reading, in order, overloads included.
+    pub readings: Vec<Reading>,
+    /// Recoveries needed (each followed by a retry of the failed part).
+    pub retries: u32,
+    /// What each recovery was and did, for the run's manifest.
+    pub notes: Vec<String>,
+}
+
+impl Acquired {
+    /// Appends `other` (a later part of the same step).
+    pub fn extend(&mut self, other: Acquired) {
+        self.readings.extend(other.readings);
+        self.retries += other.retries;
+        self.notes.extend(other.notes);
+    }
+}
+
+/// The outcome of [`Multimeter::measure`].
+#[derive(Debug)]
+pub enum Measured<P> {
+    /// Every reading is here.
+    Complete(Acquired),
+    /// Every reading was taken, the last of them are still in the meter: hand the value to
+    /// [`Multimeter::collect`] (meanwhile the table may move: the meter is not measuring).
+    Pending(P),
+}
+
+/// Progress of a measurement: readings received so far, readings asked for.
+pub type ProgressFn = Box<dyn FnMut(usize, usize) + Send>;
+
+/// A DC voltmeter, whatever its model and link. Methods take `&mut self`: one task owns it.
+pub trait Multimeter: Send {
+    /// The meter's error.
+    type Error: MeterError;
+    /// Readings taken and still in the instrument (see [`Measured::Pending`]).
+    type Pending: Send;
+
+    /// The link's description, used in messages.
+    fn describe(&self) -> &str;
+
+    /// Clears the link, takes remote control, identifies the meter (refusing another model),
+    /// resets it to a known state.
+    fn connect(&mut self) -> impl Future<Output = Result<Identity, Self::Error>> + Send;
+
+    /// Configures DC volts (checked against the meter's own limits before anything is sent).
+    fn configure(
+        &mut self,
+        settings: &DcVolts,
+    ) -> impl Future<Output = Result<(), Self::Error>> + Send;
+
+    /// One reading's time at the configured settings (`None` before [`Multimeter::configure`]).
+    fn reading_time(&self) -> Option<Duration>;
+
+    /// How the meter acquires at the configured settings, in a word (`stream`, `memory`, ...),
+    /// for the run's log and timing record.
+    fn acquisition(&self) -> &'static str;
+
+    /// Takes `n` readings. With `may_defer`, the meter may answer [`Measured::Pending`] once
+    /// every reading is taken but some are still in its memory, so the caller can move the
+    /// table during their transfer. Recoveries and retries happen inside, up to the meter's
+    /// limit, and are reported in [`Acquired`].
+    fn measure(
+        &mut self,
+        n: usize,
+        may_defer: bool,
+    ) -> impl Future<Output = Result<Measured<Self::Pending>, Self::Error>> + Send;
+
+    /// Transfers pending readings (retrying a garbled transfer). An error of kind
+    /// [`ErrorKind::ReadingsLost`] means the meter lost them: measure them again.
+    fn collect(
+        &mut self,
+        pending: Self::Pending,
+    ) -> impl Future<Output = Result<Acquired, Self::Error>> + Send;
+
+    /// After an interrupted exchange: brings the meter back to a known state (device clear,
+    /// and a full re-establish if it lost its settings). Returns what was done, for the log.
+    fn recover(&mut self) -> impl Future<Output = Result<String, Self::Error>> + Send;
+
+    /// Hands the meter back to its front panel.
+    fn release(&mut self) -> impl Future<Output = Result<(), Self::Error>> + Send;
+
+    /// Calls `progress` with every reading received (`None` removes it).
+    fn set_progress(&mut self, progress: Option<ProgressFn>);
+}
