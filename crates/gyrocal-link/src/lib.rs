@@ -90,6 +90,30 @@ pub trait Transport: Send {
             })
         }
     }
+
+    /// Reads up to and including the byte `delimiter` and returns the text before it, line
+    /// terminators included (CR and LF are not stripped). For protocols whose replies end with
+    /// a prompt that is not followed by a line terminator, such as the `>` of an Ideal Aerosmith
+    /// controller. `timeout` applies to the whole read; bytes after the delimiter stay buffered.
+    ///
+    /// Added beside `read_line` for prompt-terminated replies; the provided implementation
+    /// fails with an [`LinkError::Io`] of kind [`std::io::ErrorKind::Unsupported`].
+    /// [`StreamTransport`] and [`ScriptedTransport`] implement it.
+    fn read_until(
+        &mut self,
+        delimiter: u8,
+        timeout: Option<Duration>,
+    ) -> impl Future<Output = Result<String, LinkError>> + Send {
+        let _ = (delimiter, timeout);
+        let device = self.describe().to_string();
+        async move {
+            Err(LinkError::io(
+                device,
+                "reading up to a prompt",
+                std::io::Error::from(std::io::ErrorKind::Unsupported),
+            ))
+        }
+    }
 }
 
 /// A piece of a line returned by [`Transport::read_field`].
@@ -126,5 +150,12 @@ impl<T: Transport + ?Sized> Transport for &mut T {
         timeout: Option<Duration>,
     ) -> impl Future<Output = Result<Field, LinkError>> + Send {
         (**self).read_field(sep, timeout)
+    }
+    fn read_until(
+        &mut self,
+        delimiter: u8,
+        timeout: Option<Duration>,
+    ) -> impl Future<Output = Result<String, LinkError>> + Send {
+        (**self).read_until(delimiter, timeout)
     }
 }

@@ -184,7 +184,7 @@ impl<T> std::fmt::Debug for Acl<T> {
 }
 
 /// One failed attempt at a query.
-enum Miss {
+pub(crate) enum Miss {
     /// Nothing (or not a line of text) came back.
     Link(LinkError),
     /// A line came back that is not a valid reply.
@@ -193,7 +193,7 @@ enum Miss {
 
 impl Miss {
     /// What went wrong, for a retry note.
-    fn describe(&self) -> String {
+    pub(crate) fn describe(&self) -> String {
         match self {
             Miss::Link(LinkError::Timeout {
                 timeout, partial, ..
@@ -219,7 +219,7 @@ impl Miss {
 }
 
 /// Whether asking again can help: a lost or corrupted reply can, a dead link cannot.
-fn retryable(e: &LinkError) -> bool {
+pub(crate) fn retryable(e: &LinkError) -> bool {
     matches!(e.kind(), LinkErrorKind::Timeout | LinkErrorKind::Garbled)
 }
 

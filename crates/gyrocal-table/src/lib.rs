@@ -66,6 +66,7 @@ mod stop;
 mod table;
 
 pub mod acl;
+pub mod aerosmith;
 pub mod dialect;
 
 pub use dialect::Dialect;

@@ -137,7 +137,8 @@ impl Ramp {
 /// A rate table of any dialect: the one implementation of [`RateTable`].
 ///
 /// Build it from a dialect and the policy's settings with [`Table::with_dialect`], or through a
-/// dialect's constructor, such as [`AclTable::new`](crate::acl::AclTable) (ACUTROL).
+/// dialect's constructor: [`AclTable::new`](crate::acl::AclTable) (ACUTROL),
+/// [`AerosmithTable::new`](crate::aerosmith::AerosmithTable) (Ideal Aerosmith, experimental).
 pub struct Table<D: Dialect> {
     shared: Arc<Shared<D>>,
     policy: PolicyConfig,
