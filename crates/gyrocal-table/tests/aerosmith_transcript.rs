@@ -9,7 +9,9 @@ use gyrocal_table::{RateTable, TableError, TableErrorKind, TableMode, TableState
 
 /// Expects `command` + CR and answers `reply` (which ends with the prompt).
 fn q(script: ScriptedTransport, command: &str, reply: &str) -> ScriptedTransport {
-    script.expect_raw(format!("{command}\r").as_bytes()).reply(reply)
+    script
+        .expect_raw(format!("{command}\r").as_bytes())
+        .reply(reply)
 }
 
 fn connected(script: ScriptedTransport) -> ScriptedTransport {
@@ -137,7 +139,11 @@ async fn aerosmith_options_crlf_per_minute_and_mco_polarity() {
         .reply("600.000000\r\n>");
     let mut table = AerosmithTable::new(script, config);
     table.connect().await.unwrap();
-    assert_eq!(table.state(), TableState::Connected, "MCO 0 = complete: OFF");
+    assert_eq!(
+        table.state(),
+        TableState::Connected,
+        "MCO 0 = complete: OFF"
+    );
     table.enable().await.unwrap();
     table.set_rate(10.0, 5.0).await.unwrap();
     assert_eq!(table.read_rate().await.unwrap(), 10.0);
