@@ -1,5 +1,6 @@
 //! A simulated ACUTROL-style single-axis rate table speaking gyrocal's serial ACL dialect
-//! (`shared/docs/rate-table.md`).
+//! (`shared/docs/rate-table.md`), and, over the same motion model, the experimental Ideal
+//! Aerosmith ASCII dialect ([`aerosmith`]).
 //!
 //! The table runs as a tokio task serving a byte stream (an in-memory pipe or a pseudo-terminal).
 //! Its motion is not ticked: the state holds the current profile [`Segment`] (start time, start

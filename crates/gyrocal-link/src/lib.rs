@@ -5,6 +5,8 @@
 //! Instruments on RS-232 (the HP 34401A, a rate table behind a serial converter) speak lines of
 //! text. The drivers only need four things from a link: send a line, read one complete line with
 //! a deadline, write raw bytes (the 34401A's Ctrl-C device clear), and throw away stale input.
+//! (A controller whose replies end with a prompt and no line terminator is read with
+//! [`Transport::read_until`].)
 //! [`Transport`] is exactly that, so the protocol code is generic over the link and the same
 //! driver runs on a real serial port, a pseudo-terminal, a TCP socket, an in-memory pipe driven in
 //! virtual time, or a [`ScriptedTransport`] that checks the exact bytes a driver writes.

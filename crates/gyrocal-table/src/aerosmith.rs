@@ -17,7 +17,9 @@
 //!
 //! ## The wire
 //!
-//! 9600 baud, 8N1 (open the port with those options: the link layer's framing option). Each
+//! 9600 baud, 8N1. gyrocal-link offers 8N2 as its only 8-bit framing: open the port at 9600
+//! 8N2 (an 8N1 receiver takes the second stop bit as idle time, and UARTs check only the first
+//! stop bit of what they receive), or over a serial-to-Ethernet converter set to 8N1. Each
 //! command is a mnemonic and its argument, then the line ending; the controller answers with
 //! optional data lines and a `>` prompt (not followed by a line ending). A `?` in a reply is an
 //! error (a [`TableError::Table`] with code [`NO_CODE`]: the controller gives none). The driver
