@@ -1,7 +1,9 @@
 //! # gyrocal-sim
 //!
 //! The simulated bench gyrocal's tests (and operators in training) run against: an HP 34401A
-//! multimeter, an ACUTROL-style rate table and the hemispherical resonator gyro that sits on it.
+//! multimeter, an ACUTROL-style rate table (also served in the experimental Ideal Aerosmith ASCII
+//! dialect, [`table::aerosmith`], with the same motion model) and the hemispherical resonator
+//! gyro that sits on it.
 //!
 //! The simulator replaces the *devices*, never the drivers: each simulated instrument serves the
 //! raw byte stream of its wire protocol (an in-memory pipe in virtual time, or a pseudo-terminal

@@ -1,5 +1,6 @@
 //! A simulated ACUTROL-style single-axis rate table speaking gyrocal's serial ACL dialect
-//! (`shared/docs/rate-table.md`).
+//! (`shared/docs/rate-table.md`), and, over the same motion model, the experimental Ideal
+//! Aerosmith ASCII dialect ([`aerosmith`]).
 //!
 //! The table runs as a tokio task serving a byte stream (an in-memory pipe or a pseudo-terminal).
 //! Its motion is not ticked: the state holds the current profile [`Segment`] (start time, start
@@ -15,6 +16,7 @@
 //! the error queue and `*STB?`, rate noise on the readback and a once-per-revolution ripple on
 //! the actual rate, position integrating the rate and wrapping at 360°.
 
+pub mod aerosmith;
 mod profile;
 #[cfg(test)]
 mod tests;
@@ -163,6 +165,11 @@ pub const NOISE_BYTE: u8 = 0xFF;
 
 /// Applies `fault` to `reply` (without its terminator); the bytes to write, LF included.
 fn faulty_reply(reply: &str, fault: Option<ReplyFault>) -> Vec<u8> {
+    faulty_reply_ending(reply, fault, b"\n")
+}
+
+/// Applies `fault` to `reply`; the bytes to write, ending with `end` (nothing when dropped).
+fn faulty_reply_ending(reply: &str, fault: Option<ReplyFault>, end: &[u8]) -> Vec<u8> {
     let mut bytes = Vec::with_capacity(reply.len() + 2);
     match fault {
         None => bytes.extend_from_slice(reply.as_bytes()),
@@ -186,7 +193,7 @@ fn faulty_reply(reply: &str, fault: Option<ReplyFault>) -> Vec<u8> {
             bytes.extend_from_slice(reply.as_bytes());
         }
     }
-    bytes.push(b'\n');
+    bytes.extend_from_slice(end);
     bytes
 }
 
@@ -383,6 +390,70 @@ impl State {
             }
             self.latch(when, code, text);
         }
+    }
+
+    /// A controlled stop at `t` (ACL `:Mode:Off`, Aerosmith `STO`): with the servo on, a ramp
+    /// to zero at the acceleration limit in force (the table's maximum if none was set).
+    fn controlled_stop(&mut self, t: f64) {
+        if self.interlock_closed {
+            let accel = if self.accel_limit > 0.0 {
+                self.accel_limit
+            } else {
+                self.config.max_acceleration
+            };
+            let jerk = self.config.jerk;
+            self.ramp_to(t, 0.0, accel, jerk);
+            self.mode = SimMode::Off;
+            self.demand = 0.0;
+        }
+    }
+
+    /// Counts a rate demand (ACL `:Demand:Rate`, Aerosmith `JOG`) and takes the faults armed
+    /// for it; `None` when the table goes silent at this demand (it executes nothing).
+    fn count_demand(&mut self) -> Option<Vec<DemandFault>> {
+        self.demands_seen += 1;
+        let n = self.demands_seen;
+        let mut armed = Vec::new();
+        self.on_demand.retain(|&(k, f)| {
+            if k == n {
+                armed.push(f);
+                false
+            } else {
+                true
+            }
+        });
+        if armed.contains(&DemandFault::Silent) {
+            tracing::info!("sim table silent from demand {n} on");
+            self.silent = true;
+            return None;
+        }
+        Some(armed)
+    }
+
+    /// Arms the faults taken by [`State::count_demand`] once the demand was executed at `t`.
+    fn arm_demand_faults(&mut self, t: f64, armed: Vec<DemandFault>) {
+        let n = self.demands_seen;
+        // halfway through the ramp this demand started, or now if it started none
+        let mid = if self.seg.t0 == t {
+            t + self.seg.duration() / 2.0
+        } else {
+            t
+        };
+        for f in armed {
+            tracing::info!("sim table: {f:?} armed at demand {n} for t={mid:.3}");
+            match f {
+                DemandFault::Trip => self.trip_after = Some(mid),
+                DemandFault::Fault => self.inject_after = Some(mid),
+                DemandFault::Interlock => self.interlock_after = Some(mid),
+                DemandFault::Reply(fault, count) => {
+                    for _ in 0..count {
+                        self.reply_faults.push_back(fault);
+                    }
+                }
+                DemandFault::Silent => {}
+            }
+        }
+        self.advance(t);
     }
 
     fn status_byte(&self) -> u8 {
@@ -841,17 +912,7 @@ fn command(st: &mut State, t: f64, nodes: &[String], query: bool, args: &[&str])
         }
     } else if path_is(nodes, &["Mode", "Off"]) {
         parse_axis(st, args.first())?;
-        if st.interlock_closed {
-            let accel = if st.accel_limit > 0.0 {
-                st.accel_limit
-            } else {
-                st.config.max_acceleration
-            };
-            let jerk = st.config.jerk;
-            st.ramp_to(t, 0.0, accel, jerk);
-            st.mode = SimMode::Off;
-            st.demand = 0.0;
-        }
+        st.controlled_stop(t);
     } else if path_is(nodes, &["Mode", "Position"]) {
         parse_axis(st, args.first())?;
         st.push_error(205, "Mode not available");
@@ -872,44 +933,9 @@ fn command(st: &mut State, t: f64, nodes: &[String], query: bool, args: &[&str])
             st.rate_limit = v;
         }
     } else if path_is(nodes, &["Demand", "Rate"]) {
-        st.demands_seen += 1;
-        let n = st.demands_seen;
-        let mut armed = Vec::new();
-        st.on_demand.retain(|&(k, f)| {
-            if k == n {
-                armed.push(f);
-                false
-            } else {
-                true
-            }
-        });
-        if armed.contains(&DemandFault::Silent) {
-            tracing::info!("sim table silent from demand {n} on");
-            st.silent = true;
-            return None;
-        }
+        let armed = st.count_demand()?;
         demand_rate(st, t, args);
-        // halfway through the ramp this demand started, or now if it started none
-        let mid = if st.seg.t0 == t {
-            t + st.seg.duration() / 2.0
-        } else {
-            t
-        };
-        for f in armed {
-            tracing::info!("sim table: {f:?} armed at demand {n} for t={mid:.3}");
-            match f {
-                DemandFault::Trip => st.trip_after = Some(mid),
-                DemandFault::Fault => st.inject_after = Some(mid),
-                DemandFault::Interlock => st.interlock_after = Some(mid),
-                DemandFault::Reply(fault, count) => {
-                    for _ in 0..count {
-                        st.reply_faults.push_back(fault);
-                    }
-                }
-                DemandFault::Silent => {}
-            }
-        }
-        st.advance(t);
+        st.arm_demand_faults(t, armed);
     } else {
         st.push_error(-113, "Undefined header");
     }

@@ -5,6 +5,8 @@
 //! Instruments on RS-232 (the HP 34401A, a rate table behind a serial converter) speak lines of
 //! text. The drivers only need four things from a link: send a line, read one complete line with
 //! a deadline, write raw bytes (the 34401A's Ctrl-C device clear), and throw away stale input.
+//! (A controller whose replies end with a prompt and no line terminator is read with
+//! [`Transport::read_until`].)
 //! [`Transport`] is exactly that, so the protocol code is generic over the link and the same
 //! driver runs on a real serial port, a pseudo-terminal, a TCP socket, an in-memory pipe driven in
 //! virtual time, or a [`ScriptedTransport`] that checks the exact bytes a driver writes.
@@ -90,6 +92,30 @@ pub trait Transport: Send {
             })
         }
     }
+
+    /// Reads up to and including the byte `delimiter` and returns the text before it, line
+    /// terminators included (CR and LF are not stripped). For protocols whose replies end with
+    /// a prompt that is not followed by a line terminator, such as the `>` of an Ideal Aerosmith
+    /// controller. `timeout` applies to the whole read; bytes after the delimiter stay buffered.
+    ///
+    /// Added beside `read_line` for prompt-terminated replies; the provided implementation
+    /// fails with an [`LinkError::Io`] of kind [`std::io::ErrorKind::Unsupported`].
+    /// [`StreamTransport`] and [`ScriptedTransport`] implement it.
+    fn read_until(
+        &mut self,
+        delimiter: u8,
+        timeout: Option<Duration>,
+    ) -> impl Future<Output = Result<String, LinkError>> + Send {
+        let _ = (delimiter, timeout);
+        let device = self.describe().to_string();
+        async move {
+            Err(LinkError::io(
+                device,
+                "reading up to a prompt",
+                std::io::Error::from(std::io::ErrorKind::Unsupported),
+            ))
+        }
+    }
 }
 
 /// A piece of a line returned by [`Transport::read_field`].
@@ -126,5 +152,12 @@ impl<T: Transport + ?Sized> Transport for &mut T {
         timeout: Option<Duration>,
     ) -> impl Future<Output = Result<Field, LinkError>> + Send {
         (**self).read_field(sep, timeout)
+    }
+    fn read_until(
+        &mut self,
+        delimiter: u8,
+        timeout: Option<Duration>,
+    ) -> impl Future<Output = Result<String, LinkError>> + Send {
+        (**self).read_until(delimiter, timeout)
     }
 }

@@ -197,6 +197,35 @@ impl Transport for ScriptedTransport {
         Ok(0)
     }
 
+    /// Reads replies up to the byte `delimiter`: a reply step that holds it is split there (the
+    /// rest stays in the script as the next reply); a reply step without it is taken whole with
+    /// its implied LF and the next step continues the read.
+    async fn read_until(
+        &mut self,
+        delimiter: u8,
+        timeout: Option<Duration>,
+    ) -> Result<String, LinkError> {
+        let mut text = String::new();
+        loop {
+            if let Some(ScriptStep::Reply(line)) = self.steps.front_mut()
+                && let Some(pos) = line.bytes().position(|b| b == delimiter)
+            {
+                let rest = line.split_off(pos + 1);
+                line.pop();
+                let piece = std::mem::replace(line, rest);
+                if line.is_empty() {
+                    self.steps.pop_front();
+                }
+                self.log
+                    .push(format!("< {piece:?} (up to {:?})", char::from(delimiter)));
+                text.push_str(&piece);
+                return Ok(text);
+            }
+            text.push_str(&self.read_line(timeout).await?);
+            text.push('\n');
+        }
+    }
+
     /// Splits the next reply at `sep`: the rest stays in the script as the next reply piece.
     async fn read_field(&mut self, sep: u8, timeout: Option<Duration>) -> Result<Field, LinkError> {
         if let Some(ScriptStep::Reply(line)) = self.steps.front_mut()
@@ -253,6 +282,19 @@ mod tests {
             }
         }
         assert_eq!(got, ["+1", "+2", "+3"]);
+    }
+
+    #[tokio::test]
+    async fn read_until_splits_and_joins_replies() {
+        let mut t = ScriptedTransport::new("table")
+            .expect_raw(b"PVE\r")
+            .reply("10.0\r")
+            .reply(">")
+            .reply("\r\n>");
+        t.write_raw(b"PVE\r").await.unwrap();
+        assert_eq!(t.read_until(b'>', None).await.unwrap(), "10.0\r\n");
+        assert_eq!(t.read_until(b'>', None).await.unwrap(), "\r\n");
+        t.done();
     }
 
     #[tokio::test]

@@ -113,6 +113,19 @@ impl<S: AsyncStream> StreamTransport<S> {
         )
     }
 
+    /// Takes the text up to `delimiter` (not included, the delimiter consumed) out of the
+    /// buffer, if the delimiter has arrived.
+    fn take_until(&mut self, delimiter: u8) -> Option<Result<String, LinkError>> {
+        let pos = self.buf.iter().position(|&b| b == delimiter)?;
+        let mut text: Vec<u8> = self.buf.drain(..=pos).collect();
+        text.pop();
+        Some(String::from_utf8(text).map_err(|e| LinkError::Garbled {
+            device: self.name.clone(),
+            reason: "reply is not valid text".into(),
+            bytes: e.into_bytes(),
+        }))
+    }
+
     /// Reads until `take` yields something, the deadline passes or the peer goes away.
     async fn read_with<R>(
         &mut self,
@@ -197,6 +210,14 @@ impl<S: AsyncStream> Transport for StreamTransport<S> {
         self.read_with(timeout, |s| s.take_field(sep)).await
     }
 
+    async fn read_until(
+        &mut self,
+        delimiter: u8,
+        timeout: Option<Duration>,
+    ) -> Result<String, LinkError> {
+        self.read_with(timeout, |s| s.take_until(delimiter)).await
+    }
+
     async fn discard_input(&mut self) -> Result<usize, LinkError> {
         let mut dropped = std::mem::take(&mut self.buf).len();
         loop {
@@ -275,6 +296,20 @@ mod tests {
         dev.write_all(&[b'x'; 40]).await.unwrap();
         let err = t.read_line(Some(Duration::from_secs(1))).await.unwrap_err();
         assert_eq!(err.kind(), ErrorKind::Garbled);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn read_until_a_prompt_without_line_end() {
+        let (mut t, mut dev) = memory_pair("mem");
+        let s = Some(Duration::from_secs(1));
+        dev.write_all(b"10.0000\r\n>\r\n>").await.unwrap();
+        assert_eq!(t.read_until(b'>', s).await.unwrap(), "10.0000\r\n");
+        assert_eq!(t.read_until(b'>', s).await.unwrap(), "\r\n");
+        dev.write_all(b"partial").await.unwrap();
+        let err = t.read_until(b'>', s).await.unwrap_err();
+        assert_eq!(err.kind(), ErrorKind::Timeout);
+        dev.write_all(b"?\r>").await.unwrap();
+        assert_eq!(t.read_until(b'>', s).await.unwrap(), "partial?\r");
     }
 
     #[tokio::test(start_paused = true)]

@@ -1,8 +1,21 @@
 //! # gyrocal-table
 //!
-//! Rate-table drivers: the [`RateTable`] trait a calibration sequencer programs against, and the
+//! Rate-table drivers: the [`RateTable`] trait a calibration sequencer programs against, one
+//! generic implementation of it ([`Table`]) over any wire protocol ([`Dialect`]), and the
 //! ACUTROL command language ([`acl`]) as its first dialect, generic over any
 //! [`gyrocal_link::Transport`].
+//!
+//! ## Policy once, dialects small
+//!
+//! Everything listed below except the bytes is the same for every rate table, so it is written
+//! once, in [`Table<D: Dialect>`](Table), and a dialect implements only its wire protocol:
+//! identify, servo on, demand a rate with an acceleration, read rate, position and mode, poll
+//! for a latched fault, controlled and emergency stop, plus its retries of idempotent queries
+//! (see [`dialect`]). This is probe-rs's pattern for JTAG (`impl<P: AutoImplementJtagAccess>
+//! JtagAccess for P` over a small `RawJtagIo` trait): a new probe implements the raw operations
+//! and inherits the rest, so a fix to the policy fixes every table, and a second dialect cannot
+//! forget the heartbeat or the rest check. `acl::AclTable<T>` is `Table<acl::Acl<T>>`, and
+//! `AclTable::new(transport, config)` builds it as before.
 //!
 //! ## Why a driver and not a few `send_line` calls
 //!
@@ -45,17 +58,22 @@
 //! acquisition: `table.record_while(interval, dmm.read(500))` runs both in one task.
 //!
 //! A second dialect (Ideal Aerosmith ASCII, a binary framed table) is a new module implementing
-//! [`RateTable`]; nothing else changes.
+//! [`Dialect`]; the table type, the sequencer and the tests of the policy stay as they are.
 
 mod error;
 mod stats;
 mod stop;
+mod table;
 
 pub mod acl;
+pub mod aerosmith;
+pub mod dialect;
 
+pub use dialect::Dialect;
 pub use error::{TableError, TableErrorKind};
 pub use stats::{RateAccumulator, RateStats};
 pub use stop::{StopGuard, StopHandle, StopKind, StopPath};
+pub use table::{PolicyConfig, Table};
 
 use std::fmt;
 use std::future::Future;

@@ -1,0 +1,615 @@
+//! **Experimental**: the Ideal Aerosmith three-letter ASCII dialect.
+//!
+//! No vendor manual was found; this dialect follows public third-party scripts
+//! (`shared/docs/instruments.md`), and where they disagree the choice is an
+//! [`AerosmithConfig`] option with a documented default. It has run against gyrocal's
+//! simulator only. **Before trusting it on a real table, a lab must verify, at low rate with the
+//! hardware E-stop at hand:**
+//!
+//! 1. the line ending the controller expects ([`AerosmithConfig::line_ending`], default CR);
+//! 2. the units of `JOG` and `PVE` ([`AerosmithConfig::rate_units`], default deg/s; one script
+//!    comments "1–21600 deg/min"): `JOG1` must turn the table at 1 deg/s, not 1 deg/min;
+//! 3. the polarity of `MCO` ([`AerosmithConfig::mco_polarity`], default `1` = complete);
+//! 4. the bits of the `STA` status word ([`AerosmithConfig::status_bits`], defaults servo on
+//!    `0x01`, jogging `0x02`, fault `0x04`, all unconfirmed);
+//! 5. that every command, `JOG` included, ends its reply with the `>` prompt (one script does
+//!    not wait for a reply to `JOG`).
+//!
+//! ## The wire
+//!
+//! 9600 baud, 8N1. gyrocal-link offers 8N2 as its only 8-bit framing: open the port at 9600
+//! 8N2 (an 8N1 receiver takes the second stop bit as idle time, and UARTs check only the first
+//! stop bit of what they receive), or over a serial-to-Ethernet converter set to 8N1. Each
+//! command is a mnemonic and its argument, then the line ending; the controller answers with
+//! optional data lines and a `>` prompt (not followed by a line ending). A `?` in a reply is an
+//! error (a [`TableError::Table`] with code [`NO_CODE`]: the controller gives none). The driver
+//! reads every reply up to the prompt ([`gyrocal_link::Transport::read_until`]), tolerates an
+//! echo of the command, and takes the last data line as a query's value.
+//!
+//! ```text
+//! connect:      STA                       (no identification command is known)
+//! enable:       SRV                       (servo on; also clears a latched fault [U])
+//! set_rate:     ACL<deg/s²>  JOG<rate>
+//! sample:       PVE  STA
+//! read_mode:    STA  [MCO<tol> when not jogging]
+//! stop:         STO                       emergency: STO as well (see below)
+//! ```
+//!
+//! Modes are derived: jogging (status bit) is [`TableMode::Rate`]; not jogging with `MCO`
+//! saying the motion is complete is [`TableMode::Off`]; not jogging with the motion still
+//! running (a stop decelerating) is reported as [`TableMode::Abort`], so the policy's rest check
+//! (|rate| small *and* mode OFF) waits for the controller to finish too. A latched fault is the
+//! fault bit of `STA`; the controller gives no text, so the fault reason names the status word.
+//!
+//! ## No emergency stop command
+//!
+//! No interlock command is known beyond `SRV`: [`RateTable::emergency_stop`] sends `STO`, a
+//! controlled stop, and logs that. **The hardware E-stop is the only true emergency stop of an
+//! Aerosmith table**; the operator must have it within reach. After an emergency stop the
+//! driver still treats the servo as off (a new demand needs [`RateTable::enable`]).
+//!
+//! The stop path does not wait for the prompt of `STO` (a stop must not hang on a reply): the
+//! prompt it owes is read before the next exchange.
+//!
+//! ## Retries
+//!
+//! As in ACL, the queries (`PVE`, `PPO`, `STA`, `MCO`) only read state and are asked again after
+//! a lost, garbled or unparseable reply, within the query's timeout ([`AerosmithConfig::retries`]),
+//! each retry noted for the run manifest. Commands (`SRV`, `ACL`, `JOG`, `STO`) are never
+//! repeated; a command without its prompt is a link failure.
+
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use gyrocal_link::{LinkError, Transport, show_bytes};
+use tokio::time::Instant;
+
+#[cfg(doc)]
+use crate::RateTable;
+use crate::acl::{Miss, retryable};
+use crate::dialect::{Connected, Dialect, DialectError, StopAttempt};
+use crate::table::{PolicyConfig, Table};
+use crate::{Identity, Limits, StopKind, TableError, TableMode, TableStatus};
+
+/// The prompt that ends every reply.
+pub const PROMPT: u8 = b'>';
+
+/// The code of a [`TableError::Table`] from a `?` reply: the controller gives no code.
+pub const NO_CODE: i32 = -1;
+
+/// The line ending of commands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LineEnding {
+    /// CR only (default): what one script sends; a controller that ends commands on CR would
+    /// take a following LF as the start of the next command.
+    #[default]
+    Cr,
+    /// CR LF: what another script sends.
+    CrLf,
+}
+
+impl LineEnding {
+    /// The bytes.
+    pub fn bytes(self) -> &'static [u8] {
+        match self {
+            LineEnding::Cr => b"\r",
+            LineEnding::CrLf => b"\r\n",
+        }
+    }
+}
+
+/// The units of `JOG` and `PVE`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum RateUnits {
+    /// Degrees per second (default; one script).
+    #[default]
+    DegPerSec,
+    /// Degrees per minute (a comment of another script: "1–21600 deg/min").
+    DegPerMin,
+}
+
+impl RateUnits {
+    /// Multiplier from deg/s to these units.
+    pub fn per_deg_per_sec(self) -> f64 {
+        match self {
+            RateUnits::DegPerSec => 1.0,
+            RateUnits::DegPerMin => 60.0,
+        }
+    }
+}
+
+/// What `MCO<tol>` answers when the motion is complete.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum McoPolarity {
+    /// `1` means complete (default).
+    #[default]
+    OneIsComplete,
+    /// `0` means complete.
+    ZeroIsComplete,
+}
+
+/// Bit masks of the `STA` status word (all unconfirmed).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StatusBits {
+    /// Servo on. Default `0x01`.
+    pub servo: u32,
+    /// Jogging (a continuous-rate command in force). Default `0x02`.
+    pub jog: u32,
+    /// A fault is latched. Default `0x04`.
+    pub fault: u32,
+}
+
+impl Default for StatusBits {
+    fn default() -> Self {
+        StatusBits {
+            servo: 0x01,
+            jog: 0x02,
+            fault: 0x04,
+        }
+    }
+}
+
+/// Configuration of the Aerosmith driver: the policy's settings and the dialect's options.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AerosmithConfig {
+    /// The policy's settings (limits, timeouts, rest tolerance).
+    pub policy: PolicyConfig,
+    /// Line ending of commands. Default CR.
+    pub line_ending: LineEnding,
+    /// Units of `JOG` and `PVE`. Default deg/s.
+    pub rate_units: RateUnits,
+    /// Polarity of `MCO`. Default `1` = complete.
+    pub mco_polarity: McoPolarity,
+    /// Tolerance sent with `MCO`, deg/s (converted to [`AerosmithConfig::rate_units`]).
+    /// Default 0.01.
+    pub mco_tolerance: f64,
+    /// Bits of the `STA` status word.
+    pub status_bits: StatusBits,
+    /// How many times an idempotent query is asked again. Default 2.
+    pub retries: u32,
+}
+
+impl Default for AerosmithConfig {
+    fn default() -> Self {
+        AerosmithConfig {
+            policy: PolicyConfig::default(),
+            line_ending: LineEnding::Cr,
+            rate_units: RateUnits::DegPerSec,
+            mco_polarity: McoPolarity::OneIsComplete,
+            mco_tolerance: 0.01,
+            status_bits: StatusBits::default(),
+            retries: 2,
+        }
+    }
+}
+
+/// An Ideal Aerosmith table (experimental): the generic [`Table`] over the [`Aerosmith`]
+/// dialect.
+///
+/// ```no_run
+/// # async fn demo() -> Result<(), gyrocal_table::TableError> {
+/// use gyrocal_table::{RateTable, aerosmith::{AerosmithConfig, AerosmithTable}};
+/// let (transport, _device) = gyrocal_link::memory_pair("table");
+/// let mut table = AerosmithTable::new(transport, AerosmithConfig::default());
+/// table.connect().await?;
+/// table.enable().await?;
+/// # Ok(()) }
+/// ```
+pub type AerosmithTable<T> = Table<Aerosmith<T>>;
+
+impl<T: Transport + 'static> Table<Aerosmith<T>> {
+    /// Takes the transport by value; nothing is sent until [`RateTable::connect`].
+    pub fn new(transport: T, config: AerosmithConfig) -> Self {
+        Table::with_dialect(Aerosmith::new(transport, config), config.policy)
+    }
+
+    /// The configuration in force.
+    pub fn config(&self) -> &AerosmithConfig {
+        &self.dialect().config
+    }
+}
+
+struct Link<T> {
+    transport: T,
+    /// An exchange was started and its reply not consumed: clear the input first.
+    dirty: bool,
+    /// Prompts owed by stops sent without waiting: read before the next exchange.
+    owed_prompts: u32,
+}
+
+/// The Ideal Aerosmith dialect over a transport that can read up to a prompt. Use it through
+/// [`AerosmithTable`].
+pub struct Aerosmith<T> {
+    device: String,
+    config: AerosmithConfig,
+    link: tokio::sync::Mutex<Link<T>>,
+    /// The servo was turned on by us (or found on): its bit dropping is a fault.
+    expect_servo: AtomicBool,
+    retries: Mutex<Vec<String>>,
+}
+
+impl<T> std::fmt::Debug for Aerosmith<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Aerosmith")
+            .field("device", &self.device)
+            .field("config", &self.config)
+            .finish_non_exhaustive()
+    }
+}
+
+/// The data lines of a reply (prompt removed): trimmed, empty lines and an echo dropped.
+fn data_lines<'a>(body: &'a str, command: &str) -> Vec<&'a str> {
+    body.split(['\r', '\n'])
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && *l != command)
+        .collect()
+}
+
+impl<T: Transport + 'static> Aerosmith<T> {
+    /// The dialect over `transport`; nothing is sent until the table connects.
+    pub fn new(transport: T, config: AerosmithConfig) -> Self {
+        Aerosmith {
+            device: transport.describe().to_string(),
+            config,
+            link: tokio::sync::Mutex::new(Link {
+                transport,
+                dirty: false,
+                owed_prompts: 0,
+            }),
+            expect_servo: AtomicBool::new(false),
+            retries: Mutex::new(Vec::new()),
+        }
+    }
+
+    fn frame(&self, command: &str) -> Vec<u8> {
+        let mut bytes = command.as_bytes().to_vec();
+        bytes.extend_from_slice(self.config.line_ending.bytes());
+        bytes
+    }
+
+    fn num(&self, v: f64) -> String {
+        format!("{v:.4}")
+    }
+
+    /// Sends `command` and reads its reply up to the prompt (no retry).
+    async fn exchange(&self, command: &str, timeout: Duration) -> Result<String, LinkError> {
+        let deadline = Instant::now() + timeout;
+        let mut link = self.link.lock().await;
+        while link.owed_prompts > 0 {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match link.transport.read_until(PROMPT, Some(left)).await {
+                Ok(_) => link.owed_prompts -= 1,
+                Err(_) => {
+                    link.owed_prompts = 0;
+                    link.dirty = true;
+                }
+            }
+        }
+        if link.dirty {
+            let dropped = link.transport.discard_input().await.unwrap_or(0);
+            tracing::debug!(device = %self.device, "cleared {dropped} stale bytes");
+        }
+        link.dirty = true;
+        link.transport.write_raw(&self.frame(command)).await?;
+        let left = deadline.saturating_duration_since(Instant::now());
+        let body = link.transport.read_until(PROMPT, Some(left)).await?;
+        link.dirty = false;
+        tracing::trace!(device = %self.device, "> {command} < {body:?}>");
+        Ok(body)
+    }
+
+    fn table_error(&self, command: &str, body: &str) -> TableError {
+        TableError::Table {
+            device: self.device.clone(),
+            command: command.to_string(),
+            code: NO_CODE,
+            text: data_lines(body, command).join(" "),
+        }
+    }
+
+    /// Sends a command (not repeated); its prompt must come, and without a `?`.
+    async fn command(&self, command: &str, timeout: Duration) -> Result<(), DialectError> {
+        tracing::debug!(device = %self.device, "> {command}");
+        let body = self
+            .exchange(command, timeout)
+            .await
+            .map_err(|e| DialectError::link(TableError::from_link(&self.device, command, e)))?;
+        if body.contains('?') {
+            return Err(self.table_error(command, &body).into());
+        }
+        Ok(())
+    }
+
+    /// Asks an idempotent query until `parse` accepts its value line, at most `1 + retries`
+    /// times within `timeout` (the ACL dialect's rules). A `?` reply is a table error, not
+    /// retried.
+    async fn ask<R>(
+        &self,
+        command: &str,
+        timeout: Duration,
+        parse: impl Fn(&str) -> Result<R, &'static str>,
+    ) -> Result<R, DialectError> {
+        let attempts = self.config.retries.saturating_add(1);
+        let deadline = Instant::now() + timeout;
+        let mut first: Option<Miss> = None;
+        let mut last = String::new();
+        let mut link_missed = false;
+        for attempt in 1..=attempts {
+            let left = attempts - attempt + 1;
+            let budget = deadline.saturating_duration_since(Instant::now()) / left;
+            let miss = match self.exchange(command, budget).await {
+                Ok(body) if body.contains('?') => {
+                    return Err(self.table_error(command, &body).into());
+                }
+                Ok(body) => {
+                    let value = data_lines(&body, command).last().copied().unwrap_or("");
+                    match parse(value) {
+                        Ok(v) => {
+                            if attempt > 1 {
+                                self.link.lock().await.dirty = true;
+                            }
+                            return Ok(v);
+                        }
+                        Err(reason) => Miss::Reply {
+                            reply: body,
+                            reason,
+                        },
+                    }
+                }
+                Err(e) if retryable(&e) => Miss::Link(e),
+                Err(e) => {
+                    return Err(DialectError::link(TableError::from_link(
+                        &self.device,
+                        command,
+                        e,
+                    )));
+                }
+            };
+            last = miss.describe();
+            link_missed |= matches!(miss, Miss::Link(_));
+            if attempt < attempts {
+                self.note_retry(format!(
+                    "`{command}`: {last}; asked again (retry {attempt} of {})",
+                    attempts - 1
+                ));
+                self.link.lock().await.dirty = true;
+            }
+            first.get_or_insert(miss);
+        }
+        let error = match first {
+            Some(Miss::Reply { reply, reason }) => TableError::Reply {
+                device: self.device.clone(),
+                command: command.to_string(),
+                reason: format!("{reason}; no usable reply in {attempts} attempts"),
+                bytes: show_bytes(reply.as_bytes()),
+            },
+            Some(Miss::Link(e)) => TableError::from_link(&self.device, command, e),
+            None => TableError::Reply {
+                device: self.device.clone(),
+                command: command.to_string(),
+                reason: "no attempt was made".into(),
+                bytes: String::new(),
+            },
+        };
+        if attempts > 1 {
+            self.note_retry(format!(
+                "`{command}`: {last}; no usable reply in {attempts} attempts, gave up"
+            ));
+        }
+        Err(DialectError {
+            error,
+            link_failed: link_missed,
+        })
+    }
+
+    fn note_retry(&self, note: String) {
+        tracing::warn!(device = %self.device, "{note}");
+        self.retries
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .push(note);
+    }
+
+    async fn query_number(&self, command: &str, timeout: Duration) -> Result<f64, DialectError> {
+        self.ask(command, timeout, |v| match v.parse::<f64>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            _ => Err("not a finite decimal number"),
+        })
+        .await
+    }
+
+    async fn query_status(&self, timeout: Duration) -> Result<u32, DialectError> {
+        self.ask("STA", timeout, |v| {
+            v.parse::<u32>().map_err(|_| "not a status word")
+        })
+        .await
+    }
+
+    /// `MCO<tol>`: whether the controller says the motion is complete.
+    async fn motion_complete(&self, timeout: Duration) -> Result<bool, DialectError> {
+        let tol = self.config.mco_tolerance * self.config.rate_units.per_deg_per_sec();
+        let command = format!("MCO{}", self.num(tol));
+        let one = self.ask(&command, timeout, |v| match v {
+            "1" => Ok(true),
+            "0" => Ok(false),
+            _ => Err("not 0 or 1"),
+        });
+        let one = one.await?;
+        Ok(match self.config.mco_polarity {
+            McoPolarity::OneIsComplete => one,
+            McoPolarity::ZeroIsComplete => !one,
+        })
+    }
+
+    /// The mode a status word stands for (asking `MCO` when not jogging).
+    async fn mode_of(&self, status: u32, timeout: Duration) -> Result<TableMode, DialectError> {
+        if status & self.config.status_bits.jog != 0 {
+            return Ok(TableMode::Rate);
+        }
+        Ok(if self.motion_complete(timeout).await? {
+            TableMode::Off
+        } else {
+            TableMode::Abort
+        })
+    }
+}
+
+impl<T: Transport + 'static> Dialect for Aerosmith<T> {
+    const NAME: &'static str = "aerosmith";
+
+    fn describe(&self) -> &str {
+        &self.device
+    }
+
+    /// Clears stale input, then `STA` (and `MCO` when not jogging): a table that answers a
+    /// status word is taken as identified; there is no identification command.
+    async fn connect(&self, timeout: Duration) -> Result<Connected, DialectError> {
+        {
+            let mut link = self.link.lock().await;
+            let dropped = link
+                .transport
+                .discard_input()
+                .await
+                .map_err(|e| TableError::from_link(&self.device, "(clear input)", e))?;
+            link.dirty = false;
+            link.owed_prompts = 0;
+            if dropped > 0 {
+                tracing::info!(device = %self.device, "cleared {dropped} stale bytes");
+            }
+        }
+        let status = self.query_status(timeout).await?;
+        let mode = self.mode_of(status, timeout).await?;
+        self.expect_servo.store(
+            status & self.config.status_bits.servo != 0,
+            Ordering::SeqCst,
+        );
+        Ok(Connected {
+            identity: Identity {
+                manufacturer: "Ideal Aerosmith".into(),
+                model: "(no identification command)".into(),
+                serial: String::new(),
+                version: format!("STA {status}"),
+            },
+            mode,
+        })
+    }
+
+    async fn enable(&self, _limits: &Limits, timeout: Duration) -> Result<(), DialectError> {
+        self.command("SRV", timeout).await?;
+        self.expect_servo.store(true, Ordering::SeqCst);
+        Ok(())
+    }
+
+    async fn demand_rate(
+        &self,
+        rate: f64,
+        acceleration: f64,
+        timeout: Duration,
+    ) -> Result<(), DialectError> {
+        let units = self.config.rate_units.per_deg_per_sec();
+        self.command(&format!("ACL{}", self.num(acceleration)), timeout)
+            .await?;
+        self.command(&format!("JOG{}", self.num(rate * units)), timeout)
+            .await
+    }
+
+    async fn read_rate(&self, timeout: Duration) -> Result<f64, DialectError> {
+        let v = self.query_number("PVE", timeout).await?;
+        Ok(v / self.config.rate_units.per_deg_per_sec())
+    }
+
+    async fn read_position(&self, timeout: Duration) -> Result<f64, DialectError> {
+        self.query_number("PPO", timeout).await
+    }
+
+    async fn read_mode(&self, timeout: Duration) -> Result<TableMode, DialectError> {
+        let status = self.query_status(timeout).await?;
+        self.mode_of(status, timeout).await
+    }
+
+    /// The mode, and a status byte with bit 0 set when the fault bit is (bit 7, an error
+    /// queue, never: the controller has none).
+    async fn status(&self, timeout: Duration) -> Result<TableStatus, DialectError> {
+        let status = self.query_status(timeout).await?;
+        let mode = self.mode_of(status, timeout).await?;
+        let status_byte = u8::from(status & self.config.status_bits.fault != 0);
+        Ok(TableStatus { mode, status_byte })
+    }
+
+    /// `STA`: the fault bit, or the servo bit dropping while the servo should be on, is a
+    /// fault (the controller gives no text: the reason names the status word).
+    async fn poll_faults(&self, timeout: Duration) -> Result<Option<String>, DialectError> {
+        let status = self.query_status(timeout).await?;
+        let bits = self.config.status_bits;
+        if status & bits.fault != 0 {
+            return Ok(Some(format!(
+                "table reports a fault (STA status word {status} = {status:#x}, fault bit \
+                 {:#x}; the controller gives no fault text)",
+                bits.fault
+            )));
+        }
+        if status & bits.servo == 0 && self.expect_servo.load(Ordering::SeqCst) {
+            return Ok(Some(format!(
+                "servo turned off by itself (STA status word {status} = {status:#x})"
+            )));
+        }
+        Ok(None)
+    }
+
+    /// `STO` for both kinds (no interlock command is known: the hardware E-stop is the only
+    /// true emergency stop). Does not wait for the prompt; the next exchange reads it.
+    async fn send_stop(&self, kind: StopKind, timeout: Duration) -> StopAttempt {
+        let command = "STO";
+        if kind == StopKind::Emergency {
+            tracing::warn!(
+                device = %self.device,
+                "emergency stop: the Aerosmith dialect has no interlock command, sending STO \
+                 (a controlled stop); the hardware E-stop is the only true emergency stop"
+            );
+        }
+        let wait = timeout * 2 + Duration::from_millis(500);
+        let Ok(mut link) = tokio::time::timeout(wait, self.link.lock()).await else {
+            return StopAttempt {
+                attempted: false,
+                result: Err(TableError::Fault {
+                    device: self.device.clone(),
+                    reason: format!("could not get the link within {wait:?} to send `{command}`"),
+                }),
+            };
+        };
+        tracing::info!(device = %self.device, "{command}");
+        let frame = self.frame(command);
+        let sent = tokio::time::timeout(timeout, link.transport.write_raw(&frame)).await;
+        let result = match sent {
+            Ok(Ok(())) => {
+                link.owed_prompts += 1;
+                Ok(())
+            }
+            Ok(Err(e)) => {
+                link.dirty = true;
+                Err(TableError::from_link(&self.device, command, e))
+            }
+            Err(_) => {
+                link.dirty = true;
+                Err(TableError::Fault {
+                    device: self.device.clone(),
+                    reason: format!("`{command}` could not be written within {timeout:?}"),
+                })
+            }
+        };
+        StopAttempt {
+            attempted: true,
+            result,
+        }
+    }
+
+    fn take_retries(&self) -> Vec<String> {
+        std::mem::take(
+            &mut *self
+                .retries
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner),
+        )
+    }
+}
