@@ -90,6 +90,38 @@ pub trait Transport: Send {
             })
         }
     }
+
+    /// Device clear, as an operation of the interface (VISA's `viClear()`): tells the
+    /// instrument to abort what it is doing and empty its input and output buffers, and throws
+    /// away the input already received here. A reply the instrument had begun may still arrive
+    /// a moment later: a caller that needs a clean link waits a settle time and calls
+    /// [`Transport::discard_input`] again.
+    ///
+    /// How it is done belongs to the interface:
+    /// - RS-232 (the provided implementation, used by [`StreamTransport`] and
+    ///   [`ScriptedTransport`]): the Ctrl-C byte [`DEVICE_CLEAR`], the 34401A's RS-232 device
+    ///   clear, then [`Transport::discard_input`]. A `tcp://` link is an RS-232 instrument
+    ///   behind a serial-to-Ethernet converter, so it gets the same byte, passed through.
+    ///   (A native LAN SCPI socket would have no in-band device clear: its transport would
+    ///   implement this as a reconnect, or the instrument's control connection, or a documented
+    ///   no-op; no such transport exists yet.)
+    /// - GPIB through a Prologix controller (`PrologixTransport`, coming next): `++clr`, the bus's
+    ///   Selected Device Clear.
+    fn device_clear(&mut self) -> impl Future<Output = Result<(), LinkError>> + Send {
+        async move {
+            self.write_raw(&[DEVICE_CLEAR]).await?;
+            self.discard_input().await?;
+            Ok(())
+        }
+    }
+
+    /// Whether the instrument must be put in remote by a command of its own (`SYST:REM` on the
+    /// 34401A's RS-232 port) and handed back with another (`SYST:LOC`). True for RS-232 (the
+    /// provided implementation); false over GPIB, where the bus's REN line does it and the
+    /// 34401A does not accept those commands (they are RS-232-only in its manual).
+    fn needs_remote_command(&self) -> bool {
+        true
+    }
 }
 
 /// A piece of a line returned by [`Transport::read_field`].
@@ -126,5 +158,11 @@ impl<T: Transport + ?Sized> Transport for &mut T {
         timeout: Option<Duration>,
     ) -> impl Future<Output = Result<Field, LinkError>> + Send {
         (**self).read_field(sep, timeout)
+    }
+    fn device_clear(&mut self) -> impl Future<Output = Result<(), LinkError>> + Send {
+        (**self).device_clear()
+    }
+    fn needs_remote_command(&self) -> bool {
+        (**self).needs_remote_command()
     }
 }
