@@ -13,19 +13,27 @@
 //! hands over bytes as they come) must never be mistaken for a whole reply, and every driver would
 //! otherwise re-implement the same buffering, CR stripping and timeout handling.
 //!
-//! Opening: [`open`] takes a port string (`/dev/ttyUSB0`, `COM3`, a pseudo-terminal path, or
-//! `tcp://host:port`) and [`LinkOptions`] (baud 300–9600, framing 8N2/7E2/7O2) and returns a
-//! type-erased [`StreamTransport<DynStream>`]. [`memory_pair`] gives an in-memory link for tests in
+//! Opening: [`open`] takes a port string (`/dev/ttyUSB0`, `COM3`, a pseudo-terminal path,
+//! `tcp://host:port`, or a Prologix GPIB controller: `prologix:/dev/ttyUSB0?addr=22`,
+//! `prologix-tcp://host:1234?addr=22`) and [`LinkOptions`] (baud 300–9600, framing
+//! 8N2/7E2/7O2) and returns a [`Link`]: a type-erased [`StreamTransport<DynStream>`] or a
+//! [`PrologixTransport`] over one. [`memory_pair`] gives an in-memory link for tests in
 //! virtual time, [`pseudo_terminal`] a pseudo-terminal pair for tests through the serial code.
 
 mod error;
 mod open;
+mod prologix;
 mod scripted;
 mod serial;
 mod stream;
 
 pub use error::{ErrorKind, LinkError, show_bytes};
-pub use open::{TCP_SCHEME, open, open_tcp};
+pub use open::{
+    Link, PROLOGIX_SCHEME, PROLOGIX_TCP_SCHEME, PortSpec, TCP_SCHEME, open, open_tcp, parse_port,
+};
+pub use prologix::{
+    DEFAULT_GPIB_ADDRESS, ESC, PROLOGIX_TCP_PORT, PrologixOptions, PrologixTransport, escape,
+};
 pub use scripted::{ScriptStep, ScriptedTransport};
 #[cfg(unix)]
 pub use serial::pseudo_terminal;
@@ -105,7 +113,7 @@ pub trait Transport: Send {
     ///   (A native LAN SCPI socket would have no in-band device clear: its transport would
     ///   implement this as a reconnect, or the instrument's control connection, or a documented
     ///   no-op; no such transport exists yet.)
-    /// - GPIB through a Prologix controller (`PrologixTransport`, coming next): `++clr`, the bus's
+    /// - GPIB through a Prologix controller ([`PrologixTransport`]): `++clr`, the bus's
     ///   Selected Device Clear.
     fn device_clear(&mut self) -> impl Future<Output = Result<(), LinkError>> + Send {
         async move {
