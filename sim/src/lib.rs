@@ -15,6 +15,7 @@ pub mod bench;
 pub mod dmm;
 pub mod faults;
 pub mod gyro;
+pub mod prologix;
 pub mod signal;
 pub mod table;
 
