@@ -9,6 +9,9 @@
 //! driver runs on a real serial port, a pseudo-terminal, a TCP socket, an in-memory pipe driven in
 //! virtual time, or a [`ScriptedTransport`] that checks the exact bytes a driver writes.
 //!
+//! The framing is a `tokio_util::codec` decoder and encoder, [`LineCodec`] (the model is
+//! tokio-serial's `SerialFramed<C>`), which [`StreamTransport`] drives over its read buffer.
+//!
 //! Why lines are cut here and not in the drivers: a reply that arrives in pieces (a serial port
 //! hands over bytes as they come) must never be mistaken for a whole reply, and every driver would
 //! otherwise re-implement the same buffering, CR stripping and timeout handling.
@@ -20,6 +23,7 @@
 //! [`PrologixTransport`] over one. [`memory_pair`] gives an in-memory link for tests in
 //! virtual time, [`pseudo_terminal`] a pseudo-terminal pair for tests through the serial code.
 
+mod codec;
 mod error;
 mod open;
 mod prologix;
@@ -27,6 +31,7 @@ mod scripted;
 mod serial;
 mod stream;
 
+pub use codec::{Cut, Garbled, LineCodec};
 pub use error::{ErrorKind, LinkError, show_bytes};
 pub use open::{
     Link, PROLOGIX_SCHEME, PROLOGIX_TCP_SCHEME, PortSpec, TCP_SCHEME, open, open_tcp, parse_port,

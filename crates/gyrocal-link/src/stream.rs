@@ -1,10 +1,14 @@
 //! [`StreamTransport`]: line framing over any async byte stream (serial port, TCP socket,
-//! in-memory pipe).
+//! in-memory pipe). The framing itself is [`LineCodec`] (a `tokio_util::codec` decoder and
+//! encoder); this type adds deadlines, the end of the stream and discarding stale input.
 
 use std::time::Duration;
 
+use bytes::BytesMut;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, DuplexStream};
+use tokio_util::codec::{Decoder, Encoder};
 
+use crate::codec::{Cut, LineCodec};
 use crate::{Field, LinkError, Transport};
 
 /// Any bidirectional async byte stream that can back a [`StreamTransport`].
@@ -24,8 +28,8 @@ pub const DEFAULT_MAX_LINE: usize = 256 * 1024;
 pub struct StreamTransport<S> {
     stream: S,
     name: String,
-    buf: Vec<u8>,
-    max_line: usize,
+    buf: BytesMut,
+    codec: LineCodec,
 }
 
 impl<S> std::fmt::Debug for StreamTransport<S> {
@@ -33,7 +37,7 @@ impl<S> std::fmt::Debug for StreamTransport<S> {
         f.debug_struct("StreamTransport")
             .field("name", &self.name)
             .field("buffered", &self.buf.len())
-            .field("max_line", &self.max_line)
+            .field("max_line", &self.codec.max_line())
             .finish_non_exhaustive()
     }
 }
@@ -44,14 +48,14 @@ impl<S: AsyncStream> StreamTransport<S> {
         StreamTransport {
             stream,
             name: name.into(),
-            buf: Vec::new(),
-            max_line: DEFAULT_MAX_LINE,
+            buf: BytesMut::new(),
+            codec: LineCodec::new(DEFAULT_MAX_LINE),
         }
     }
 
     /// Sets the longest line accepted before the input is declared garbled.
     pub fn with_max_line(mut self, max_line: usize) -> Self {
-        self.max_line = max_line.max(1);
+        self.codec = LineCodec::new(max_line);
         self
     }
 
@@ -74,63 +78,31 @@ impl<S: AsyncStream> StreamTransport<S> {
             stream: Box::new(self.stream),
             name: self.name,
             buf: self.buf,
-            max_line: self.max_line,
+            codec: self.codec,
         }
     }
 
-    /// Takes one complete line out of the buffer, if there is one.
-    fn take_line(&mut self) -> Option<Result<String, LinkError>> {
-        let pos = self.buf.iter().position(|&b| b == b'\n')?;
-        let mut line: Vec<u8> = self.buf.drain(..=pos).collect();
-        line.pop(); // LF
-        if line.last() == Some(&b'\r') {
-            line.pop();
+    /// Decodes one piece (a line, or a field up to `cut`'s separator) out of the buffer.
+    fn take(&mut self, cut: Cut) -> Result<Option<Field>, LinkError> {
+        self.codec.set_cut(cut);
+        match self.codec.decode(&mut self.buf) {
+            Ok(None) => Ok(None),
+            Ok(Some(Ok(field))) => Ok(Some(field)),
+            Ok(Some(Err(g))) => Err(LinkError::Garbled {
+                device: self.name.clone(),
+                reason: g.reason,
+                bytes: g.bytes,
+            }),
+            Err(e) => Err(LinkError::io(&self.name, "decoding", e)),
         }
-        Some(String::from_utf8(line).map_err(|e| LinkError::Garbled {
-            device: self.name.clone(),
-            reason: "reply is not valid text".into(),
-            bytes: e.into_bytes(),
-        }))
     }
 
-    /// Takes one piece (up to `sep` or LF) out of the buffer, if there is one.
-    fn take_field(&mut self, sep: u8) -> Option<Result<Field, LinkError>> {
-        let pos = self.buf.iter().position(|&b| b == b'\n' || b == sep)?;
-        let end_of_line = self.buf[pos] == b'\n';
-        let mut text: Vec<u8> = self.buf.drain(..=pos).collect();
-        text.pop();
-        if end_of_line && text.last() == Some(&b'\r') {
-            text.pop();
-        }
-        Some(
-            String::from_utf8(text)
-                .map(|text| Field { text, end_of_line })
-                .map_err(|e| LinkError::Garbled {
-                    device: self.name.clone(),
-                    reason: "reply is not valid text".into(),
-                    bytes: e.into_bytes(),
-                }),
-        )
-    }
-
-    /// Reads until `take` yields something, the deadline passes or the peer goes away.
-    async fn read_with<R>(
-        &mut self,
-        timeout: Option<Duration>,
-        mut take: impl FnMut(&mut Self) -> Option<Result<R, LinkError>>,
-    ) -> Result<R, LinkError> {
+    /// Reads until the codec yields a piece, the deadline passes or the peer goes away.
+    async fn read_with(&mut self, timeout: Option<Duration>, cut: Cut) -> Result<Field, LinkError> {
         let deadline = timeout.map(|t| tokio::time::Instant::now() + t);
         loop {
-            if let Some(item) = take(self) {
-                return item;
-            }
-            if self.buf.len() > self.max_line {
-                let bytes = std::mem::take(&mut self.buf);
-                return Err(LinkError::Garbled {
-                    device: self.name.clone(),
-                    reason: format!("no line terminator within {} bytes", self.max_line),
-                    bytes,
-                });
+            if let Some(field) = self.take(cut)? {
+                return Ok(field);
             }
             let n = match deadline {
                 Some(d) => match tokio::time::timeout_at(d, self.fill()).await {
@@ -139,7 +111,7 @@ impl<S: AsyncStream> StreamTransport<S> {
                         return Err(LinkError::Timeout {
                             device: self.name.clone(),
                             timeout: timeout.unwrap_or_default(),
-                            partial: self.buf.clone(),
+                            partial: self.buf.to_vec(),
                         });
                     }
                 },
@@ -148,21 +120,18 @@ impl<S: AsyncStream> StreamTransport<S> {
             if n == 0 {
                 return Err(LinkError::Disconnected {
                     device: self.name.clone(),
-                    partial: std::mem::take(&mut self.buf),
+                    partial: self.buf.split().to_vec(),
                 });
             }
         }
     }
 
     async fn fill(&mut self) -> Result<usize, LinkError> {
-        let mut chunk = [0u8; 4096];
-        let n = self
-            .stream
-            .read(&mut chunk)
+        self.buf.reserve(4096);
+        self.stream
+            .read_buf(&mut self.buf)
             .await
-            .map_err(|e| LinkError::io(&self.name, "reading", e))?;
-        self.buf.extend_from_slice(&chunk[..n]);
-        Ok(n)
+            .map_err(|e| LinkError::io(&self.name, "reading", e))
     }
 }
 
@@ -189,16 +158,25 @@ impl<S: AsyncStream> Transport for StreamTransport<S> {
         })
     }
 
+    /// Encodes the line with the codec (the line and LF) and writes it.
+    async fn send_line(&mut self, line: &str) -> Result<(), LinkError> {
+        let mut bytes = BytesMut::with_capacity(line.len() + 1);
+        self.codec
+            .encode(line, &mut bytes)
+            .map_err(|e| LinkError::io(&self.name, "encoding", e))?;
+        self.write_raw(&bytes).await
+    }
+
     async fn read_line(&mut self, timeout: Option<Duration>) -> Result<String, LinkError> {
-        self.read_with(timeout, Self::take_line).await
+        Ok(self.read_with(timeout, Cut::Line).await?.text)
     }
 
     async fn read_field(&mut self, sep: u8, timeout: Option<Duration>) -> Result<Field, LinkError> {
-        self.read_with(timeout, |s| s.take_field(sep)).await
+        self.read_with(timeout, Cut::Field(sep)).await
     }
 
     async fn discard_input(&mut self) -> Result<usize, LinkError> {
-        let mut dropped = std::mem::take(&mut self.buf).len();
+        let mut dropped = crate::codec::clear(&mut self.buf);
         loop {
             // A zero timeout still polls the read once: whatever is already waiting is taken,
             // and nothing is waited for.
