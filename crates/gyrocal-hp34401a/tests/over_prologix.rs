@@ -107,15 +107,34 @@ async fn connect_configure_and_500_readings_stream_and_memory() {
 #[tokio::test(start_paused = true)]
 async fn device_clear_recovers_after_a_garbled_reply() {
     for s in [Strategy::Stream, Strategy::Memory, Strategy::Poll] {
+        recovers_from(Fault::Garble, s).await;
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn device_clear_recovers_after_a_lost_or_truncated_reply() {
+    for f in [Fault::NoReply, Fault::Truncate] {
+        for s in [Strategy::Stream, Strategy::Memory, Strategy::Poll] {
+            recovers_from(f.clone(), s).await;
+        }
+    }
+}
+
+async fn recovers_from(fault: Fault, s: Strategy) {
+    {
         let (mut dmm, ctl, meter) = bench().await;
-        meter.inject(Fault::Garble);
+        meter.inject(fault.clone());
         let acq = dmm.acquire(40, s).await.unwrap();
         check(&acq.volts(), 40);
-        assert_eq!(acq.retries, 1, "{s:?}");
-        assert_eq!(ctl.stats().clears, 2, "connect and one recovery ({s:?})");
-        assert_eq!(meter.stats().device_clears, 2, "{s:?}");
+        assert_eq!(acq.retries, 1, "{fault:?} {s:?}");
+        assert_eq!(
+            ctl.stats().clears,
+            2,
+            "connect and one recovery ({fault:?} {s:?})"
+        );
+        assert_eq!(meter.stats().device_clears, 2, "{fault:?} {s:?}");
         // the recovery was a plain one: no re-establishing, no SYST:REM over GPIB
-        assert_eq!(acq.reestablished(), 0, "{s:?}");
+        assert_eq!(acq.reestablished(), 0, "{fault:?} {s:?}");
     }
 }
 
