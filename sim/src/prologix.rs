@@ -551,7 +551,7 @@ mod tests {
     #[tokio::test(start_paused = true)]
     async fn auto_read_after_a_command_gives_420_and_clr_clears() {
         let (mut host, ctl, dmm) = meter();
-        host.write_all(b"++addr 22\n++eos 2\n++read_tmo_ms 200\n++auto 1\nTRIG:SOUR IMM\n")
+        host.write_all(b"++addr 22\n++eos 2\n++read_tmo_ms 200\n++auto 1\n*CLS\n")
             .await
             .unwrap();
         tokio::time::sleep(Duration::from_secs(1)).await;

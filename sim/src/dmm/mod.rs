@@ -46,9 +46,9 @@
 //! the same byte as the RS-232 device clear) is Selected Device Clear, [`GPIB_TALK`] addresses
 //! the meter to talk, [`GPIB_UNTALK`] unaddresses it. Addressed to talk with nothing to say and
 //! no query pending, the meter queues -420 "Query UNTERMINATED" (what `++auto 1` provokes after
-//! a command; the check is made when the talk address arrives, so a command line still waiting
-//! for its characters' wire time runs after it: `*CLS` would then clear that -420). Bytes cross
-//! the bus at [`GPIB_CHAR_TIME`] each.
+//! a command; when commands received before the talk address have not run yet, the check waits
+//! for them, as on a meter that runs a command as soon as its terminator arrives, so `*CLS`
+//! then `++read` still leaves the -420). Bytes cross the bus at [`GPIB_CHAR_TIME`] each.
 //!
 //! The input voltage comes from a [`SignalSource`] sampled over each reading's integration
 //! window, plus seeded gaussian noise. Faults can be scheduled in [`DmmConfig::faults`] or
@@ -578,6 +578,9 @@ struct Meter {
     off_until: Option<Instant>,
     /// GPIB mode: addressed to talk.
     talk: bool,
+    /// GPIB mode: addressed to talk while commands were still waiting to run; whether that
+    /// is a -420 is decided once they have run.
+    talk_check: bool,
 }
 
 /// The Standard Event register's Power On bit.
@@ -605,6 +608,7 @@ impl Meter {
         Meter {
             remote: !cfg.strict_remote || cfg.interface == Interface::Gpib,
             talk: false,
+            talk_check: false,
             cfg,
             source,
             rng: StdRng::seed_from_u64(seed),
@@ -775,14 +779,31 @@ impl Meter {
     /// GPIB mode: addressed to talk. With nothing to say and no query pending, -420.
     fn talk_addressed(&mut self) {
         self.talk = true;
-        if !self.query_pending() && self.meas.is_none() {
+        if self.query_pending() || self.meas.is_some() {
+            return;
+        }
+        if self.lines.is_empty() && self.exec.is_none() {
             self.raise(-420, "Query UNTERMINATED");
+        } else {
+            // commands still to run (a real meter would have run them already): decide after
+            self.talk_check = true;
+        }
+    }
+
+    /// The deferred -420 check of [`Meter::talk_addressed`], once the commands have run.
+    fn deferred_talk_check(&mut self) {
+        if self.talk_check && self.lines.is_empty() && self.exec.is_none() && self.meas.is_none() {
+            self.talk_check = false;
+            if self.talk && !self.query_pending() {
+                self.raise(-420, "Query UNTERMINATED");
+            }
         }
     }
 
     fn device_clear(&mut self) {
         self.counters.device_clears += 1;
         self.talk = false;
+        self.talk_check = false;
         self.meas = None;
         self.exec = None;
         self.out.clear();
@@ -888,6 +909,7 @@ impl Meter {
         self.counters.power_cycles += 1;
         self.remote = !self.cfg.strict_remote || self.gpib();
         self.talk = false;
+        self.talk_check = false;
         self.set = Settings::default();
         self.errors.clear();
         self.memory.clear();
@@ -1018,6 +1040,7 @@ impl Meter {
                 break;
             }
         }
+        self.deferred_talk_check();
     }
 
     fn trigger_delay(&self) -> Duration {
