@@ -13,6 +13,29 @@ use tokio_util::codec::{Decoder, Encoder};
 
 use crate::Field;
 
+/// A framing a [`StreamTransport`] can drive: decodes pieces ([`Field`]s, or [`Garbled`]
+/// bytes as an item so reading goes on after them), encodes a line to send, and cuts whole
+/// lines or fields as [`Transport::read_line`] and [`Transport::read_field`] ask.
+/// [`LineCodec`] is the one every current instrument uses; a prompt-terminated dialect would
+/// be another implementation.
+///
+/// [`Transport::read_line`]: crate::Transport::read_line
+/// [`Transport::read_field`]: crate::Transport::read_field
+pub trait FrameCodec:
+    Decoder<Item = Result<Field, Garbled>, Error = std::io::Error>
+    + for<'a> Encoder<&'a str, Error = std::io::Error>
+    + Send
+{
+    /// What the next decode cuts.
+    fn set_cut(&mut self, cut: Cut);
+}
+
+impl FrameCodec for LineCodec {
+    fn set_cut(&mut self, cut: Cut) {
+        LineCodec::set_cut(self, cut);
+    }
+}
+
 /// Bytes that cannot be a reply: why, and the bytes (taken out of the buffer).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Garbled {

@@ -31,7 +31,7 @@ mod scripted;
 mod serial;
 mod stream;
 
-pub use codec::{Cut, Garbled, LineCodec};
+pub use codec::{Cut, FrameCodec, Garbled, LineCodec};
 pub use error::{ErrorKind, LinkError, show_bytes};
 pub use open::{
     Link, PROLOGIX_SCHEME, PROLOGIX_TCP_SCHEME, PortSpec, TCP_SCHEME, open, open_tcp, parse_port,

@@ -6,9 +6,8 @@ use std::time::Duration;
 
 use bytes::BytesMut;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, DuplexStream};
-use tokio_util::codec::{Decoder, Encoder};
 
-use crate::codec::{Cut, LineCodec};
+use crate::codec::{Cut, FrameCodec, LineCodec};
 use crate::{Field, LinkError, Transport};
 
 /// Any bidirectional async byte stream that can back a [`StreamTransport`].
@@ -25,38 +24,55 @@ pub const DEFAULT_MAX_LINE: usize = 256 * 1024;
 
 /// Line framing over a byte stream: buffers input, returns whole LF-terminated lines with a
 /// trailing CR removed, and keeps any bytes after the LF for the next call.
-pub struct StreamTransport<S> {
+///
+/// The framing is the codec `C`, [`LineCodec`] unless another [`FrameCodec`] is given with
+/// [`StreamTransport::with_codec`] (a prompt-terminated or fixed-length framing is a codec, not
+/// a transport).
+pub struct StreamTransport<S, C = LineCodec> {
     stream: S,
     name: String,
     buf: BytesMut,
-    codec: LineCodec,
+    codec: C,
 }
 
-impl<S> std::fmt::Debug for StreamTransport<S> {
+impl<S, C: std::fmt::Debug> std::fmt::Debug for StreamTransport<S, C> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("StreamTransport")
             .field("name", &self.name)
             .field("buffered", &self.buf.len())
-            .field("max_line", &self.codec.max_line())
+            .field("codec", &self.codec)
             .finish_non_exhaustive()
     }
 }
 
 impl<S: AsyncStream> StreamTransport<S> {
-    /// Wraps `stream`; `name` is what error messages call the link.
+    /// Wraps `stream` with the line framing ([`LineCodec`]); `name` is what error messages call
+    /// the link.
     pub fn new(stream: S, name: impl Into<String>) -> Self {
-        StreamTransport {
-            stream,
-            name: name.into(),
-            buf: BytesMut::new(),
-            codec: LineCodec::new(DEFAULT_MAX_LINE),
-        }
+        StreamTransport::with_codec(stream, name, LineCodec::new(DEFAULT_MAX_LINE))
     }
 
     /// Sets the longest line accepted before the input is declared garbled.
     pub fn with_max_line(mut self, max_line: usize) -> Self {
         self.codec = LineCodec::new(max_line);
         self
+    }
+}
+
+impl<S: AsyncStream, C: FrameCodec> StreamTransport<S, C> {
+    /// Wraps `stream` with the framing `codec`.
+    pub fn with_codec(stream: S, name: impl Into<String>, codec: C) -> Self {
+        StreamTransport {
+            stream,
+            name: name.into(),
+            buf: BytesMut::new(),
+            codec,
+        }
+    }
+
+    /// The codec.
+    pub fn codec(&self) -> &C {
+        &self.codec
     }
 
     /// The wrapped stream.
@@ -70,7 +86,7 @@ impl<S: AsyncStream> StreamTransport<S> {
     }
 
     /// Erases the stream type.
-    pub fn boxed(self) -> StreamTransport<DynStream>
+    pub fn boxed(self) -> StreamTransport<DynStream, C>
     where
         S: 'static,
     {
@@ -135,7 +151,7 @@ impl<S: AsyncStream> StreamTransport<S> {
     }
 }
 
-impl<S: AsyncStream> Transport for StreamTransport<S> {
+impl<S: AsyncStream, C: FrameCodec> Transport for StreamTransport<S, C> {
     fn describe(&self) -> &str {
         &self.name
     }
@@ -204,6 +220,54 @@ pub fn memory_pair(name: impl Into<String>) -> (StreamTransport<DuplexStream>, D
 mod tests {
     use super::*;
     use crate::ErrorKind;
+    use crate::codec::Garbled;
+    use bytes::BufMut;
+    use tokio_util::codec::{Decoder, Encoder};
+
+    /// Another framing is another codec: replies end with a `>` prompt, commands with CR.
+    #[derive(Debug)]
+    struct Prompt;
+    impl Decoder for Prompt {
+        type Item = Result<Field, Garbled>;
+        type Error = std::io::Error;
+        fn decode(&mut self, buf: &mut BytesMut) -> Result<Option<Self::Item>, Self::Error> {
+            let Some(pos) = buf.iter().position(|&b| b == b'>') else {
+                return Ok(None);
+            };
+            let reply = buf.split_to(pos + 1);
+            let text = String::from_utf8_lossy(&reply[..pos]).trim().to_string();
+            Ok(Some(Ok(Field {
+                text,
+                end_of_line: true,
+            })))
+        }
+    }
+    impl Encoder<&str> for Prompt {
+        type Error = std::io::Error;
+        fn encode(&mut self, line: &str, dst: &mut BytesMut) -> Result<(), Self::Error> {
+            dst.put_slice(line.as_bytes());
+            dst.put_u8(b'\r');
+            Ok(())
+        }
+    }
+    impl FrameCodec for Prompt {
+        fn set_cut(&mut self, _: crate::Cut) {}
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn another_framing_is_another_codec() {
+        let (host, mut dev) = tokio::io::duplex(1024);
+        let mut t = StreamTransport::with_codec(host, "table", Prompt);
+        t.send_line("PVE").await.unwrap();
+        let mut got = [0u8; 4];
+        dev.read_exact(&mut got).await.unwrap();
+        assert_eq!(&got, b"PVE\r");
+        dev.write_all(b"\r\n+10.0000\r\n>").await.unwrap();
+        let s = Some(Duration::from_secs(1));
+        assert_eq!(t.read_line(s).await.unwrap(), "+10.0000");
+        let err = t.read_line(s).await.unwrap_err();
+        assert_eq!(err.kind(), ErrorKind::Timeout);
+    }
 
     #[tokio::test(start_paused = true)]
     async fn lines_are_split_and_cr_stripped() {
