@@ -3,11 +3,15 @@
 //! The async, line-oriented transport every gyrocal instrument driver talks through.
 //!
 //! Instruments on RS-232 (the HP 34401A, a rate table behind a serial converter) speak lines of
-//! text. The drivers only need four things from a link: send a line, read one complete line with
-//! a deadline, write raw bytes (the 34401A's Ctrl-C device clear), and throw away stale input.
-//! [`Transport`] is exactly that, so the protocol code is generic over the link and the same
-//! driver runs on a real serial port, a pseudo-terminal, a TCP socket, an in-memory pipe driven in
-//! virtual time, or a [`ScriptedTransport`] that checks the exact bytes a driver writes.
+//! text. The drivers only need a few things from a link: send a line, read one complete line (or
+//! a field of it) with a deadline, write raw bytes, throw away stale input, clear the device
+//! the way the interface does it ([`Transport::device_clear`]: Ctrl-C on RS-232, `++clr` on
+//! GPIB), and know whether the instrument needs a remote command
+//! ([`Transport::needs_remote_command`]). [`Transport`] is exactly that, so the protocol code is
+//! generic over the link and the same driver runs on a real serial port, a pseudo-terminal, a
+//! TCP socket, GPIB behind a Prologix controller ([`PrologixTransport`]), an in-memory pipe
+//! driven in virtual time, or a [`ScriptedTransport`] that checks the exact bytes a driver
+//! writes.
 //!
 //! The framing is a `tokio_util::codec` decoder and encoder, [`LineCodec`] (the model is
 //! tokio-serial's `SerialFramed<C>`), which [`StreamTransport`] drives over its read buffer.
