@@ -18,6 +18,7 @@ pub mod dmm;
 pub mod faults;
 pub mod from_plan;
 pub mod gyro;
+pub mod prologix;
 pub mod signal;
 pub mod table;
 

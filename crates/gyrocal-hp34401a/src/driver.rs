@@ -2,7 +2,7 @@
 
 use std::time::Duration;
 
-use gyrocal_link::{DEVICE_CLEAR, Transport};
+use gyrocal_link::Transport;
 use tokio::time::Instant;
 
 use crate::timing::{MAX_SAMPLE_COUNT, MEMORY_READINGS, Strategy, Timing};
@@ -290,11 +290,14 @@ impl<T: Transport> Hp34401a<T> {
         self.link
     }
 
-    /// Device clear, `SYST:REM` (or `SYST:RWL`), `*IDN?` checked to be a 34401A, `*RST;*CLS`,
+    /// Device clear, `SYST:REM` (or `SYST:RWL`; neither over GPIB, see
+    /// [`Transport::needs_remote_command`]), `*IDN?` checked to be a 34401A, `*RST;*CLS`,
     /// then the error queue drained (entries left from before are logged).
     pub async fn connect(&mut self) -> Result<&Identity, Error> {
         self.device_clear().await?;
-        self.command(self.remote_command()).await?;
+        if let Some(remote) = self.remote_command() {
+            self.command(remote).await?;
+        }
         let reply = self.query("*IDN?", self.options.query_timeout).await?;
         let Some(id) = Identity::parse(&reply) else {
             return Err(Error::NotA34401A {
@@ -311,15 +314,21 @@ impl<T: Transport> Hp34401a<T> {
         Ok(self.identity.insert(id))
     }
 
-    /// Hands the meter back to its front panel (`SYST:LOC`) and returns the link.
+    /// Hands the meter back to its front panel (`SYST:LOC`, on links that need remote commands:
+    /// see [`Transport::needs_remote_command`]; over GPIB going to local is the controller's
+    /// business) and returns the link.
     pub async fn close(mut self) -> Result<T, Error> {
         self.local().await?;
         Ok(self.link)
     }
 
-    /// Hands the meter back to its front panel (`SYST:LOC`), keeping the driver.
+    /// Hands the meter back to its front panel (`SYST:LOC` on links that need remote
+    /// commands; over GPIB going to local is the controller's business), keeping the driver.
     pub async fn local(&mut self) -> Result<(), Error> {
-        self.command("SYST:LOC").await
+        if self.link.needs_remote_command() {
+            self.command("SYST:LOC").await?;
+        }
+        Ok(())
     }
 
     /// Configures DC volts. `config` is validated before anything is sent; afterwards the error
@@ -348,11 +357,16 @@ impl<T: Transport> Hp34401a<T> {
         Ok(())
     }
 
-    fn remote_command(&self) -> &'static str {
-        if self.options.lock_front_panel {
-            "SYST:RWL"
+    /// `SYST:REM` (or `SYST:RWL`) when the link needs it ([`Transport::needs_remote_command`]:
+    /// RS-232 does; over GPIB the bus puts the meter in remote and the 34401A takes no
+    /// `SYST:REM`, an RS-232-only command).
+    fn remote_command(&self) -> Option<&'static str> {
+        if !self.link.needs_remote_command() {
+            None
+        } else if self.options.lock_front_panel {
+            Some("SYST:RWL")
         } else {
-            "SYST:REM"
+            Some("SYST:REM")
         }
     }
 
@@ -500,7 +514,9 @@ impl<T: Transport> Hp34401a<T> {
     /// the configuration again, the error queue drained (must be empty).
     async fn reestablish_once(&mut self, deadline: Instant) -> Result<(), Error> {
         self.device_clear().await?;
-        self.command(self.remote_command()).await?;
+        if let Some(remote) = self.remote_command() {
+            self.command(remote).await?;
+        }
         self.command("*CLS").await?;
         let left = deadline.saturating_duration_since(Instant::now());
         let timeout = self
@@ -817,8 +833,11 @@ impl<T: Transport> Hp34401a<T> {
         expected.mul_f64(self.options.timeout_factor.max(1.0)) + self.options.timeout_slack
     }
 
+    /// The interface's device clear ([`Transport::device_clear`]: the 0x03 byte on RS-232,
+    /// `++clr` through a Prologix GPIB controller), then the settle pause and the stale input
+    /// thrown away.
     async fn device_clear(&mut self) -> Result<(), Error> {
-        self.link.write_raw(&[DEVICE_CLEAR]).await?;
+        self.link.device_clear().await?;
         self.in_flight = 0;
         tokio::time::sleep(self.options.clear_settle).await;
         let dropped = self.link.discard_input().await?;

@@ -1,13 +1,16 @@
 //! # gyrocal-hp34401a
 //!
 //! A driver for the HP 34401A digital multimeter over RS-232 (or TCP through a serial
-//! converter), generic over [`gyrocal_link::Transport`] so the same code runs on a real port, a
+//! converter), or over GPIB through a Prologix controller ([`gyrocal_link::PrologixTransport`]:
+//! device clear is then `++clr` and no `SYST:REM`/`SYST:LOC` is sent, as the link says through
+//! [`gyrocal_link::Transport::needs_remote_command`]), generic over [`gyrocal_link::Transport`] so the same code runs on a real port, a
 //! pseudo-terminal, an in-memory pipe to the simulator in virtual time, or a transcript.
 //!
 //! Why it looks the way it does (see `shared/docs/hp34401a.md`):
 //!
 //! - the meter answers nothing sensible until `SYST:REM`, so [`Hp34401a::connect`] starts with a
-//!   device clear (Ctrl-C) and `SYST:REM`, then checks `*IDN?`;
+//!   device clear (the interface's: Ctrl-C on RS-232) and `SYST:REM` (RS-232 only), then checks
+//!   `*IDN?`;
 //! - the meter's RS-232 handshake cannot be used through `serialport`, and queries that pile up
 //!   give mixed replies (-410/-420): the driver reads every reply before it sends anything else
 //!   and keeps fewer than ~100 characters of commands unacknowledged;

@@ -454,3 +454,39 @@ async fn another_instrument_after_the_reestablish_is_retried_then_named() {
     );
     assert!(msg.contains("FLUKE,8846A"), "{msg}");
 }
+
+/// Over GPIB through a Prologix controller: the controller's set-up, `++clr` as the device
+/// clear, no `SYST:REM`, every reply fetched with `++read eoi`, no `SYST:LOC` at close.
+#[tokio::test]
+async fn connect_and_close_over_a_prologix_controller() {
+    use gyrocal_link::{PrologixOptions, PrologixTransport};
+    let script = ScriptedTransport::new("prologix")
+        .expect_line("++savecfg 0")
+        .expect_line("++mode 1")
+        .expect_line("++ifc")
+        .expect_line("++addr 22")
+        .expect_line("++auto 0")
+        .expect_line("++eoi 1")
+        .expect_line("++eos 2")
+        .expect_line("++eot_enable 0")
+        .expect_line("++read_tmo_ms 1000")
+        .query("++ver", "Prologix GPIB-USB Controller version 6.107")
+        .expect_line("++clr")
+        .expect_line("*IDN?")
+        .query("++read eoi", IDN)
+        .expect_line("*RST;*CLS")
+        .expect_line("SYST:ERR?")
+        .query("++read eoi", NO_ERROR);
+    let link = PrologixTransport::open(script, PrologixOptions::default())
+        .await
+        .unwrap();
+    let mut dmm = Hp34401a::new(
+        link,
+        DriverOptions {
+            clear_settle: std::time::Duration::ZERO,
+            ..DriverOptions::default()
+        },
+    );
+    dmm.connect().await.unwrap();
+    dmm.close().await.unwrap().into_inner().done();
+}

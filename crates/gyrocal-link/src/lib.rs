@@ -3,31 +3,48 @@
 //! The async, line-oriented transport every gyrocal instrument driver talks through.
 //!
 //! Instruments on RS-232 (the HP 34401A, a rate table behind a serial converter) speak lines of
-//! text. The drivers only need four things from a link: send a line, read one complete line with
-//! a deadline, write raw bytes (the 34401A's Ctrl-C device clear), and throw away stale input.
+//! text. The drivers only need a few things from a link: send a line, read one complete line (or
+//! a field of it) with a deadline, write raw bytes, throw away stale input, clear the device
+//! the way the interface does it ([`Transport::device_clear`]: Ctrl-C on RS-232, `++clr` on
+//! GPIB), and know whether the instrument needs a remote command
+//! ([`Transport::needs_remote_command`]). [`Transport`] is exactly that, so the protocol code is
+//! generic over the link and the same driver runs on a real serial port, a pseudo-terminal, a
+//! TCP socket, GPIB behind a Prologix controller ([`PrologixTransport`]), an in-memory pipe
+//! driven in virtual time, or a [`ScriptedTransport`] that checks the exact bytes a driver
+//! writes.
+//!
+//! The framing is a `tokio_util::codec` decoder and encoder, [`LineCodec`] (the model is
+//! tokio-serial's `SerialFramed<C>`), which [`StreamTransport`] drives over its read buffer.
 //! (A controller whose replies end with a prompt and no line terminator is read with
 //! [`Transport::read_until`].)
-//! [`Transport`] is exactly that, so the protocol code is generic over the link and the same
-//! driver runs on a real serial port, a pseudo-terminal, a TCP socket, an in-memory pipe driven in
-//! virtual time, or a [`ScriptedTransport`] that checks the exact bytes a driver writes.
 //!
 //! Why lines are cut here and not in the drivers: a reply that arrives in pieces (a serial port
 //! hands over bytes as they come) must never be mistaken for a whole reply, and every driver would
 //! otherwise re-implement the same buffering, CR stripping and timeout handling.
 //!
-//! Opening: [`open`] takes a port string (`/dev/ttyUSB0`, `COM3`, a pseudo-terminal path, or
-//! `tcp://host:port`) and [`LinkOptions`] (baud 300–9600, framing 8N2/7E2/7O2) and returns a
-//! type-erased [`StreamTransport<DynStream>`]. [`memory_pair`] gives an in-memory link for tests in
+//! Opening: [`open`] takes a port string (`/dev/ttyUSB0`, `COM3`, a pseudo-terminal path,
+//! `tcp://host:port`, or a Prologix GPIB controller: `prologix:/dev/ttyUSB0?addr=22`,
+//! `prologix-tcp://host:1234?addr=22`) and [`LinkOptions`] (baud 300–9600, framing
+//! 8N2/7E2/7O2) and returns a [`Link`]: a type-erased [`StreamTransport<DynStream>`] or a
+//! [`PrologixTransport`] over one. [`memory_pair`] gives an in-memory link for tests in
 //! virtual time, [`pseudo_terminal`] a pseudo-terminal pair for tests through the serial code.
 
+mod codec;
 mod error;
 mod open;
+mod prologix;
 mod scripted;
 mod serial;
 mod stream;
 
+pub use codec::{Cut, FrameCodec, Garbled, LineCodec};
 pub use error::{ErrorKind, LinkError, show_bytes};
-pub use open::{TCP_SCHEME, open, open_tcp};
+pub use open::{
+    Link, PROLOGIX_SCHEME, PROLOGIX_TCP_SCHEME, PortSpec, TCP_SCHEME, open, open_tcp, parse_port,
+};
+pub use prologix::{
+    DEFAULT_GPIB_ADDRESS, ESC, PROLOGIX_TCP_PORT, PrologixOptions, PrologixTransport, escape,
+};
 pub use scripted::{ScriptStep, ScriptedTransport};
 #[cfg(unix)]
 pub use serial::pseudo_terminal;
@@ -116,6 +133,38 @@ pub trait Transport: Send {
             ))
         }
     }
+
+    /// Device clear, as an operation of the interface (VISA's `viClear()`): tells the
+    /// instrument to abort what it is doing and empty its input and output buffers, and throws
+    /// away the input already received here. A reply the instrument had begun may still arrive
+    /// a moment later: a caller that needs a clean link waits a settle time and calls
+    /// [`Transport::discard_input`] again.
+    ///
+    /// How it is done belongs to the interface:
+    /// - RS-232 (the provided implementation, used by [`StreamTransport`] and
+    ///   [`ScriptedTransport`]): the Ctrl-C byte [`DEVICE_CLEAR`], the 34401A's RS-232 device
+    ///   clear, then [`Transport::discard_input`]. A `tcp://` link is an RS-232 instrument
+    ///   behind a serial-to-Ethernet converter, so it gets the same byte, passed through.
+    ///   (A native LAN SCPI socket would have no in-band device clear: its transport would
+    ///   implement this as a reconnect, or the instrument's control connection, or a documented
+    ///   no-op; no such transport exists yet.)
+    /// - GPIB through a Prologix controller ([`PrologixTransport`]): `++clr`, the bus's
+    ///   Selected Device Clear.
+    fn device_clear(&mut self) -> impl Future<Output = Result<(), LinkError>> + Send {
+        async move {
+            self.write_raw(&[DEVICE_CLEAR]).await?;
+            self.discard_input().await?;
+            Ok(())
+        }
+    }
+
+    /// Whether the instrument must be put in remote by a command of its own (`SYST:REM` on the
+    /// 34401A's RS-232 port) and handed back with another (`SYST:LOC`). True for RS-232 (the
+    /// provided implementation); false over GPIB, where the bus's REN line does it and the
+    /// 34401A does not accept those commands (they are RS-232-only in its manual).
+    fn needs_remote_command(&self) -> bool {
+        true
+    }
 }
 
 /// A piece of a line returned by [`Transport::read_field`].
@@ -159,5 +208,11 @@ impl<T: Transport + ?Sized> Transport for &mut T {
         timeout: Option<Duration>,
     ) -> impl Future<Output = Result<String, LinkError>> + Send {
         (**self).read_until(delimiter, timeout)
+    }
+    fn device_clear(&mut self) -> impl Future<Output = Result<(), LinkError>> + Send {
+        (**self).device_clear()
+    }
+    fn needs_remote_command(&self) -> bool {
+        (**self).needs_remote_command()
     }
 }

@@ -1,10 +1,13 @@
 //! [`StreamTransport`]: line framing over any async byte stream (serial port, TCP socket,
-//! in-memory pipe).
+//! in-memory pipe). The framing itself is [`LineCodec`] (a `tokio_util::codec` decoder and
+//! encoder); this type adds deadlines, the end of the stream and discarding stale input.
 
 use std::time::Duration;
 
+use bytes::BytesMut;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, DuplexStream};
 
+use crate::codec::{Cut, FrameCodec, LineCodec};
 use crate::{Field, LinkError, Transport};
 
 /// Any bidirectional async byte stream that can back a [`StreamTransport`].
@@ -21,38 +24,55 @@ pub const DEFAULT_MAX_LINE: usize = 256 * 1024;
 
 /// Line framing over a byte stream: buffers input, returns whole LF-terminated lines with a
 /// trailing CR removed, and keeps any bytes after the LF for the next call.
-pub struct StreamTransport<S> {
+///
+/// The framing is the codec `C`, [`LineCodec`] unless another [`FrameCodec`] is given with
+/// [`StreamTransport::with_codec`] (a prompt-terminated or fixed-length framing is a codec, not
+/// a transport).
+pub struct StreamTransport<S, C = LineCodec> {
     stream: S,
     name: String,
-    buf: Vec<u8>,
-    max_line: usize,
+    buf: BytesMut,
+    codec: C,
 }
 
-impl<S> std::fmt::Debug for StreamTransport<S> {
+impl<S, C: std::fmt::Debug> std::fmt::Debug for StreamTransport<S, C> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("StreamTransport")
             .field("name", &self.name)
             .field("buffered", &self.buf.len())
-            .field("max_line", &self.max_line)
+            .field("codec", &self.codec)
             .finish_non_exhaustive()
     }
 }
 
 impl<S: AsyncStream> StreamTransport<S> {
-    /// Wraps `stream`; `name` is what error messages call the link.
+    /// Wraps `stream` with the line framing ([`LineCodec`]); `name` is what error messages call
+    /// the link.
     pub fn new(stream: S, name: impl Into<String>) -> Self {
-        StreamTransport {
-            stream,
-            name: name.into(),
-            buf: Vec::new(),
-            max_line: DEFAULT_MAX_LINE,
-        }
+        StreamTransport::with_codec(stream, name, LineCodec::new(DEFAULT_MAX_LINE))
     }
 
     /// Sets the longest line accepted before the input is declared garbled.
     pub fn with_max_line(mut self, max_line: usize) -> Self {
-        self.max_line = max_line.max(1);
+        self.codec = LineCodec::new(max_line);
         self
+    }
+}
+
+impl<S: AsyncStream, C: FrameCodec> StreamTransport<S, C> {
+    /// Wraps `stream` with the framing `codec`.
+    pub fn with_codec(stream: S, name: impl Into<String>, codec: C) -> Self {
+        StreamTransport {
+            stream,
+            name: name.into(),
+            buf: BytesMut::new(),
+            codec,
+        }
+    }
+
+    /// The codec.
+    pub fn codec(&self) -> &C {
+        &self.codec
     }
 
     /// The wrapped stream.
@@ -66,7 +86,7 @@ impl<S: AsyncStream> StreamTransport<S> {
     }
 
     /// Erases the stream type.
-    pub fn boxed(self) -> StreamTransport<DynStream>
+    pub fn boxed(self) -> StreamTransport<DynStream, C>
     where
         S: 'static,
     {
@@ -74,76 +94,58 @@ impl<S: AsyncStream> StreamTransport<S> {
             stream: Box::new(self.stream),
             name: self.name,
             buf: self.buf,
-            max_line: self.max_line,
+            codec: self.codec,
         }
     }
 
-    /// Takes one complete line out of the buffer, if there is one.
-    fn take_line(&mut self) -> Option<Result<String, LinkError>> {
-        let pos = self.buf.iter().position(|&b| b == b'\n')?;
-        let mut line: Vec<u8> = self.buf.drain(..=pos).collect();
-        line.pop(); // LF
-        if line.last() == Some(&b'\r') {
-            line.pop();
+    /// Decodes one piece (a line, or a field up to `cut`'s separator) out of the buffer.
+    fn take(&mut self, cut: Cut) -> Result<Option<Field>, LinkError> {
+        self.codec.set_cut(cut);
+        match self.codec.decode(&mut self.buf) {
+            Ok(None) => Ok(None),
+            Ok(Some(Ok(field))) => Ok(Some(field)),
+            Ok(Some(Err(g))) => Err(LinkError::Garbled {
+                device: self.name.clone(),
+                reason: g.reason,
+                bytes: g.bytes,
+            }),
+            Err(e) => Err(LinkError::io(&self.name, "decoding", e)),
         }
-        Some(String::from_utf8(line).map_err(|e| LinkError::Garbled {
-            device: self.name.clone(),
-            reason: "reply is not valid text".into(),
-            bytes: e.into_bytes(),
-        }))
-    }
-
-    /// Takes one piece (up to `sep` or LF) out of the buffer, if there is one.
-    fn take_field(&mut self, sep: u8) -> Option<Result<Field, LinkError>> {
-        let pos = self.buf.iter().position(|&b| b == b'\n' || b == sep)?;
-        let end_of_line = self.buf[pos] == b'\n';
-        let mut text: Vec<u8> = self.buf.drain(..=pos).collect();
-        text.pop();
-        if end_of_line && text.last() == Some(&b'\r') {
-            text.pop();
-        }
-        Some(
-            String::from_utf8(text)
-                .map(|text| Field { text, end_of_line })
-                .map_err(|e| LinkError::Garbled {
-                    device: self.name.clone(),
-                    reason: "reply is not valid text".into(),
-                    bytes: e.into_bytes(),
-                }),
-        )
     }
 
     /// Takes the text up to `delimiter` (not included, the delimiter consumed) out of the
-    /// buffer, if the delimiter has arrived.
-    fn take_until(&mut self, delimiter: u8) -> Option<Result<String, LinkError>> {
-        let pos = self.buf.iter().position(|&b| b == delimiter)?;
-        let mut text: Vec<u8> = self.buf.drain(..=pos).collect();
+    /// buffer, if the delimiter has arrived (a prompt-terminated reply).
+    fn take_until(&mut self, delimiter: u8) -> Result<Option<String>, LinkError> {
+        let Some(pos) = self.buf.iter().position(|&b| b == delimiter) else {
+            return Ok(None);
+        };
+        let mut text = self.buf.split_to(pos + 1).to_vec();
         text.pop();
-        Some(String::from_utf8(text).map_err(|e| LinkError::Garbled {
-            device: self.name.clone(),
-            reason: "reply is not valid text".into(),
-            bytes: e.into_bytes(),
-        }))
+        String::from_utf8(text)
+            .map(Some)
+            .map_err(|e| LinkError::Garbled {
+                device: self.name.clone(),
+                reason: "reply is not valid text".into(),
+                bytes: e.into_bytes(),
+            })
     }
 
-    /// Reads until `take` yields something, the deadline passes or the peer goes away.
-    async fn read_with<R>(
+    /// Reads until the codec yields a piece, the deadline passes or the peer goes away.
+    async fn read_with(&mut self, timeout: Option<Duration>, cut: Cut) -> Result<Field, LinkError> {
+        self.read_until_taken(timeout, |s| s.take(cut)).await
+    }
+
+    /// Reads until `take` gets something out of the buffer, the deadline passes or the peer
+    /// goes away.
+    async fn read_until_taken<R>(
         &mut self,
         timeout: Option<Duration>,
-        mut take: impl FnMut(&mut Self) -> Option<Result<R, LinkError>>,
+        mut take: impl FnMut(&mut Self) -> Result<Option<R>, LinkError>,
     ) -> Result<R, LinkError> {
         let deadline = timeout.map(|t| tokio::time::Instant::now() + t);
         loop {
-            if let Some(item) = take(self) {
-                return item;
-            }
-            if self.buf.len() > self.max_line {
-                let bytes = std::mem::take(&mut self.buf);
-                return Err(LinkError::Garbled {
-                    device: self.name.clone(),
-                    reason: format!("no line terminator within {} bytes", self.max_line),
-                    bytes,
-                });
+            if let Some(got) = take(self)? {
+                return Ok(got);
             }
             let n = match deadline {
                 Some(d) => match tokio::time::timeout_at(d, self.fill()).await {
@@ -152,7 +154,7 @@ impl<S: AsyncStream> StreamTransport<S> {
                         return Err(LinkError::Timeout {
                             device: self.name.clone(),
                             timeout: timeout.unwrap_or_default(),
-                            partial: self.buf.clone(),
+                            partial: self.buf.to_vec(),
                         });
                     }
                 },
@@ -161,25 +163,22 @@ impl<S: AsyncStream> StreamTransport<S> {
             if n == 0 {
                 return Err(LinkError::Disconnected {
                     device: self.name.clone(),
-                    partial: std::mem::take(&mut self.buf),
+                    partial: self.buf.split().to_vec(),
                 });
             }
         }
     }
 
     async fn fill(&mut self) -> Result<usize, LinkError> {
-        let mut chunk = [0u8; 4096];
-        let n = self
-            .stream
-            .read(&mut chunk)
+        self.buf.reserve(4096);
+        self.stream
+            .read_buf(&mut self.buf)
             .await
-            .map_err(|e| LinkError::io(&self.name, "reading", e))?;
-        self.buf.extend_from_slice(&chunk[..n]);
-        Ok(n)
+            .map_err(|e| LinkError::io(&self.name, "reading", e))
     }
 }
 
-impl<S: AsyncStream> Transport for StreamTransport<S> {
+impl<S: AsyncStream, C: FrameCodec> Transport for StreamTransport<S, C> {
     fn describe(&self) -> &str {
         &self.name
     }
@@ -202,12 +201,21 @@ impl<S: AsyncStream> Transport for StreamTransport<S> {
         })
     }
 
+    /// Encodes the line with the codec (the line and LF) and writes it.
+    async fn send_line(&mut self, line: &str) -> Result<(), LinkError> {
+        let mut bytes = BytesMut::with_capacity(line.len() + 1);
+        self.codec
+            .encode(line, &mut bytes)
+            .map_err(|e| LinkError::io(&self.name, "encoding", e))?;
+        self.write_raw(&bytes).await
+    }
+
     async fn read_line(&mut self, timeout: Option<Duration>) -> Result<String, LinkError> {
-        self.read_with(timeout, Self::take_line).await
+        Ok(self.read_with(timeout, Cut::Line).await?.text)
     }
 
     async fn read_field(&mut self, sep: u8, timeout: Option<Duration>) -> Result<Field, LinkError> {
-        self.read_with(timeout, |s| s.take_field(sep)).await
+        self.read_with(timeout, Cut::Field(sep)).await
     }
 
     async fn read_until(
@@ -215,11 +223,12 @@ impl<S: AsyncStream> Transport for StreamTransport<S> {
         delimiter: u8,
         timeout: Option<Duration>,
     ) -> Result<String, LinkError> {
-        self.read_with(timeout, |s| s.take_until(delimiter)).await
+        self.read_until_taken(timeout, |s| s.take_until(delimiter))
+            .await
     }
 
     async fn discard_input(&mut self) -> Result<usize, LinkError> {
-        let mut dropped = std::mem::take(&mut self.buf).len();
+        let mut dropped = crate::codec::clear(&mut self.buf);
         loop {
             // A zero timeout still polls the read once: whatever is already waiting is taken,
             // and nothing is waited for.
@@ -247,6 +256,54 @@ pub fn memory_pair(name: impl Into<String>) -> (StreamTransport<DuplexStream>, D
 mod tests {
     use super::*;
     use crate::ErrorKind;
+    use crate::codec::Garbled;
+    use bytes::BufMut;
+    use tokio_util::codec::{Decoder, Encoder};
+
+    /// Another framing is another codec: replies end with a `>` prompt, commands with CR.
+    #[derive(Debug)]
+    struct Prompt;
+    impl Decoder for Prompt {
+        type Item = Result<Field, Garbled>;
+        type Error = std::io::Error;
+        fn decode(&mut self, buf: &mut BytesMut) -> Result<Option<Self::Item>, Self::Error> {
+            let Some(pos) = buf.iter().position(|&b| b == b'>') else {
+                return Ok(None);
+            };
+            let reply = buf.split_to(pos + 1);
+            let text = String::from_utf8_lossy(&reply[..pos]).trim().to_string();
+            Ok(Some(Ok(Field {
+                text,
+                end_of_line: true,
+            })))
+        }
+    }
+    impl Encoder<&str> for Prompt {
+        type Error = std::io::Error;
+        fn encode(&mut self, line: &str, dst: &mut BytesMut) -> Result<(), Self::Error> {
+            dst.put_slice(line.as_bytes());
+            dst.put_u8(b'\r');
+            Ok(())
+        }
+    }
+    impl FrameCodec for Prompt {
+        fn set_cut(&mut self, _: crate::Cut) {}
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn another_framing_is_another_codec() {
+        let (host, mut dev) = tokio::io::duplex(1024);
+        let mut t = StreamTransport::with_codec(host, "table", Prompt);
+        t.send_line("PVE").await.unwrap();
+        let mut got = [0u8; 4];
+        dev.read_exact(&mut got).await.unwrap();
+        assert_eq!(&got, b"PVE\r");
+        dev.write_all(b"\r\n+10.0000\r\n>").await.unwrap();
+        let s = Some(Duration::from_secs(1));
+        assert_eq!(t.read_line(s).await.unwrap(), "+10.0000");
+        let err = t.read_line(s).await.unwrap_err();
+        assert_eq!(err.kind(), ErrorKind::Timeout);
+    }
 
     #[tokio::test(start_paused = true)]
     async fn lines_are_split_and_cr_stripped() {
@@ -299,20 +356,6 @@ mod tests {
     }
 
     #[tokio::test(start_paused = true)]
-    async fn read_until_a_prompt_without_line_end() {
-        let (mut t, mut dev) = memory_pair("mem");
-        let s = Some(Duration::from_secs(1));
-        dev.write_all(b"10.0000\r\n>\r\n>").await.unwrap();
-        assert_eq!(t.read_until(b'>', s).await.unwrap(), "10.0000\r\n");
-        assert_eq!(t.read_until(b'>', s).await.unwrap(), "\r\n");
-        dev.write_all(b"partial").await.unwrap();
-        let err = t.read_until(b'>', s).await.unwrap_err();
-        assert_eq!(err.kind(), ErrorKind::Timeout);
-        dev.write_all(b"?\r>").await.unwrap();
-        assert_eq!(t.read_until(b'>', s).await.unwrap(), "partial?\r");
-    }
-
-    #[tokio::test(start_paused = true)]
     async fn fields_split_on_separator_and_line_end() {
         let (mut t, mut dev) = memory_pair("mem");
         dev.write_all(b"+1.0E+00,+2.0E+00,+3.0").await.unwrap();
@@ -330,5 +373,19 @@ mod tests {
         let f = t.read_field(b',', s).await.unwrap();
         assert_eq!((f.text.as_str(), f.end_of_line), ("+3.0E+00", true));
         assert_eq!(t.read_line(s).await.unwrap(), "NEXT");
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn read_until_a_prompt_without_line_end() {
+        let (mut t, mut dev) = memory_pair("mem");
+        let s = Some(Duration::from_secs(1));
+        dev.write_all(b"10.0000\r\n>\r\n>").await.unwrap();
+        assert_eq!(t.read_until(b'>', s).await.unwrap(), "10.0000\r\n");
+        assert_eq!(t.read_until(b'>', s).await.unwrap(), "\r\n");
+        dev.write_all(b"partial").await.unwrap();
+        let err = t.read_until(b'>', s).await.unwrap_err();
+        assert_eq!(err.kind(), ErrorKind::Timeout);
+        dev.write_all(b"?\r>").await.unwrap();
+        assert_eq!(t.read_until(b'>', s).await.unwrap(), "partial?\r");
     }
 }

@@ -114,7 +114,7 @@ fn settle() -> SettleCriteria {
     }
 }
 
-async fn open(path: &str) -> gyrocal_link::StreamTransport<gyrocal_link::DynStream> {
+async fn open(path: &str) -> gyrocal_link::Link {
     gyrocal_link::open(path, &LinkOptions::default())
         .await
         .unwrap()

@@ -1,4 +1,4 @@
-//! A simulated HP 34401A on its RS-232 port.
+//! A simulated HP 34401A on its RS-232 port (or on GPIB behind a controller: see GPIB mode below).
 //!
 //! [`SimDmm::spawn`] serves the meter's wire protocol on any async byte stream (one end of an
 //! in-memory pipe in virtual time, or the master side of a pseudo-terminal in real time) as a
@@ -34,6 +34,22 @@
 //!   characters on the wire, 20 ms to arm, per reading `delay + NPLC/f_line` (twice the
 //!   integration with autozero on), and output at 11 bits per character at the configured baud.
 //!
+//! GPIB mode ([`DmmConfig::interface`] = `gpib`, a small option for the simulated Prologix
+//! controller in [`crate::prologix`]): the stream then stands for the GPIB bus behind a
+//! controller. The meter is in remote from the start (the controller holds REN), so it needs no
+//! `SYST:REM`; `SYST:REM`, `SYST:RWL` and `SYST:LOC` are RS-232-only commands in the manual, and
+//! the simulator refuses them over GPIB with -113 "Undefined header" (its choice, unconfirmed
+//! on a real meter: it makes a driver that sends them fail its tests). Replies end in LF (with
+//! EOI on the real bus); the meter sends only while addressed to talk, and stops talking after
+//! the LF that ends a message, so a reply waits in its output buffer until the controller reads
+//! it. Bus events travel in band as single bytes the controller writes: [`GPIB_SDC`] (0x03,
+//! the same byte as the RS-232 device clear) is Selected Device Clear, [`GPIB_TALK`] addresses
+//! the meter to talk, [`GPIB_UNTALK`] unaddresses it. Addressed to talk with nothing to say and
+//! no query pending, the meter queues -420 "Query UNTERMINATED" (what `++auto 1` provokes after
+//! a command; when commands received before the talk address have not run yet, the check waits
+//! for them, as on a meter that runs a command as soon as its terminator arrives, so `*CLS`
+//! then `++read` still leaves the -420). Bytes cross the bus at [`GPIB_CHAR_TIME`] each.
+//!
 //! The input voltage comes from a [`SignalSource`] sampled over each reading's integration
 //! window, plus seeded gaussian noise. Faults can be scheduled in [`DmmConfig::faults`] or
 //! injected at run time through [`DmmHandle::inject`].
@@ -67,6 +83,27 @@ pub const ERROR_QUEUE_SIZE: usize = 20;
 pub const ARM_TIME: Duration = Duration::from_millis(20);
 /// The overload value.
 pub const OVERLOAD: f64 = 9.9e37;
+/// GPIB mode: the in-band byte for Selected Device Clear (the RS-232 device clear byte).
+pub const GPIB_SDC: u8 = gyrocal_link::DEVICE_CLEAR;
+/// GPIB mode: the in-band byte that addresses the meter to talk (MTA on a real bus).
+pub const GPIB_TALK: u8 = 0x05;
+/// GPIB mode: the in-band byte that unaddresses the meter (UNT on a real bus).
+pub const GPIB_UNTALK: u8 = 0x06;
+/// GPIB mode: time per byte on the bus, before scaling (an assumption: about 100 kB/s, well
+/// above what the meter produces; the bus is never the bottleneck).
+pub const GPIB_CHAR_TIME: Duration = Duration::from_micros(10);
+
+/// Which remote interface the simulated meter serves.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Interface {
+    /// The RS-232 port (the default): `SYST:REM` first, replies end CR LF, 11-bit characters
+    /// at the configured baud, Ctrl-C device clear.
+    #[default]
+    Rs232,
+    /// GPIB behind a controller (see the module documentation).
+    Gpib,
+}
 
 /// A fault to inject.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -147,6 +184,8 @@ pub struct DmmConfig {
     pub time_scale: f64,
     /// Faults injected when the command count reaches their mark. Default none.
     pub faults: Vec<ScheduledFault>,
+    /// The remote interface served. Default `rs232`.
+    pub interface: Interface,
 }
 
 impl Default for DmmConfig {
@@ -163,6 +202,7 @@ impl Default for DmmConfig {
             output_buffer: 512,
             time_scale: 1.0,
             faults: Vec::new(),
+            interface: Interface::Rs232,
         }
     }
 }
@@ -536,6 +576,11 @@ struct Meter {
     esr: u8,
     /// Switched off until then (a power cycle).
     off_until: Option<Instant>,
+    /// GPIB mode: addressed to talk.
+    talk: bool,
+    /// GPIB mode: addressed to talk while commands were still waiting to run; whether that
+    /// is a -420 is decided once they have run.
+    talk_check: bool,
 }
 
 /// The Standard Event register's Power On bit.
@@ -561,7 +606,9 @@ impl Meter {
         let mut faults = cfg.faults.clone();
         faults.sort_by_key(|f| std::cmp::Reverse(f.after_commands));
         Meter {
-            remote: !cfg.strict_remote,
+            remote: !cfg.strict_remote || cfg.interface == Interface::Gpib,
+            talk: false,
+            talk_check: false,
             cfg,
             source,
             rng: StdRng::seed_from_u64(seed),
@@ -603,10 +650,16 @@ impl Meter {
         loop {
             let now = Instant::now();
             self.advance(now);
-            if let Some((bytes, due)) = self.tx.take_if(|(_, due)| *due <= now) {
+            if self.may_send()
+                && let Some((bytes, due)) = self.tx.take_if(|(_, due)| *due <= now)
+            {
                 let _ = due;
                 if wr.write_all(&bytes).await.is_err() || wr.flush().await.is_err() {
                     break;
+                }
+                if self.gpib() && bytes.last() == Some(&b'\n') {
+                    // end of message (EOI): the meter stops talking
+                    self.talk = false;
                 }
                 continue;
             }
@@ -647,7 +700,19 @@ impl Meter {
         }
     }
 
+    fn gpib(&self) -> bool {
+        self.cfg.interface == Interface::Gpib
+    }
+
+    /// Whether output may go out now: always on RS-232, while addressed to talk on GPIB.
+    fn may_send(&self) -> bool {
+        !self.gpib() || self.talk
+    }
+
     fn char_time(&self) -> Duration {
+        if self.gpib() {
+            return scaled(&self.cfg, GPIB_CHAR_TIME);
+        }
         scaled(
             &self.cfg,
             Duration::from_secs_f64(11.0 / f64::from(self.cfg.baud)),
@@ -660,7 +725,9 @@ impl Meter {
         }
         let mut wake: Option<Instant> = None;
         let mut consider = |t: Instant| wake = Some(wake.map_or(t, |w| w.min(t)));
-        if let Some((_, due)) = &self.tx {
+        if let Some((_, due)) = &self.tx
+            && self.may_send()
+        {
             consider(*due);
         }
         if let Some(m) = &self.meas
@@ -689,6 +756,8 @@ impl Meter {
         for &b in bytes {
             match b {
                 gyrocal_link::DEVICE_CLEAR => self.device_clear(),
+                GPIB_TALK if self.gpib() => self.talk_addressed(),
+                GPIB_UNTALK if self.gpib() => self.talk = false,
                 b'\n' => {
                     let mut raw = std::mem::take(&mut self.inbuf);
                     if raw.last() == Some(&b'\r') {
@@ -707,8 +776,34 @@ impl Meter {
         self.counters.max_input_backlog = self.counters.max_input_backlog.max(backlog);
     }
 
+    /// GPIB mode: addressed to talk. With nothing to say and no query pending, -420.
+    fn talk_addressed(&mut self) {
+        self.talk = true;
+        if self.query_pending() || self.meas.is_some() {
+            return;
+        }
+        if self.lines.is_empty() && self.exec.is_none() {
+            self.raise(-420, "Query UNTERMINATED");
+        } else {
+            // commands still to run (a real meter would have run them already): decide after
+            self.talk_check = true;
+        }
+    }
+
+    /// The deferred -420 check of [`Meter::talk_addressed`], once the commands have run.
+    fn deferred_talk_check(&mut self) {
+        if self.talk_check && self.lines.is_empty() && self.exec.is_none() && self.meas.is_none() {
+            self.talk_check = false;
+            if self.talk && !self.query_pending() {
+                self.raise(-420, "Query UNTERMINATED");
+            }
+        }
+    }
+
     fn device_clear(&mut self) {
         self.counters.device_clears += 1;
+        self.talk = false;
+        self.talk_check = false;
         self.meas = None;
         self.exec = None;
         self.out.clear();
@@ -812,7 +907,9 @@ impl Meter {
         tracing::debug!("simulated 34401A: power on");
         self.off_until = None;
         self.counters.power_cycles += 1;
-        self.remote = !self.cfg.strict_remote;
+        self.remote = !self.cfg.strict_remote || self.gpib();
+        self.talk = false;
+        self.talk_check = false;
         self.set = Settings::default();
         self.errors.clear();
         self.memory.clear();
@@ -922,7 +1019,13 @@ impl Meter {
                 progressed = true;
             }
             if self.tx.is_none() && !self.out.is_empty() {
-                let n = self.out.len().min(16);
+                let mut n = self.out.len().min(16);
+                if self.gpib()
+                    && let Some(lf) = self.out.iter().take(n).position(|&b| b == b'\n')
+                {
+                    // a chunk ends at the end of a message (where EOI goes)
+                    n = lf + 1;
+                }
                 let chunk: Vec<u8> = self.out.drain(..n).collect();
                 let start = self.out_time.max(self.out_wire_free);
                 let due = start + self.char_time() * u32::try_from(n).unwrap_or(16);
@@ -937,6 +1040,7 @@ impl Meter {
                 break;
             }
         }
+        self.deferred_talk_check();
     }
 
     fn trigger_delay(&self) -> Duration {
@@ -1126,7 +1230,11 @@ impl Meter {
             }
         }
         if self.exec.as_ref().is_some_and(|e| e.has_output) {
-            self.emit(b"\r\n");
+            if self.gpib() {
+                self.emit(b"\n");
+            } else {
+                self.emit(b"\r\n");
+            }
         }
         self.exec = None;
         true
@@ -1137,6 +1245,11 @@ impl Meter {
             self.raise(-113, "Undefined header");
             return;
         };
+        if self.gpib() && matches!(cmd, Cmd::Remote | Cmd::Rwlock | Cmd::Local) {
+            // RS-232-only commands (see the module documentation)
+            self.raise(-113, "Undefined header");
+            return;
+        }
         if !self.remote && !matches!(cmd, Cmd::Remote | Cmd::Rwlock) {
             match self.cfg.local_mode {
                 LocalMode::Refuse => {
