@@ -36,6 +36,8 @@ pub struct BenchConfig {
     pub time_scale: f64,
     /// The rate table.
     pub table: TableConfig,
+    /// The table's wire protocol. Default ACL.
+    pub table_wire: TableWire,
     /// The gyro.
     pub gyro: GyroConfig,
     /// The multimeter.
@@ -48,8 +50,33 @@ impl Default for BenchConfig {
             seed: 1,
             time_scale: 1.0,
             table: TableConfig::default(),
+            table_wire: TableWire::default(),
             gyro: GyroConfig::default(),
             dmm: DmmConfig::default(),
+        }
+    }
+}
+
+/// The wire protocol the simulated table speaks (the motion, limits and faults are the same).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TableWire {
+    /// gyrocal's serial ACL dialect (ACUTROL).
+    #[default]
+    Acl,
+    /// The experimental Ideal Aerosmith ASCII dialect, with its wire options.
+    Aerosmith(crate::table::aerosmith::AerosmithWire),
+}
+
+impl TableHandle {
+    /// Serves `wire` on one more link (a client reconnecting, a TCP connection).
+    pub fn serve_wire<S>(&self, stream: S, wire: TableWire) -> tokio::task::JoinHandle<()>
+    where
+        S: AsyncRead + AsyncWrite + Send + Unpin + 'static,
+    {
+        match wire {
+            TableWire::Acl => self.serve_link(stream),
+            TableWire::Aerosmith(w) => self.serve_aerosmith(stream, w),
         }
     }
 }
@@ -109,6 +136,7 @@ impl Bench {
             seed,
             time_scale,
             table: mut table_config,
+            table_wire,
             gyro,
             dmm: mut dmm_config,
         } = config;
@@ -119,7 +147,12 @@ impl Bench {
         };
         table_config.time_scale = time_scale;
         dmm_config.time_scale = time_scale;
-        let table_handle = SimTable::spawn(table, table_config, derive_seed(seed, 1));
+        let table_handle = match table_wire {
+            TableWire::Acl => SimTable::spawn(table, table_config, derive_seed(seed, 1)),
+            TableWire::Aerosmith(w) => {
+                SimTable::spawn_aerosmith(table, table_config, w, derive_seed(seed, 1))
+            }
+        };
         let signal = GyroSignal::new(gyro, table_handle.clone(), derive_seed(seed, 2));
         let truth = signal.truth();
         let dmm_handle = SimDmm::spawn(dmm, dmm_config, Box::new(signal), derive_seed(seed, 3));

@@ -17,9 +17,9 @@
 //! The gyro's own white noise is switched off, so `noise_v` alone sets the reading scatter
 //! and a plan reads as what it means.
 
-use gyrocal_files::{Framing, Plan};
+use gyrocal_files::{Framing, Plan, TableDialect};
 
-use crate::bench::BenchConfig;
+use crate::bench::{BenchConfig, TableWire};
 
 /// The bench configuration for `plan`'s `[simulation]` section, at real instrument timing
 /// (`time_scale` 1; set it for a real-time bench).
@@ -41,6 +41,12 @@ pub fn bench_config(plan: &Plan) -> BenchConfig {
     b.gyro.bias_random_walk = s.bias_walk;
     b.gyro.latitude_deg = s.latitude_deg;
     b.gyro.earth_rate = true;
+    // the plan's dialect is the wire the simulated table speaks (the Aerosmith wire with the
+    // defaults the driver assumes)
+    b.table_wire = match plan.table().dialect {
+        TableDialect::Acl => TableWire::Acl,
+        TableDialect::Aerosmith => TableWire::Aerosmith(Default::default()),
+    };
     b.table.rate_noise_std = s.rate_noise_dps;
     b.table.ripple_amplitude = s.ripple_dps;
     b.dmm.noise_v = s.noise_v;

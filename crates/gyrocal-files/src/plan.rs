@@ -521,6 +521,10 @@ impl fmt::Display for Port {
 pub enum TableDialect {
     /// Acutronic ACL (ACUTROL3000), the first dialect gyrocal speaks.
     Acl,
+    /// Ideal Aerosmith three-letter ASCII commands (`JOG`, `ACL`, `STO`, `PVE`, ...):
+    /// experimental, written from public scripts, no vendor manual (see gyrocal-table's
+    /// `aerosmith` module for what a lab must verify first).
+    Aerosmith,
 }
 
 impl TableDialect {
@@ -528,6 +532,7 @@ impl TableDialect {
     pub fn as_str(self) -> &'static str {
         match self {
             TableDialect::Acl => "acl",
+            TableDialect::Aerosmith => "aerosmith",
         }
     }
 }
@@ -1130,10 +1135,14 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
     // [table] first: the rates are checked against its limits.
     let dialect = match t.dialect.to_ascii_lowercase().as_str() {
         "acl" => TableDialect::Acl,
+        "aerosmith" => TableDialect::Aerosmith,
         _ => {
             return Err(cx.err(
                 "table.dialect",
-                format!("must be \"acl\" (got {:?})", t.dialect),
+                format!(
+                    "must be \"acl\" or \"aerosmith\" (experimental) (got {:?})",
+                    t.dialect
+                ),
             ));
         }
     };

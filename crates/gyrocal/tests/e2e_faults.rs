@@ -41,6 +41,11 @@ fn write_plan(dir: &Path) -> PathBuf {
 
 /// The same plan with other rates and acceleration.
 fn write_plan_with(dir: &Path, rates: &[f64], acceleration_dps2: f64) -> PathBuf {
+    write_plan_full(dir, rates, acceleration_dps2, "acl")
+}
+
+/// The same plan with another table dialect too.
+fn write_plan_full(dir: &Path, rates: &[f64], acceleration_dps2: f64, dialect: &str) -> PathBuf {
     let rates: Vec<String> = rates.iter().map(|r| format!("{r}")).collect();
     let text = format!(
         r#"[plan]
@@ -52,7 +57,7 @@ repeat = 1
 whole_revolutions = 0
 
 [table]
-dialect = "acl"
+dialect = "{dialect}"
 port = "/dev/ttyUSB1"
 baud = 9600
 max_rate_dps = 10
@@ -1152,4 +1157,47 @@ fn e2e_a_meter_power_cycle_is_recovered_and_the_run_completes() {
     assert_eq!(last["dmm"]["nplc"], 1.0, "{last}");
     assert_eq!(last["dmm"]["remote"], false, "{last}");
     assert_table_parked(&last);
+}
+
+// ---------------------------------------------------------------------------------------------
+// 21–22. the experimental Ideal Aerosmith dialect: the same run, the same safety
+
+#[test]
+fn e2e_aerosmith_table_clean_run_completes_with_the_table_at_rest() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_plan_full(tmp.path(), &RATES, 20.0, "aerosmith");
+    let dir = tmp.path().join("run");
+    let sim = Sim::start(&plan, &[]);
+    let end = Run::start(&plan, &sim, &out_args(&dir), None).wait();
+    assert_eq!(end.code, Some(0), "{end:?}");
+    check_complete(&dir);
+    assert!(
+        end.stderr.contains("rate table: Ideal Aerosmith"),
+        "{}",
+        end.stderr
+    );
+    assert!(end.stderr.contains("table at rest"), "{}", end.stderr);
+    let last = sim.finish();
+    assert_table_parked(&last);
+}
+
+#[test]
+fn e2e_aerosmith_table_sigint_at_speed_exits_only_at_rest() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_plan_full(tmp.path(), &[0.0, 10.0], 5.0, "aerosmith");
+    let dir = tmp.path().join("run");
+    let sim = Sim::start_scaled(&plan, &[], "4");
+    let run = Run::start(&plan, &sim, &out_args(&dir), Some(ACQ_LOG));
+    wait_acquisition(&run, 2);
+    std::thread::sleep(Duration::from_millis(100));
+    run.guard.signal(Signal::SIGINT);
+    let end = run.wait();
+    assert_eq!(end.code, Some(130), "{end:?}");
+    assert!(end.stderr.contains("table at rest"), "{}", end.stderr);
+    assert_eq!(check_recorded_steps_whole(&dir), vec![0]);
+    let last = sim.finish();
+    assert!(
+        last["table"]["actual_rate"].as_f64().unwrap().abs() < 0.05,
+        "{last}"
+    );
 }

@@ -550,3 +550,33 @@ fn a_simulated_run_cannot_be_resumed_on_the_instruments() {
         "the refused resume changed nothing"
     );
 }
+
+#[test]
+fn the_aerosmith_dialect_runs_the_same_plan_on_the_simulated_bench() {
+    // the plan's [table] dialect picks the driver and the simulated table's wire
+    let tmp = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(config("quick.toml"))
+        .unwrap()
+        .replace("dialect = \"acl\"", "dialect = \"aerosmith\"");
+    assert!(text.contains("\"aerosmith\""));
+    let plan = tmp.path().join("aerosmith.toml");
+    std::fs::write(&plan, text).unwrap();
+    let dir = tmp.path().join("run");
+    let out = gyrocal()
+        .args([
+            "run",
+            plan.to_str().unwrap(),
+            "--simulate",
+            "--no-report",
+            "--out",
+        ])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(stderr.contains("rate table: Ideal Aerosmith"), "{stderr}");
+    assert!(stderr.contains("table at rest"), "{stderr}");
+    check_complete(&dir, 5, 50);
+    assert_eq!(final_table_state(&stderr)["stopped"], true);
+}

@@ -104,7 +104,13 @@ fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
     let _ = writeln!(o, "hash {}", plan.hash());
     let _ = writeln!(
         o,
-        "table: acl on {} (max {} °/s, {} °/s², tolerance {} °/s for {:.1} s, timeout {:.0} s)",
+        "table: {}{} on {} (max {} °/s, {} °/s², tolerance {} °/s for {:.1} s, timeout {:.0} s)",
+        t.dialect.as_str(),
+        if t.dialect == gyrocal_run::TableDialect::Aerosmith {
+            " (experimental)"
+        } else {
+            ""
+        },
         t.port,
         t.max_rate_dps,
         t.acceleration_dps2,

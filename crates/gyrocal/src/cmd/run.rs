@@ -27,7 +27,7 @@ use gyrocal_link::{LinkOptions, Transport};
 use gyrocal_run::sequencer::table_config;
 use gyrocal_run::{
     Event, Phase, Plan, Port, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status,
-    StopRequest, TableRest, fit_run,
+    StopRequest, TableDialect, TableRest, fit_run,
 };
 use gyrocal_table::acl::AclTable;
 use tokio::sync::{mpsc, watch};
@@ -313,6 +313,10 @@ async fn execute(
     }
 }
 
+/// The instruments the plan names, built on their links: here, at the edge, and nowhere
+/// else (the sequencer is generic over the roles). The table's dialect picks the table type,
+/// and each arm runs the same generic sequence, as ripgrep's `PatternMatcher` dispatches into
+/// one generic search.
 async fn sequence<D, T>(
     plan: Plan,
     dmm_link: D,
@@ -324,7 +328,36 @@ where
     T: Transport + 'static,
 {
     let dmm = gyrocal_run::estimate::hp34401a(dmm_link, &plan, DriverOptions::default());
-    let table = AclTable::new(table_link, table_config(&plan));
+    match plan.table().dialect {
+        TableDialect::Acl => {
+            let table = AclTable::new(table_link, table_config(&plan));
+            sequence_with(plan, dmm, table, run).await
+        }
+        TableDialect::Aerosmith => {
+            let config = gyrocal_table::aerosmith::AerosmithConfig {
+                policy: gyrocal_table::PolicyConfig {
+                    limits: table_config(&plan).limits,
+                    ..gyrocal_table::PolicyConfig::default()
+                },
+                ..gyrocal_table::aerosmith::AerosmithConfig::default()
+            };
+            let table = gyrocal_table::aerosmith::AerosmithTable::new(table_link, config);
+            sequence_with(plan, dmm, table, run).await
+        }
+    }
+}
+
+/// Runs the sequencer with signals watched and progress shown, whatever the instruments.
+async fn sequence_with<M, T>(
+    plan: Plan,
+    dmm: M,
+    table: T,
+    run: RunDir,
+) -> anyhow::Result<(RunSummary, RunDir, Option<StopSignal>)>
+where
+    M: gyrocal_meter::Multimeter + 'static,
+    T: gyrocal_table::RateTable + 'static,
+{
     let (tx, rx) = mpsc::unbounded_channel();
     let mut seq =
         Sequencer::new(plan, dmm, table, run, SequencerOptions::default()).with_events(tx);

@@ -167,7 +167,7 @@ async fn serve(config: BenchConfig, specs: Vec<FaultSpec>, table_tcp: Option<u16
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
         .context("installing the SIGTERM handler")?;
 
-    let (seed, time_scale) = (config.seed, config.time_scale);
+    let (seed, time_scale, wire) = (config.seed, config.time_scale, config.table_wire);
     let bench = Bench::spawn_on(config, dmm_dev, table_dev);
     let mut schedule = faults::schedule(&specs, &bench, time_scale);
 
@@ -193,7 +193,7 @@ async fn serve(config: BenchConfig, specs: Vec<FaultSpec>, table_tcp: Option<u16
                         Ok((sock, peer)) => {
                             tracing::info!(%peer, "table client connected over TCP");
                             let _ = sock.set_nodelay(true);
-                            table.serve_link(sock);
+                            table.serve_wire(sock, wire);
                         }
                         Err(e) => {
                             tracing::warn!(error = %e, "accepting a table client failed");
