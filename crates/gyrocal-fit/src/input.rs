@@ -577,9 +577,8 @@ impl ColumnParser<'_> {
             });
         }
         let rows = self.rates.len() as u64;
-        let room = grow(&mut self.rates)
-            && grow(&mut self.volts)
-            && self.sigmas.as_mut().is_none_or(grow);
+        let room =
+            grow(&mut self.rates) && grow(&mut self.volts) && self.sigmas.as_mut().is_none_or(grow);
         if !room {
             return Err(InputError::OutOfMemory {
                 file: file.to_string(),

@@ -57,7 +57,7 @@ pub use analysis::{
 };
 pub use data::{Columns, Dataset, Point, Weighting};
 pub use error::FitError;
-pub use lsq::{check_rates, fit_least_squares};
+pub use lsq::{check_rates, fit_least_squares, fit_least_squares_columns};
 pub use metrics::{Metrics, NONLINEARITY_NORMALISATION, NotComputed, repeatability_ppm};
 pub use model::{
     Coefficients, Fit, Method, Model, NeuronTrace, RateResidual, Residual, TrainingData,

@@ -331,6 +331,18 @@ pub fn fit_least_squares(
     fit_prepared(&prep, model)
 }
 
+/// [`fit_least_squares`] on column arrays; fits with more than
+/// [`crate::POINT_RESIDUALS_MAX`] points carry per-rate residuals.
+pub fn fit_least_squares_columns(
+    data: &Columns,
+    model: Model,
+    weighting: Weighting,
+) -> Result<Fit, FitError> {
+    let prep = Prepared::new(data, weighting, data.len() <= crate::POINT_RESIDUALS_MAX)?;
+    prep.check(model)?;
+    fit_prepared(&prep, model)
+}
+
 /// [`fit_least_squares`] on prepared data (the caller has checked the model).
 pub(crate) fn fit_prepared(prep: &Prepared<'_>, model: Model) -> Result<Fit, FitError> {
     let sigmas = prep.sigmas;
