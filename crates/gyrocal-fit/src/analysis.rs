@@ -2,13 +2,30 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::data::{Dataset, Weighting};
+use crate::data::{Columns, Dataset, Weighting};
 use crate::error::FitError;
-use crate::lsq::{assemble, check, check_rates, fit_least_squares};
+use crate::lsq::{Prepared, assemble, check, check_rates, fit_prepared};
 use crate::metrics::{Metrics, repeatability_ppm};
 use crate::model::{Coefficients, Fit, Method, Model, NeuronTrace};
-use crate::neuron::{NeuronOptions, train};
+use crate::neuron::{NeuronOptions, RATE_MEANS_ABOVE_POINTS, train, train_rate_means};
 use crate::surface::ErrorSurface;
+
+/// Default of [`Options::point_residuals_max`]: data sets of up to 10 000 points carry
+/// per-point residuals in every fit; larger ones per-rate summaries
+/// ([`crate::Fit::rate_residuals`]) unless asked (`gyrocal fit --residuals`).
+pub const POINT_RESIDUALS_MAX: usize = 10_000;
+
+/// How the fits of an analysis record their residuals.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ResidualDetail {
+    /// Every fit's `residuals` has one entry per point, in data order.
+    #[default]
+    PerPoint,
+    /// Every fit's `residuals` is empty and `rate_residuals` has one entry per distinct rate
+    /// (more points than [`Options::point_residuals_max`]).
+    PerRate,
+}
 
 /// What to compute.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -31,6 +48,10 @@ pub struct Options {
     /// name). The linear model underlies the metrics: data that cannot determine it is an
     /// error either way.
     pub skip_unsupported: bool,
+    /// Most points for which fits carry per-point residuals; above it they carry per-rate
+    /// summaries instead ([`ResidualDetail::PerRate`]). Default [`POINT_RESIDUALS_MAX`];
+    /// `usize::MAX` keeps them always.
+    pub point_residuals_max: usize,
 }
 
 impl Default for Options {
@@ -42,6 +63,7 @@ impl Default for Options {
             weighting: Weighting::Auto,
             surface_size: 41,
             skip_unsupported: true,
+            point_residuals_max: POINT_RESIDUALS_MAX,
         }
     }
 }
@@ -54,6 +76,13 @@ pub struct Analysis {
     pub source: Option<String>,
     /// Number of points.
     pub points: usize,
+    /// Distinct rates in the data (absent in documents written before this field existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub distinct_rates: Option<usize>,
+    /// Whether the fits carry per-point or per-rate residuals (absent in documents written
+    /// before this field existed: per point).
+    #[serde(default)]
+    pub residual_detail: ResidualDetail,
     /// The fits, least squares first (in model order), then the neuron.
     pub fits: Vec<Fit>,
     /// The requested models that were not fitted because the data cannot determine them, with
@@ -139,6 +168,16 @@ pub struct MultiAnalysis {
 /// when the options select nothing (e.g. only the neuron, which fits the linear model, with
 /// only the quadratic model).
 pub fn analyze(data: &Dataset, opts: &Options) -> Result<Analysis, FitError> {
+    analyze_columns(&Columns::from_dataset(data), opts)
+}
+
+/// [`analyze`] on column arrays (what `gyrocal fit` reads a file into).
+///
+/// The cost is a few passes over the data whatever its size: one sort of the rates (the
+/// distinct rates are counted once), one blocked QR and one residual pass per fit, one pass
+/// for the error surface (then the grid in closed form), and for the neuron above
+/// [`RATE_MEANS_ABOVE_POINTS`] points two passes (then training on the rate means).
+pub fn analyze_columns(data: &Columns, opts: &Options) -> Result<Analysis, FitError> {
     let _span =
         tracing::debug_span!("analyze", source = ?data.source, points = data.len()).entered();
     let mut models = opts.models.clone();
@@ -152,15 +191,19 @@ pub fn analyze(data: &Dataset, opts: &Options) -> Result<Analysis, FitError> {
                 .to_string(),
         ));
     }
+    let point_residuals = data.len() <= opts.point_residuals_max;
+    // Finite values, then the distinct rates, counted once for every check below.
+    let prep = Prepared::new(data, opts.weighting, point_residuals)?;
     // The linear model underlies the metrics, so the data must support it in any case.
-    check(data, Model::Linear)?;
+    prep.check(Model::Linear)?;
     let mut fits = Vec::new();
     let mut skipped = Vec::new();
+    let mut split_error = None;
     if ls {
         for &m in &models {
             // The rule first (the reason a user can act on), then the solver, whose rank
             // check may still refuse nearly coincident rates.
-            match check(data, m).and_then(|()| fit_least_squares(data, m, opts.weighting)) {
+            match prep.check(m).and_then(|()| fit_prepared(&prep, m)) {
                 Ok(fit) => fits.push(fit),
                 Err(e) if opts.skip_unsupported && m != Model::Linear => {
                     tracing::info!(model = %m, reason = %e, "model skipped");
@@ -168,13 +211,16 @@ pub fn analyze(data: &Dataset, opts: &Options) -> Result<Analysis, FitError> {
                         model: m,
                         reason: e.to_string(),
                     });
+                    if m == Model::Split {
+                        split_error = Some(e);
+                    }
                 }
                 Err(e) => return Err(e),
             }
         }
     }
     if neuron {
-        fits.push(fit_neuron(data, &opts.neuron, opts.weighting)?);
+        fits.push(neuron_prepared(&prep, &opts.neuron));
     }
     let best_model = fits
         .iter()
@@ -182,10 +228,35 @@ pub fn analyze(data: &Dataset, opts: &Options) -> Result<Analysis, FitError> {
         .filter_map(|f| f.residual_std_error.map(|s| (s, f.model)))
         .min_by(|a, b| a.0.total_cmp(&b.0))
         .map(|(_, m)| m);
-    let metrics = Metrics::compute(data, opts.weighting)?;
+    // The metrics reuse the least-squares fits already made (the same weighting).
+    let find = |m: Model| {
+        fits.iter()
+            .find(|f| f.method == Method::LeastSquares && f.model == m)
+    };
+    let line_own;
+    let line = match find(Model::Linear) {
+        Some(f) => f,
+        None => {
+            line_own = fit_prepared(&prep, Model::Linear)?;
+            &line_own
+        }
+    };
+    let split_own;
+    let split = match (find(Model::Split), split_error) {
+        (Some(f), _) => Ok(f),
+        (None, Some(e)) => Err(e),
+        (None, None) => {
+            split_own = prep
+                .check(Model::Split)
+                .and_then(|()| fit_prepared(&prep, Model::Split));
+            split_own.as_ref().map_err(Clone::clone)
+        }
+    };
+    let metrics = Metrics::from_fits(&prep, line, split.as_ref().map(|f| *f));
     let error_surface = (opts.surface_size > 0).then(|| {
-        ErrorSurface::around(
-            data,
+        ErrorSurface::around_columns(
+            prep.rates(),
+            prep.volts(),
             metrics.scale_factor,
             metrics.bias_volts,
             opts.surface_size,
@@ -197,6 +268,12 @@ pub fn analyze(data: &Dataset, opts: &Options) -> Result<Analysis, FitError> {
     Ok(Analysis {
         source: data.source.clone(),
         points: data.len(),
+        distinct_rates: Some(prep.index.distinct.len()),
+        residual_detail: if point_residuals {
+            ResidualDetail::PerPoint
+        } else {
+            ResidualDetail::PerRate
+        },
         fits,
         skipped,
         best_model,
@@ -212,8 +289,19 @@ pub fn fit_neuron(
     weighting: Weighting,
 ) -> Result<Fit, FitError> {
     check(data, Model::Linear)?;
-    let sigmas = data.sigmas(weighting);
-    let t = train(&data.rates(), &data.volts(), sigmas.as_deref(), opts);
+    let cols = Columns::from_dataset(data);
+    let prep = Prepared::new(&cols, weighting, true)?;
+    Ok(neuron_prepared(&prep, opts))
+}
+
+/// The neuron's fit of prepared data (checked for the linear model): per point up to
+/// [`RATE_MEANS_ABOVE_POINTS`] points, on the rate means above.
+fn neuron_prepared(prep: &Prepared<'_>, opts: &NeuronOptions) -> Fit {
+    let t = if prep.len() > RATE_MEANS_ABOVE_POINTS {
+        train_rate_means(prep.rates(), prep.volts(), prep.sigmas, &prep.index, opts)
+    } else {
+        train(prep.rates(), prep.volts(), prep.sigmas, opts)
+    };
     match t.status {
         crate::neuron::NeuronStatus::Converged => {}
         status => tracing::warn!(
@@ -237,16 +325,17 @@ pub fn fit_neuron(
         seed: opts.seed,
         initial_weight: t.initial_weight,
         initial_threshold: t.initial_threshold,
+        training_data: t.training_data,
+        online_pass_limit: t.online_pass_limit,
     };
-    Ok(assemble(
-        data,
+    assemble(
+        prep,
         Method::Neuron,
         Model::Linear,
         coefficients,
         Coefficients::default(),
-        sigmas.as_deref(),
         Some(trace),
-    ))
+    )
 }
 
 /// Analyses several data sets and adds the repeatability of the least-squares linear scale

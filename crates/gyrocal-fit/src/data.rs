@@ -132,3 +132,113 @@ pub(crate) fn distinct(values: impl Iterator<Item = f64>) -> usize {
     v.dedup();
     v.len()
 }
+
+/// A data set as column arrays: what `gyrocal fit` reads a (possibly large) file into.
+///
+/// Memory is 16 bytes a point (24 with a `volts_std` column), against 64 for a [`Point`].
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Columns {
+    /// Where the data came from (a file name), for messages and reports.
+    pub source: Option<String>,
+    /// Applied rates, °/s.
+    pub rates: Vec<f64>,
+    /// Mean gyro outputs, V.
+    pub volts: Vec<f64>,
+    /// The σ of each point as [`Point::sigma`] computes it, NaN where a point has none;
+    /// `None` when the source has no `volts_std` column.
+    pub sigmas: Option<Vec<f64>>,
+    /// The line of the last data row, when the data came from a file.
+    pub last_line: Option<u64>,
+}
+
+impl Columns {
+    /// The columns of a [`Dataset`].
+    pub fn from_dataset(data: &Dataset) -> Self {
+        let any = data.points.iter().any(|p| p.volts_std.is_some());
+        Self {
+            source: data.source.clone(),
+            rates: data.rates(),
+            volts: data.volts(),
+            sigmas: any.then(|| {
+                data.points
+                    .iter()
+                    .map(|p| p.sigma().unwrap_or(f64::NAN))
+                    .collect()
+            }),
+            last_line: data.last_line(),
+        }
+    }
+
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.rates.len().min(self.volts.len())
+    }
+
+    /// True when there are no points.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The per-point σ used for weighting (as [`Dataset::sigmas`]): `Some` only with
+    /// [`Weighting::Auto`] and a usable σ on every point.
+    pub fn weighting_sigmas(&self, weighting: Weighting) -> Option<&[f64]> {
+        match weighting {
+            Weighting::Unweighted => None,
+            Weighting::Auto => {
+                let s = self.sigmas.as_deref()?;
+                (!s.is_empty() && s.iter().all(|s| s.is_finite() && *s > 0.0)).then_some(s)
+            }
+        }
+    }
+}
+
+/// The distinct rates of a data set, counted once (one sort of a copy of the rates) and
+/// reused by every model check, the per-rate summaries and the neuron.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub(crate) struct RateIndex {
+    /// Number of points.
+    pub points: usize,
+    /// The distinct rates, increasing (`-0.0` and `0.0` are one rate).
+    pub distinct: Vec<f64>,
+    /// Points at each distinct rate.
+    pub counts: Vec<u64>,
+}
+
+impl RateIndex {
+    pub fn new(rates: &[f64]) -> Self {
+        let mut v = rates.to_vec();
+        v.sort_unstable_by(f64::total_cmp);
+        let mut distinct: Vec<f64> = Vec::new();
+        let mut counts: Vec<u64> = Vec::new();
+        for w in v {
+            match distinct.last() {
+                Some(&last) if last == w => {
+                    if let Some(c) = counts.last_mut() {
+                        *c += 1;
+                    }
+                }
+                _ => {
+                    distinct.push(w);
+                    counts.push(1);
+                }
+            }
+        }
+        distinct.shrink_to_fit();
+        counts.shrink_to_fit();
+        Self {
+            points: rates.len(),
+            distinct,
+            counts,
+        }
+    }
+
+    /// Number of distinct rates satisfying `keep`.
+    pub fn distinct_where(&self, keep: impl Fn(f64) -> bool) -> usize {
+        self.distinct.iter().filter(|w| keep(**w)).count()
+    }
+
+    /// Index of `rate` (which must be one of the data's rates) in [`RateIndex::distinct`].
+    pub fn group(&self, rate: f64) -> usize {
+        self.distinct.partition_point(|d| *d < rate)
+    }
+}

@@ -52,13 +52,15 @@ pub mod neuron;
 mod surface;
 
 pub use analysis::{
-    Analysis, MultiAnalysis, Options, Skipped, analyze, analyze_many, fit_neuron,
-    unsupported_models,
+    Analysis, MultiAnalysis, Options, POINT_RESIDUALS_MAX, ResidualDetail, Skipped, analyze,
+    analyze_columns, analyze_many, fit_neuron, unsupported_models,
 };
-pub use data::{Dataset, Point, Weighting};
+pub use data::{Columns, Dataset, Point, Weighting};
 pub use error::FitError;
-pub use lsq::{check_rates, fit_least_squares};
+pub use lsq::{check_rates, fit_least_squares, fit_least_squares_columns};
 pub use metrics::{Metrics, NONLINEARITY_NORMALISATION, NotComputed, repeatability_ppm};
-pub use model::{Coefficients, Fit, Method, Model, NeuronTrace, Residual};
+pub use model::{
+    Coefficients, Fit, Method, Model, NeuronTrace, RateResidual, Residual, TrainingData,
+};
 pub use neuron::{NeuronOptions, NeuronStatus};
 pub use surface::ErrorSurface;

@@ -2,9 +2,11 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::data::{Dataset, Weighting, distinct};
+use crate::data::{Columns, Dataset, RateIndex, Weighting};
 use crate::error::FitError;
-use crate::model::{Coefficients, Fit, Method, Model, NeuronTrace, Residual, predict};
+use crate::model::{
+    Coefficients, Fit, Method, Model, NeuronTrace, RateResidual, Residual, predict,
+};
 
 /// Solution of one polynomial least-squares problem, in original units.
 #[derive(Debug, Clone)]
@@ -15,7 +17,12 @@ pub(crate) struct PolySolution {
     pub se: Option<Vec<f64>>,
 }
 
-/// Fits `y = Σ k_j ω^j` (j = 0..=degree) by least squares.
+/// Rows per Householder QR block: data sets up to this size are factorised in one QR, exactly
+/// as before blocks existed; larger ones block by block (below).
+pub(crate) const QR_BLOCK: usize = 4096;
+
+/// Fits `y = Σ k_j ω^j` (j = 0..=degree) by least squares to the points whose rate satisfies
+/// `keep`.
 ///
 /// The columns are `(ω/ω_max)^j`, so they all lie in [-1, 1] and the cubic stays well
 /// conditioned at rates of tens of °/s; the coefficients are mapped back by `k_j = c_j/ω_max^j`.
@@ -23,15 +30,29 @@ pub(crate) struct PolySolution {
 /// Householder QR (`R c = Qᵀ b`); the covariance of `c` is `s²·R⁻¹R⁻ᵀ`, with
 /// `s² = Σ w_i r_i² / (N − p)` (the residual variance scales the covariance, so the standard
 /// errors reflect the scatter actually seen, as numpy's `polyfit(cov=True)` does).
+///
+/// Memory is bounded: rows are taken [`QR_BLOCK`] at a time, each block stacked under the
+/// triangular factor of the rows before it and factorised again (`[R; A_k] = Q_k R'`, the
+/// same `R` and `Qᵀb` as one QR of all the rows, up to rounding), so a fit never holds the
+/// `N × p` design matrix. `distinct` is the number of distinct kept rates, for the error.
 pub(crate) fn solve_poly(
     rates: &[f64],
     volts: &[f64],
     sigma: Option<&[f64]>,
+    keep: impl Fn(f64) -> bool,
     degree: usize,
     model: Model,
+    distinct: usize,
 ) -> Result<PolySolution, FitError> {
-    let n = rates.len();
     let p = degree + 1;
+    let mut n = 0_usize;
+    let mut scale = 0.0_f64;
+    for &w in rates {
+        if keep(w) {
+            n += 1;
+            scale = scale.max(w.abs());
+        }
+    }
     if n < p {
         return Err(FitError::TooFewPoints {
             model,
@@ -39,47 +60,74 @@ pub(crate) fn solve_poly(
             needed: p,
         });
     }
-    let scale = rates.iter().fold(0.0_f64, |m, w| m.max(w.abs()));
     if scale == 0.0 {
         return Err(FitError::TooFewDistinctRates { distinct: 1 });
     }
     let weight = |i: usize| sigma.map_or(1.0, |s| 1.0 / s[i]);
-    let mut a = DMatrix::<f64>::zeros(n, p);
-    let mut b = DVector::<f64>::zeros(n);
-    for i in 0..n {
-        let x = rates[i] / scale;
-        let wi = weight(i);
-        let mut xp = wi;
-        for j in 0..p {
-            a[(i, j)] = xp;
-            xp *= x;
+    let rank_deficient = FitError::RankDeficient {
+        model,
+        needed: p,
+        distinct,
+    };
+    // (R, first p entries of Qᵀb) of the rows so far.
+    let mut acc: Option<(DMatrix<f64>, DVector<f64>)> = None;
+    let mut block: Vec<usize> = Vec::with_capacity(QR_BLOCK.min(n));
+    let flush = |block: &mut Vec<usize>, acc: &mut Option<(DMatrix<f64>, DVector<f64>)>| {
+        let top = if acc.is_some() { p } else { 0 };
+        let m = top + block.len();
+        let mut a = DMatrix::<f64>::zeros(m, p);
+        let mut b = DVector::<f64>::zeros(m);
+        if let Some((r, qtb)) = acc.as_ref() {
+            a.rows_mut(0, p).copy_from(r);
+            b.rows_mut(0, p).copy_from(qtb);
         }
-        b[i] = volts[i] * wi;
+        for (k, &i) in block.iter().enumerate() {
+            let row = top + k;
+            let x = rates[i] / scale;
+            let wi = weight(i);
+            let mut xp = wi;
+            for j in 0..p {
+                a[(row, j)] = xp;
+                xp *= x;
+            }
+            b[row] = volts[i] * wi;
+        }
+        block.clear();
+        let qr = a.qr();
+        let r = qr.r();
+        let mut qtb = b;
+        qr.q_tr_mul(&mut qtb);
+        *acc = Some((r, qtb.rows(0, p).into_owned()));
+    };
+    for (i, &w) in rates.iter().enumerate() {
+        if !keep(w) {
+            continue;
+        }
+        block.push(i);
+        if block.len() == QR_BLOCK {
+            flush(&mut block, &mut acc);
+        }
     }
-    let qr = a.qr();
-    let r = qr.r();
+    if !block.is_empty() {
+        flush(&mut block, &mut acc);
+    }
+    let Some((r, rhs)) = acc else {
+        return Err(rank_deficient);
+    };
     let max_diag = (0..p).fold(0.0_f64, |m, j| m.max(r[(j, j)].abs()));
     if (0..p).any(|j| r[(j, j)].abs() <= 1e-12 * max_diag) {
-        return Err(FitError::RankDeficient {
-            model,
-            needed: p,
-            distinct: distinct(rates.iter().copied()),
-        });
+        return Err(rank_deficient);
     }
-    let mut qtb = b;
-    qr.q_tr_mul(&mut qtb);
-    let rhs = qtb.rows(0, p).into_owned();
     let c = r
         .solve_upper_triangular(&rhs)
-        .ok_or(FitError::RankDeficient {
-            model,
-            needed: p,
-            distinct: distinct(rates.iter().copied()),
-        })?;
+        .ok_or_else(|| rank_deficient.clone())?;
 
     // Weighted residual sum of squares for the covariance scale.
     let mut wsse = 0.0;
-    for i in 0..n {
+    for i in 0..rates.len() {
+        if !keep(rates[i]) {
+            continue;
+        }
         let x = rates[i] / scale;
         let mut fitted = 0.0;
         for j in (0..p).rev() {
@@ -93,11 +141,7 @@ pub(crate) fn solve_poly(
         let s2 = wsse / (n - p) as f64;
         let r_inv = r
             .solve_upper_triangular(&DMatrix::<f64>::identity(p, p))
-            .ok_or(FitError::RankDeficient {
-                model,
-                needed: p,
-                distinct: distinct(rates.iter().copied()),
-            })?;
+            .ok_or_else(|| rank_deficient.clone())?;
         // cov = s² R⁻¹ R⁻ᵀ; its diagonal is s² times the squared row norms of R⁻¹.
         Some(
             (0..p)
@@ -111,6 +155,77 @@ pub(crate) fn solve_poly(
     Ok(PolySolution { coef, se })
 }
 
+/// A data set prepared for fitting: its columns, its distinct rates (counted once), the
+/// weighting in force, and what the fits record per point.
+pub(crate) struct Prepared<'a> {
+    pub cols: &'a Columns,
+    pub index: RateIndex,
+    pub sigmas: Option<&'a [f64]>,
+    /// Keep per-point residuals (otherwise per-rate summaries).
+    pub point_residuals: bool,
+    /// Per distinct rate: (sum, min, max) of the outputs, for the per-rate summaries.
+    group_volts: Vec<(f64, f64, f64)>,
+    sst: f64,
+}
+
+impl<'a> Prepared<'a> {
+    /// Checks the values are finite, counts the distinct rates, and (without per-point
+    /// residuals) sums the outputs per rate.
+    pub fn new(
+        cols: &'a Columns,
+        weighting: Weighting,
+        point_residuals: bool,
+    ) -> Result<Self, FitError> {
+        let n = cols.len();
+        for (index, (w, d)) in cols.rates[..n].iter().zip(&cols.volts[..n]).enumerate() {
+            if !(w.is_finite() && d.is_finite()) {
+                return Err(FitError::NonFinite { index });
+            }
+        }
+        let index = RateIndex::new(&cols.rates[..n]);
+        let mean = cols.volts[..n].iter().sum::<f64>() / n.max(1) as f64;
+        let sst: f64 = cols.volts[..n]
+            .iter()
+            .map(|v| (v - mean) * (v - mean))
+            .sum();
+        let mut group_volts = Vec::new();
+        if !point_residuals {
+            group_volts = vec![(0.0, f64::INFINITY, f64::NEG_INFINITY); index.distinct.len()];
+            for (w, d) in cols.rates[..n].iter().zip(&cols.volts[..n]) {
+                let g = &mut group_volts[index.group(*w)];
+                g.0 += d;
+                g.1 = g.1.min(*d);
+                g.2 = g.2.max(*d);
+            }
+        }
+        Ok(Self {
+            cols,
+            index,
+            sigmas: cols.weighting_sigmas(weighting),
+            point_residuals,
+            group_volts,
+            sst,
+        })
+    }
+
+    pub fn len(&self) -> usize {
+        self.cols.len()
+    }
+
+    pub fn rates(&self) -> &[f64] {
+        &self.cols.rates[..self.len()]
+    }
+
+    pub fn volts(&self) -> &[f64] {
+        &self.cols.volts[..self.len()]
+    }
+
+    /// [`check_rates`] on the precomputed distinct rates.
+    pub fn check(&self, model: Model) -> Result<(), FitError> {
+        check_index(&self.index, model)
+    }
+}
+
 /// Checks that `data` can determine `model`, with the errors a user can act on.
 pub(crate) fn check(data: &Dataset, model: Model) -> Result<(), FitError> {
     for (index, p) in data.points.iter().enumerate() {
@@ -121,26 +236,10 @@ pub(crate) fn check(data: &Dataset, model: Model) -> Result<(), FitError> {
     check_rates(&data.rates(), model)
 }
 
-/// Whether data measured at `rates` (one point per rate, repeats included, in any order) can
-/// determine `model`; the error says why not.
-///
-/// This is the one rule for "can this model be fitted": [`crate::analyze`] skips the models
-/// it rejects, and a plan checker calls it on a schedule's rates to warn before a run which
-/// models the fit will skip. It needs as many points as the model has coefficients, at least
-/// two distinct rates, as many distinct rates as coefficients for the polynomial models, and
-/// for the split model at least two distinct rates on each side of zero (zero counts on both).
-/// Non-finite rates are the caller's concern (parsed input never holds one).
-///
-/// ```
-/// use gyrocal_fit::{Model, check_rates};
-/// assert!(check_rates(&[0.0, 1.0, -1.0, 10.0, -10.0], Model::Cubic).is_ok());
-/// let e = check_rates(&[0.0, 1.0, 10.0], Model::Cubic).unwrap_err();
-/// assert!(e.to_string().contains("the data have 3"));
-/// assert!(check_rates(&[0.0, 1.0, 10.0], Model::Split).is_err());
-/// ```
-pub fn check_rates(rates: &[f64], model: Model) -> Result<(), FitError> {
+/// [`check_rates`] on rates already counted.
+pub(crate) fn check_index(index: &RateIndex, model: Model) -> Result<(), FitError> {
     let needed = model.coefficient_count();
-    let distinct_all = distinct(rates.iter().copied());
+    let distinct_all = index.distinct.len();
     // Distinct rates first: it is the actionable figure (more readings at the same rates
     // cannot determine a polynomial), and fewer points than coefficients implies it.
     if model != Model::Split && distinct_all >= 2 && distinct_all < needed {
@@ -150,10 +249,10 @@ pub fn check_rates(rates: &[f64], model: Model) -> Result<(), FitError> {
             distinct: distinct_all,
         });
     }
-    if model != Model::Split && rates.len() < needed {
+    if model != Model::Split && index.points < needed {
         return Err(FitError::TooFewPoints {
             model,
-            points: rates.len(),
+            points: index.points,
             needed,
         });
     }
@@ -164,8 +263,8 @@ pub fn check_rates(rates: &[f64], model: Model) -> Result<(), FitError> {
     }
     match model {
         Model::Split => {
-            let pos = distinct(rates.iter().copied().filter(|w| *w >= 0.0));
-            let neg = distinct(rates.iter().copied().filter(|w| *w <= 0.0));
+            let pos = index.distinct_where(|w| w >= 0.0);
+            let neg = index.distinct_where(|w| w <= 0.0);
             if pos < 2 {
                 return Err(FitError::SplitNeedsBothSigns {
                     side: "positive",
@@ -194,6 +293,27 @@ pub fn check_rates(rates: &[f64], model: Model) -> Result<(), FitError> {
     Ok(())
 }
 
+/// Whether data measured at `rates` (one point per rate, repeats included, in any order) can
+/// determine `model`; the error says why not.
+///
+/// This is the one rule for "can this model be fitted": [`crate::analyze`] skips the models
+/// it rejects, and a plan checker calls it on a schedule's rates to warn before a run which
+/// models the fit will skip. It needs as many points as the model has coefficients, at least
+/// two distinct rates, as many distinct rates as coefficients for the polynomial models, and
+/// for the split model at least two distinct rates on each side of zero (zero counts on both).
+/// Non-finite rates are the caller's concern (parsed input never holds one).
+///
+/// ```
+/// use gyrocal_fit::{Model, check_rates};
+/// assert!(check_rates(&[0.0, 1.0, -1.0, 10.0, -10.0], Model::Cubic).is_ok());
+/// let e = check_rates(&[0.0, 1.0, 10.0], Model::Cubic).unwrap_err();
+/// assert!(e.to_string().contains("the data have 3"));
+/// assert!(check_rates(&[0.0, 1.0, 10.0], Model::Split).is_err());
+/// ```
+pub fn check_rates(rates: &[f64], model: Model) -> Result<(), FitError> {
+    check_index(&RateIndex::new(rates), model)
+}
+
 /// Fits `model` to `data` by least squares.
 ///
 /// With [`Weighting::Auto`] and a standard deviation on every point, each point is weighted by
@@ -206,21 +326,36 @@ pub fn fit_least_squares(
     weighting: Weighting,
 ) -> Result<Fit, FitError> {
     check(data, model)?;
-    let sigmas = data.sigmas(weighting);
-    let rates = data.rates();
-    let volts = data.volts();
+    let cols = Columns::from_dataset(data);
+    let prep = Prepared::new(&cols, weighting, true)?;
+    fit_prepared(&prep, model)
+}
+
+/// [`fit_least_squares`] on column arrays; fits with more than
+/// [`crate::POINT_RESIDUALS_MAX`] points carry per-rate residuals.
+pub fn fit_least_squares_columns(
+    data: &Columns,
+    model: Model,
+    weighting: Weighting,
+) -> Result<Fit, FitError> {
+    let prep = Prepared::new(data, weighting, data.len() <= crate::POINT_RESIDUALS_MAX)?;
+    prep.check(model)?;
+    fit_prepared(&prep, model)
+}
+
+/// [`fit_least_squares`] on prepared data (the caller has checked the model).
+pub(crate) fn fit_prepared(prep: &Prepared<'_>, model: Model) -> Result<Fit, FitError> {
+    let sigmas = prep.sigmas;
+    let rates = prep.rates();
+    let volts = prep.volts();
     let (coefficients, std_errors) = match model {
         Model::Split => {
-            let side = |keep: &dyn Fn(f64) -> bool| -> Result<PolySolution, FitError> {
-                let idx: Vec<usize> = (0..rates.len()).filter(|&i| keep(rates[i])).collect();
-                let w: Vec<f64> = idx.iter().map(|&i| rates[i]).collect();
-                let d: Vec<f64> = idx.iter().map(|&i| volts[i]).collect();
-                let s: Option<Vec<f64>> =
-                    sigmas.as_ref().map(|s| idx.iter().map(|&i| s[i]).collect());
-                solve_poly(&w, &d, s.as_deref(), 1, Model::Split)
+            let side = |keep: fn(f64) -> bool| -> Result<PolySolution, FitError> {
+                let distinct = prep.index.distinct_where(keep);
+                solve_poly(rates, volts, sigmas, keep, 1, Model::Split, distinct)
             };
-            let pos = side(&|w| w >= 0.0)?;
-            let neg = side(&|w| w <= 0.0)?;
+            let pos = side(|w| w >= 0.0)?;
+            let neg = side(|w| w <= 0.0)?;
             let c = Coefficients {
                 k0: Some(0.5 * (pos.coef[0] + neg.coef[0])),
                 k_pos: Some(pos.coef[1]),
@@ -245,7 +380,15 @@ pub fn fit_least_squares(
             (c, se)
         }
         _ => {
-            let sol = solve_poly(&rates, &volts, sigmas.as_deref(), model.degree(), model)?;
+            let sol = solve_poly(
+                rates,
+                volts,
+                sigmas,
+                |_| true,
+                model.degree(),
+                model,
+                prep.index.distinct.len(),
+            )?;
             let get = |v: &[f64], j: usize| v.get(j).copied();
             let c = Coefficients {
                 k0: get(&sol.coef, 0),
@@ -268,54 +411,72 @@ pub fn fit_least_squares(
         }
     };
     Ok(assemble(
-        data,
+        prep,
         Method::LeastSquares,
         model,
         coefficients,
         std_errors,
-        sigmas.as_deref(),
         None,
     ))
 }
 
-/// Builds a [`Fit`] from coefficients: fitted values, residuals and the summary figures.
+/// Builds a [`Fit`] from coefficients: residuals (per point, or per rate on large data) and
+/// the summary figures, in one pass over the points.
 pub(crate) fn assemble(
-    data: &Dataset,
+    prep: &Prepared<'_>,
     method: Method,
     model: Model,
     coefficients: Coefficients,
     std_errors: Coefficients,
-    sigmas: Option<&[f64]>,
     neuron: Option<NeuronTrace>,
 ) -> Fit {
-    let n = data.len();
-    let residuals: Vec<Residual> = data
-        .points
-        .iter()
-        .map(|p| {
-            let fitted = predict(model, &coefficients, p.rate_dps);
-            Residual {
-                rate_dps: p.rate_dps,
-                volts: p.volts,
+    let n = prep.len();
+    let sigmas = prep.sigmas;
+    let mut residuals: Vec<Residual> = Vec::new();
+    if prep.point_residuals {
+        residuals.reserve_exact(n);
+    }
+    let (mut sse, mut chi2, mut max_abs) = (0.0_f64, 0.0_f64, 0.0_f64);
+    for (i, (&w, &d)) in prep.rates().iter().zip(prep.volts()).enumerate() {
+        let fitted = predict(model, &coefficients, w);
+        let residual = d - fitted;
+        sse += residual * residual;
+        if let Some(s) = sigmas {
+            chi2 += (residual / s[i]) * (residual / s[i]);
+        }
+        max_abs = max_abs.max(residual.abs());
+        if prep.point_residuals {
+            residuals.push(Residual {
+                rate_dps: w,
+                volts: d,
                 fitted,
-                residual: p.volts - fitted,
-            }
-        })
-        .collect();
-    let sse: f64 = residuals.iter().map(|r| r.residual * r.residual).sum();
-    let chi_squared = sigmas.map(|s| {
-        residuals
+                residual,
+            });
+        }
+    }
+    let rate_residuals: Vec<RateResidual> = if prep.point_residuals {
+        Vec::new()
+    } else {
+        prep.index
+            .distinct
             .iter()
-            .zip(s)
-            .map(|(r, s)| (r.residual / s) * (r.residual / s))
-            .sum::<f64>()
-    });
-    let mean = data.points.iter().map(|p| p.volts).sum::<f64>() / n.max(1) as f64;
-    let sst: f64 = data
-        .points
-        .iter()
-        .map(|p| (p.volts - mean) * (p.volts - mean))
-        .sum();
+            .zip(&prep.index.counts)
+            .zip(&prep.group_volts)
+            .map(|((&w, &count), &(sum, min, max))| {
+                let fitted = predict(model, &coefficients, w);
+                let mean_volts = sum / count as f64;
+                RateResidual {
+                    rate_dps: w,
+                    n: count,
+                    mean_volts,
+                    fitted,
+                    mean_residual: mean_volts - fitted,
+                    max_abs_residual: (max - fitted).abs().max((min - fitted).abs()),
+                }
+            })
+            .collect()
+    };
+    let sst = prep.sst;
     let p = model.coefficient_count();
     let scale_factor = match model {
         Model::Split => {
@@ -339,12 +500,13 @@ pub(crate) fn assemble(
         std_errors,
         weighted: sigmas.is_some(),
         sse,
-        chi_squared,
+        chi_squared: sigmas.map(|_| chi2),
         rms_residual: (sse / n.max(1) as f64).sqrt(),
         residual_std_error: (n > p).then(|| (sse / (n - p) as f64).sqrt()),
-        max_abs_residual: residuals.iter().fold(0.0, |m, r| m.max(r.residual.abs())),
+        max_abs_residual: max_abs,
         r_squared: if sst > 0.0 { 1.0 - sse / sst } else { 1.0 },
         residuals,
+        rate_residuals,
         passes,
         converged,
         neuron,

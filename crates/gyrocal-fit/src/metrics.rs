@@ -2,10 +2,10 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::data::{Dataset, Weighting};
+use crate::data::{Columns, Dataset, Weighting};
 use crate::error::FitError;
-use crate::lsq::{check, fit_least_squares};
-use crate::model::Model;
+use crate::lsq::{Prepared, check, fit_prepared};
+use crate::model::{Fit, Model};
 
 /// How [`Metrics::nonlinearity_ppm`] is normalised (also written into the JSON).
 pub const NONLINEARITY_NORMALISATION: &str = "max_j |K*W_j + F0 - F_j| / max_j |F_j| (least-squares line K, F0; largest absolute output in the range)";
@@ -66,19 +66,30 @@ impl Metrics {
     /// asymmetry, K+ and K− are `None`, with the reason in [`Metrics::not_computed`], when the
     /// split model cannot be fitted (one direction missing).
     pub fn compute(data: &Dataset, weighting: Weighting) -> Result<Self, FitError> {
-        let line = fit_least_squares(data, Model::Linear, weighting)?;
+        check(data, Model::Linear)?;
+        let cols = Columns::from_dataset(data);
+        let prep = Prepared::new(&cols, weighting, true)?;
+        let line = fit_prepared(&prep, Model::Linear)?;
+        let split = prep
+            .check(Model::Split)
+            .and_then(|()| fit_prepared(&prep, Model::Split));
+        Ok(Self::from_fits(&prep, &line, split.as_ref()))
+    }
+
+    /// The metrics from the least-squares line and split fit (or why the split model could
+    /// not be fitted) of prepared data.
+    pub(crate) fn from_fits(
+        prep: &Prepared<'_>,
+        line: &Fit,
+        split: Result<&Fit, &FitError>,
+    ) -> Self {
         let k = line.scale_factor;
         let f0 = line.bias;
-        let fm = data
-            .points
-            .iter()
-            .fold(0.0_f64, |m, p| m.max(p.volts.abs()));
+        let fm = prep.volts().iter().fold(0.0_f64, |m, v| m.max(v.abs()));
         let max_dev = line.max_abs_residual;
         let nonlinearity_ppm = if fm > 0.0 { max_dev / fm * 1e6 } else { 0.0 };
         let mut not_computed = Vec::new();
-        let split = check(data, Model::Split)
-            .and_then(|()| fit_least_squares(data, Model::Split, weighting));
-        let (kp, kn) = match &split {
+        let (kp, kn) = match split {
             Ok(s) => (s.coefficients.k_pos, s.coefficients.k_neg),
             Err(e) => {
                 for metric in [
@@ -106,7 +117,7 @@ impl Metrics {
             _ => None,
         };
         let bias_dps = if k != 0.0 { f0 / k } else { 0.0 };
-        Ok(Self {
+        Self {
             scale_factor: k,
             bias_volts: f0,
             nonlinearity_ppm,
@@ -119,7 +130,7 @@ impl Metrics {
             bias_dph: bias_dps * SECONDS_PER_HOUR,
             repeatability_ppm: None,
             not_computed,
-        })
+        }
     }
 }
 

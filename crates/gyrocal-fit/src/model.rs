@@ -144,6 +144,43 @@ pub struct Residual {
     pub residual: f64,
 }
 
+/// One rate's fit, summarised over the points measured at that rate (in place of per-point
+/// residuals on large data sets; see [`crate::Options::point_residuals_max`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RateResidual {
+    /// Applied rate, °/s.
+    pub rate_dps: f64,
+    /// Points at that rate.
+    pub n: u64,
+    /// Mean measured output at that rate, V.
+    pub mean_volts: f64,
+    /// Output predicted by the fit at that rate, V.
+    pub fitted: f64,
+    /// `mean_volts − fitted`, V.
+    pub mean_residual: f64,
+    /// Largest `|volts − fitted|` over the points at that rate, V.
+    pub max_abs_residual: f64,
+}
+
+/// What the neuron's online passes presented.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", tag = "kind")]
+pub enum TrainingData {
+    /// Every point, once per online pass (the paper's rule).
+    #[default]
+    Points,
+    /// Above [`crate::neuron::RATE_MEANS_ABOVE_POINTS`] points: each distinct rate's mean
+    /// output once per online pass, its cost weighted by the points (and weights) it averages.
+    /// The batch passes and the pass errors use every point (through the data's sufficient
+    /// statistics), so the minimum, the SSE and the pass errors are those of all points.
+    RateMeans {
+        /// Distinct rates presented per online pass.
+        rates: usize,
+        /// Points they average.
+        points: usize,
+    },
+}
+
 /// How the neuron was trained and what happened (present on neuron fits only).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct NeuronTrace {
@@ -165,6 +202,15 @@ pub struct NeuronTrace {
     pub initial_weight: f64,
     /// Initial threshold (bias), V.
     pub initial_threshold: f64,
+    /// What the online passes presented (absent in documents written before this field
+    /// existed: points).
+    #[serde(default)]
+    pub training_data: TrainingData,
+    /// The online-pass limit when it was lowered below `max_online_passes` to bound the cost
+    /// on data with very many distinct rates ([`crate::neuron::ONLINE_PRESENTATIONS_MAX`]
+    /// presentations in all).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub online_pass_limit: Option<u64>,
 }
 
 /// The result of fitting one model by one method.
@@ -199,8 +245,13 @@ pub struct Fit {
     pub max_abs_residual: f64,
     /// Coefficient of determination `1 − sse/Σ(D − mean D)²`.
     pub r_squared: f64,
-    /// Per-point fit, in data order.
+    /// Per-point fit, in data order; empty when the analysis summarised residuals per rate
+    /// instead (see [`crate::Analysis::residual_detail`]).
+    #[serde(default)]
     pub residuals: Vec<Residual>,
+    /// Per-rate fit, increasing rate: present instead of `residuals` on large data sets.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub rate_residuals: Vec<RateResidual>,
     /// Number of training passes (neuron only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub passes: Option<u64>,

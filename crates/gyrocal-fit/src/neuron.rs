@@ -40,6 +40,23 @@ use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 
+use crate::data::RateIndex;
+use crate::model::TrainingData;
+use crate::surface::SseForm;
+
+/// Above this many points the online passes present each distinct rate's mean output (weighted
+/// by the points it averages) instead of every point: see [`TrainingData::RateMeans`]. The
+/// batch passes and the pass errors still cover every point, through the sufficient statistics
+/// of the data, so their cost does not grow with the number of points. At or below it (a
+/// calibration's step means, tens of points) training is per point, as before.
+pub const RATE_MEANS_ABOVE_POINTS: usize = 10_000;
+
+/// Most presentations (rates × online passes) in the online phase of training on rate means:
+/// with very many distinct rates the online-pass limit is lowered to
+/// `max(1, ONLINE_PRESENTATIONS_MAX / rates)` (reported in the trace); the batch finish then
+/// converges as usual.
+pub const ONLINE_PRESENTATIONS_MAX: u64 = 20_000_000;
+
 /// Settings of the neuron.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
@@ -119,6 +136,10 @@ pub struct Trained {
     pub initial_weight: f64,
     /// Initial threshold, V.
     pub initial_threshold: f64,
+    /// What the online passes presented.
+    pub training_data: TrainingData,
+    /// The online-pass limit, when lowered below `max_online_passes` to bound the cost.
+    pub online_pass_limit: Option<u64>,
 }
 
 /// Trains the neuron on `(rates, volts)` with optional per-point σ (weights `1/σ²`).
@@ -175,6 +196,156 @@ pub fn train(
             / 2.0
     };
 
+    let max_x2 = x.iter().fold(0.0_f64, |m, x| m.max(x * x));
+    let grad = |w: f64, t: f64| -> (f64, f64) {
+        let (mut gw, mut gt) = (0.0, 0.0);
+        for i in 0..n {
+            let e = y[i] - (w * x[i] + t);
+            gw -= u[i] * e * x[i];
+            gt -= u[i] * e;
+        }
+        (gw / nf, gt / nf)
+    };
+    let problem = Problem {
+        x: &x,
+        y: &y,
+        u: &u,
+        max_x2,
+        online_limit: opts.max_online_passes,
+    };
+    let mut t = run(&problem, opts, &to_original, &cost, &sse_volts, &grad);
+    t.training_data = TrainingData::Points;
+    t
+}
+
+/// Trains on the per-rate means of a large data set ([`TrainingData::RateMeans`]): the same
+/// normalisation, initial weights, update rules and stopping rules as [`train`], the online
+/// passes over the distinct rates' weighted mean outputs (each weighted by the summed
+/// normalised weights of its points), the batch gradient, cost and pass errors from the
+/// sufficient statistics of every point ([`SseForm`]). At the minimum this is the per-point
+/// problem's minimum: `Σ_i u_i (y_i − ŷ)²` differs from `Σ_g U_g (ȳ_g − ŷ_g)²` by a constant.
+pub(crate) fn train_rate_means(
+    rates: &[f64],
+    volts: &[f64],
+    sigmas: Option<&[f64]>,
+    index: &RateIndex,
+    opts: &NeuronOptions,
+) -> Trained {
+    let n = rates.len().min(volts.len());
+    let nf = n as f64;
+    let raw = |i: usize| sigmas.map_or(1.0, |s| 1.0 / (s[i] * s[i]));
+    let usum: f64 = (0..n).map(raw).sum();
+    let norm = nf / usum;
+    let groups = index.distinct.len();
+    let mut gu = vec![0.0_f64; groups];
+    let mut guy = vec![0.0_f64; groups];
+    let (mut swx, mut swy) = (0.0_f64, 0.0_f64);
+    let (mut dmin, mut dmax) = (f64::INFINITY, f64::NEG_INFINITY);
+    for i in 0..n {
+        let u = raw(i) * norm;
+        swx += rates[i] * u;
+        swy += volts[i] * u;
+        let g = index.group(rates[i]);
+        gu[g] += u;
+        guy[g] += u * volts[i];
+        dmin = dmin.min(volts[i]);
+        dmax = dmax.max(volts[i]);
+    }
+    let mx = swx / nf;
+    let my = swy / nf;
+    let sx = index
+        .distinct
+        .iter()
+        .fold(0.0_f64, |m, w| m.max((w - mx).abs()));
+    let sy = if n > 0 {
+        (dmax - my).abs().max((dmin - my).abs())
+    } else {
+        0.0
+    };
+    let sx = if sx > 0.0 { sx } else { 1.0 };
+    let sy = if sy > 0.0 { sy } else { 1.0 };
+    let xg: Vec<f64> = index.distinct.iter().map(|w| (w - mx) / sx).collect();
+    let yg: Vec<f64> = guy
+        .iter()
+        .zip(&gu)
+        .map(|(uy, u)| (uy / u - my) / sy)
+        .collect();
+    // Mean 1 over the presented means, as the per-point weights have mean 1 over the points.
+    let ug: Vec<f64> = gu.iter().map(|u| u * groups as f64 / nf).collect();
+    // The weighted least-squares line in normalised units, from the rate means (exact: the
+    // within-rate scatter does not move it), as the reference of the sufficient statistics.
+    let (mut s1, mut sx1, mut sxx, mut sy1, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for g in 0..groups {
+        s1 += gu[g];
+        sx1 += gu[g] * xg[g];
+        sxx += gu[g] * xg[g] * xg[g];
+        sy1 += gu[g] * yg[g];
+        sxy += gu[g] * xg[g] * yg[g];
+    }
+    let det = s1 * sxx - sx1 * sx1;
+    let w0 = if det > 0.0 {
+        (s1 * sxy - sx1 * sy1) / det
+    } else {
+        0.0
+    };
+    let t0 = if s1 > 0.0 { (sy1 - w0 * sx1) / s1 } else { 0.0 };
+    let mut weighted = SseForm::new(&[], &[], None, w0, t0);
+    let mut unweighted = weighted;
+    for i in 0..n {
+        let x = (rates[i] - mx) / sx;
+        let y = (volts[i] - my) / sy;
+        weighted.add(x, y, raw(i) * norm);
+        unweighted.add(x, y, 1.0);
+    }
+    let to_original = |w: f64, t: f64| {
+        let k = w * sy / sx;
+        (k, my + sy * t - k * mx)
+    };
+    let sse_volts = |w: f64, t: f64| unweighted.at(w, t) * sy * sy;
+    let cost = |w: f64, t: f64| weighted.at(w, t) / 2.0;
+    let grad = |w: f64, t: f64| {
+        let (gw, gt) = weighted.half_gradient(w, t);
+        (gw / nf, gt / nf)
+    };
+    let max_x2 = xg.iter().fold(0.0_f64, |m, x| m.max(x * x));
+    let budget = (ONLINE_PRESENTATIONS_MAX / groups.max(1) as u64).max(1);
+    let online_limit = opts.max_online_passes.min(budget);
+    let problem = Problem {
+        x: &xg,
+        y: &yg,
+        u: &ug,
+        max_x2,
+        online_limit,
+    };
+    let mut t = run(&problem, opts, &to_original, &cost, &sse_volts, &grad);
+    t.training_data = TrainingData::RateMeans {
+        rates: groups,
+        points: n,
+    };
+    t.online_pass_limit = (online_limit < opts.max_online_passes).then_some(online_limit);
+    t
+}
+
+/// What the online passes present, in normalised units.
+struct Problem<'a> {
+    x: &'a [f64],
+    y: &'a [f64],
+    u: &'a [f64],
+    max_x2: f64,
+    online_limit: u64,
+}
+
+/// The training loop shared by [`train`] and [`train_rate_means`].
+fn run(
+    problem: &Problem<'_>,
+    opts: &NeuronOptions,
+    to_original: &dyn Fn(f64, f64) -> (f64, f64),
+    cost: &dyn Fn(f64, f64) -> f64,
+    sse_volts: &dyn Fn(f64, f64) -> f64,
+    grad: &dyn Fn(f64, f64) -> (f64, f64),
+) -> Trained {
+    let (x, y, u) = (problem.x, problem.y, problem.u);
+    let n = x.len().min(y.len()).min(u.len());
     let mut rng = StdRng::seed_from_u64(opts.seed);
     let mut w: f64 = rng.random_range(-0.1..0.1);
     let mut t: f64 = rng.random_range(-0.1..0.1);
@@ -187,8 +358,7 @@ pub fn train(
     let mut batch_passes = 0_u64;
     let mut online = true;
     let mut status = NeuronStatus::MaxPasses;
-    let max_x2 = x.iter().fold(0.0_f64, |m, x| m.max(x * x));
-    let batch_eta = 1.0 / (1.0 + max_x2);
+    let batch_eta = 1.0 / (1.0 + problem.max_x2);
     let batch_alpha = 0.5;
 
     for pass in 1..=opts.max_passes {
@@ -213,14 +383,7 @@ pub fn train(
             }
         } else {
             batch_passes += 1;
-            let (mut gw, mut gt) = (0.0, 0.0);
-            for i in 0..n {
-                let e = y[i] - (w * x[i] + t);
-                gw -= u[i] * e * x[i];
-                gt -= u[i] * e;
-            }
-            gw /= nf;
-            gt /= nf;
+            let (gw, gt) = grad(w, t);
             if (gw * gw + gt * gt).sqrt() <= opts.gradient_tolerance {
                 batch_passes -= 1;
                 status = NeuronStatus::Converged;
@@ -252,7 +415,7 @@ pub fn train(
         let change = (prev_e - e).abs();
         prev_e = e;
         let settled = change <= opts.epsilon * e;
-        if online && (settled || online_passes >= opts.max_online_passes) {
+        if online && (settled || online_passes >= problem.online_limit) {
             if opts.batch_finish {
                 online = false;
                 // Start the batch phase without the online phase's momentum.
@@ -279,5 +442,7 @@ pub fn train(
         pass_errors,
         initial_weight,
         initial_threshold,
+        training_data: TrainingData::Points,
+        online_pass_limit: None,
     }
 }

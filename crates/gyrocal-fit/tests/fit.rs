@@ -701,3 +701,47 @@ fn endless_input_is_refused_at_the_cap() {
     );
     assert!(started.elapsed() < std::time::Duration::from_secs(20));
 }
+
+#[test]
+fn blocked_qr_on_many_points_recovers_a_noise_free_cubic_and_matches_the_neuron() {
+    // 20 000 points (five QR blocks), shuffled rates: the blocked factorisation is exact.
+    let rates = [
+        -20.0, -15.0, -7.0, -1.0, -0.3, 0.0, 0.3, 1.0, 7.0, 15.0, 20.0,
+    ];
+    let data = Dataset::from_pairs((0..20_000).map(|i| {
+        let w = rates[(i * 7) % rates.len()];
+        (w, 0.0088 + 0.3612 * w + 2e-6 * w * w - 3e-8 * w * w * w)
+    }));
+    let fit = fit_least_squares(&data, Model::Cubic, Weighting::Auto).unwrap();
+    let c = fit.coefficients;
+    assert!((c.k0.unwrap() - 0.0088).abs() < 1e-12, "{c:?}");
+    assert!((c.k1.unwrap() - 0.3612).abs() < 1e-12, "{c:?}");
+    assert!((c.k2.unwrap() - 2e-6).abs() < 1e-13, "{c:?}");
+    assert!((c.k3.unwrap() + 3e-8).abs() < 1e-14, "{c:?}");
+    // The neuron trains on the 11 rate means above 10 000 points and reaches the line.
+    let noisy = Dataset::from_pairs(data.points.iter().enumerate().map(|(i, p)| {
+        let noise = 1e-4 * ((i as f64 * 0.618_033_988_7).fract() - 0.5);
+        (p.rate_dps, p.volts + noise)
+    }));
+    let ls = fit_least_squares(&noisy, Model::Linear, Weighting::Auto).unwrap();
+    let nn = fit_neuron(&noisy, &NeuronOptions::default(), Weighting::Auto).unwrap();
+    let t = nn.neuron.as_ref().unwrap();
+    assert_eq!(
+        t.training_data,
+        gyrocal_fit::TrainingData::RateMeans {
+            rates: 11,
+            points: 20_000
+        }
+    );
+    assert!(nn.converged);
+    assert!(
+        (nn.sse - ls.sse).abs() <= 1e-9 * ls.sse,
+        "{} {}",
+        nn.sse,
+        ls.sse
+    );
+    assert!((nn.scale_factor - ls.scale_factor).abs() <= 1e-9 * ls.scale_factor);
+    // The last pass error (from the sufficient statistics) is the fit's SSE.
+    let last = *t.pass_errors.last().unwrap();
+    assert!((last - nn.sse).abs() <= 1e-9 * nn.sse, "{last} {}", nn.sse);
+}

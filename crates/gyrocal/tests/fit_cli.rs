@@ -346,10 +346,10 @@ fn endless_and_huge_inputs_exit_2_quickly() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(
-        err.contains("/dev/zero: larger than the 64 MiB limit"),
+        err.contains("/dev/zero: line 1: longer than the 1024 KiB limit for a line"),
         "{err}"
     );
-    // A regular file over the cap is refused from its size (sparse: no disk used).
+    // A large file without line breaks is refused after its first MiB (sparse: no disk used).
     let tmp = tempfile::tempdir().unwrap();
     let path = tmp.path().join("huge.csv");
     let f = std::fs::File::create(&path).unwrap();
@@ -357,10 +357,68 @@ fn endless_and_huge_inputs_exit_2_quickly() {
     let out = gyrocal(&["fit", path.to_str().unwrap()]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
-    assert!(err.contains("huge.csv: larger than"), "{err}");
+    assert!(err.contains("huge.csv: line 1: longer than"), "{err}");
     assert!(
         started.elapsed() < std::time::Duration::from_secs(30),
         "{:?}",
         started.elapsed()
     );
+}
+
+#[test]
+fn many_points_get_per_rate_summaries_unless_residuals_is_given() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rates = [-20.0, -10.0, -1.0, 0.0, 1.0, 10.0, 20.0];
+    let mut text = String::from("rate_dps,volts\n");
+    for i in 0..14_000 {
+        let w = rates[(i * 5) % rates.len()];
+        let noise = 1e-4 * ((i as f64 * 0.618_033_988_7).fract() - 0.5);
+        text.push_str(&format!(
+            "{w},{}\n",
+            0.0088 + 0.3612 * w + 2e-6 * w * w + noise
+        ));
+    }
+    let path = write(&tmp, "many.csv", &text);
+    let out = gyrocal(&["fit", "--json", &path]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["points"], 14_000);
+    assert_eq!(v["distinct_rates"], 7);
+    assert_eq!(v["residual_detail"], "per-rate");
+    for f in v["fits"].as_array().unwrap() {
+        assert_eq!(f["residuals"].as_array().unwrap().len(), 0);
+        let rr = f["rate_residuals"].as_array().unwrap();
+        assert_eq!(rr.len(), 7);
+        assert_eq!(
+            rr.iter().map(|r| r["n"].as_u64().unwrap()).sum::<u64>(),
+            14_000
+        );
+    }
+    let nn = &v["fits"][4];
+    assert_eq!(nn["method"], "neuron");
+    assert_eq!(nn["neuron"]["training_data"]["kind"], "rate-means");
+    assert_eq!(nn["neuron"]["training_data"]["rates"], 7);
+    let (ls, nsse) = (
+        v["fits"][0]["sse"].as_f64().unwrap(),
+        nn["sse"].as_f64().unwrap(),
+    );
+    assert!((nsse - ls).abs() <= 1e-9 * ls, "{nsse} vs {ls}");
+
+    let out = gyrocal(&["fit", "--json", "--residuals", &path]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["residual_detail"], "per-point");
+    assert_eq!(v["fits"][0]["residuals"].as_array().unwrap().len(), 14_000);
+
+    let out = gyrocal(&["fit", &path]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("online passes on the means of the 7 rates"),
+        "{text}"
+    );
+    assert!(text.contains("LS mean r. [mV]"), "{text}");
+    assert!(text.lines().count() < 60, "{text}");
 }

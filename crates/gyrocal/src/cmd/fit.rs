@@ -2,15 +2,23 @@
 
 use std::fmt::Write as _;
 use std::fs::File;
-use std::io::{BufReader, Write as _};
+use std::io::{BufWriter, Write as _};
 use std::path::PathBuf;
 
 use anyhow::Context as _;
 use clap::{Args, ValueEnum};
 use gyrocal_fit::{
-    Analysis, Dataset, Fit, Method, Model, MultiAnalysis, NeuronOptions, NeuronStatus, Options,
-    Weighting, analyze, input,
+    Analysis, Columns, Fit, Method, Model, MultiAnalysis, NeuronOptions, NeuronStatus, Options,
+    POINT_RESIDUALS_MAX, TrainingData, Weighting, analyze_columns, input,
 };
+
+/// Above this many points the human report's table has one row per distinct rate (with the
+/// number of points and mean residuals) instead of one row per point.
+pub const HUMAN_POINT_ROWS_MAX: usize = 1_000;
+
+/// The most points `--residuals` accepts: per-point residuals of five fits take 160 bytes a
+/// point in memory (320 MB here) and more in JSON; a larger file is refused with exit 2.
+pub const RESIDUALS_POINTS_MAX: usize = 2_000_000;
 
 use crate::BadInput;
 
@@ -95,6 +103,11 @@ pub struct FitArgs {
     /// Neuron: online passes only, as in the paper (stops near, not at, the minimum).
     #[arg(long)]
     pub no_batch_finish: bool,
+    /// Per-point residuals in every fit whatever the size of the data. Without it, data sets
+    /// of more than 10000 points (1000 in the human report) get per-rate summaries instead
+    /// (JSON `rate_residuals`, one table row per rate). At most 2000000 points.
+    #[arg(long)]
+    pub residuals: bool,
 }
 
 impl FitArgs {
@@ -139,28 +152,25 @@ impl FitArgs {
             // Models asked for by name must be fitted; the default "every model" skips the
             // ones the data cannot determine and says so.
             skip_unsupported: self.models.is_empty(),
+            point_residuals_max: if self.residuals {
+                usize::MAX
+            } else if self.json {
+                POINT_RESIDUALS_MAX
+            } else {
+                HUMAN_POINT_ROWS_MAX
+            },
             ..defaults
         })
     }
 }
 
-/// Reads one file into a data set; errors name the file (and the line, from the parser). A
-/// file larger than [`input::MAX_INPUT_BYTES`] is refused before it is read; an endless one
-/// (`/dev/zero`, a pipe) after that many bytes.
-fn read(path: &PathBuf) -> anyhow::Result<Dataset> {
+/// Reads one file into column arrays, streaming; errors name the file (and the line, from
+/// the parser). Memory is bounded by [`input::MAX_ROWS`] rows and [`input::MAX_LINE_BYTES`]
+/// a line: an endless input (`/dev/zero`, a pipe) is refused after at most that much.
+fn read(path: &PathBuf) -> anyhow::Result<Columns> {
     let name = path.display().to_string();
     let file = File::open(path).map_err(|e| BadInput(format!("{name}: cannot open: {e}")))?;
-    if let Ok(meta) = file.metadata()
-        && meta.is_file()
-        && meta.len() > input::MAX_INPUT_BYTES
-    {
-        let e = input::InputError::TooLarge {
-            file: name,
-            cap: input::MAX_INPUT_BYTES,
-        };
-        return Err(BadInput(e.to_string()).into());
-    }
-    input::parse_csv(BufReader::new(file), &name).map_err(|e| BadInput(e.to_string()).into())
+    input::parse_columns(file, &name).map_err(|e| BadInput(e.to_string()).into())
 }
 
 /// Runs `gyrocal fit`.
@@ -169,10 +179,18 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let mut analyses = Vec::new();
     for path in &args.files {
         let data = read(path)?;
+        if args.residuals && data.len() > RESIDUALS_POINTS_MAX {
+            return Err(BadInput(format!(
+                "{}: {} points: --residuals (every point of every fit) is limited to {RESIDUALS_POINTS_MAX} points; without it the fits carry per-rate residuals",
+                path.display(),
+                data.len()
+            ))
+            .into());
+        }
         let _span = tracing::info_span!("fit", file = %path.display()).entered();
-        let analysis = analyze(&data, &opts).map_err(|e| {
+        let analysis = analyze_columns(&data, &opts).map_err(|e| {
             let name = path.display();
-            let place = match data.last_line() {
+            let place = match data.last_line {
                 Some(l) => format!("line {l} (end of data)"),
                 None => "no data rows".to_string(),
             };
@@ -183,19 +201,22 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             };
             BadInput(format!("{name}: {place}: {e}{hint}"))
         })?;
+        // The columns are dropped here: one file's data in memory at a time.
+        drop(data);
         analyses.push(analysis);
     }
-    let mut out = String::new();
+    let mut stdout = BufWriter::with_capacity(1 << 16, std::io::stdout().lock());
     if args.json {
-        let json = if analyses.len() == 1 {
-            serde_json::to_string_pretty(&analyses[0])
+        // Straight to stdout: no copy of the document in memory.
+        if analyses.len() == 1 {
+            serde_json::to_writer_pretty(&mut stdout, &analyses[0])
         } else {
-            serde_json::to_string_pretty(&MultiAnalysis::from_analyses(analyses))
+            serde_json::to_writer_pretty(&mut stdout, &MultiAnalysis::from_analyses(analyses))
         }
-        .context("serialising the result")?;
-        out.push_str(&json);
-        out.push('\n');
+        .context("writing the result to stdout")?;
+        stdout.write_all(b"\n").context("writing to stdout")?;
     } else {
+        let mut out = String::new();
         let multi = MultiAnalysis::from_analyses(analyses);
         for a in &multi.files {
             human(&mut out, a);
@@ -216,11 +237,10 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
                 let _ = writeln!(out, "repeatability std(K_i)/mean(K_i): {r:.1} ppm");
             }
         }
+        stdout
+            .write_all(out.as_bytes())
+            .context("writing to stdout")?;
     }
-    let mut stdout = std::io::stdout().lock();
-    stdout
-        .write_all(out.as_bytes())
-        .context("writing to stdout")?;
     stdout.flush().context("writing to stdout")?;
     Ok(())
 }
@@ -316,6 +336,18 @@ pub(crate) fn human(out: &mut String, a: &Analysis) {
                 ),
             };
             let _ = writeln!(out, "  {:<24} {status}", "");
+            if let TrainingData::RateMeans { rates, points } = t.training_data {
+                let limit = t
+                    .online_pass_limit
+                    .map(|l| format!(", online passes limited to {l}"))
+                    .unwrap_or_default();
+                let _ = writeln!(
+                    out,
+                    "  {:<24} online passes on the means of the {rates} rates (above {} points), batch passes and errors over all {points} points{limit}",
+                    "",
+                    gyrocal_fit::neuron::RATE_MEANS_ABOVE_POINTS
+                );
+            }
         }
     }
     let _ = writeln!(out);
@@ -383,7 +415,35 @@ pub(crate) fn human(out: &mut String, a: &Analysis) {
     if let Some(b) = best_fit {
         let _ = write!(header, " {:>17}", format!("{} resid. [mV]", b.model));
     }
-    let _ = writeln!(out, "{header}");
+    let per_rate = a.fits.first().is_some_and(|f| !f.rate_residuals.is_empty());
+    if per_rate {
+        // One row per distinct rate: the mean output and the mean residuals.
+        let mut header = format!("{:>10} {:>9} {:>14}", "rate [°/s]", "n", "mean [V]");
+        if ls.is_some() {
+            let _ = write!(header, " {:>17}", "LS mean r. [mV]");
+        }
+        if nn.is_some() {
+            let _ = write!(header, " {:>17}", "neuron mean r. [mV]");
+        }
+        if let Some(b) = best_fit {
+            let _ = write!(header, " {:>17}", format!("{} mean r. [mV]", b.model));
+        }
+        let _ = writeln!(out, "{header}");
+        let Some(base) = a.fits.first() else {
+            return;
+        };
+        for (i, r) in base.rate_residuals.iter().enumerate() {
+            let mut row = format!("{:>10} {:>9} {:>14.7}", r.rate_dps, r.n, r.mean_volts);
+            for f in [ls, nn, best_fit].into_iter().flatten() {
+                if let Some(fr) = f.rate_residuals.get(i) {
+                    let _ = write!(row, " {:>+17.4}", fr.mean_residual * 1e3);
+                }
+            }
+            let _ = writeln!(out, "{row}");
+        }
+    } else {
+        let _ = writeln!(out, "{header}");
+    }
     for i in 0..a.points {
         let Some(r) = a.fits.first().and_then(|f| f.residuals.get(i)) else {
             break;
