@@ -42,6 +42,19 @@ pub struct BenchConfig {
     pub gyro: GyroConfig,
     /// The multimeter.
     pub dmm: DmmConfig,
+    /// How the multimeter is reached. Default its RS-232 port.
+    pub dmm_link: DmmLink,
+}
+
+/// How the simulated multimeter is reached.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DmmLink {
+    /// The meter's own RS-232 port.
+    #[default]
+    Rs232,
+    /// GPIB through a simulated Prologix controller (the meter in GPIB mode behind it).
+    Prologix(crate::prologix::PrologixConfig),
 }
 
 impl Default for BenchConfig {
@@ -53,6 +66,7 @@ impl Default for BenchConfig {
             table_wire: TableWire::default(),
             gyro: GyroConfig::default(),
             dmm: DmmConfig::default(),
+            dmm_link: DmmLink::default(),
         }
     }
 }
@@ -139,6 +153,7 @@ impl Bench {
             table_wire,
             gyro,
             dmm: mut dmm_config,
+            dmm_link,
         } = config;
         let time_scale = if time_scale.is_finite() && time_scale > 0.0 {
             time_scale
@@ -155,7 +170,22 @@ impl Bench {
         };
         let signal = GyroSignal::new(gyro, table_handle.clone(), derive_seed(seed, 2));
         let truth = signal.truth();
-        let dmm_handle = SimDmm::spawn(dmm, dmm_config, Box::new(signal), derive_seed(seed, 3));
+        let dmm_handle = match dmm_link {
+            DmmLink::Rs232 => {
+                SimDmm::spawn(dmm, dmm_config, Box::new(signal), derive_seed(seed, 3))
+            }
+            DmmLink::Prologix(ctl) => {
+                // the controller task lives as long as its host link; its handle is not needed
+                let (_controller, meter) = crate::prologix::spawn_gpib_meter(
+                    dmm,
+                    ctl,
+                    dmm_config,
+                    Box::new(signal),
+                    derive_seed(seed, 3),
+                );
+                meter
+            }
+        };
         BenchHandle {
             table: table_handle,
             dmm: dmm_handle,

@@ -17,9 +17,9 @@
 //! The gyro's own white noise is switched off, so `noise_v` alone sets the reading scatter
 //! and a plan reads as what it means.
 
-use gyrocal_files::{Framing, Plan, TableDialect};
+use gyrocal_files::{Framing, Plan, Port, TableDialect};
 
-use crate::bench::{BenchConfig, TableWire};
+use crate::bench::{BenchConfig, DmmLink, TableWire};
 
 /// The bench configuration for `plan`'s `[simulation]` section, at real instrument timing
 /// (`time_scale` 1; set it for a real-time bench).
@@ -47,6 +47,10 @@ pub fn bench_config(plan: &Plan) -> BenchConfig {
         TableDialect::Acl => TableWire::Acl,
         TableDialect::Aerosmith => TableWire::Aerosmith(Default::default()),
     };
+    // a meter the plan reaches through a Prologix controller sits behind a simulated one
+    if matches!(plan.dmm().port, Port::Gpib(_)) {
+        b.dmm_link = DmmLink::Prologix(Default::default());
+    }
     b.table.rate_noise_std = s.rate_noise_dps;
     b.table.ripple_amplitude = s.ripple_dps;
     b.dmm.noise_v = s.noise_v;

@@ -46,7 +46,8 @@ use crate::dmm::{DmmConfig, DmmHandle, GPIB_SDC, GPIB_TALK, GPIB_UNTALK, Interfa
 const ESC: u8 = 0x1b;
 
 /// The simulated controller's settings.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct PrologixConfig {
     /// `++ver` reply. Default `Prologix GPIB-USB Controller version 6.107`.
     pub version: String,

@@ -463,6 +463,11 @@ pub enum Port {
         /// TCP port (1..=65535).
         port: u16,
     },
+    /// GPIB through a Prologix controller: `prologix:/dev/ttyUSB0?addr=22` (GPIB-USB) or
+    /// `prologix-tcp://HOST[:1234]?addr=22` (GPIB-Ethernet). Kept as written: the link layer
+    /// (`gyrocal_link::parse_port`) owns the syntax and checks it when the port is opened or
+    /// the plan checked (`gyrocal check`).
+    Gpib(String),
 }
 
 impl Port {
@@ -497,9 +502,13 @@ impl Port {
                 port,
             });
         }
+        if s.starts_with("prologix:") || s.starts_with("prologix-tcp://") {
+            return Ok(Port::Gpib(s.to_string()));
+        }
         if s.contains("://") {
             return Err(format!(
-                "unknown scheme: use a device path or tcp://HOST:PORT (got {s:?})"
+                "unknown scheme: use a device path, tcp://HOST:PORT, prologix:DEVICE?addr=N or \
+                 prologix-tcp://HOST?addr=N (got {s:?})"
             ));
         }
         Ok(Port::Serial(PathBuf::from(s)))
@@ -512,6 +521,7 @@ impl fmt::Display for Port {
             Port::Serial(p) => write!(f, "{}", p.display()),
             Port::Tcp { host, port } if host.contains(':') => write!(f, "tcp://[{host}]:{port}"),
             Port::Tcp { host, port } => write!(f, "tcp://{host}:{port}"),
+            Port::Gpib(spec) => f.write_str(spec),
         }
     }
 }

@@ -1201,3 +1201,35 @@ fn e2e_aerosmith_table_sigint_at_speed_exits_only_at_rest() {
         "{last}"
     );
 }
+
+#[test]
+fn e2e_meter_over_gpib_through_a_prologix_controller_completes() {
+    // the plan names a Prologix port: `gyrocal sim` serves a simulated controller on the
+    // meter's pseudo-terminal, `gyrocal run` opens it as prologix:PATH?addr=22
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_plan(tmp.path());
+    let text = std::fs::read_to_string(&plan).unwrap().replace(
+        "port = \"/dev/ttyUSB0\"",
+        "port = \"prologix:/dev/ttyUSB0?addr=22\"",
+    );
+    std::fs::write(&plan, text).unwrap();
+    let dir = tmp.path().join("run");
+    let sim = Sim::start(&plan, &[]);
+    let dmm_port = format!("prologix:{}?addr=22", sim.dmm());
+    let mut cmd = Command::new(BIN);
+    let out = cmd
+        .env_remove("RUST_LOG")
+        .arg("run")
+        .arg(&plan)
+        .args(["--dmm-port", &dmm_port, "--table-port", sim.table()])
+        .args(["--no-report", "--out", dir.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    check_complete(&dir);
+    let last = sim.finish();
+    assert_table_parked(&last);
+    // GPIB: the meter was never sent SYST:REM (it would have refused it with -113)
+    assert_eq!(last["dmm"]["errors_raised"], 0, "{last}");
+}

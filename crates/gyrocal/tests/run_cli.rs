@@ -580,3 +580,48 @@ fn the_aerosmith_dialect_runs_the_same_plan_on_the_simulated_bench() {
     check_complete(&dir, 5, 50);
     assert_eq!(final_table_state(&stderr)["stopped"], true);
 }
+
+#[test]
+fn a_meter_behind_a_prologix_controller_runs_the_same_plan() {
+    // `prologix:` in [dmm] port: the real Prologix transport in front of the 34401A driver,
+    // a simulated controller in front of the simulated meter (GPIB mode: no SYST:REM)
+    let tmp = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(config("quick.toml"))
+        .unwrap()
+        .replace(
+            "port = \"/dev/ttyUSB0\"",
+            "port = \"prologix:/dev/ttyUSB0?addr=22\"",
+        );
+    assert!(text.contains("prologix:"));
+    let plan = tmp.path().join("gpib.toml");
+    std::fs::write(&plan, &text).unwrap();
+    let dir = tmp.path().join("run");
+    let out = gyrocal()
+        .args([
+            "run",
+            plan.to_str().unwrap(),
+            "--simulate",
+            "--no-report",
+            "--out",
+        ])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    check_complete(&dir, 5, 50);
+    assert!(stderr.contains("table at rest"), "{stderr}");
+    // a bad GPIB address is refused before anything opens, naming the key
+    let bad = tmp.path().join("bad.toml");
+    std::fs::write(&bad, text.replace("addr=22", "addr=31")).unwrap();
+    let out = gyrocal()
+        .args(["check", bad.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("dmm.port") && stderr.contains("0..=30"),
+        "{stderr}"
+    );
+}

@@ -27,7 +27,23 @@ pub fn load_plan(path: &std::path::Path) -> anyhow::Result<Plan> {
     estimate::dcv_config(&plan)
         .validate()
         .map_err(|e| BadInput(format!("{}: [dmm] {e}", path.display())))?;
+    check_port(path, "dmm.port", &plan.dmm().port)?;
+    check_port(path, "table.port", &plan.table().port)?;
     Ok(plan)
+}
+
+/// A Prologix port string is kept as written by the plan; its syntax belongs to the link
+/// layer, which checks it here so `check` and `run` refuse a bad one before anything opens.
+pub fn check_port(
+    path: &std::path::Path,
+    key: &str,
+    port: &gyrocal_run::Port,
+) -> anyhow::Result<()> {
+    if let gyrocal_run::Port::Gpib(spec) = port {
+        gyrocal_link::parse_port(spec)
+            .map_err(|e| BadInput(format!("{}: {key}: {e}", path.display())))?;
+    }
+    Ok(())
 }
 
 /// Runs `gyrocal check`.

@@ -121,10 +121,14 @@ pub const EXIT_ABORTED: u8 = 130;
 pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
     let mut plan = load_plan(&args.plan)?;
     if let Some(p) = &args.dmm_port {
-        plan.set_dmm_port(Port::parse(p).map_err(|e| BadInput(format!("--dmm-port: {e}")))?);
+        let port = Port::parse(p).map_err(|e| BadInput(format!("--dmm-port: {e}")))?;
+        crate::cmd::check::check_port(Path::new("--dmm-port"), "port", &port)?;
+        plan.set_dmm_port(port);
     }
     if let Some(p) = &args.table_port {
-        plan.set_table_port(Port::parse(p).map_err(|e| BadInput(format!("--table-port: {e}")))?);
+        let port = Port::parse(p).map_err(|e| BadInput(format!("--table-port: {e}")))?;
+        crate::cmd::check::check_port(Path::new("--table-port"), "port", &port)?;
+        plan.set_table_port(port);
     }
     if let Some(x) = args.sim_time_scale
         && !(x.is_finite() && x > 0.0)
@@ -267,7 +271,22 @@ async fn execute(
         let bench = gyrocal_sim::bench::Bench::spawn(cfg);
         let mut schedule = gyrocal_sim::faults::schedule(faults, &bench.handle, time_scale);
         let (dir, run) = open_run_dir(args, &plan)?;
-        let (summary, run, signal) = sequence(plan, bench.dmm, bench.table, run).await?;
+        let (summary, run, signal) = match &plan.dmm().port {
+            // the plan reaches the meter over GPIB: the bench put a simulated Prologix
+            // controller in front of it, and the real Prologix transport talks to that
+            Port::Gpib(spec) => {
+                let options = match gyrocal_link::parse_port(spec) {
+                    Ok(gyrocal_link::PortSpec::PrologixSerial { options, .. })
+                    | Ok(gyrocal_link::PortSpec::PrologixTcp { options, .. }) => options,
+                    _ => gyrocal_link::PrologixOptions::default(),
+                };
+                let dmm = gyrocal_link::PrologixTransport::open(bench.dmm, options)
+                    .await
+                    .context("opening the simulated Prologix controller")?;
+                sequence(plan, dmm, bench.table, run).await?
+            }
+            _ => sequence(plan, bench.dmm, bench.table, run).await?,
+        };
         // let the simulator take the last commands before it is dropped
         tokio::time::sleep(Duration::from_millis(50)).await;
         for f in schedule.status(&bench.handle) {
