@@ -58,14 +58,13 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use gyrocal_link::{ErrorKind as LinkErrorKind, LinkError, Transport, show_bytes};
-use tokio::time::Instant;
-
 #[cfg(doc)]
 use crate::RateTable;
+use crate::ask::{Asking, Attempt};
 use crate::dialect::{Connected, Dialect, DialectError, StopAttempt};
 use crate::table::{PolicyConfig, Table};
 use crate::{Identity, Limits, StopKind, TableError, TableMode, TableStatus};
+use gyrocal_link::{ErrorKind as LinkErrorKind, LinkError, Transport, show_bytes};
 
 /// Most errors read from the queue in one go (the queue is finite; a table that keeps
 /// answering errors is broken, not informative).
@@ -270,85 +269,25 @@ impl<T: Transport + 'static> Acl<T> {
         Ok(reply)
     }
 
-    /// Asks the idempotent query `line` until `parse` accepts the reply, at most
-    /// `1 + retries` times within `timeout` in total (see the module documentation). A dead link
-    /// is a link failure at once; a lost or garbled reply only when no attempt succeeded; when
-    /// every attempt got a line that does not parse, a [`TableError::Reply`] is returned
-    /// without a link failure (as a single bad reply always was).
+    /// Asks the idempotent query `line` until `parse` accepts the reply, under the retry
+    /// policy every dialect shares ([`crate::ask`]).
     async fn ask<R>(
         &self,
         line: &str,
         timeout: Duration,
         parse: impl Fn(&str) -> Result<R, &'static str>,
     ) -> Result<R, DialectError> {
-        let attempts = self.config.retries.saturating_add(1);
-        let deadline = Instant::now() + timeout;
-        let mut first: Option<Miss> = None;
-        let mut last = String::new();
-        let mut link_missed = false;
-        for attempt in 1..=attempts {
-            let left = attempts - attempt + 1;
-            let budget = deadline.saturating_duration_since(Instant::now()) / left;
-            let miss = match self.exchange(line, budget).await {
+        let parse = &parse;
+        crate::ask::ask(self, line, timeout, |budget| async move {
+            match self.exchange(line, budget).await {
                 Ok(reply) => match parse(&reply) {
-                    Ok(v) => {
-                        if attempt > 1 {
-                            // a late reply to an earlier attempt may have been taken for this
-                            // one; then this attempt's reply is still to come: clear it first
-                            self.link.lock().await.dirty = true;
-                        }
-                        return Ok(v);
-                    }
-                    Err(reason) => Miss::Reply { reply, reason },
+                    Ok(v) => Attempt::Value(v),
+                    Err(reason) => Attempt::Unusable { reply, reason },
                 },
-                Err(e) if retryable(&e) => Miss::Link(e),
-                Err(e) => return Err(self.lost(line, e)),
-            };
-            last = miss.describe();
-            link_missed |= matches!(miss, Miss::Link(_));
-            if attempt < attempts {
-                let mut note = format!(
-                    "`{line}`: {last}; asked again (retry {attempt} of {})",
-                    attempts - 1
-                );
-                if line.starts_with(":System:Error?") {
-                    note.push_str(
-                        "; the table had already removed the error-queue entry of that reply, \
-                         so a table error may be missing",
-                    );
-                }
-                self.note_retry(note);
-                // the reply may have been late or followed by more junk: clear it first
-                self.link.lock().await.dirty = true;
+                Err(e) => Attempt::Link(e),
             }
-            first.get_or_insert(miss);
-        }
-        let err = match first {
-            Some(Miss::Reply { reply, reason }) if attempts > 1 => self.reply_error(
-                line,
-                &reply,
-                &format!("{reason}; no usable reply in {attempts} attempts"),
-            ),
-            Some(Miss::Reply { reply, reason }) => self.reply_error(line, &reply, reason),
-            Some(Miss::Link(e)) => TableError::from_link(&self.device, line, e),
-            None => TableError::Reply {
-                device: self.device.clone(),
-                command: line.to_string(),
-                reason: "no attempt was made".into(),
-                bytes: String::new(),
-            },
-        };
-        if attempts > 1 {
-            self.note_retry(format!(
-                "`{line}`: {last}; no usable reply in {attempts} attempts, gave up"
-            ));
-        }
-        // A link that lost or mangled a reply and never gave a usable one cannot be trusted
-        // with the table's motion: the policy faults, as after a single lost reply.
-        Err(DialectError {
-            error: err,
-            link_failed: link_missed,
         })
+        .await
     }
 
     fn note_retry(&self, note: String) {
@@ -357,15 +296,6 @@ impl<T: Transport + 'static> Acl<T> {
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
             .push(note);
-    }
-
-    fn reply_error(&self, command: &str, reply: &str, reason: &str) -> TableError {
-        TableError::Reply {
-            device: self.device.clone(),
-            command: command.to_string(),
-            reason: reason.to_string(),
-            bytes: show_bytes(reply.as_bytes()),
-        }
     }
 
     async fn query_number(&self, line: &str, timeout: Duration) -> Result<f64, DialectError> {
@@ -459,6 +389,31 @@ fn parse_mode(reply: &str) -> Option<TableMode> {
         "POSITION" | "POS" => Some(TableMode::Position),
         "ABORT" => Some(TableMode::Abort),
         _ => None,
+    }
+}
+
+impl<T: Transport + 'static> Asking for Acl<T> {
+    fn device(&self) -> &str {
+        &self.device
+    }
+
+    fn retries(&self) -> u32 {
+        self.config.retries
+    }
+
+    fn note_retry(&self, note: String) {
+        Acl::note_retry(self, note);
+    }
+
+    async fn mark_dirty(&self) {
+        self.link.lock().await.dirty = true;
+    }
+
+    fn retry_caveat(&self, line: &str) -> Option<&'static str> {
+        line.starts_with(":System:Error?").then_some(
+            "; the table had already removed the error-queue entry of that reply, so a table \
+             error may be missing",
+        )
     }
 }
 

@@ -62,12 +62,12 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use gyrocal_link::{LinkError, Transport, show_bytes};
+use gyrocal_link::{LinkError, Transport};
 use tokio::time::Instant;
 
 #[cfg(doc)]
 use crate::RateTable;
-use crate::acl::{Miss, retryable};
+use crate::ask::{Asking, Attempt};
 use crate::dialect::{Connected, Dialect, DialectError, StopAttempt};
 use crate::table::{PolicyConfig, Table};
 use crate::{Identity, Limits, StopKind, TableError, TableMode, TableStatus};
@@ -321,86 +321,34 @@ impl<T: Transport + 'static> Aerosmith<T> {
         Ok(())
     }
 
-    /// Asks an idempotent query until `parse` accepts its value line, at most `1 + retries`
-    /// times within `timeout` (the ACL dialect's rules). A `?` reply is a table error, not
-    /// retried.
+    /// Asks an idempotent query until `parse` accepts its value line, under the retry policy
+    /// every dialect shares ([`crate::ask`]). A `?` reply is a table error, not retried.
     async fn ask<R>(
         &self,
         command: &str,
         timeout: Duration,
         parse: impl Fn(&str) -> Result<R, &'static str>,
     ) -> Result<R, DialectError> {
-        let attempts = self.config.retries.saturating_add(1);
-        let deadline = Instant::now() + timeout;
-        let mut first: Option<Miss> = None;
-        let mut last = String::new();
-        let mut link_missed = false;
-        for attempt in 1..=attempts {
-            let left = attempts - attempt + 1;
-            let budget = deadline.saturating_duration_since(Instant::now()) / left;
-            let miss = match self.exchange(command, budget).await {
+        let parse = &parse;
+        crate::ask::ask(self, command, timeout, |budget| async move {
+            match self.exchange(command, budget).await {
                 Ok(body) if body.contains('?') => {
-                    return Err(self.table_error(command, &body).into());
+                    Attempt::Final(self.table_error(command, &body).into())
                 }
                 Ok(body) => {
                     let value = data_lines(&body, command).last().copied().unwrap_or("");
                     match parse(value) {
-                        Ok(v) => {
-                            if attempt > 1 {
-                                self.link.lock().await.dirty = true;
-                            }
-                            return Ok(v);
-                        }
-                        Err(reason) => Miss::Reply {
+                        Ok(v) => Attempt::Value(v),
+                        Err(reason) => Attempt::Unusable {
                             reply: body,
                             reason,
                         },
                     }
                 }
-                Err(e) if retryable(&e) => Miss::Link(e),
-                Err(e) => {
-                    return Err(DialectError::link(TableError::from_link(
-                        &self.device,
-                        command,
-                        e,
-                    )));
-                }
-            };
-            last = miss.describe();
-            link_missed |= matches!(miss, Miss::Link(_));
-            if attempt < attempts {
-                self.note_retry(format!(
-                    "`{command}`: {last}; asked again (retry {attempt} of {})",
-                    attempts - 1
-                ));
-                self.link.lock().await.dirty = true;
+                Err(e) => Attempt::Link(e),
             }
-            first.get_or_insert(miss);
-        }
-        let error = match first {
-            Some(Miss::Reply { reply, reason }) => TableError::Reply {
-                device: self.device.clone(),
-                command: command.to_string(),
-                reason: format!("{reason}; no usable reply in {attempts} attempts"),
-                bytes: show_bytes(reply.as_bytes()),
-            },
-            Some(Miss::Link(e)) => TableError::from_link(&self.device, command, e),
-            None => TableError::Reply {
-                device: self.device.clone(),
-                command: command.to_string(),
-                reason: "no attempt was made".into(),
-                bytes: String::new(),
-            },
-        };
-        if attempts > 1 {
-            self.note_retry(format!(
-                "`{command}`: {last}; no usable reply in {attempts} attempts, gave up"
-            ));
-        }
-        Err(DialectError {
-            error,
-            link_failed: link_missed,
         })
+        .await
     }
 
     fn note_retry(&self, note: String) {
@@ -452,6 +400,24 @@ impl<T: Transport + 'static> Aerosmith<T> {
         } else {
             TableMode::Abort
         })
+    }
+}
+
+impl<T: Transport + 'static> Asking for Aerosmith<T> {
+    fn device(&self) -> &str {
+        &self.device
+    }
+
+    fn retries(&self) -> u32 {
+        self.config.retries
+    }
+
+    fn note_retry(&self, note: String) {
+        Aerosmith::note_retry(self, note);
+    }
+
+    async fn mark_dirty(&self) {
+        self.link.lock().await.dirty = true;
     }
 }
 

@@ -60,6 +60,7 @@
 //! A second dialect (Ideal Aerosmith ASCII, a binary framed table) is a new module implementing
 //! [`Dialect`]; the table type, the sequencer and the tests of the policy stay as they are.
 
+mod ask;
 mod error;
 mod stats;
 mod stop;

@@ -1,0 +1,140 @@
+//! Asking an idempotent query again: the retry policy every dialect shares, written once.
+//!
+//! A lost, garbled or noisy reply to a query that changes nothing (`:Read:Rate?`, `PVE`,
+//! `*STB?`, ...) is asked again, at most `1 + retries` times within the query's own deadline
+//! (each attempt gets the time left divided by the attempts left, so a silent table still
+//! fails within the heartbeat deadline). A dead link fails at once. Every retry is noted for
+//! the run's manifest. After a retry succeeded the link is marked dirty: a late reply to an
+//! earlier attempt may have been taken for this one, and this attempt's reply is still to
+//! come. A link that lost or mangled a reply and never gave a usable one is a link failure
+//! (the policy faults the table); a table that answered every time with something unusable
+//! is a reply error only.
+
+use std::future::Future;
+use std::time::Duration;
+
+use gyrocal_link::{LinkError, show_bytes};
+use tokio::time::Instant;
+
+use crate::TableError;
+use crate::acl::{Miss, retryable};
+use crate::dialect::DialectError;
+
+/// How one attempt went.
+pub(crate) enum Attempt<R> {
+    /// A usable value.
+    Value(R),
+    /// A reply line came back that the parser refused.
+    Unusable {
+        /// The reply.
+        reply: String,
+        /// Why it is refused.
+        reason: &'static str,
+    },
+    /// The link failed (retried when [`retryable`]).
+    Link(LinkError),
+    /// A definite answer that asking again cannot change (a table error reply).
+    Final(DialectError),
+}
+
+/// What the shared policy needs from a dialect.
+pub(crate) trait Asking: Sync {
+    /// The link's description.
+    fn device(&self) -> &str;
+    /// Retries after the first attempt.
+    fn retries(&self) -> u32;
+    /// Records a retry note (and logs it).
+    fn note_retry(&self, note: String);
+    /// The next exchange must clear stale input first.
+    fn mark_dirty(&self) -> impl Future<Output = ()> + Send;
+    /// Something to add to a retry note of `line` (an error-queue entry that may be lost).
+    fn retry_caveat(&self, line: &str) -> Option<&'static str> {
+        let _ = line;
+        None
+    }
+}
+
+/// Asks `line` through `attempt` (one exchange and its parse, given the time it may take)
+/// under the shared retry policy.
+pub(crate) async fn ask<D, R, F, Fut>(
+    dialect: &D,
+    line: &str,
+    timeout: Duration,
+    mut attempt: F,
+) -> Result<R, DialectError>
+where
+    D: Asking,
+    F: FnMut(Duration) -> Fut,
+    Fut: Future<Output = Attempt<R>>,
+{
+    let attempts = dialect.retries().saturating_add(1);
+    let deadline = Instant::now() + timeout;
+    let mut first: Option<Miss> = None;
+    let mut last = String::new();
+    let mut link_missed = false;
+    for n in 1..=attempts {
+        let left = attempts - n + 1;
+        let budget = deadline.saturating_duration_since(Instant::now()) / left;
+        let miss = match attempt(budget).await {
+            Attempt::Value(v) => {
+                if n > 1 {
+                    dialect.mark_dirty().await;
+                }
+                return Ok(v);
+            }
+            Attempt::Unusable { reply, reason } => Miss::Reply { reply, reason },
+            Attempt::Link(e) if retryable(&e) => Miss::Link(e),
+            Attempt::Link(e) => {
+                return Err(DialectError::link(TableError::from_link(
+                    dialect.device(),
+                    line,
+                    e,
+                )));
+            }
+            Attempt::Final(e) => return Err(e),
+        };
+        last = miss.describe();
+        link_missed |= matches!(miss, Miss::Link(_));
+        if n < attempts {
+            let mut note = format!(
+                "`{line}`: {last}; asked again (retry {n} of {})",
+                attempts - 1
+            );
+            if let Some(caveat) = dialect.retry_caveat(line) {
+                note.push_str(caveat);
+            }
+            dialect.note_retry(note);
+            // the reply may have been late or followed by more junk: clear it first
+            dialect.mark_dirty().await;
+        }
+        first.get_or_insert(miss);
+    }
+    let error = match first {
+        Some(Miss::Reply { reply, reason }) => TableError::Reply {
+            device: dialect.device().to_string(),
+            command: line.to_string(),
+            reason: if attempts > 1 {
+                format!("{reason}; no usable reply in {attempts} attempts")
+            } else {
+                reason.to_string()
+            },
+            bytes: show_bytes(reply.as_bytes()),
+        },
+        Some(Miss::Link(e)) => TableError::from_link(dialect.device(), line, e),
+        None => TableError::Reply {
+            device: dialect.device().to_string(),
+            command: line.to_string(),
+            reason: "no attempt was made".into(),
+            bytes: String::new(),
+        },
+    };
+    if attempts > 1 {
+        dialect.note_retry(format!(
+            "`{line}`: {last}; no usable reply in {attempts} attempts, gave up"
+        ));
+    }
+    Err(DialectError {
+        error,
+        link_failed: link_missed,
+    })
+}
