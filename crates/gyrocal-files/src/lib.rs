@@ -105,8 +105,7 @@ pub fn fit_run(
             }
         }
     }
-    let value = serde_json::to_value(&analysis).map_err(|e| FitRunError::Json(e.to_string()))?;
-    run.set_fit(value)?;
+    run.set_fit(analysis.clone())?;
     Ok(analysis)
 }
 

@@ -413,8 +413,27 @@ pub struct Manifest {
     pub retries: Vec<Retry>,
     /// Bound versus elapsed, when computed.
     pub timing: Option<Timing>,
-    /// The fit (`gyrocal fit --json` document), when done.
-    pub fit: Option<serde_json::Value>,
+    /// The fit (the fit crate's [`gyrocal_fit::Analysis`], the `gyrocal fit --json`
+    /// document), when done. A fit this version cannot read back (written by another version)
+    /// is `None` here, with a warning: `fit.json` beside the manifest stays the source of truth.
+    #[serde(default, deserialize_with = "lenient_fit")]
+    pub fit: Option<gyrocal_fit::Analysis>,
+}
+
+/// Reads the manifest's fit, or `None` (with a warning) when it is not an analysis this
+/// version understands: an unreadable fit must never make a run directory unreadable.
+fn lenient_fit<'de, D>(de: D) -> Result<Option<gyrocal_fit::Analysis>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+{
+    let value = Option::<serde_json::Value>::deserialize(de)?;
+    Ok(value.and_then(|v| match serde_json::from_value(v) {
+        Ok(a) => Some(a),
+        Err(e) => {
+            tracing::warn!(error = %e, "the manifest's fit is not readable by this version; ignored");
+            None
+        }
+    }))
 }
 
 /// A run directory read back by [`load`].
@@ -966,7 +985,7 @@ impl RunDir {
     }
 
     /// Stores the fit document: writes `fit.json` atomically and puts it in the manifest.
-    pub fn set_fit(&mut self, fit: serde_json::Value) -> Result<(), RunError> {
+    pub fn set_fit(&mut self, fit: gyrocal_fit::Analysis) -> Result<(), RunError> {
         let path = self.dir.join(FIT_JSON);
         let bytes = serde_json::to_vec_pretty(&fit).map_err(|e| RunError::Protocol {
             path: path.clone(),

@@ -120,8 +120,13 @@ fn a_full_run_writes_what_the_fit_needs() {
         message: "timeout".into(),
     })
     .unwrap();
-    rd.set_fit(serde_json::json!({"scale_factor": 0.3612}))
-        .unwrap();
+    let steps = gyrocal_files::load(&dir).unwrap().steps;
+    let analysis = gyrocal_fit::analyze(
+        &gyrocal_files::dataset_from_steps(&steps, "steps.csv"),
+        &gyrocal_fit::Options::default(),
+    )
+    .unwrap();
+    rd.set_fit(analysis.clone()).unwrap();
     rd.finish(Status::Complete, None, 51.5).unwrap();
 
     // steps.csv: the columns `gyrocal fit` reads by name, with numbers in them
@@ -176,7 +181,12 @@ fn a_full_run_writes_what_the_fit_needs() {
         m.instruments.dmm.as_deref(),
         Some("HEWLETT-PACKARD,34401A,0,11-5-2")
     );
-    assert_eq!(m.fit, Some(serde_json::json!({"scale_factor": 0.3612})));
+    // the manifest's fit is the typed analysis, read back as written (to JSON's float
+    // precision)
+    let back = m.fit.as_ref().expect("the fit in the manifest");
+    assert_eq!(back.fits.len(), analysis.fits.len());
+    let k = |a: &gyrocal_fit::Analysis| a.metrics.scale_factor;
+    assert!((k(back) / k(&analysis) - 1.0).abs() < 1e-15);
     assert!(dir.join("fit.json").exists());
     assert_eq!(data.steps.len(), 5);
     // no temp file left behind
@@ -684,4 +694,27 @@ fn a_samples_csv_over_its_cap_is_refused_on_resume_from_its_size() {
         "{msg}"
     );
     assert!(started.elapsed() < std::time::Duration::from_secs(5));
+}
+
+#[test]
+fn a_manifest_fit_this_version_cannot_read_leaves_the_run_readable() {
+    // a manifest written by another version, with a fit document this one does not know:
+    // the run directory still loads (the fit is ignored with a warning; fit.json is the
+    // source of truth)
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let p = plan();
+    let mut rd = RunDir::create(&dir, &p, meta()).unwrap();
+    run_step(&mut rd, 0, true);
+    rd.finish(Status::Aborted, Some("test".into()), 1.0)
+        .unwrap();
+    drop(rd);
+    let path = dir.join("manifest.json");
+    let mut m: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(&path).unwrap()).unwrap();
+    m["fit"] = serde_json::json!({"scale_factor": 0.3612});
+    fs::write(&path, serde_json::to_string_pretty(&m).unwrap()).unwrap();
+    let data = gyrocal_files::load(&dir).unwrap();
+    assert!(data.manifest.fit.is_none());
+    assert_eq!(data.steps.len(), 1);
 }

@@ -101,12 +101,8 @@ pub(crate) fn load_run(dir: &Path) -> Result<Input, ReportError> {
             Ok(analysis_from_json(&fit_path, value)?),
             FitSource::FitJson(fit_path),
         )
-    } else if let Some(value) = run.manifest.fit.clone() {
-        let mpath = dir.join(MANIFEST_JSON);
-        (
-            Ok(analysis_from_json(&mpath, value)?),
-            FitSource::Manifest(mpath),
-        )
+    } else if let Some(analysis) = run.manifest.fit.clone() {
+        (Ok(analysis), FitSource::Manifest(dir.join(MANIFEST_JSON)))
     } else {
         (fit(&data), FitSource::Computed)
     };

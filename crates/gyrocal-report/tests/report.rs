@@ -119,7 +119,7 @@ fn make_run(dir: &Path, spec: &RunSpec<'_>) {
         let run = gyrocal_files::load(dir).unwrap();
         let data = gyrocal_files::dataset_from_steps(&run.steps, &dir.display().to_string());
         let a = analyze(&data, &Options::default()).unwrap();
-        rd.set_fit(serde_json::to_value(&a).unwrap()).unwrap();
+        rd.set_fit(a.clone()).unwrap();
     }
     rd.finish(
         spec.status,

@@ -114,17 +114,17 @@ async fn paper_plan_completes_and_recovers_the_truth() {
     // linear calibration of the true, slightly nonlinear and asymmetric model) within 3
     // reported standard errors
     let fit = data.manifest.fit.expect("fit in manifest");
-    let lin = fit["fits"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|f| f["method"] == "least-squares" && f["model"] == "linear")
+    let lin = fit
+        .fit(
+            gyrocal_fit::Method::LeastSquares,
+            gyrocal_fit::Model::Linear,
+        )
         .unwrap();
     let (true_k, true_k0) = bench.truth.fit_line(plan.rates_dps());
-    let k = lin["scale_factor"].as_f64().unwrap();
-    let k0 = lin["bias"].as_f64().unwrap();
-    let sk = lin["std_errors"]["k1"].as_f64().unwrap();
-    let sk0 = lin["std_errors"]["k0"].as_f64().unwrap();
+    let k = lin.scale_factor;
+    let k0 = lin.bias;
+    let sk = lin.std_errors.k1.unwrap();
+    let sk0 = lin.std_errors.k0.unwrap();
     assert!((k - true_k).abs() < 3.0 * sk, "K {k} vs {true_k} ± {sk}");
     assert!(
         (k0 - true_k0).abs() < 3.0 * sk0,
@@ -368,8 +368,9 @@ async fn a_repeated_schedule_reports_the_repeatability_of_its_passes() {
     let (summary, _) = run_plan(&plan, &dir, false, None).await;
     assert_eq!(summary.status, Status::Complete, "{:?}", summary.reason);
     let fit = load(&dir).unwrap().manifest.fit.unwrap();
-    let r = fit["metrics"]["repeatability_ppm"]
-        .as_f64()
+    let r = fit
+        .metrics
+        .repeatability_ppm
         .expect("repeatability over 3 passes");
     // three passes of 50 readings with 2 mV noise: K to some tens of ppm, not zero, not wild
     assert!(r > 0.0 && r < 1000.0, "{r}");
@@ -379,7 +380,7 @@ async fn a_repeated_schedule_reports_the_repeatability_of_its_passes() {
     let one = plan_with("quick.toml", |_| {});
     run_plan(&one, &single, false, None).await;
     let fit = load(&single).unwrap().manifest.fit.unwrap();
-    assert!(fit["metrics"]["repeatability_ppm"].is_null());
+    assert!(fit.metrics.repeatability_ppm.is_none());
 }
 
 #[tokio::test(start_paused = true)]
