@@ -323,10 +323,13 @@ impl<T: Transport> Hp34401a<T> {
     }
 
     /// Hands the meter back to its front panel (`SYST:LOC` on links that need remote
-    /// commands; over GPIB going to local is the controller's business), keeping the driver.
+    /// commands; over GPIB the interface's go-to-local, `++loc` through a Prologix), keeping
+    /// the driver.
     pub async fn local(&mut self) -> Result<(), Error> {
         if self.link.needs_remote_command() {
             self.command("SYST:LOC").await?;
+        } else {
+            self.link.return_to_local().await?;
         }
         Ok(())
     }

@@ -476,7 +476,9 @@ async fn connect_and_close_over_a_prologix_controller() {
         .query("++read eoi", IDN)
         .expect_line("*RST;*CLS")
         .expect_line("SYST:ERR?")
-        .query("++read eoi", NO_ERROR);
+        .query("++read eoi", NO_ERROR)
+        // back to local at the close: the controller's go-to-local, not SYST:LOC
+        .expect_line("++loc");
     let link = PrologixTransport::open(script, PrologixOptions::default())
         .await
         .unwrap();

@@ -165,6 +165,14 @@ pub trait Transport: Send {
     fn needs_remote_command(&self) -> bool {
         true
     }
+
+    /// Hands the instrument back to its front panel at the interface level (VISA's
+    /// `viGpibControlREN`): nothing on RS-232 (the instrument's own command does it, see
+    /// [`Transport::needs_remote_command`]; the provided implementation), `++loc` through a
+    /// Prologix controller.
+    fn return_to_local(&mut self) -> impl Future<Output = Result<(), LinkError>> + Send {
+        async { Ok(()) }
+    }
 }
 
 /// A piece of a line returned by [`Transport::read_field`].
@@ -214,5 +222,8 @@ impl<T: Transport + ?Sized> Transport for &mut T {
     }
     fn needs_remote_command(&self) -> bool {
         (**self).needs_remote_command()
+    }
+    fn return_to_local(&mut self) -> impl Future<Output = Result<(), LinkError>> + Send {
+        (**self).return_to_local()
     }
 }

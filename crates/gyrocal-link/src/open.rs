@@ -274,6 +274,12 @@ impl Transport for Link {
             Link::Prologix(t) => t.needs_remote_command(),
         }
     }
+    async fn return_to_local(&mut self) -> Result<(), LinkError> {
+        match self {
+            Link::Stream(t) => t.return_to_local().await,
+            Link::Prologix(t) => t.return_to_local().await,
+        }
+    }
 }
 
 /// Opens a link from a port string (see the module documentation). Serial settings in

@@ -325,6 +325,12 @@ impl<T: Transport> Transport for PrologixTransport<T> {
     fn needs_remote_command(&self) -> bool {
         false
     }
+
+    /// `++loc`: the controller releases REN for the instrument, which goes to local.
+    async fn return_to_local(&mut self) -> Result<(), LinkError> {
+        self.armed = false;
+        self.controller("++loc").await
+    }
 }
 
 #[cfg(test)]
