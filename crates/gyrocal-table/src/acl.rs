@@ -54,13 +54,12 @@
 //! [`Table`]. [`AclTable<T>`] is `Table<Acl<T>>`, built with
 //! [`AclTable::new`](Table::new) from a transport and an [`AclConfig`].
 
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 #[cfg(doc)]
 use crate::RateTable;
-use crate::ask::{Asking, Attempt};
+use crate::ask::{Asking, Attempt, RetryNotes};
 use crate::dialect::{Connected, Dialect, DialectError, StopAttempt};
 use crate::table::{PolicyConfig, Table};
 use crate::{Identity, Limits, StopKind, TableError, TableMode, TableStatus};
@@ -170,7 +169,7 @@ pub struct Acl<T> {
     /// We opened the interlock ourselves: the interlock-event bit is expected.
     opened_by_us: AtomicBool,
     /// Retry notes not yet taken.
-    retries: Mutex<Vec<String>>,
+    retries: RetryNotes,
 }
 
 impl<T> std::fmt::Debug for Acl<T> {
@@ -234,7 +233,7 @@ impl<T: Transport + 'static> Acl<T> {
             }),
             rate_mode: AtomicBool::new(false),
             opened_by_us: AtomicBool::new(false),
-            retries: Mutex::new(Vec::new()),
+            retries: RetryNotes::default(),
         }
     }
 
@@ -288,14 +287,6 @@ impl<T: Transport + 'static> Acl<T> {
             }
         })
         .await
-    }
-
-    fn note_retry(&self, note: String) {
-        tracing::warn!(device = %self.device, "{note}");
-        self.retries
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .push(note);
     }
 
     async fn query_number(&self, line: &str, timeout: Duration) -> Result<f64, DialectError> {
@@ -401,8 +392,8 @@ impl<T: Transport + 'static> Asking for Acl<T> {
         self.config.retries
     }
 
-    fn note_retry(&self, note: String) {
-        Acl::note_retry(self, note);
+    fn retry_notes(&self) -> &RetryNotes {
+        &self.retries
     }
 
     async fn mark_dirty(&self) {
@@ -588,11 +579,6 @@ impl<T: Transport + 'static> Dialect for Acl<T> {
     }
 
     fn take_retries(&self) -> Vec<String> {
-        std::mem::take(
-            &mut *self
-                .retries
-                .lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner),
-        )
+        self.retries.take()
     }
 }

@@ -58,7 +58,6 @@
 //! each retry noted for the run manifest. Commands (`SRV`, `ACL`, `JOG`, `STO`) are never
 //! repeated; a command without its prompt is a link failure.
 
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
@@ -67,7 +66,7 @@ use tokio::time::Instant;
 
 #[cfg(doc)]
 use crate::RateTable;
-use crate::ask::{Asking, Attempt};
+use crate::ask::{Asking, Attempt, RetryNotes};
 use crate::dialect::{Connected, Dialect, DialectError, StopAttempt};
 use crate::table::{PolicyConfig, Table};
 use crate::{Identity, Limits, StopKind, TableError, TableMode, TableStatus};
@@ -226,7 +225,7 @@ pub struct Aerosmith<T> {
     link: tokio::sync::Mutex<Link<T>>,
     /// The servo was turned on by us (or found on): its bit dropping is a fault.
     expect_servo: AtomicBool,
-    retries: Mutex<Vec<String>>,
+    retries: RetryNotes,
 }
 
 impl<T> std::fmt::Debug for Aerosmith<T> {
@@ -258,7 +257,7 @@ impl<T: Transport + 'static> Aerosmith<T> {
                 owed_prompts: 0,
             }),
             expect_servo: AtomicBool::new(false),
-            retries: Mutex::new(Vec::new()),
+            retries: RetryNotes::default(),
         }
     }
 
@@ -351,14 +350,6 @@ impl<T: Transport + 'static> Aerosmith<T> {
         .await
     }
 
-    fn note_retry(&self, note: String) {
-        tracing::warn!(device = %self.device, "{note}");
-        self.retries
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .push(note);
-    }
-
     async fn query_number(&self, command: &str, timeout: Duration) -> Result<f64, DialectError> {
         self.ask(command, timeout, |v| match v.parse::<f64>() {
             Ok(v) if v.is_finite() => Ok(v),
@@ -412,8 +403,8 @@ impl<T: Transport + 'static> Asking for Aerosmith<T> {
         self.config.retries
     }
 
-    fn note_retry(&self, note: String) {
-        Aerosmith::note_retry(self, note);
+    fn retry_notes(&self) -> &RetryNotes {
+        &self.retries
     }
 
     async fn mark_dirty(&self) {
@@ -571,11 +562,6 @@ impl<T: Transport + 'static> Dialect for Aerosmith<T> {
     }
 
     fn take_retries(&self) -> Vec<String> {
-        std::mem::take(
-            &mut *self
-                .retries
-                .lock()
-                .unwrap_or_else(std::sync::PoisonError::into_inner),
-        )
+        self.retries.take()
     }
 }

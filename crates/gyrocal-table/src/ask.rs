@@ -11,6 +11,7 @@
 //! is a reply error only.
 
 use std::future::Future;
+use std::sync::Mutex;
 use std::time::Duration;
 
 use gyrocal_link::{LinkError, show_bytes};
@@ -19,6 +20,32 @@ use tokio::time::Instant;
 use crate::TableError;
 use crate::acl::{Miss, retryable};
 use crate::dialect::DialectError;
+
+/// The retry notes a dialect keeps for the run's manifest until
+/// [`crate::RateTable::take_retries`] collects them.
+#[derive(Debug, Default)]
+pub(crate) struct RetryNotes(Mutex<Vec<String>>);
+
+impl RetryNotes {
+    /// Logs `note` and keeps it.
+    pub(crate) fn push(&self, device: &str, note: String) {
+        tracing::warn!(device = %device, "{note}");
+        self.0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .push(note);
+    }
+
+    /// The notes since the last call.
+    pub(crate) fn take(&self) -> Vec<String> {
+        std::mem::take(
+            &mut *self
+                .0
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner),
+        )
+    }
+}
 
 /// How one attempt went.
 pub(crate) enum Attempt<R> {
@@ -43,8 +70,8 @@ pub(crate) trait Asking: Sync {
     fn device(&self) -> &str;
     /// Retries after the first attempt.
     fn retries(&self) -> u32;
-    /// Records a retry note (and logs it).
-    fn note_retry(&self, note: String);
+    /// Where the retry notes go.
+    fn retry_notes(&self) -> &RetryNotes;
     /// The next exchange must clear stale input first.
     fn mark_dirty(&self) -> impl Future<Output = ()> + Send;
     /// Something to add to a retry note of `line` (an error-queue entry that may be lost).
@@ -103,7 +130,7 @@ where
             if let Some(caveat) = dialect.retry_caveat(line) {
                 note.push_str(caveat);
             }
-            dialect.note_retry(note);
+            dialect.retry_notes().push(dialect.device(), note);
             // the reply may have been late or followed by more junk: clear it first
             dialect.mark_dirty().await;
         }
@@ -129,9 +156,10 @@ where
         },
     };
     if attempts > 1 {
-        dialect.note_retry(format!(
-            "`{line}`: {last}; no usable reply in {attempts} attempts, gave up"
-        ));
+        dialect.retry_notes().push(
+            dialect.device(),
+            format!("`{line}`: {last}; no usable reply in {attempts} attempts, gave up"),
+        );
     }
     Err(DialectError {
         error,

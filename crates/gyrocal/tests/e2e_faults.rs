@@ -1135,28 +1135,20 @@ fn e2e_a_meter_power_cycle_is_recovered_and_the_run_completes() {
     // off for 2 sim s (67 ms here) in the middle of step 1, back in LOCAL at 10 PLC
     let spec = "dmm:powercycle@reading40/2s";
     let tmp = tempfile::tempdir().unwrap();
-    let (plan, sim, dir) = start(tmp.path(), &[spec]);
-    let end = Run::start(&plan, &sim, &out_args(&dir), None).wait();
-    assert_eq!(end.code, Some(0), "{end:?}");
-    check_complete(&dir);
+    let (_, last, dir) = completes_with_retries(tmp.path(), spec, "dmm");
     let m = manifest(&dir);
     assert!(
         m["retries"]
             .as_array()
             .unwrap()
             .iter()
-            .any(|r| r["instrument"] == "dmm"
-                && r["step"] == 1
-                && r["message"].as_str().unwrap().contains("re-established")),
+            .any(|r| r["message"].as_str().unwrap().contains("re-established")),
         "{m}"
     );
-    let last = sim.finish();
-    assert!(fault_fired(&last, spec), "{last}");
     assert_eq!(last["dmm"]["power_cycles"], 1, "{last}");
     // measuring at the plan's 1 PLC again, and handed back to local at the end
     assert_eq!(last["dmm"]["nplc"], 1.0, "{last}");
     assert_eq!(last["dmm"]["remote"], false, "{last}");
-    assert_table_parked(&last);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1232,4 +1224,22 @@ fn e2e_meter_over_gpib_through_a_prologix_controller_completes() {
     assert_table_parked(&last);
     // GPIB: the meter was never sent SYST:REM (it would have refused it with -113)
     assert_eq!(last["dmm"]["errors_raised"], 0, "{last}");
+}
+
+#[test]
+fn e2e_aerosmith_table_gone_silent_is_never_called_at_rest() {
+    // silent from the middle of step 1's readings: the operator is told plainly that rest
+    // could not be confirmed, and the simulated table does still turn
+    let spec = "table:silent@reading45";
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_plan_full(tmp.path(), &RATES, 20.0, "aerosmith");
+    let dir = tmp.path().join("run");
+    let sim = Sim::start_scaled(&plan, &[spec], "5");
+    let end = Run::start(&plan, &sim, &out_args(&dir), None).wait();
+    assert_eq!(end.code, Some(1), "{end:?}");
+    assert_not_called_at_rest(&end);
+    assert_eq!(check_recorded_steps_whole(&dir), vec![0]);
+    let last = sim.finish();
+    assert!(fault_fired(&last, spec), "{last}");
+    assert_eq!(last["table"]["stopped"], false, "{last}");
 }

@@ -555,24 +555,8 @@ fn a_simulated_run_cannot_be_resumed_on_the_instruments() {
 fn the_aerosmith_dialect_runs_the_same_plan_on_the_simulated_bench() {
     // the plan's [table] dialect picks the driver and the simulated table's wire
     let tmp = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(config("quick.toml"))
-        .unwrap()
-        .replace("dialect = \"acl\"", "dialect = \"aerosmith\"");
-    assert!(text.contains("\"aerosmith\""));
-    let plan = tmp.path().join("aerosmith.toml");
-    std::fs::write(&plan, text).unwrap();
-    let dir = tmp.path().join("run");
-    let out = gyrocal()
-        .args([
-            "run",
-            plan.to_str().unwrap(),
-            "--simulate",
-            "--no-report",
-            "--out",
-        ])
-        .arg(&dir)
-        .output()
-        .unwrap();
+    let (out, dir, _) =
+        run_quick_variant(tmp.path(), "dialect = \"acl\"", "dialect = \"aerosmith\"");
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(0), "{stderr}");
     assert!(stderr.contains("rate table: Ideal Aerosmith"), "{stderr}");
@@ -586,27 +570,11 @@ fn a_meter_behind_a_prologix_controller_runs_the_same_plan() {
     // `prologix:` in [dmm] port: the real Prologix transport in front of the 34401A driver,
     // a simulated controller in front of the simulated meter (GPIB mode: no SYST:REM)
     let tmp = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(config("quick.toml"))
-        .unwrap()
-        .replace(
-            "port = \"/dev/ttyUSB0\"",
-            "port = \"prologix:/dev/ttyUSB0?addr=22\"",
-        );
-    assert!(text.contains("prologix:"));
-    let plan = tmp.path().join("gpib.toml");
-    std::fs::write(&plan, &text).unwrap();
-    let dir = tmp.path().join("run");
-    let out = gyrocal()
-        .args([
-            "run",
-            plan.to_str().unwrap(),
-            "--simulate",
-            "--no-report",
-            "--out",
-        ])
-        .arg(&dir)
-        .output()
-        .unwrap();
+    let (out, dir, text) = run_quick_variant(
+        tmp.path(),
+        "port = \"/dev/ttyUSB0\"",
+        "port = \"prologix:/dev/ttyUSB0?addr=22\"",
+    );
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(0), "{stderr}");
     check_complete(&dir, 5, 50);
@@ -624,4 +592,28 @@ fn a_meter_behind_a_prologix_controller_runs_the_same_plan() {
         stderr.contains("dmm.port") && stderr.contains("0..=30"),
         "{stderr}"
     );
+}
+
+/// quick.toml with `from` replaced by `to`, run with `--simulate` into `tmp/run`: the output,
+/// the run directory and the plan's text.
+fn run_quick_variant(tmp: &Path, from: &str, to: &str) -> (std::process::Output, PathBuf, String) {
+    let text = std::fs::read_to_string(config("quick.toml"))
+        .unwrap()
+        .replace(from, to);
+    assert!(text.contains(to), "quick.toml has no {from:?}");
+    let plan = tmp.join("variant.toml");
+    std::fs::write(&plan, &text).unwrap();
+    let dir = tmp.join("run");
+    let out = gyrocal()
+        .args([
+            "run",
+            plan.to_str().unwrap(),
+            "--simulate",
+            "--no-report",
+            "--out",
+        ])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    (out, dir, text)
 }
