@@ -58,4 +58,4 @@ pub use driver::{
 pub use error::{Error, ErrorKind, InstrumentError};
 pub use meter::{Hp34401aMeter, PendingBurst};
 pub use reading::{OVERLOAD, Reading, parse_reading};
-pub use timing::{Strategy, Timing};
+pub use timing::{MeterTiming, Strategy, Timing};

@@ -9,12 +9,10 @@
 //! re-establish after a power cycle) and taken again, up to [`DriverOptions::retries`] per
 //! measurement, and every recovery is described in the returned [`Acquired`].
 
-use std::time::Duration;
-
 use gyrocal_link::Transport;
-use gyrocal_meter::{Acquired, DcVolts, Identity, Measured, Multimeter, ProgressFn};
+use gyrocal_meter::{Acquired, DcVolts, Identity, Measured, Multimeter, ProgressFn, TimingModel};
 
-use crate::timing::MEMORY_READINGS;
+use crate::timing::{MEMORY_READINGS, MeterTiming};
 use crate::{
     AutoZero, Burst, DcvConfig, DriverOptions, Error, ErrorKind, Hp34401a, Reading, Strategy,
     Timing,
@@ -183,17 +181,13 @@ impl<T: Transport + 'static> Multimeter for Hp34401aMeter<T> {
         self.driver.configure(&config).await
     }
 
-    fn reading_time(&self) -> Option<Duration> {
-        self.driver.timing().map(|t: Timing| t.reading_time())
-    }
-
-    fn acquisition(&self) -> &'static str {
-        match self.strategy() {
-            Strategy::Stream => "stream",
-            Strategy::Memory => "memory",
-            Strategy::Poll => "poll",
-            Strategy::Auto => "auto",
-        }
+    fn timing(&self) -> Option<Box<dyn TimingModel>> {
+        self.driver.timing().map(|timing: Timing| {
+            Box::new(MeterTiming {
+                timing,
+                strategy: timing.resolve(self.strategy),
+            }) as Box<dyn TimingModel>
+        })
     }
 
     async fn measure(

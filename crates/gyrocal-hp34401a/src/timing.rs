@@ -215,6 +215,98 @@ impl Timing {
     }
 }
 
+/// The 34401A's timing in the multimeter role: the model at one configuration and the
+/// strategy it acquires with (`Auto` resolved).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeterTiming {
+    /// The model.
+    pub timing: Timing,
+    /// The strategy (never `Auto`).
+    pub strategy: Strategy,
+}
+
+impl MeterTiming {
+    /// The timing of a meter configured with `config` acquiring with `strategy`.
+    pub fn new(config: &DcvConfig, strategy: Strategy) -> Self {
+        let timing = Timing::new(config);
+        MeterTiming {
+            timing,
+            strategy: timing.resolve(strategy),
+        }
+    }
+
+    /// The readings of each memory burst of an `n`-reading acquisition.
+    fn bursts(n: usize) -> impl Iterator<Item = usize> {
+        let full = n / MEMORY_READINGS;
+        let rest = n % MEMORY_READINGS;
+        std::iter::repeat_n(MEMORY_READINGS, full).chain((rest > 0).then_some(rest))
+    }
+
+    /// The streaming bound: arming, then the readings or the wire, whichever is slower, and
+    /// the last reading's characters (the host learns the acquisition is over from them).
+    fn stream_bound(&self, n: usize) -> Duration {
+        if n == 0 {
+            return Duration::ZERO;
+        }
+        let t = &self.timing;
+        let n32 = u32::try_from(n).unwrap_or(u32::MAX);
+        let wire = t.wire_time_per_reading();
+        let measure = (t.reading_time() * n32 + wire).max(t.reading_time() + wire * n32);
+        t.arming_time() + measure
+    }
+}
+
+impl gyrocal_meter::TimingModel for MeterTiming {
+    fn reading_time(&self) -> Duration {
+        self.timing.reading_time()
+    }
+
+    fn acquisition(&self) -> &'static str {
+        match self.strategy {
+            Strategy::Stream => "stream",
+            Strategy::Memory => "memory",
+            Strategy::Poll => "poll",
+            Strategy::Auto => "auto",
+        }
+    }
+
+    /// Streaming and polling: the whole acquisition is in the step (polling is judged against
+    /// the streaming bound, which is why it scores badly). Memory: each burst is armed,
+    /// measured and fetched in turn (the meter cannot measure while it sends); the last
+    /// burst's `FETC?` is deferred when asked.
+    fn cost(&self, n: usize, defer: bool) -> gyrocal_meter::Cost {
+        let t = &self.timing;
+        match self.strategy {
+            Strategy::Memory => {
+                let mut cost = gyrocal_meter::Cost::default();
+                let count = Self::bursts(n).count();
+                for (i, k) in Self::bursts(n).enumerate() {
+                    let k32 = u32::try_from(k).unwrap_or(u32::MAX);
+                    cost.in_step += t.burst_time(k);
+                    // arming, the readings, the `*OPC?` reply that says they are taken
+                    cost.bound += t.arming_time() + t.reading_time() * k32 + t.wire_time(2);
+                    let fetch = t.fetch_time(k);
+                    let fetch_bound = t.wire_time(k * READING_CHARS + 1);
+                    if defer && i + 1 == count {
+                        cost.deferred = fetch;
+                        cost.bound_deferred = fetch_bound;
+                    } else {
+                        cost.in_step += fetch;
+                        cost.bound += fetch_bound;
+                    }
+                }
+                cost
+            }
+            s => gyrocal_meter::Cost {
+                in_step: t.estimate(s, n),
+                deferred: Duration::ZERO,
+                bound: self.stream_bound(n),
+                bound_deferred: Duration::ZERO,
+            },
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

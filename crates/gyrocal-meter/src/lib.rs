@@ -140,6 +140,38 @@ pub enum Measured<P> {
     Pending(P),
 }
 
+/// What acquiring `n` readings costs, from a meter's timing model (see [`TimingModel::cost`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Cost {
+    /// Expected time the step spends acquiring: commands, arming, the readings and every
+    /// transfer the step waits for (all of them unless `deferred`).
+    pub in_step: Duration,
+    /// Expected time of the transfer left in the meter ([`Measured::Pending`]), which overlaps
+    /// the table's next ramp; zero when nothing is deferred.
+    pub deferred: Duration,
+    /// The physical bound of the step's acquisition, what no sequencer can beat: arming, the
+    /// readings (or the wire, when it is the slower), and the transfer that tells the host
+    /// the last reading was taken (the table must not move before that). Commands and
+    /// protocol overhead are not in it.
+    pub bound: Duration,
+    /// The physical bound of the deferred transfer (zero when nothing is deferred).
+    pub bound_deferred: Duration,
+}
+
+/// A meter's timing model at fixed settings: how long readings take and what acquiring them
+/// costs. Public so a planner can estimate a run before any instrument is connected; each
+/// meter's crate owns its model (integration, trigger delay, arming, wire).
+pub trait TimingModel: Send + Sync {
+    /// One reading's time.
+    fn reading_time(&self) -> Duration;
+    /// How the meter acquires at these settings, in a word (`stream`, `memory`, ...), for the
+    /// run's log and timing record.
+    fn acquisition(&self) -> &'static str;
+    /// What `n` readings cost; with `defer`, the part the meter may hand over as
+    /// [`Measured::Pending`] is counted apart (the caller overlaps it with the next ramp).
+    fn cost(&self, n: usize, defer: bool) -> Cost;
+}
+
 /// Progress of a measurement: readings received so far, readings asked for.
 pub type ProgressFn = Box<dyn FnMut(usize, usize) + Send>;
 
@@ -163,12 +195,10 @@ pub trait Multimeter: Send {
         settings: &DcVolts,
     ) -> impl Future<Output = Result<(), Self::Error>> + Send;
 
-    /// One reading's time at the configured settings (`None` before [`Multimeter::configure`]).
-    fn reading_time(&self) -> Option<Duration>;
-
-    /// How the meter acquires at the configured settings, in a word (`stream`, `memory`, ...),
-    /// for the run's log and timing record.
-    fn acquisition(&self) -> &'static str;
+    /// The meter's timing model at the configured settings (`None` before
+    /// [`Multimeter::configure`]): the run's estimate, its physical bound and the number of
+    /// readings a whole-revolution step takes come from it.
+    fn timing(&self) -> Option<Box<dyn TimingModel>>;
 
     /// Takes `n` readings. With `may_defer`, the meter may answer [`Measured::Pending`] once
     /// every reading is taken but some are still in its memory, so the caller can move the

@@ -7,9 +7,11 @@
 
 use std::path::Path;
 
+#[path = "../tests/common/mod.rs"]
+mod common;
+
+use common::table_config;
 use criterion::{Criterion, criterion_group, criterion_main};
-use gyrocal_hp34401a::DriverOptions;
-use gyrocal_run::sequencer::table_config;
 use gyrocal_run::{Plan, RunDir, RunMeta, Sequencer, SequencerOptions, Status, StopRequest};
 use gyrocal_sim::bench::Bench;
 use gyrocal_sim::from_plan::bench_config;
@@ -25,7 +27,7 @@ fn run_once(plan: &Plan) -> f64 {
     rt.block_on(async {
         let bench = Bench::spawn(bench_config(plan));
         let run = RunDir::create(&tmp.path().join("run"), plan, RunMeta::default()).unwrap();
-        let dmm = gyrocal_run::estimate::hp34401a(bench.dmm, plan, DriverOptions::default());
+        let dmm = common::hp34401a(bench.dmm, plan);
         let table = AclTable::new(bench.table, table_config(plan));
         let mut seq = Sequencer::new(plan.clone(), dmm, table, run, SequencerOptions::default());
         let (_tx, rx) = tokio::sync::watch::channel(StopRequest::None);

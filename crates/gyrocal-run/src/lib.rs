@@ -22,13 +22,3 @@ pub use gyrocal_files::{
 pub use sequencer::{
     Event, Phase, RunSummary, SequenceError, Sequencer, SequencerOptions, StopRequest, TableRest,
 };
-
-/// The serial framing a plan names, as the link opens it. (The plan crate is synchronous and
-/// knows no link; this is where the two meet.)
-pub fn link_framing(f: Framing) -> gyrocal_link::Framing {
-    match f {
-        Framing::N8 => gyrocal_link::Framing::EightNone,
-        Framing::E7 => gyrocal_link::Framing::SevenEven,
-        Framing::O7 => gyrocal_link::Framing::SevenOdd,
-    }
-}

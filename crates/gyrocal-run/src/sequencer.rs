@@ -285,17 +285,6 @@ pub struct RunSummary {
     pub table: TableRest,
 }
 
-/// The ACL driver configuration for `plan`: its client-side limits are the plan's.
-pub fn table_config(plan: &Plan) -> gyrocal_table::acl::AclConfig {
-    gyrocal_table::acl::AclConfig {
-        limits: gyrocal_table::Limits {
-            max_rate: plan.table().max_rate_dps,
-            max_acceleration: plan.table().acceleration_dps2,
-        },
-        ..gyrocal_table::acl::AclConfig::default()
-    }
-}
-
 /// What the steps share: how to reach the rate and how to read.
 struct StepContext {
     criteria: SettleCriteria,
@@ -674,12 +663,15 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
         let dcv = estimate::dc_volts(&self.plan);
         let dmm = self.dmm_mut()?;
         dmm.configure(&dcv).await.map_err(dmm_error)?;
-        let reading_time = dmm.reading_time().unwrap_or(Duration::ZERO);
-        let acquisition = dmm.acquisition();
+        let Some(timing) = dmm.timing() else {
+            return Err(dmm_error(NoTiming));
+        };
+        let reading_time = timing.reading_time();
+        let acquisition = timing.acquisition();
         self.table.enable().await?;
 
         let steps = self.run.remaining_steps();
-        let est: Estimate = estimate::estimate(&self.plan, &steps, 0.0);
+        let est: Estimate = estimate::estimate(&self.plan, &steps, 0.0, timing.as_ref());
         self.emit(Event::Planned {
             steps: steps.len(),
             done: self.run.done_steps().len(),
@@ -727,8 +719,7 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
                 .chain(queue.iter())
                 .filter_map(|s| est.steps.iter().find(|e| e.step.index == s.index))
                 .map(|e| e.ramp + e.settle + e.acquire)
-                .sum::<Duration>()
-                + est.final_transfer;
+                .sum::<Duration>();
             self.emit(Event::StepStarted {
                 step,
                 position,
@@ -1078,6 +1069,17 @@ fn released() -> SequenceError {
 struct Released;
 
 impl MeterError for Released {
+    fn kind(&self) -> ErrorKind {
+        ErrorKind::Other
+    }
+}
+
+/// The meter gave no timing model after its configuration (a bug in its driver).
+#[derive(Debug, thiserror::Error)]
+#[error("the multimeter has no timing model after its configuration")]
+struct NoTiming;
+
+impl MeterError for NoTiming {
     fn kind(&self) -> ErrorKind {
         ErrorKind::Other
     }

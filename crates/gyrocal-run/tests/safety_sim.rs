@@ -6,11 +6,12 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)] // test helpers
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use gyrocal_hp34401a::DriverOptions;
-use gyrocal_run::sequencer::table_config;
+use common::table_config;
 use gyrocal_run::{
     Event, Phase, Plan, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status,
     StopRequest, TableRest, load,
@@ -97,7 +98,7 @@ async fn run_on_bench(
     dir: &Path,
     hook: Hook,
 ) -> (RunSummary, Vec<Event>, BenchHandle) {
-    let dmm = gyrocal_run::estimate::hp34401a(bench.dmm, plan, DriverOptions::default());
+    let dmm = common::hp34401a(bench.dmm, plan);
     let table = AclTable::new(bench.table, table_config(plan));
     let (summary, events) = run_table(plan, dmm, table, dir, hook).await;
     (summary, events, bench.handle)
@@ -368,7 +369,7 @@ async fn run_hooked(
     hook: impl FnOnce(&mut Hooked<AclTable<gyrocal_link::StreamTransport<tokio::io::DuplexStream>>>),
 ) -> (RunSummary, BenchHandle) {
     let bench = Bench::spawn(bench_config(plan));
-    let dmm = gyrocal_run::estimate::hp34401a(bench.dmm, plan, DriverOptions::default());
+    let dmm = common::hp34401a(bench.dmm, plan);
     let mut table = Hooked::new(AclTable::new(bench.table, table_config(plan)));
     hook(&mut table);
     let (summary, _) = run_table(plan, dmm, table, dir, Box::new(|_| None)).await;
@@ -462,7 +463,7 @@ async fn a_panic_in_the_sequencer_still_brings_the_table_to_rest() {
     let plan = plan_with_rates(&[0.0, 20.0, -20.0]);
     let tmp = tempfile::tempdir().unwrap();
     let bench = Bench::spawn(bench_config(&plan));
-    let dmm = gyrocal_run::estimate::hp34401a(bench.dmm, &plan, DriverOptions::default());
+    let dmm = common::hp34401a(bench.dmm, &plan);
     let mut table = Hooked::new(AclTable::new(bench.table, table_config(&plan)));
     table.panic_at = Some(3);
     let (summary, _) = run_table(

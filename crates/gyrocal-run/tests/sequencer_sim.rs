@@ -3,11 +3,12 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a panic is a failed test
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use gyrocal_hp34401a::DriverOptions;
-use gyrocal_run::sequencer::table_config;
+use common::table_config;
 use gyrocal_run::{
     Plan, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status, StopRequest, fit_run,
     load, load_samples,
@@ -55,7 +56,7 @@ async fn run_with(
     run: RunDir,
     stop_after: Option<usize>,
 ) -> (RunSummary, BenchHandle) {
-    let dmm = gyrocal_run::estimate::hp34401a(bench.dmm, plan, DriverOptions::default());
+    let dmm = common::hp34401a(bench.dmm, plan);
     let table = AclTable::new(bench.table, table_config(plan));
     let (events_tx, mut events) = tokio::sync::mpsc::unbounded_channel();
     let mut seq = Sequencer::new(plan.clone(), dmm, table, run, SequencerOptions::default())

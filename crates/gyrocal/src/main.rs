@@ -5,6 +5,7 @@
 //! line) are reported on one line with exit code 2; anything else exits with 1.
 
 mod cmd;
+mod instruments;
 mod runlog;
 
 use std::process::ExitCode;

@@ -8,7 +8,6 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use clap::Args;
-use gyrocal_hp34401a::Strategy;
 use gyrocal_run::Plan;
 use gyrocal_run::estimate::{self, Estimate};
 
@@ -24,9 +23,8 @@ pub struct CheckArgs {
 /// Reads and validates a plan; a bad plan is the user's to fix (exit 2).
 pub fn load_plan(path: &std::path::Path) -> anyhow::Result<Plan> {
     let plan = Plan::from_file(path).map_err(|e| BadInput(e.to_string()))?;
-    estimate::dcv_config(&plan)
-        .validate()
-        .map_err(|e| BadInput(format!("{}: [dmm] {e}", path.display())))?;
+    crate::instruments::check_meter(&plan)
+        .map_err(|e| BadInput(format!("{}: {e}", path.display())))?;
     check_port(path, "dmm.port", &plan.dmm().port)?;
     check_port(path, "table.port", &plan.table().port)?;
     Ok(plan)
@@ -50,7 +48,8 @@ pub fn check_port(
 pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
     let plan = load_plan(&args.plan)?;
     let steps = plan.schedule();
-    let est = estimate::estimate(&plan, &steps, 0.0);
+    let timing = crate::instruments::meter_timing(&plan);
+    let est = estimate::estimate(&plan, &steps, 0.0, timing.as_ref());
     print!("{}", render(&plan, &args.plan, &est));
     for w in model_warnings(&plan, &args.plan) {
         eprintln!("gyrocal: warning: {w}");
@@ -102,16 +101,6 @@ pub fn hms(s: f64) -> String {
     }
 }
 
-/// The strategy's name as in plans.
-pub fn strategy_name(s: Strategy) -> &'static str {
-    match s {
-        Strategy::Stream => "stream",
-        Strategy::Memory => "memory",
-        Strategy::Poll => "poll",
-        Strategy::Auto => "auto",
-    }
-}
-
 fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
     let mut o = String::new();
     let d = plan.dmm();
@@ -145,7 +134,7 @@ fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
         d.line_hz,
         est.reading_time.as_secs_f64() * 1e3,
         format!("{:?}", d.acquisition).to_lowercase(),
-        strategy_name(est.strategy)
+        est.acquisition
     );
     let _ = writeln!(o);
     let _ = writeln!(

@@ -22,14 +22,11 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use clap::Args;
-use gyrocal_hp34401a::DriverOptions;
 use gyrocal_link::{LinkOptions, Transport};
-use gyrocal_run::sequencer::table_config;
 use gyrocal_run::{
     Event, Phase, Plan, Port, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status,
-    StopRequest, TableDialect, TableRest, fit_run,
+    StopRequest, TableRest, fit_run,
 };
-use gyrocal_table::acl::AclTable;
 use tokio::sync::{mpsc, watch};
 
 use crate::BadInput;
@@ -312,7 +309,7 @@ async fn execute(
         let d = plan.dmm();
         let dmm_opts = LinkOptions {
             baud: d.baud,
-            framing: gyrocal_run::link_framing(d.framing),
+            framing: crate::instruments::link_framing(d.framing),
             ..LinkOptions::default()
         };
         let dmm = gyrocal_link::open(&d.port.to_string(), &dmm_opts)
@@ -332,10 +329,8 @@ async fn execute(
     }
 }
 
-/// The instruments the plan names, built on their links: here, at the edge, and nowhere
-/// else (the sequencer is generic over the roles). The table's dialect picks the table type,
-/// and each arm runs the same generic sequence, as ripgrep's `PatternMatcher` dispatches into
-/// one generic search.
+/// The instruments the plan names, built on their links by [`crate::instruments`] (the one
+/// place that knows the drivers), then the same generic sequence for every combination.
 async fn sequence<D, T>(
     plan: Plan,
     dmm_link: D,
@@ -346,23 +341,25 @@ where
     D: Transport + 'static,
     T: Transport + 'static,
 {
-    let dmm = gyrocal_run::estimate::hp34401a(dmm_link, &plan, DriverOptions::default());
-    match plan.table().dialect {
-        TableDialect::Acl => {
-            let table = AclTable::new(table_link, table_config(&plan));
-            sequence_with(plan, dmm, table, run).await
-        }
-        TableDialect::Aerosmith => {
-            let config = gyrocal_table::aerosmith::AerosmithConfig {
-                policy: gyrocal_table::PolicyConfig {
-                    limits: table_config(&plan).limits,
-                    ..gyrocal_table::PolicyConfig::default()
-                },
-                ..gyrocal_table::aerosmith::AerosmithConfig::default()
-            };
-            let table = gyrocal_table::aerosmith::AerosmithTable::new(table_link, config);
-            sequence_with(plan, dmm, table, run).await
-        }
+    let p = plan.clone();
+    crate::instruments::with_instruments(&p, dmm_link, table_link, Sequence { plan, run }).await
+}
+
+/// The run's job once its instruments are built.
+struct Sequence {
+    plan: Plan,
+    run: RunDir,
+}
+
+impl crate::instruments::WithInstruments for Sequence {
+    type Output = anyhow::Result<(RunSummary, RunDir, Option<StopSignal>)>;
+
+    async fn call<M, T>(self, dmm: M, table: T) -> Self::Output
+    where
+        M: gyrocal_meter::Multimeter + 'static,
+        T: gyrocal_table::RateTable + 'static,
+    {
+        sequence_with(self.plan, dmm, table, self.run).await
     }
 }
 

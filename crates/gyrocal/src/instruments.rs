@@ -1,0 +1,145 @@
+//! Plan → instruments: the one place that knows which drivers exist.
+//!
+//! The sequencer is generic over the two roles ([`gyrocal_meter::Multimeter`] and
+//! [`gyrocal_table::RateTable`]); this module picks the concrete types from the plan and
+//! hands them to one generic function, the way ripgrep's `crates/core/search.rs` dispatches
+//! through `enum PatternMatcher` into a generic search. Adding a meter or a table dialect is a
+//! new driver crate (or module) plus one arm here: [`with_meter`] for a meter,
+//! [`with_table`] for a dialect. Each arm costs one monomorphised copy of the sequencer, so
+//! arms are per meter *or* per table, never per pair.
+
+use gyrocal_hp34401a::{AutoZero, DcvConfig, DriverOptions, MeterTiming, Strategy};
+use gyrocal_link::Transport;
+use gyrocal_meter::{Multimeter, TimingModel};
+use gyrocal_run::{Framing, Plan, TableDialect};
+use gyrocal_table::RateTable;
+
+/// The 34401A configuration a plan asks for.
+pub fn hp34401a_config(plan: &Plan) -> DcvConfig {
+    let d = plan.dmm();
+    DcvConfig {
+        range: Some(d.range_v),
+        nplc: d.nplc,
+        autozero: if d.autozero {
+            AutoZero::On
+        } else {
+            AutoZero::Off
+        },
+        line_hz: d.line_hz,
+        baud: d.baud,
+        ..DcvConfig::default()
+    }
+}
+
+/// The 34401A strategy a plan's `acquisition` key names.
+pub fn hp34401a_strategy(plan: &Plan) -> Strategy {
+    match plan.dmm().acquisition {
+        gyrocal_run::Acquisition::Auto => Strategy::Auto,
+        gyrocal_run::Acquisition::Stream => Strategy::Stream,
+        gyrocal_run::Acquisition::Memory => Strategy::Memory,
+        gyrocal_run::Acquisition::Poll => Strategy::Poll,
+    }
+}
+
+/// Checks the plan's meter settings against the meter's own facts (before anything opens).
+pub fn check_meter(plan: &Plan) -> Result<(), String> {
+    hp34401a_config(plan)
+        .validate()
+        .map_err(|e| format!("[dmm] {e}"))
+}
+
+/// The meter's timing model at the plan's settings, for an estimate before any instrument is
+/// connected (`gyrocal check`).
+pub fn meter_timing(plan: &Plan) -> Box<dyn TimingModel> {
+    Box::new(MeterTiming::new(
+        &hp34401a_config(plan),
+        hp34401a_strategy(plan),
+    ))
+}
+
+/// The serial framing a plan names, as the link opens it.
+pub fn link_framing(f: Framing) -> gyrocal_link::Framing {
+    match f {
+        Framing::N8 => gyrocal_link::Framing::EightNone,
+        Framing::E7 => gyrocal_link::Framing::SevenEven,
+        Framing::O7 => gyrocal_link::Framing::SevenOdd,
+    }
+}
+
+/// The table's client-side limits: the plan's.
+pub fn table_limits(plan: &Plan) -> gyrocal_table::Limits {
+    gyrocal_table::Limits {
+        max_rate: plan.table().max_rate_dps,
+        max_acceleration: plan.table().acceleration_dps2,
+    }
+}
+
+/// What to do with the instruments once they are built: a generic function over the two
+/// roles (the sequencer with signals and progress, in `gyrocal run`).
+pub trait WithInstruments {
+    /// What it returns.
+    type Output;
+    /// Runs with a meter and a table.
+    fn call<M, T>(self, dmm: M, table: T) -> impl Future<Output = Self::Output>
+    where
+        M: Multimeter + 'static,
+        T: RateTable + 'static;
+}
+
+/// Builds the plan's multimeter on `dmm_link` and its table on `table_link`, and hands both
+/// to `job`.
+pub async fn with_instruments<D, L, J>(plan: &Plan, dmm_link: D, table_link: L, job: J) -> J::Output
+where
+    D: Transport + 'static,
+    L: Transport + 'static,
+    J: WithInstruments,
+{
+    with_meter(plan, dmm_link, table_link, job).await
+}
+
+/// The meter arm: one per multimeter model family.
+async fn with_meter<D, L, J>(plan: &Plan, dmm_link: D, table_link: L, job: J) -> J::Output
+where
+    D: Transport + 'static,
+    L: Transport + 'static,
+    J: WithInstruments,
+{
+    let dmm = gyrocal_hp34401a::Hp34401aMeter::new(
+        dmm_link,
+        DriverOptions::default(),
+        hp34401a_strategy(plan),
+        plan.dmm().baud,
+    );
+    with_table(plan, dmm, table_link, job).await
+}
+
+/// The table arm: one per dialect.
+async fn with_table<M, L, J>(plan: &Plan, dmm: M, table_link: L, job: J) -> J::Output
+where
+    M: Multimeter + 'static,
+    L: Transport + 'static,
+    J: WithInstruments,
+{
+    let policy = gyrocal_table::PolicyConfig {
+        limits: table_limits(plan),
+        ..gyrocal_table::PolicyConfig::default()
+    };
+    match plan.table().dialect {
+        TableDialect::Acl => {
+            let config = gyrocal_table::acl::AclConfig {
+                limits: policy.limits,
+                ..gyrocal_table::acl::AclConfig::default()
+            };
+            let table = gyrocal_table::acl::AclTable::new(table_link, config);
+            job.call(dmm, table).await
+        }
+        TableDialect::Aerosmith => {
+            let config = gyrocal_table::aerosmith::AerosmithConfig {
+                policy,
+                ..gyrocal_table::aerosmith::AerosmithConfig::default()
+            };
+            let table = gyrocal_table::aerosmith::AerosmithTable::new(table_link, config);
+            job.call(dmm, table).await
+        }
+    }
+}
