@@ -227,6 +227,9 @@ pub struct Hp34401a<T: Transport> {
     in_flight: usize,
     progress: Option<ProgressFn>,
     epoch: u64,
+    /// The `SAMP:COUN` the meter holds, as far as the driver knows (sent since the last
+    /// connection, configuration or recovery): settings are sent only when they change.
+    sample_count: Option<usize>,
 }
 
 impl<T: Transport> Hp34401a<T> {
@@ -240,6 +243,7 @@ impl<T: Transport> Hp34401a<T> {
             in_flight: 0,
             progress: None,
             epoch: 0,
+            sample_count: None,
         }
     }
 
@@ -308,6 +312,7 @@ impl<T: Transport> Hp34401a<T> {
         tracing::info!(device = self.device(), idn = %id.raw, "34401A connected");
         self.command("*RST;*CLS").await?;
         self.config = None;
+        self.sample_count = None;
         for e in self.drain_errors().await? {
             tracing::warn!(device = self.device(), error = %e, "stale error after *RST;*CLS");
         }
@@ -339,6 +344,7 @@ impl<T: Transport> Hp34401a<T> {
     pub async fn configure(&mut self, config: &DcvConfig) -> Result<(), Error> {
         config.validate()?;
         self.config = None;
+        self.sample_count = None;
         self.apply(config, "configuring DC volts").await?;
         self.config = Some(config.clone());
         Ok(())
@@ -424,6 +430,7 @@ impl<T: Transport> Hp34401a<T> {
     /// command in LOCAL would measure at its power-on settings until something fails.
     pub async fn recover(&mut self) -> Result<Recovery, Error> {
         let started = Instant::now();
+        self.sample_count = None;
         self.device_clear().await?;
         let (errors, cause) = match self.drain_errors().await {
             Ok(errors) => {
@@ -599,22 +606,17 @@ impl<T: Transport> Hp34401a<T> {
                 }
             }
             Strategy::Poll => {
-                let mut counted = false;
                 while readings.len() < n {
                     let step = async {
-                        if !counted {
-                            self.command("SAMP:COUN 1").await?;
-                        }
+                        self.set_sample_count(1).await?;
                         self.poll_once(&timing).await
                     };
                     match step.await {
                         Ok(r) => {
-                            counted = true;
                             readings.push(r);
                             self.report(readings.len(), n);
                         }
                         Err(e) => {
-                            counted = false;
                             recoveries.push(self.after_failure(e, &mut failures).await?);
                         }
                     }
@@ -641,7 +643,7 @@ impl<T: Transport> Hp34401a<T> {
                 "a memory burst holds 1 to 512 readings, not {n}"
             )));
         }
-        self.command(&format!("SAMP:COUN {n}")).await?;
+        self.set_sample_count(n).await?;
         self.send_query("INIT;*OPC?").await?;
         let expected = timing.burst_time(n);
         Ok(Burst {
@@ -721,7 +723,7 @@ impl<T: Transport> Hp34401a<T> {
         total: usize,
         timing: &Timing,
     ) -> Result<Vec<Reading>, Error> {
-        self.command(&format!("SAMP:COUN {k}")).await?;
+        self.set_sample_count(k).await?;
         self.send_query("READ?").await?;
         let first = self.scaled(
             timing.command_time("READ?")
@@ -731,6 +733,17 @@ impl<T: Transport> Hp34401a<T> {
         );
         let next = self.scaled(timing.reading_time().max(timing.wire_time_per_reading()));
         self.read_readings(k, first, next, base, total).await
+    }
+
+    /// `SAMP:COUN k`, unless the meter already holds `k`.
+    async fn set_sample_count(&mut self, k: usize) -> Result<(), Error> {
+        if self.sample_count == Some(k) {
+            return Ok(());
+        }
+        self.sample_count = None;
+        self.command(&format!("SAMP:COUN {k}")).await?;
+        self.sample_count = Some(k);
+        Ok(())
     }
 
     async fn poll_once(&mut self, timing: &Timing) -> Result<Reading, Error> {

@@ -698,7 +698,7 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
             timeout: self.plan.table().at_rate_timeout,
         };
         let accel = self.plan.table().acceleration_dps2;
-        let dwell = self.plan.settle().saturating_sub(criteria.window);
+        let dwell = self.plan.settle();
         let ctx = StepContext {
             criteria,
             accel,
@@ -806,10 +806,7 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
             let Self { table, dmm, .. } = self;
             let dmm = dmm.as_mut().ok_or_else(released)?;
             // the dwell runs from the moment the table is at rate, fetch or no fetch
-            let wait = async {
-                let r = table.wait_at_rate(&ctx.criteria).await;
-                (r, Instant::now())
-            };
+            let wait = table.wait_at_rate(&ctx.criteria);
             let PendingFetch {
                 step: p_step,
                 pending: p_pending,
@@ -817,8 +814,7 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
                 t_start: p_start,
                 t_end: p_end,
             } = p;
-            let ((settled, at), fetched) = tokio::join!(wait, dmm.collect(p_pending));
-            at_rate = at;
+            let (settled, fetched) = tokio::join!(wait, dmm.collect(p_pending));
             // record the previous step before anything else can fail
             match fetched {
                 Ok(acq) => {
@@ -842,11 +838,12 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
                     self.lost.push(p_step);
                 }
             }
-            settled?;
+            at_rate = settled?.at_rate_since;
         } else {
-            self.table.wait_at_rate(&ctx.criteria).await?;
-            at_rate = Instant::now();
+            at_rate = self.table.wait_at_rate(&ctx.criteria).await?.at_rate_since;
         }
+        // the settling dwell counts from the first sample of the stability window: the
+        // table has held the rate since then
         let dwell_end = at_rate + ctx.dwell;
         if dwell_end > Instant::now() {
             self.emit(Event::Phase {

@@ -57,6 +57,8 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
+use tokio::time::Instant;
+
 #[cfg(doc)]
 use crate::RateTable;
 use crate::ask::{Asking, Attempt, RetryNotes};
@@ -470,22 +472,24 @@ impl<T: Transport + 'static> Dialect for Acl<T> {
     async fn demand_rate(
         &self,
         rate: f64,
-        acceleration: f64,
+        acceleration: Option<f64>,
         _timeout: Duration,
-    ) -> Result<(), DialectError> {
+    ) -> Result<Instant, DialectError> {
         let axis = self.config.axis;
         let mut lines = Vec::with_capacity(3);
         if !self.rate_mode.load(Ordering::SeqCst) {
             lines.push(format!(":Mode:Rate {axis}"));
         }
-        lines.push(format!(
-            ":Limit:Acceleration R,{axis},{}",
-            Self::num(acceleration)
-        ));
+        if let Some(a) = acceleration {
+            lines.push(format!(":Limit:Acceleration R,{axis},{}", Self::num(a)));
+        }
         lines.push(format!(":Demand:Rate {axis},{}", Self::num(rate)));
         self.commands(&lines).await?;
+        // the table ramps from here; the error check below overlaps the ramp
+        let written = Instant::now();
         self.rate_mode.store(true, Ordering::SeqCst);
-        self.check_errors(&lines).await
+        self.check_errors(&lines).await?;
+        Ok(written)
     }
 
     async fn read_rate(&self, timeout: Duration) -> Result<f64, DialectError> {

@@ -461,14 +461,19 @@ impl<T: Transport + 'static> Dialect for Aerosmith<T> {
     async fn demand_rate(
         &self,
         rate: f64,
-        acceleration: f64,
+        acceleration: Option<f64>,
         timeout: Duration,
-    ) -> Result<(), DialectError> {
+    ) -> Result<Instant, DialectError> {
         let units = self.config.rate_units.per_deg_per_sec();
-        self.command(&format!("ACL{}", self.num(acceleration)), timeout)
-            .await?;
+        if let Some(a) = acceleration {
+            self.command(&format!("ACL{}", self.num(a)), timeout)
+                .await?;
+        }
+        // the controller acts on the line as it arrives; its prompt follows
+        let written = Instant::now();
         self.command(&format!("JOG{}", self.num(rate * units)), timeout)
-            .await
+            .await?;
+        Ok(written)
     }
 
     async fn read_rate(&self, timeout: Duration) -> Result<f64, DialectError> {

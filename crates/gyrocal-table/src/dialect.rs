@@ -32,6 +32,8 @@
 use std::future::Future;
 use std::time::Duration;
 
+use tokio::time::Instant;
+
 use crate::{Identity, Limits, StopKind, TableError, TableMode, TableStatus};
 
 /// An error from a dialect operation.
@@ -114,15 +116,17 @@ pub trait Dialect: Send + Sync + 'static {
         timeout: Duration,
     ) -> impl Future<Output = Result<(), DialectError>> + Send;
 
-    /// Demands `rate` (deg/s) with acceleration limit `acceleration` (deg/s²), entering rate
-    /// mode if needed, and checks that the table took it. The policy checked the limits and the
-    /// state.
+    /// Demands `rate` (deg/s), entering rate mode if needed, first setting the acceleration
+    /// limit to `acceleration` (deg/s²) when given (`None`: the table still has the one last
+    /// sent, so nothing is spent on it), and checks that the table took it. Returns the instant
+    /// the demand was written: the ramp starts there, and the policy's first at-rate sample
+    /// is timed from it. The policy checked the limits and the state.
     fn demand_rate(
         &self,
         rate: f64,
-        acceleration: f64,
+        acceleration: Option<f64>,
         timeout: Duration,
-    ) -> impl Future<Output = Result<(), DialectError>> + Send;
+    ) -> impl Future<Output = Result<Instant, DialectError>> + Send;
 
     /// The measured rate, deg/s.
     fn read_rate(

@@ -277,6 +277,9 @@ pub struct SettleReport {
     pub ramp_time: Duration,
     /// Time from the demand being sent to the end of the stability window.
     pub settled_after: Duration,
+    /// When the first sample of the stability window was taken: the table has held the rate
+    /// since then (a settling dwell may count from it).
+    pub at_rate_since: tokio::time::Instant,
     /// The measured rate over the stability window.
     pub window: RateStats,
 }

@@ -376,14 +376,24 @@ impl<D: Dialect> RateTable for Table<D> {
         if !allowed {
             return Err(self.state_error(&format!("demand {rate} deg/s")));
         }
-        let start = Instant::now();
+        // The acceleration limit is sent only when it changes while the table is under our
+        // demand (a stop, an enable or a fault may have reset it on the controller).
+        let unchanged = self.acceleration == Some(acceleration)
+            && matches!(
+                state,
+                TableState::Ramping { .. } | TableState::AtRate { .. }
+            );
+        let send_acceleration = (!unchanged).then_some(acceleration);
+        // no limit may be assumed on the table until the demand went through
+        self.acceleration = None;
+        let start = self
+            .call(self.shared.dialect.demand_rate(
+                rate,
+                send_acceleration,
+                self.policy.reply_timeout,
+            ))
+            .await?;
         self.acceleration = Some(acceleration);
-        self.call(
-            self.shared
-                .dialect
-                .demand_rate(rate, acceleration, self.policy.reply_timeout),
-        )
-        .await?;
         self.ramp = Some(Ramp {
             start,
             from: self.demand,
@@ -440,11 +450,17 @@ impl<D: Dialect> RateTable for Table<D> {
         let mut since: Option<Instant> = None;
         let mut window = RateAccumulator::default();
         let mut last = f64::NAN;
+        // Samples during the ramp are heartbeats on the interval; one is taken exactly at the
+        // end of the computed ramp, and the stability window runs on the interval from
+        // there, so a table that follows its profile is declared at rate one window after
+        // the ramp, not up to an interval later. A sample's time is when it was asked (the
+        // controller reads its rate as the query arrives), not when the reply came back.
         let mut next = now;
         loop {
+            tokio::time::sleep_until(next).await;
+            let t = Instant::now();
             let rate = self.sample().await?;
             last = if rate.is_finite() { rate } else { last };
-            let t = Instant::now();
             if t >= ramp_end && (rate - demand).abs() <= tolerance {
                 let t0 = *since.get_or_insert(t);
                 window.push(rate);
@@ -453,7 +469,8 @@ impl<D: Dialect> RateTable for Table<D> {
                     return Ok(SettleReport {
                         demand,
                         ramp_time,
-                        settled_after: t - start,
+                        settled_after: Instant::now() - start,
+                        at_rate_since: t0,
                         window: window.stats(),
                     });
                 }
@@ -471,8 +488,11 @@ impl<D: Dialect> RateTable for Table<D> {
                 );
                 return Err(self.shared.fault(reason).await);
             }
-            next = (next + criteria.interval).max(Instant::now());
-            tokio::time::sleep_until(next.min(deadline)).await;
+            next = (t + criteria.interval).max(Instant::now());
+            if t < ramp_end {
+                next = next.min(ramp_end);
+            }
+            next = next.min(deadline);
         }
     }
 

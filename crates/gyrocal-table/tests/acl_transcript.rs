@@ -220,7 +220,7 @@ async fn table_commands_are_never_resent_when_the_error_check_is_lost() {
         .expect_line(":System:Error?")
         .silence()
         .query(":System:Error?", NO_ERROR)
-        .expect_line(":Limit:Acceleration R,1,5.000000")
+        // the same acceleration limit is not sent again
         .expect_line(":Demand:Rate 1,10.000000")
         // lost three times: the demand is still not repeated; the driver faults and stops
         .expect_line(":System:Error?")
@@ -248,6 +248,35 @@ async fn table_commands_are_never_resent_when_the_error_check_is_lost() {
     let err = table.set_rate(10.0, 5.0).await.unwrap_err();
     assert_eq!(err.kind(), TableErrorKind::Timeout, "{err}");
     assert_eq!(table.state(), TableState::Faulted);
+}
+
+#[tokio::test]
+async fn table_acceleration_limit_is_sent_only_when_it_changes_or_after_a_stop() {
+    let script = enabled(ScriptedTransport::new("table"))
+        .expect_line(":Limit:Acceleration R,1,5.000000")
+        .expect_line(":Demand:Rate 1,20.000000")
+        .query(":System:Error?", NO_ERROR)
+        // same limit: the demand alone
+        .expect_line(":Demand:Rate 1,10.000000")
+        .query(":System:Error?", NO_ERROR)
+        // a new limit is sent before the demand
+        .expect_line(":Limit:Acceleration R,1,2.000000")
+        .expect_line(":Demand:Rate 1,-10.000000")
+        .query(":System:Error?", NO_ERROR)
+        .expect_line(":Mode:Off 1")
+        // after a stop the limit is never assumed: sent again
+        .expect_line(":Mode:Rate 1")
+        .expect_line(":Limit:Acceleration R,1,2.000000")
+        .expect_line(":Demand:Rate 1,5.000000")
+        .query(":System:Error?", NO_ERROR);
+    let mut table = AclTable::new(script, AclConfig::default());
+    table.connect().await.unwrap();
+    table.enable().await.unwrap();
+    table.set_rate(20.0, 5.0).await.unwrap();
+    table.set_rate(10.0, 5.0).await.unwrap();
+    table.set_rate(-10.0, 2.0).await.unwrap();
+    table.stop().await.unwrap();
+    table.set_rate(5.0, 2.0).await.unwrap();
 }
 
 #[tokio::test]
