@@ -12,10 +12,10 @@ mod common;
 
 use common::table_config;
 use criterion::{Criterion, criterion_group, criterion_main};
+use gyrocal_acl::AclTable;
 use gyrocal_run::{Plan, RunDir, RunMeta, Sequencer, SequencerOptions, Status, StopRequest};
 use gyrocal_sim::bench::Bench;
 use gyrocal_sim::from_plan::bench_config;
-use gyrocal_table::acl::AclTable;
 
 fn run_once(plan: &Plan) -> f64 {
     let rt = tokio::runtime::Builder::new_current_thread()

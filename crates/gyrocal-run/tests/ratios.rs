@@ -11,10 +11,10 @@ mod common;
 use std::path::Path;
 
 use common::table_config;
+use gyrocal_acl::AclTable;
 use gyrocal_run::{Plan, RunDir, RunMeta, Sequencer, SequencerOptions, Status, StopRequest};
 use gyrocal_sim::bench::Bench;
 use gyrocal_sim::from_plan::bench_config;
-use gyrocal_table::acl::AclTable;
 
 fn paper_with(edit: impl FnOnce(&mut toml::Table)) -> Plan {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/paper.toml");

@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use common::table_config;
+use gyrocal_acl::AclTable;
 use gyrocal_run::{
     Event, Phase, Plan, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status,
     StopRequest, TableRest, load,
@@ -19,7 +20,6 @@ use gyrocal_run::{
 use gyrocal_sim::bench::{Bench, BenchHandle};
 use gyrocal_sim::from_plan::bench_config;
 use gyrocal_sim::table::SimMode;
-use gyrocal_table::acl::AclTable;
 use gyrocal_table::{
     Capabilities, Identity, RateStats, RateTable, RestReport, SettleCriteria, SettleReport,
     StopHandle, TableError, TableState, TableStatus,

@@ -9,13 +9,13 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use common::table_config;
+use gyrocal_acl::AclTable;
 use gyrocal_run::{
     Plan, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status, StopRequest, fit_run,
     load, load_samples,
 };
 use gyrocal_sim::bench::{Bench, BenchHandle};
 use gyrocal_sim::from_plan::bench_config;
-use gyrocal_table::acl::AclTable;
 use tokio::sync::watch;
 
 fn config(name: &str) -> PathBuf {

@@ -14,21 +14,20 @@ use std::future::Future;
 use std::sync::Mutex;
 use std::time::Duration;
 
-use gyrocal_link::{LinkError, show_bytes};
+use gyrocal_link::{ErrorKind as LinkErrorKind, LinkError, show_bytes};
 use tokio::time::Instant;
 
 use crate::TableError;
-use crate::acl::{Miss, retryable};
 use crate::dialect::DialectError;
 
 /// The retry notes a dialect keeps for the run's manifest until
 /// [`crate::RateTable::take_retries`] collects them.
 #[derive(Debug, Default)]
-pub(crate) struct RetryNotes(Mutex<Vec<String>>);
+pub struct RetryNotes(Mutex<Vec<String>>);
 
 impl RetryNotes {
     /// Logs `note` and keeps it.
-    pub(crate) fn push(&self, device: &str, note: String) {
+    pub fn push(&self, device: &str, note: String) {
         tracing::warn!(device = %device, "{note}");
         self.0
             .lock()
@@ -37,7 +36,7 @@ impl RetryNotes {
     }
 
     /// The notes since the last call.
-    pub(crate) fn take(&self) -> Vec<String> {
+    pub fn take(&self) -> Vec<String> {
         std::mem::take(
             &mut *self
                 .0
@@ -48,7 +47,7 @@ impl RetryNotes {
 }
 
 /// How one attempt went.
-pub(crate) enum Attempt<R> {
+pub enum Attempt<R> {
     /// A usable value.
     Value(R),
     /// A reply line came back that the parser refused.
@@ -65,7 +64,7 @@ pub(crate) enum Attempt<R> {
 }
 
 /// What the shared policy needs from a dialect.
-pub(crate) trait Asking: Sync {
+pub trait Asking: Sync {
     /// The link's description.
     fn device(&self) -> &str;
     /// Retries after the first attempt.
@@ -83,7 +82,7 @@ pub(crate) trait Asking: Sync {
 
 /// Asks `line` through `attempt` (one exchange and its parse, given the time it may take)
 /// under the shared retry policy.
-pub(crate) async fn ask<D, R, F, Fut>(
+pub async fn ask<D, R, F, Fut>(
     dialect: &D,
     line: &str,
     timeout: Duration,
@@ -165,4 +164,49 @@ where
         error,
         link_failed: link_missed,
     })
+}
+
+/// One failed attempt at a query.
+pub enum Miss {
+    /// Nothing (or not a line of text) came back.
+    Link(LinkError),
+    /// A line came back that is not a valid reply.
+    Reply {
+        /// The reply.
+        reply: String,
+        /// Why it is refused.
+        reason: &'static str,
+    },
+}
+
+impl Miss {
+    /// What went wrong, for a retry note.
+    pub fn describe(&self) -> String {
+        match self {
+            Miss::Link(LinkError::Timeout {
+                timeout, partial, ..
+            }) if partial.is_empty() => {
+                format!("no reply within {:.3} s", timeout.as_secs_f64())
+            }
+            Miss::Link(LinkError::Timeout {
+                timeout, partial, ..
+            }) => format!(
+                "no complete reply within {:.3} s (got {})",
+                timeout.as_secs_f64(),
+                show_bytes(partial)
+            ),
+            Miss::Link(LinkError::Garbled { reason, bytes, .. }) => {
+                format!("garbled reply {} ({reason})", show_bytes(bytes))
+            }
+            Miss::Link(e) => e.to_string(),
+            Miss::Reply { reply, reason } => {
+                format!("unusable reply {} ({reason})", show_bytes(reply.as_bytes()))
+            }
+        }
+    }
+}
+
+/// Whether asking again can help: a lost or corrupted reply can, a dead link cannot.
+pub fn retryable(e: &LinkError) -> bool {
+    matches!(e.kind(), LinkErrorKind::Timeout | LinkErrorKind::Garbled)
 }

@@ -176,3 +176,17 @@ pub trait Dialect: Send + Sync + 'static {
         Vec::new()
     }
 }
+
+/// A dialect built from its transport and its configuration, so that
+/// [`Table::new`](crate::Table::new) builds the table of that dialect in one call
+/// (`AclTable::new(link, AclConfig::default())`).
+pub trait Build: Dialect + Sized {
+    /// The link it talks over.
+    type Transport;
+    /// Its configuration (with the policy's settings in it).
+    type Config;
+    /// The dialect and the policy's settings for `config`.
+    fn build(transport: Self::Transport, config: Self::Config) -> (Self, crate::PolicyConfig);
+    /// The configuration in force.
+    fn config(&self) -> &Self::Config;
+}

@@ -1,9 +1,11 @@
 //! # gyrocal-table
 //!
-//! Rate-table drivers: the [`RateTable`] trait a calibration sequencer programs against, one
-//! generic implementation of it ([`Table`]) over any wire protocol ([`Dialect`]), and the
-//! ACUTROL command language ([`acl`]) as its first dialect, generic over any
-//! [`gyrocal_link::Transport`].
+//! The rate-table role: the [`RateTable`] trait a calibration sequencer programs against, and
+//! one generic implementation of it ([`Table`]) over any wire protocol ([`Dialect`]), generic
+//! over any [`gyrocal_link::Transport`]. The dialects live in crates of their own
+//! (`gyrocal-acl` for the ACUTROL command language, `gyrocal-aerosmith` for the experimental
+//! Ideal Aerosmith one), so code written against the role (the sequencer) depends on no
+//! driver.
 //!
 //! ## Policy once, dialects small
 //!
@@ -14,7 +16,7 @@
 //! (see [`dialect`]). This is probe-rs's pattern for JTAG (`impl<P: AutoImplementJtagAccess>
 //! JtagAccess for P` over a small `RawJtagIo` trait): a new probe implements the raw operations
 //! and inherits the rest, so a fix to the policy fixes every table, and a second dialect cannot
-//! forget the heartbeat or the rest check. `acl::AclTable<T>` is `Table<acl::Acl<T>>`, and
+//! forget the heartbeat or the rest check. `gyrocal_acl::AclTable<T>` is `Table<gyrocal_acl::Acl<T>>`, and
 //! `AclTable::new(transport, config)` builds it as before.
 //!
 //! ## Why a driver and not a few `send_line` calls
@@ -60,14 +62,12 @@
 //! A second dialect (Ideal Aerosmith ASCII, a binary framed table) is a new module implementing
 //! [`Dialect`]; the table type, the sequencer and the tests of the policy stay as they are.
 
-mod ask;
+pub mod ask;
 mod error;
 mod stats;
 mod stop;
 mod table;
 
-pub mod acl;
-pub mod aerosmith;
 pub mod dialect;
 
 pub use dialect::Dialect;

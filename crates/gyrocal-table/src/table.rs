@@ -137,8 +137,8 @@ impl Ramp {
 /// A rate table of any dialect: the one implementation of [`RateTable`].
 ///
 /// Build it from a dialect and the policy's settings with [`Table::with_dialect`], or through a
-/// dialect's constructor: [`AclTable::new`](crate::acl::AclTable) (ACUTROL),
-/// [`AerosmithTable::new`](crate::aerosmith::AerosmithTable) (Ideal Aerosmith, experimental).
+/// dialect's constructor: `gyrocal_acl::AclTable::new` (ACUTROL),
+/// `gyrocal_aerosmith::AerosmithTable::new` (Ideal Aerosmith, experimental).
 pub struct Table<D: Dialect> {
     shared: Arc<Shared<D>>,
     policy: PolicyConfig,
@@ -157,6 +157,20 @@ impl<D: Dialect> std::fmt::Debug for Table<D> {
             .field("state", &self.shared.status().state)
             .field("demand", &self.demand)
             .finish_non_exhaustive()
+    }
+}
+
+impl<D: crate::dialect::Build> Table<D> {
+    /// Builds the dialect on `transport` with `config`; nothing is sent until
+    /// [`RateTable::connect`].
+    pub fn new(transport: D::Transport, config: D::Config) -> Self {
+        let (dialect, policy) = D::build(transport, config);
+        Table::with_dialect(dialect, policy)
+    }
+
+    /// The dialect's configuration in force.
+    pub fn config(&self) -> &D::Config {
+        self.dialect().config()
     }
 }
 

@@ -7,11 +7,11 @@
 
 use std::time::Duration;
 
+use gyrocal_acl::{AclConfig, AclTable};
+use gyrocal_aerosmith::{AerosmithConfig, AerosmithTable};
 use gyrocal_link::memory_pair;
 use gyrocal_sim::table::aerosmith::AerosmithWire;
 use gyrocal_sim::table::{SimTable, TableConfig, TableHandle};
-use gyrocal_table::acl::{AclConfig, AclTable};
-use gyrocal_table::aerosmith::{AerosmithConfig, AerosmithTable};
 use gyrocal_table::{RateTable, SettleCriteria, TableMode, TableState};
 
 #[derive(Debug, PartialEq)]

@@ -126,19 +126,19 @@ where
     };
     match plan.table().dialect {
         TableDialect::Acl => {
-            let config = gyrocal_table::acl::AclConfig {
+            let config = gyrocal_acl::AclConfig {
                 limits: policy.limits,
-                ..gyrocal_table::acl::AclConfig::default()
+                ..gyrocal_acl::AclConfig::default()
             };
-            let table = gyrocal_table::acl::AclTable::new(table_link, config);
+            let table = gyrocal_acl::AclTable::new(table_link, config);
             job.call(dmm, table).await
         }
         TableDialect::Aerosmith => {
-            let config = gyrocal_table::aerosmith::AerosmithConfig {
+            let config = gyrocal_aerosmith::AerosmithConfig {
                 policy,
-                ..gyrocal_table::aerosmith::AerosmithConfig::default()
+                ..gyrocal_aerosmith::AerosmithConfig::default()
             };
-            let table = gyrocal_table::aerosmith::AerosmithTable::new(table_link, config);
+            let table = gyrocal_aerosmith::AerosmithTable::new(table_link, config);
             job.call(dmm, table).await
         }
     }

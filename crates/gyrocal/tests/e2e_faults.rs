@@ -755,7 +755,7 @@ fn e2e_table_silent_from_a_demand_times_out_and_a_stop_is_attempted() {
         &plan,
         &sim,
         &out_args(&dir),
-        Some("warn,gyrocal_table=info"),
+        Some("warn,gyrocal_table=info,gyrocal_acl=info,gyrocal_aerosmith=info"),
     );
     let end = run.wait();
     assert_eq!(end.code, Some(1), "{end:?}");
@@ -811,7 +811,7 @@ fn e2e_table_silent_mid_acquisition_misses_its_heartbeat() {
         &plan,
         &sim,
         &out_args(&dir),
-        Some("warn,gyrocal_table=info"),
+        Some("warn,gyrocal_table=info,gyrocal_acl=info,gyrocal_aerosmith=info"),
     );
     let end = run.wait();
     assert_eq!(end.code, Some(1), "{end:?}");

@@ -8,9 +8,9 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::mpsc;
 use std::time::Duration;
 
+use gyrocal_acl::{AclConfig, AclTable};
 use gyrocal_hp34401a::{AutoZero, DcvConfig, DriverOptions, Hp34401a, Strategy};
 use gyrocal_link::LinkOptions;
-use gyrocal_table::acl::{AclConfig, AclTable};
 use gyrocal_table::{Limits, RateTable, SettleCriteria};
 use serde_json::Value;
 

@@ -3,10 +3,10 @@
 
 #![allow(dead_code)]
 
+use gyrocal_acl::AclConfig;
 use gyrocal_hp34401a::{DriverOptions, Hp34401aMeter, Strategy};
 use gyrocal_link::Transport;
 use gyrocal_run::{Acquisition, Plan};
-use gyrocal_table::acl::AclConfig;
 
 /// The 34401A on `link` as `plan` sets it up.
 pub fn hp34401a<T: Transport + 'static>(link: T, plan: &Plan) -> Hp34401aMeter<T> {

@@ -7,9 +7,9 @@
 
 use std::time::Duration;
 
+use gyrocal_acl::{AclConfig, AclTable};
 use gyrocal_link::memory_pair;
 use gyrocal_sim::table::{DemandFault, ReplyFault, SimMode, SimTable, TableConfig, TableHandle};
-use gyrocal_table::acl::{AclConfig, AclTable};
 use gyrocal_table::{RateTable, SettleCriteria, TableErrorKind, TableMode, TableState};
 use tokio::time::Instant;
 

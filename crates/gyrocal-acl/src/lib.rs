@@ -59,13 +59,13 @@ use std::time::Duration;
 
 use tokio::time::Instant;
 
+use gyrocal_link::{LinkError, Transport};
 #[cfg(doc)]
-use crate::RateTable;
-use crate::ask::{Asking, Attempt, RetryNotes};
-use crate::dialect::{Connected, Dialect, DialectError, StopAttempt};
-use crate::table::{PolicyConfig, Table};
-use crate::{Identity, Limits, StopKind, TableError, TableMode, TableStatus};
-use gyrocal_link::{ErrorKind as LinkErrorKind, LinkError, Transport, show_bytes};
+use gyrocal_table::RateTable;
+use gyrocal_table::ask::{Asking, Attempt, RetryNotes};
+use gyrocal_table::dialect::{Connected, Dialect, DialectError, StopAttempt};
+use gyrocal_table::{Identity, Limits, StopKind, TableError, TableMode, TableStatus};
+use gyrocal_table::{PolicyConfig, Table};
 
 /// Most errors read from the queue in one go (the queue is finite; a table that keeps
 /// answering errors is broken, not informative).
@@ -142,15 +142,16 @@ impl AclConfig {
 /// ```
 pub type AclTable<T> = Table<Acl<T>>;
 
-impl<T: Transport + 'static> Table<Acl<T>> {
-    /// Takes the transport by value; nothing is sent until [`RateTable::connect`].
-    pub fn new(transport: T, config: AclConfig) -> Self {
-        Table::with_dialect(Acl::new(transport, config), config.policy())
+impl<T: Transport + 'static> gyrocal_table::dialect::Build for Acl<T> {
+    type Transport = T;
+    type Config = AclConfig;
+
+    fn build(transport: T, config: AclConfig) -> (Self, PolicyConfig) {
+        (Acl::new(transport, config), config.policy())
     }
 
-    /// The configuration in force.
-    pub fn config(&self) -> &AclConfig {
-        &self.dialect().config
+    fn config(&self) -> &AclConfig {
+        &self.config
     }
 }
 
@@ -181,46 +182,6 @@ impl<T> std::fmt::Debug for Acl<T> {
             .field("axis", &self.config.axis)
             .finish_non_exhaustive()
     }
-}
-
-/// One failed attempt at a query.
-pub(crate) enum Miss {
-    /// Nothing (or not a line of text) came back.
-    Link(LinkError),
-    /// A line came back that is not a valid reply.
-    Reply { reply: String, reason: &'static str },
-}
-
-impl Miss {
-    /// What went wrong, for a retry note.
-    pub(crate) fn describe(&self) -> String {
-        match self {
-            Miss::Link(LinkError::Timeout {
-                timeout, partial, ..
-            }) if partial.is_empty() => {
-                format!("no reply within {:.3} s", timeout.as_secs_f64())
-            }
-            Miss::Link(LinkError::Timeout {
-                timeout, partial, ..
-            }) => format!(
-                "no complete reply within {:.3} s (got {})",
-                timeout.as_secs_f64(),
-                show_bytes(partial)
-            ),
-            Miss::Link(LinkError::Garbled { reason, bytes, .. }) => {
-                format!("garbled reply {} ({reason})", show_bytes(bytes))
-            }
-            Miss::Link(e) => e.to_string(),
-            Miss::Reply { reply, reason } => {
-                format!("unusable reply {} ({reason})", show_bytes(reply.as_bytes()))
-            }
-        }
-    }
-}
-
-/// Whether asking again can help: a lost or corrupted reply can, a dead link cannot.
-pub(crate) fn retryable(e: &LinkError) -> bool {
-    matches!(e.kind(), LinkErrorKind::Timeout | LinkErrorKind::Garbled)
 }
 
 impl<T: Transport + 'static> Acl<T> {
@@ -271,7 +232,7 @@ impl<T: Transport + 'static> Acl<T> {
     }
 
     /// Asks the idempotent query `line` until `parse` accepts the reply, under the retry
-    /// policy every dialect shares ([`crate::ask`]).
+    /// policy every dialect shares ([`gyrocal_table::ask`]).
     async fn ask<R>(
         &self,
         line: &str,
@@ -279,7 +240,7 @@ impl<T: Transport + 'static> Acl<T> {
         parse: impl Fn(&str) -> Result<R, &'static str>,
     ) -> Result<R, DialectError> {
         let parse = &parse;
-        crate::ask::ask(self, line, timeout, |budget| async move {
+        gyrocal_table::ask::ask(self, line, timeout, |budget| async move {
             match self.exchange(line, budget).await {
                 Ok(reply) => match parse(&reply) {
                     Ok(v) => Attempt::Value(v),

@@ -5,9 +5,9 @@
 
 use std::time::Duration;
 
+use gyrocal_acl::{AclConfig, AclTable};
 use gyrocal_link::memory_pair;
 use gyrocal_sim::table::{SimMode, SimTable, TableConfig, TableFaults, TableHandle};
-use gyrocal_table::acl::{AclConfig, AclTable};
 use gyrocal_table::{RateTable, SettleCriteria, TableErrorKind, TableState};
 use tokio::time::Instant;
 

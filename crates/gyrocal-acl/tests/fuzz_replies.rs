@@ -6,8 +6,8 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
+use gyrocal_acl::{AclConfig, AclTable};
 use gyrocal_link::{LinkError, Transport, show_bytes};
-use gyrocal_table::acl::{AclConfig, AclTable};
 use gyrocal_table::{RateTable, SettleCriteria};
 use proptest::prelude::*;
 

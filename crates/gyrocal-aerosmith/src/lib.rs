@@ -65,11 +65,11 @@ use gyrocal_link::{LinkError, Transport};
 use tokio::time::Instant;
 
 #[cfg(doc)]
-use crate::RateTable;
-use crate::ask::{Asking, Attempt, RetryNotes};
-use crate::dialect::{Connected, Dialect, DialectError, StopAttempt};
-use crate::table::{PolicyConfig, Table};
-use crate::{Identity, Limits, StopKind, TableError, TableMode, TableStatus};
+use gyrocal_table::RateTable;
+use gyrocal_table::ask::{Asking, Attempt, RetryNotes};
+use gyrocal_table::dialect::{Connected, Dialect, DialectError, StopAttempt};
+use gyrocal_table::{Identity, Limits, StopKind, TableError, TableMode, TableStatus};
+use gyrocal_table::{PolicyConfig, Table};
 
 /// The prompt that ends every reply.
 pub const PROMPT: u8 = b'>';
@@ -197,15 +197,16 @@ impl Default for AerosmithConfig {
 /// ```
 pub type AerosmithTable<T> = Table<Aerosmith<T>>;
 
-impl<T: Transport + 'static> Table<Aerosmith<T>> {
-    /// Takes the transport by value; nothing is sent until [`RateTable::connect`].
-    pub fn new(transport: T, config: AerosmithConfig) -> Self {
-        Table::with_dialect(Aerosmith::new(transport, config), config.policy)
+impl<T: Transport + 'static> gyrocal_table::dialect::Build for Aerosmith<T> {
+    type Transport = T;
+    type Config = AerosmithConfig;
+
+    fn build(transport: T, config: AerosmithConfig) -> (Self, PolicyConfig) {
+        (Aerosmith::new(transport, config), config.policy)
     }
 
-    /// The configuration in force.
-    pub fn config(&self) -> &AerosmithConfig {
-        &self.dialect().config
+    fn config(&self) -> &AerosmithConfig {
+        &self.config
     }
 }
 
@@ -321,7 +322,7 @@ impl<T: Transport + 'static> Aerosmith<T> {
     }
 
     /// Asks an idempotent query until `parse` accepts its value line, under the retry policy
-    /// every dialect shares ([`crate::ask`]). A `?` reply is a table error, not retried.
+    /// every dialect shares ([`gyrocal_table::ask`]). A `?` reply is a table error, not retried.
     async fn ask<R>(
         &self,
         command: &str,
@@ -329,7 +330,7 @@ impl<T: Transport + 'static> Aerosmith<T> {
         parse: impl Fn(&str) -> Result<R, &'static str>,
     ) -> Result<R, DialectError> {
         let parse = &parse;
-        crate::ask::ask(self, command, timeout, |budget| async move {
+        gyrocal_table::ask::ask(self, command, timeout, |budget| async move {
             match self.exchange(command, budget).await {
                 Ok(body) if body.contains('?') => {
                     Attempt::Final(self.table_error(command, &body).into())

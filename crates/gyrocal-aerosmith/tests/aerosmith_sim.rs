@@ -6,10 +6,10 @@
 
 use std::time::Duration;
 
+use gyrocal_aerosmith::{AerosmithConfig, AerosmithTable};
 use gyrocal_link::memory_pair;
 use gyrocal_sim::table::aerosmith::AerosmithWire;
 use gyrocal_sim::table::{SimTable, TableConfig, TableHandle};
-use gyrocal_table::aerosmith::{AerosmithConfig, AerosmithTable};
 use gyrocal_table::{RateTable, SettleCriteria, TableErrorKind, TableMode, TableState};
 use tokio::time::Instant;
 

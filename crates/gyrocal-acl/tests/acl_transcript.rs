@@ -2,8 +2,8 @@
 
 use std::time::Duration;
 
+use gyrocal_acl::{AclConfig, AclTable};
 use gyrocal_link::ScriptedTransport;
-use gyrocal_table::acl::{AclConfig, AclTable};
 use gyrocal_table::{RateTable, TableErrorKind, TableState};
 
 const NO_ERROR: &str = "0,\"No error\"";

@@ -1,10 +1,10 @@
 //! Transcript tests: the exact bytes the experimental Ideal Aerosmith dialect writes and how it
 //! reads replies that end with a `>` prompt.
 
-use gyrocal_link::ScriptedTransport;
-use gyrocal_table::aerosmith::{
+use gyrocal_aerosmith::{
     AerosmithConfig, AerosmithTable, LineEnding, McoPolarity, NO_CODE, RateUnits,
 };
+use gyrocal_link::ScriptedTransport;
 use gyrocal_table::{RateTable, TableError, TableErrorKind, TableMode, TableState};
 
 /// Expects `command` + CR and answers `reply` (which ends with the prompt).
