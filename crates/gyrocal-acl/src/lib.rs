@@ -513,34 +513,20 @@ impl<T: Transport + 'static> Dialect for Acl<T> {
             StopKind::Controlled => format!(":Mode:Off {}", self.config.axis),
             StopKind::Emergency => format!(":Interlock:Open {}", self.config.axis),
         };
-        let wait = timeout * 2 + Duration::from_millis(500);
-        let Ok(mut link) = tokio::time::timeout(wait, self.link.lock()).await else {
-            return StopAttempt {
-                attempted: false,
-                result: Err(TableError::Fault {
-                    device: self.device.clone(),
-                    reason: format!("could not get the link within {wait:?} to send `{line}`"),
-                }),
-            };
-        };
-        tracing::info!(device = %self.device, "{line}");
-        let sent = tokio::time::timeout(timeout, link.transport.send_line(&line)).await;
-        drop(link);
+        let text = line.as_str();
+        let attempt = gyrocal_table::dialect::send_stop_with(
+            &self.device,
+            text,
+            timeout,
+            self.link.lock(),
+            |mut link| async move { link.transport.send_line(text).await },
+        )
+        .await;
         self.rate_mode.store(false, Ordering::SeqCst);
-        if kind == StopKind::Emergency {
+        if kind == StopKind::Emergency && attempt.attempted {
             self.opened_by_us.store(true, Ordering::SeqCst);
         }
-        let result = match sent {
-            Ok(r) => r.map_err(|e| TableError::from_link(&self.device, &line, e)),
-            Err(_) => Err(TableError::Fault {
-                device: self.device.clone(),
-                reason: format!("`{line}` could not be written within {timeout:?}"),
-            }),
-        };
-        StopAttempt {
-            attempted: true,
-            result,
-        }
+        attempt
     }
 
     fn take_retries(&self) -> Vec<String> {

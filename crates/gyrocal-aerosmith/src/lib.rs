@@ -531,40 +531,24 @@ impl<T: Transport + 'static> Dialect for Aerosmith<T> {
                  (a controlled stop); the hardware E-stop is the only true emergency stop"
             );
         }
-        let wait = timeout * 2 + Duration::from_millis(500);
-        let Ok(mut link) = tokio::time::timeout(wait, self.link.lock()).await else {
-            return StopAttempt {
-                attempted: false,
-                result: Err(TableError::Fault {
-                    device: self.device.clone(),
-                    reason: format!("could not get the link within {wait:?} to send `{command}`"),
-                }),
-            };
-        };
-        tracing::info!(device = %self.device, "{command}");
         let frame = self.frame(command);
-        let sent = tokio::time::timeout(timeout, link.transport.write_raw(&frame)).await;
-        let result = match sent {
-            Ok(Ok(())) => {
+        gyrocal_table::dialect::send_stop_with(
+            &self.device,
+            command,
+            timeout,
+            self.link.lock(),
+            |mut link| async move {
+                // a write that fails or is cut short leaves the link in an unknown state
+                let was_dirty = link.dirty;
+                link.dirty = true;
+                link.transport.write_raw(&frame).await?;
+                link.dirty = was_dirty;
+                // the controller answers a stop with a prompt, read before the next exchange
                 link.owed_prompts += 1;
                 Ok(())
-            }
-            Ok(Err(e)) => {
-                link.dirty = true;
-                Err(TableError::from_link(&self.device, command, e))
-            }
-            Err(_) => {
-                link.dirty = true;
-                Err(TableError::Fault {
-                    device: self.device.clone(),
-                    reason: format!("`{command}` could not be written within {timeout:?}"),
-                })
-            }
-        };
-        StopAttempt {
-            attempted: true,
-            result,
-        }
+            },
+        )
+        .await
     }
 
     fn take_retries(&self) -> Vec<String> {

@@ -190,3 +190,43 @@ pub trait Build: Dialect + Sized {
     /// The configuration in force.
     fn config(&self) -> &Self::Config;
 }
+
+/// The stop path every dialect shares, written once: get the link within `2 × timeout + ½ s`
+/// (a query may hold it), log the command, write it within `timeout` with `write` (which gets
+/// the link's guard, so the dialect can keep its link state), and say what happened. Never
+/// waits for a reply: a stop must not depend on the table answering.
+pub async fn send_stop_with<G, L, W, Fut>(
+    device: &str,
+    command: &str,
+    timeout: Duration,
+    lock: L,
+    write: W,
+) -> StopAttempt
+where
+    L: Future<Output = G>,
+    W: FnOnce(G) -> Fut,
+    Fut: Future<Output = Result<(), gyrocal_link::LinkError>>,
+{
+    let wait = timeout * 2 + Duration::from_millis(500);
+    let Ok(guard) = tokio::time::timeout(wait, lock).await else {
+        return StopAttempt {
+            attempted: false,
+            result: Err(TableError::Fault {
+                device: device.to_string(),
+                reason: format!("could not get the link within {wait:?} to send `{command}`"),
+            }),
+        };
+    };
+    tracing::info!(device = %device, "{command}");
+    let result = match tokio::time::timeout(timeout, write(guard)).await {
+        Ok(r) => r.map_err(|e| TableError::from_link(device, command, e)),
+        Err(_) => Err(TableError::Fault {
+            device: device.to_string(),
+            reason: format!("`{command}` could not be written within {timeout:?}"),
+        }),
+    };
+    StopAttempt {
+        attempted: true,
+        result,
+    }
+}
