@@ -88,12 +88,14 @@ impl Identity {
 }
 
 /// Progress of an acquisition: `done` of `total` readings received.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Progress {
     /// Readings received so far.
     pub done: usize,
     /// Readings asked for.
     pub total: usize,
+    /// The reading just received.
+    pub latest: Reading,
 }
 
 /// A progress callback (see [`Hp34401a::set_progress`]).
@@ -614,7 +616,7 @@ impl<T: Transport> Hp34401a<T> {
                     match step.await {
                         Ok(r) => {
                             readings.push(r);
-                            self.report(readings.len(), n);
+                            self.report(readings.len(), n, r);
                         }
                         Err(e) => {
                             recoveries.push(self.after_failure(e, &mut failures).await?);
@@ -778,7 +780,7 @@ impl<T: Transport> Hp34401a<T> {
                     bytes: piece.as_bytes().to_vec(),
                 })?;
                 out.push(r);
-                self.report(base + out.len(), total);
+                self.report(base + out.len(), total, r);
             }
             if field.end_of_line {
                 break;
@@ -800,9 +802,13 @@ impl<T: Transport> Hp34401a<T> {
         }
     }
 
-    fn report(&mut self, done: usize, total: usize) {
+    fn report(&mut self, done: usize, total: usize, latest: Reading) {
         if let Some(f) = self.progress.as_mut() {
-            f(Progress { done, total });
+            f(Progress {
+                done,
+                total,
+                latest,
+            });
         }
     }
 

@@ -172,8 +172,19 @@ pub trait TimingModel: Send + Sync {
     fn cost(&self, n: usize, defer: bool) -> Cost;
 }
 
-/// Progress of a measurement: readings received so far, readings asked for.
-pub type ProgressFn = Box<dyn FnMut(usize, usize) + Send>;
+/// Progress of a measurement, after each reading received.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Progress {
+    /// Readings received so far in this measurement.
+    pub done: usize,
+    /// Readings asked for.
+    pub total: usize,
+    /// The reading just received.
+    pub latest: Reading,
+}
+
+/// A progress callback (see [`Multimeter::set_progress`]).
+pub type ProgressFn = Box<dyn FnMut(Progress) + Send>;
 
 /// A DC voltmeter, whatever its model and link. Methods take `&mut self`: one task owns it.
 pub trait Multimeter: Send {

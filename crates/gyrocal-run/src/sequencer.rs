@@ -122,18 +122,29 @@ pub enum Event {
         /// How the multimeter acquires (`stream`, `memory`, ...).
         acquisition: &'static str,
     },
-    /// A step begins (`position` counts from 1 within this session).
+    /// A step begins. Operators see one numbering, the plan's: `number` of `of` (`step 4/19`),
+    /// the same in every session of a resumed run; the run directory's `step` column is the
+    /// 0-based index (`number - 1`).
     StepStarted {
         /// The step.
         step: Step,
-        /// 1-based position in this session's steps.
+        /// 1-based number of the step in the plan's schedule (`step.index + 1`).
+        number: usize,
+        /// Steps in the plan's schedule.
+        of: usize,
+        /// 1-based position in this session's steps (a step measured again counts twice).
         position: usize,
         /// Steps in this session.
         total: usize,
         /// Estimated time to the end of the run from the start of this step (the instruments'
         /// timing models, see [`crate::estimate`]).
         remaining: Duration,
+        /// Of `remaining`, what the steps after this one take: a display counts the time down
+        /// within the step from `remaining` towards it.
+        after: Duration,
     },
+    /// A sample of the table while waiting for the rate.
+    Settle(gyrocal_table::SettleProgress),
     /// A step entered a phase.
     Phase {
         /// Step index.
@@ -141,12 +152,18 @@ pub enum Event {
         /// The phase.
         phase: Phase,
     },
-    /// Readings received in the current acquisition.
+    /// A reading received in the current acquisition.
     Acquiring {
         /// Readings so far.
         done: usize,
         /// Readings asked for.
         total: usize,
+        /// The reading just received, V (`None`: an overload).
+        latest: Option<f64>,
+        /// Mean of this acquisition's valid readings so far, V (NaN before the first).
+        mean: f64,
+        /// Their sample standard deviation, V (`None` below two readings).
+        std: Option<f64>,
     },
     /// A step was recorded.
     StepDone(StepRecord),
@@ -213,10 +230,11 @@ pub enum SequenceError {
     RunDir(Box<RunError>),
     /// A step produced no valid reading.
     #[error(
-        "step {step} at {rate_dps} °/s: all {count} readings were overloads (9.9E+37); is range_v too small?"
+        "step {} at {rate_dps} °/s: all {count} readings were overloads (9.9E+37); is range_v too small?",
+        .step + 1
     )]
     AllOverloaded {
-        /// Step index.
+        /// Step index (0-based; messages say `index + 1`, the plan's step number).
         step: usize,
         /// The step's rate.
         rate_dps: f64,
@@ -225,9 +243,9 @@ pub enum SequenceError {
     },
     /// The table did not hold the step's rate for its whole acquisition: the step is not
     /// recorded.
-    #[error("step {step} at {rate_dps} °/s not recorded: {detail}")]
+    #[error("step {} at {rate_dps} °/s not recorded: {detail}", .step + 1)]
     NotHeld {
-        /// Step index.
+        /// Step index (0-based; messages say `index + 1`, the plan's step number).
         step: usize,
         /// The step's rate.
         rate_dps: f64,
@@ -705,6 +723,7 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
             dwell,
             reading_time,
         };
+        let schedule_len = self.plan.schedule().len();
         let mut pending: Option<PendingFetch<M::Pending>> = None;
         // A step the table did not hold is measured again at once; the queue makes that (and
         // the session's step count) explicit.
@@ -715,16 +734,21 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
         while let Some(step) = queue.pop_front() {
             position += 1;
             // remaining: this step and every queued one, from the plan's estimate
-            let remaining = std::iter::once(&step)
-                .chain(queue.iter())
-                .filter_map(|s| est.steps.iter().find(|e| e.step.index == s.index))
-                .map(|e| e.ramp + e.settle + e.acquire)
-                .sum::<Duration>();
+            let cost = |s: &Step| {
+                est.steps
+                    .iter()
+                    .find(|e| e.step.index == s.index)
+                    .map_or(Duration::ZERO, |e| e.ramp + e.settle + e.acquire)
+            };
+            let after = queue.iter().map(cost).sum::<Duration>();
             self.emit(Event::StepStarted {
                 step,
+                number: step.index + 1,
+                of: schedule_len,
                 position,
                 total,
-                remaining,
+                remaining: cost(&step) + after,
+                after,
             });
             let last = queue.is_empty();
             let span = tracing::info_span!("step", index = step.index, rate_dps = step.rate_dps);
@@ -806,7 +830,13 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
             let Self { table, dmm, .. } = self;
             let dmm = dmm.as_mut().ok_or_else(released)?;
             // the dwell runs from the moment the table is at rate, fetch or no fetch
-            let wait = table.wait_at_rate(&ctx.criteria);
+            let events = self.events.clone();
+            let mut observe = move |p| {
+                if let Some(tx) = &events {
+                    let _ = tx.send(Event::Settle(p));
+                }
+            };
+            let wait = table.wait_at_rate_observed(&ctx.criteria, &mut observe);
             let PendingFetch {
                 step: p_step,
                 pending: p_pending,
@@ -832,7 +862,7 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
                         "dmm",
                         format!(
                             "{e}; step {} is measured again after this one",
-                            p_step.index
+                            p_step.index + 1
                         ),
                     )?;
                     self.lost.push(p_step);
@@ -840,7 +870,17 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
             }
             at_rate = settled?.at_rate_since;
         } else {
-            at_rate = self.table.wait_at_rate(&ctx.criteria).await?.at_rate_since;
+            let events = self.events.clone();
+            let mut observe = move |p| {
+                if let Some(tx) = &events {
+                    let _ = tx.send(Event::Settle(p));
+                }
+            };
+            at_rate = self
+                .table
+                .wait_at_rate_observed(&ctx.criteria, &mut observe)
+                .await?
+                .at_rate_since;
         }
         // the settling dwell counts from the first sample of the stability window: the
         // table has held the rate since then
@@ -968,8 +1008,26 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
         let tx = self.events.clone();
         if let Some(dmm) = self.dmm.as_mut() {
             dmm.set_progress(tx.map(|tx| {
-                Box::new(move |done, total| {
-                    let _ = tx.send(Event::Acquiring { done, total });
+                // Welford's running mean and variance of the step's valid readings
+                let (mut n, mut mean, mut m2) = (0u64, 0.0f64, 0.0f64);
+                Box::new(move |p: gyrocal_meter::Progress| {
+                    if p.done <= 1 {
+                        (n, mean, m2) = (0, 0.0, 0.0);
+                    }
+                    let latest = p.latest.volts();
+                    if let Some(v) = latest {
+                        n += 1;
+                        let d = v - mean;
+                        mean += d / n as f64;
+                        m2 += d * (v - mean);
+                    }
+                    let _ = tx.send(Event::Acquiring {
+                        done: p.done,
+                        total: p.total,
+                        latest,
+                        mean: if n > 0 { mean } else { f64::NAN },
+                        std: (n > 1).then(|| (m2 / (n - 1) as f64).sqrt()),
+                    });
                 }) as gyrocal_meter::ProgressFn
             }));
         }

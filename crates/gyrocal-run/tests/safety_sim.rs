@@ -427,7 +427,8 @@ async fn a_step_the_table_did_not_hold_is_measured_again_once_it_holds() {
 
 #[tokio::test(start_paused = true)]
 async fn a_table_that_never_holds_the_rate_fails_the_run_without_recording_the_step() {
-    // every monitoring sample at 10 °/s is 0.1 °/s off: both attempts are refused
+    // every monitoring sample at 10 °/s is 0.1 °/s off: both attempts are refused (the plan's step 2;
+    // messages number steps from 1)
     let plan = plan_with_rates(&[0.0, 10.0, -10.0]);
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("run");
@@ -438,7 +439,7 @@ async fn a_table_that_never_holds_the_rate_fails_the_run_without_recording_the_s
     assert_eq!(summary.status, Status::Failed);
     let reason = summary.reason.unwrap();
     assert!(
-        reason.contains("step 1 at 10 °/s not recorded") && reason.contains("+10.1"),
+        reason.contains("step 2 at 10 °/s not recorded") && reason.contains("+10.1"),
         "{reason}"
     );
     let data = load(&dir).unwrap();

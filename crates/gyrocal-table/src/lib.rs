@@ -284,6 +284,22 @@ pub struct SettleReport {
     pub window: RateStats,
 }
 
+/// Where a wait for the rate stands, after one sample (see
+/// [`RateTable::wait_at_rate_observed`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SettleProgress {
+    /// The demanded rate, deg/s.
+    pub demand: f64,
+    /// The rate just measured, deg/s.
+    pub rate: f64,
+    /// The computed ramp is still running.
+    pub ramping: bool,
+    /// How long the measured rate has stayed within the tolerance (zero when outside it).
+    pub stable_for: Duration,
+    /// How long it must stay there.
+    pub window: Duration,
+}
+
 /// What [`RateTable::wait_stopped`] saw when it confirmed the table at rest.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RestReport {
@@ -368,6 +384,18 @@ pub trait RateTable: Send {
         &mut self,
         criteria: &SettleCriteria,
     ) -> impl Future<Output = Result<SettleReport, TableError>> + Send;
+
+    /// [`RateTable::wait_at_rate`], calling `observe` after every sample (for a progress
+    /// display: "waiting for at-rate, 1.2 s stable of 2 s"). The provided method observes
+    /// nothing.
+    fn wait_at_rate_observed(
+        &mut self,
+        criteria: &SettleCriteria,
+        observe: &mut (dyn FnMut(SettleProgress) + Send),
+    ) -> impl Future<Output = Result<SettleReport, TableError>> + Send {
+        let _ = observe;
+        self.wait_at_rate(criteria)
+    }
 
     /// Starts (or restarts) recording the measured rate of every sample.
     fn start_recording(&mut self);

@@ -14,8 +14,8 @@ use tokio::time::Instant;
 use crate::dialect::{Dialect, DialectError};
 use crate::{
     Capabilities, Identity, Limits, RateAccumulator, RateStats, RateTable, RestReport,
-    SettleCriteria, SettleReport, StopHandle, StopKind, StopPath, TableError, TableMode,
-    TableState, TableStatus, stop_time,
+    SettleCriteria, SettleProgress, SettleReport, StopHandle, StopKind, StopPath, TableError,
+    TableMode, TableState, TableStatus, stop_time,
 };
 
 /// The policy's settings, whatever the dialect.
@@ -448,6 +448,14 @@ impl<D: Dialect> RateTable for Table<D> {
         &mut self,
         criteria: &SettleCriteria,
     ) -> Result<SettleReport, TableError> {
+        self.wait_at_rate_observed(criteria, &mut |_| {}).await
+    }
+
+    async fn wait_at_rate_observed(
+        &mut self,
+        criteria: &SettleCriteria,
+        observe: &mut (dyn FnMut(SettleProgress) + Send),
+    ) -> Result<SettleReport, TableError> {
         match self.state() {
             TableState::Servoed | TableState::Ramping { .. } | TableState::AtRate { .. } => {}
             _ => return Err(self.state_error("wait for the rate")),
@@ -478,6 +486,13 @@ impl<D: Dialect> RateTable for Table<D> {
             if t >= ramp_end && (rate - demand).abs() <= tolerance {
                 let t0 = *since.get_or_insert(t);
                 window.push(rate);
+                observe(SettleProgress {
+                    demand,
+                    rate,
+                    ramping: false,
+                    stable_for: t - t0,
+                    window: criteria.window,
+                });
                 if t - t0 >= criteria.window {
                     self.set_state(TableState::AtRate { rate: demand });
                     return Ok(SettleReport {
@@ -491,6 +506,13 @@ impl<D: Dialect> RateTable for Table<D> {
             } else {
                 since = None;
                 window = RateAccumulator::default();
+                observe(SettleProgress {
+                    demand,
+                    rate,
+                    ramping: t < ramp_end,
+                    stable_for: Duration::ZERO,
+                    window: criteria.window,
+                });
             }
             if t >= deadline {
                 self.demand = 0.0;

@@ -84,8 +84,8 @@ fn interrupt_after(child: &mut Child, dir: &Path, k: usize, sig: Signal) {
     kill(Pid::from_raw(child.id() as i32), sig).unwrap();
 }
 
-/// `gyrocal run PLAN --simulate --resume DIR`, which must succeed.
-fn resume_simulated(plan: &Path, dir: &Path) {
+/// `gyrocal run PLAN --simulate --resume DIR`, which must succeed; returns its stderr.
+fn resume_simulated(plan: &Path, dir: &Path) -> String {
     let out = gyrocal()
         .arg("run")
         .arg(plan)
@@ -93,11 +93,9 @@ fn resume_simulated(plan: &Path, dir: &Path) {
         .arg(dir)
         .output()
         .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{stderr}");
+    stderr
 }
 
 fn final_table_state(stderr: &str) -> serde_json::Value {
@@ -205,10 +203,36 @@ fn sigint_mid_run_stops_the_table_and_the_run_resumes_to_completion() {
     // at rest when gyrocal let go of the bench, not merely sent a stop
     assert_eq!(table["stopped"], true, "{table}");
     assert!(stderr.contains("table at rest"), "{stderr}");
+    // one numbering, the plan's, in every line: step n/19 started, step n done
+    let done = steps_done(&dir);
+    for n in 1..=done {
+        assert!(
+            stderr.contains(&format!("step {n}/19 ")),
+            "step {n}/19 in:\n{stderr}"
+        );
+        assert!(stderr.contains(&format!("  step {n} done: ")), "{stderr}");
+    }
+    // a step cut short is named, with what was discarded
+    if let Some(l) = stderr.lines().find(|l| l.contains("not recorded (")) {
+        assert!(
+            l.starts_with(&format!("step {}/19 ", done + 1)) && l.contains("measured again"),
+            "{l}"
+        );
+    }
 
-    resume_simulated(&plan, &dir);
+    let resumed = resume_simulated(&plan, &dir);
     check_complete(&dir, 19, 500);
     assert_eq!(manifest(&dir)["resumes"].as_array().unwrap().len(), 1);
+    // the resumed session goes on with the same numbers
+    let first = resumed
+        .lines()
+        .find(|l| l.starts_with("step "))
+        .unwrap_or_else(|| panic!("no step line in:\n{resumed}"));
+    assert!(
+        first.starts_with(&format!("step {}/19 ", done + 1)),
+        "{first}"
+    );
+    assert!(resumed.contains("  step 19 done: "), "{resumed}");
 }
 
 #[test]

@@ -155,8 +155,8 @@ fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
         let _ = writeln!(
             o,
             "{:>4} {:>4} {:>9} {:>8} {:>8.2} {:>8.2} {:>9.2} {:>10.1}{turns}",
-            s.step.index,
-            s.step.pass,
+            s.step.index + 1,
+            s.step.pass + 1,
             s.step.rate_dps,
             s.samples,
             s.ramp.as_secs_f64(),

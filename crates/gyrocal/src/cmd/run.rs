@@ -488,20 +488,89 @@ async fn watch_signals(
 async fn show_progress(mut rx: mpsc::UnboundedReceiver<Event>) {
     // the bar draws on stderr; with either stream redirected (a log file, CI), plain lines
     let tty = std::io::stdout().is_terminal() && std::io::stderr().is_terminal();
-    let bar = indicatif::ProgressBar::hidden();
-    if tty {
-        bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
-        bar.set_style(
-            indicatif::ProgressStyle::with_template("{prefix:.bold} [{bar:30}] {pos}/{len} {msg}")
+    let mut view = Progress::new(tty);
+    // the ETA and the bar count down between events too
+    let mut tick = tokio::time::interval(Duration::from_secs(1));
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        tokio::select! {
+            e = rx.recv() => match e {
+                Some(e) => view.event(e),
+                None => break,
+            },
+            _ = tick.tick(), if tty => view.redraw(),
+        }
+    }
+    view.bar.finish_and_clear();
+}
+
+/// The live view of a run: one line per step and event (or a bar on a terminal, which fits
+/// 80 columns: the message is cut, not wrapped), a time-based bar and ETA from the
+/// instruments' timing models that move within a step, the phase, and the step's latest
+/// reading with its running mean and σ.
+struct Progress {
+    tty: bool,
+    bar: indicatif::ProgressBar,
+    /// The session's estimated duration (the bar's length, ms).
+    estimate: Duration,
+    /// The current step: its label, when it started, its `remaining` and `after`.
+    step: Option<(String, tokio::time::Instant, Duration, Duration)>,
+    /// Steps started and not yet recorded (a memory-mode step is recorded during the next
+    /// ramp), with the readings received so far: on a stop, these are discarded.
+    open: Vec<(usize, String, usize)>,
+    phase: String,
+}
+
+impl Progress {
+    fn new(tty: bool) -> Self {
+        let bar = indicatif::ProgressBar::hidden();
+        if tty {
+            bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+            bar.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "{prefix:.bold} {elapsed_precise} [{bar:16}] {wide_msg}",
+                )
                 .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
                 .progress_chars("=> "),
-        );
+            );
+        }
+        Progress {
+            tty,
+            bar,
+            estimate: Duration::ZERO,
+            step: None,
+            open: Vec::new(),
+            phase: String::new(),
+        }
     }
-    let mut eta = String::new();
-    while let Some(e) = rx.recv().await {
+
+    /// The time left in the run by the clock: the step's estimate counted down, never below
+    /// what the later steps take.
+    fn remaining(&self) -> Option<Duration> {
+        let (_, started, remaining, after) = self.step.as_ref()?;
+        Some(remaining.saturating_sub(started.elapsed()).max(*after))
+    }
+
+    fn redraw(&self) {
+        let eta = match self.remaining() {
+            Some(r) => {
+                let done = self.estimate.saturating_sub(r);
+                self.bar.set_position(done.as_millis() as u64);
+                format!("ETA {}", short_hms(r.as_secs_f64()))
+            }
+            None => String::new(),
+        };
+        self.bar.set_message(format!("{eta} · {}", self.phase));
+    }
+
+    fn line(&self, text: String) {
+        line(self.tty, &self.bar, text);
+    }
+
+    fn event(&mut self, e: Event) {
         match e {
             Event::Connected { dmm, table } => {
-                line(tty, &bar, format!("multimeter: {dmm}\nrate table: {table}"))
+                self.line(format!("multimeter: {dmm}\nrate table: {table}"))
             }
             Event::Planned {
                 steps,
@@ -509,71 +578,94 @@ async fn show_progress(mut rx: mpsc::UnboundedReceiver<Event>) {
                 estimate,
                 acquisition,
             } => {
-                bar.set_length(steps as u64);
-                line(
-                    tty,
-                    &bar,
-                    format!(
-                        "{steps} steps to run ({done} already done), acquisition {}, estimated {}",
-                        acquisition,
-                        hms(estimate.as_secs_f64())
-                    ),
-                );
+                self.estimate = estimate;
+                self.bar.set_length(estimate.as_millis().max(1) as u64);
+                self.line(format!(
+                    "{steps} steps to run ({done} already done), acquisition {acquisition}, estimated {}",
+                    hms(estimate.as_secs_f64())
+                ));
             }
             Event::StepStarted {
                 step,
-                position,
-                total,
+                number,
+                of,
                 remaining,
+                after,
+                ..
             } => {
-                eta = format!("ETA {}", hms(remaining.as_secs_f64()));
-                let step_text = format!("step {position} of {total}: {:+} °/s", step.rate_dps);
-                bar.set_prefix(step_text.clone());
-                bar.set_position(position.saturating_sub(1) as u64);
-                if !tty {
-                    say!("{step_text} ({eta})");
+                let label = format!("step {number}/{of} {:+} °/s", step.rate_dps);
+                self.step = Some((label.clone(), tokio::time::Instant::now(), remaining, after));
+                self.open.push((step.index, label.clone(), 0));
+                self.bar.set_prefix(label.clone());
+                self.phase = "ramping".into();
+                if !self.tty {
+                    say!("{label} (ETA {})", hms(remaining.as_secs_f64()));
                 }
+                self.redraw();
+            }
+            Event::Settle(p) => {
+                self.phase = if p.ramping {
+                    format!("ramping ({:+.3} °/s)", p.rate)
+                } else {
+                    format!(
+                        "waiting for at-rate ({:.1} s stable of {:.1} s)",
+                        p.stable_for.as_secs_f64(),
+                        p.window.as_secs_f64()
+                    )
+                };
+                self.redraw();
             }
             Event::Phase { phase, .. } => {
-                let p = match phase {
+                self.phase = match phase {
                     Phase::Ramping => "ramping",
                     Phase::Settling => "settling",
                     Phase::Acquiring => "acquiring",
-                    Phase::Fetching => "fetching",
-                };
-                bar.set_message(format!("{p} · {eta}"));
+                    Phase::Fetching => "fetching readings",
+                }
+                .into();
+                self.redraw();
             }
-            Event::Acquiring { done, total } => {
-                if tty {
-                    bar.set_message(format!("acquiring {done} of {total} · {eta}"));
+            Event::Acquiring {
+                done,
+                total,
+                latest,
+                mean,
+                std,
+            } => {
+                if let Some(open) = self.open.last_mut() {
+                    open.2 = done;
+                }
+                let latest = latest.map_or("overload".into(), |v| format!("{v:.6} V"));
+                let spread = std.map_or(String::new(), |s| format!(", σ {s:.1e}"));
+                self.phase = format!("{done}/{total}: {latest} (mean {mean:.6}{spread})");
+                if self.tty {
+                    self.redraw();
                 }
             }
             Event::StepDone(r) => {
-                bar.inc(1);
-                line(
-                    tty,
-                    &bar,
-                    format!(
-                        "  step {} done: {:+.4} °/s -> {:.6} V (σ {:.1e} V, n {}, overloads {})",
-                        r.step,
-                        r.rate_dps,
-                        r.volts,
-                        r.volts_std.unwrap_or(f64::NAN),
-                        r.n,
-                        r.overloads
-                    ),
-                );
+                self.open.retain(|(index, ..)| *index != r.step);
+                self.line(format!(
+                    "  step {} done: {:+.4} °/s -> {:.6} V (σ {:.1e} V, n {}, overloads {})",
+                    r.step + 1,
+                    r.rate_dps,
+                    r.volts,
+                    r.volts_std.unwrap_or(f64::NAN),
+                    r.n,
+                    r.overloads
+                ));
             }
-            Event::Retry(r) => line(
-                tty,
-                &bar,
-                format!("  retry ({}): {}", r.instrument, r.message),
-            ),
+            Event::Retry(r) => self.line(format!("  retry ({}): {}", r.instrument, r.message)),
             Event::Stopping {
                 from_dps,
                 emergency,
                 deadline,
             } => {
+                for (_, label, readings) in std::mem::take(&mut self.open) {
+                    self.line(format!(
+                        "{label}: not recorded ({readings} reading(s) discarded); it is measured \
+                         again when the run is resumed"
+                    ));
+                }
                 let how = if emergency {
                     "emergency stop sent"
                 } else {
@@ -590,13 +682,25 @@ async fn show_progress(mut rx: mpsc::UnboundedReceiver<Event>) {
                         hms(deadline.as_secs_f64())
                     ),
                 };
-                bar.set_message("stopping the table");
-                line(tty, &bar, text);
+                self.step = None;
+                self.phase = "stopping the table".into();
+                self.redraw();
+                self.line(text);
             }
-            Event::Rest(rest) => line(tty, &bar, rest_text(&rest)),
+            Event::Rest(rest) => self.line(rest_text(&rest)),
         }
     }
-    bar.finish_and_clear();
+}
+
+/// `1:02:03` or `2:03` (a countdown that fits a narrow line).
+fn short_hms(s: f64) -> String {
+    let s = s.max(0.0).round() as u64;
+    let (h, m, sec) = (s / 3600, (s / 60) % 60, s % 60);
+    if h > 0 {
+        format!("{h}:{m:02}:{sec:02}")
+    } else {
+        format!("{m}:{sec:02}")
+    }
 }
 
 /// The operator's line about the table at the end of a run: "at rest" only when the table
