@@ -15,7 +15,12 @@ use clap::{Parser, Subcommand};
 /// Calibrate a gyroscope's scale factor on a rate table.
 #[derive(Debug, Parser)]
 #[command(name = "gyrocal", version, about)]
-struct Cli {
+pub struct Cli {
+    /// More log on stderr: -v info, -vv debug (RUST_LOG, when set, decides instead). Without
+    /// it the terminal shows gyrocal's own messages only; a run's log is always in its
+    /// run.log.
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    verbose: u8,
     #[command(subcommand)]
     command: Command,
 }
@@ -33,6 +38,10 @@ enum Command {
     Sim(cmd::sim::SimArgs),
     /// Write the HTML calibration report (with SVG plots) of run directories or steps CSV files.
     Report(cmd::report::ReportArgs),
+    /// Print the shell completion script for SHELL (bash, zsh, fish, elvish, powershell).
+    Completions(cmd::completions::CompletionsArgs),
+    /// Print the man page (roff), or write one page per subcommand into a directory.
+    Man(cmd::completions::ManArgs),
 }
 
 /// An error caused by the user's input (file, values, options): exit code 2.
@@ -51,9 +60,21 @@ fn main() -> ExitCode {
     use tracing_subscriber::layer::SubscriberExt as _;
     use tracing_subscriber::util::SubscriberInitExt as _;
     use tracing_subscriber::{EnvFilter, Layer as _, filter::LevelFilter, fmt};
+    let cli = Cli::parse();
+    // The console shows gyrocal's own messages; the log only when asked for (-v, RUST_LOG),
+    // and in colour only on a terminal without NO_COLOR.
+    let filter = match (std::env::var_os("RUST_LOG"), cli.verbose) {
+        (Some(_), _) => {
+            EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("warn"))
+        }
+        (None, 0) => EnvFilter::new("off"),
+        (None, 1) => EnvFilter::new("info"),
+        (None, _) => EnvFilter::new("debug"),
+    };
     let console = fmt::layer()
         .with_writer(std::io::stderr)
-        .with_filter(EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("warn")));
+        .with_ansi(cmd::color_on_stderr())
+        .with_filter(filter);
     // gyrocal run plugs its run directory's run.log in here (see runlog)
     let file = fmt::layer()
         .with_writer(runlog::RunLog)
@@ -63,13 +84,14 @@ fn main() -> ExitCode {
         .with(console)
         .with(file)
         .init();
-    let cli = Cli::parse();
     let result = match cli.command {
         Command::Fit(args) => cmd::fit::run(&args).map(|()| 0),
         Command::Check(args) => cmd::check::run(&args).map(|()| 0),
         Command::Run(args) => cmd::run::run(&args),
         Command::Sim(args) => cmd::sim::run(&args).map(|()| 0),
         Command::Report(args) => cmd::report::run(&args).map(|()| 0),
+        Command::Completions(args) => cmd::completions::completions(&args).map(|()| 0),
+        Command::Man(args) => cmd::completions::man(&args).map(|()| 0),
     };
     match result {
         Ok(code) => ExitCode::from(code),

@@ -74,13 +74,24 @@ pub struct FitArgs {
     /// Print exactly one JSON document on stdout instead of the human report.
     #[arg(long)]
     pub json: bool,
-    /// Model to fit (repeatable). Default: every model the data can determine (the others are
-    /// skipped with the reason). A model named here that the data cannot determine is an error.
-    #[arg(long = "model", value_enum, value_name = "MODEL")]
+    /// Model to fit (repeatable, or a comma list: `--model linear,quadratic`). Default: every
+    /// model the data can determine (the others are skipped with the reason). A model named
+    /// here that the data cannot determine is an error.
+    #[arg(
+        long = "model",
+        value_enum,
+        value_name = "MODEL",
+        value_delimiter = ','
+    )]
     pub models: Vec<ModelArg>,
-    /// Method to use (repeatable). Default: least squares for every model plus the neuron on the
-    /// linear model.
-    #[arg(long = "method", value_enum, value_name = "METHOD")]
+    /// Method to use (repeatable, or a comma list). Default: least squares for every model plus
+    /// the neuron on the linear model.
+    #[arg(
+        long = "method",
+        value_enum,
+        value_name = "METHOD",
+        value_delimiter = ','
+    )]
     pub methods: Vec<MethodArg>,
     /// Ignore volts_std/n and weight every point equally.
     #[arg(long)]

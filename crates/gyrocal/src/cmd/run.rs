@@ -51,7 +51,7 @@ pub struct RunArgs {
     #[arg(long = "sim-fault", value_name = "SPEC", requires = "simulate")]
     pub sim_faults: Vec<String>,
     /// The run directory to create (default: runs/<plan>-<UTC time>).
-    #[arg(long, value_name = "DIR", conflicts_with = "resume")]
+    #[arg(short = 'o', long, value_name = "DIR", conflicts_with = "resume")]
     pub out: Option<PathBuf>,
     /// Continue the interrupted run in DIR (the plan must be the same).
     #[arg(long, value_name = "DIR")]
