@@ -78,20 +78,26 @@ fn record(rd: &mut RunDir, step: usize) {
     .unwrap();
 }
 
+/// `v` one unit in the last place above: `40.0` becomes `40.00000000000001`.
+fn noisy(v: f64) -> f64 {
+    f64::from_bits(v.to_bits() + 1)
+}
+
 fn complete_run(dir: &Path) -> RunDir {
     let mut rd = RunDir::create(dir, &plan(), meta()).unwrap();
     for step in 0..5 {
         record(&mut rd, step);
     }
+    // figures one bit off their round values, as sums and differences of clock readings are
+    let (bound, schedule) = (noisy(40.0), noisy(42.1));
     rd.set_timing(Timing {
-        bound_s: 40.000000000000004,
-        elapsed_s: 42.10000000000001,
-        ratio: 42.10000000000001 / 40.000000000000004,
+        bound_s: bound,
+        elapsed_s: schedule,
+        ratio: schedule / bound,
         acquisition: Some("stream".into()),
     })
     .unwrap();
-    rd.finish(Status::Complete, None, 44.300000000000004)
-        .unwrap();
+    rd.finish(Status::Complete, None, noisy(44.3)).unwrap();
     gyrocal_files::fit_run(&mut rd, &gyrocal_fit::Options::default()).unwrap();
     rd
 }

@@ -104,7 +104,7 @@ fn a_simulated_run_writes_utc_times_clean_numbers_a_slim_manifest_and_no_lock() 
     // the manifest references fit.json instead of embedding it, and names its times
     let m = manifest(&dir);
     assert!(m.get("fit").is_none());
-    let fit_bytes = std::fs::read(&dir.join("fit.json")).unwrap();
+    let fit_bytes = std::fs::read(dir.join("fit.json")).unwrap();
     assert_eq!(
         m["fit_summary"]["sha256"].as_str().unwrap(),
         gyrocal_run::rundir::sha256_hex(&fit_bytes)
@@ -305,4 +305,24 @@ fn run_directories_of_the_previous_format_still_report_and_resume() {
     assert!(!dir.join(".lock").exists());
     let body = std::fs::read_to_string(dir.join("samples.csv")).unwrap();
     assert_eq!(body.lines().count(), 1 + 5 * 50);
+}
+
+#[test]
+fn a_fit_json_changed_after_the_run_is_flagged_by_the_report() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let out = simulate(&config("quick.toml"), &dir, &["--no-report"]);
+    assert!(out.status.success(), "{}", text(&out));
+    // an edit that keeps the document valid: the numbers may differ from the run's now
+    let fit = std::fs::read_to_string(dir.join("fit.json")).unwrap();
+    std::fs::write(dir.join("fit.json"), format!("{fit}\n")).unwrap();
+    let out = gyrocal().arg("report").arg(&dir).output().unwrap();
+    assert!(out.status.success(), "{}", text(&out));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("fit.json is not the file the run wrote"),
+        "{err}"
+    );
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert!(html.contains("is not the file the run wrote"));
 }
