@@ -378,3 +378,30 @@ fn a_run_directory_of_the_previous_format_loads_and_resumes() {
     assert!(rows[..2].iter().all(|r| r[u].is_empty()));
     assert!(rows[2..].iter().all(|r| parse_rfc3339_utc(&r[u]).is_some()));
 }
+
+#[test]
+fn a_bad_plan_key_in_the_manifest_is_named_with_the_file_and_line() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let mut rd = RunDir::create(&dir, &plan(), meta()).unwrap();
+    record(&mut rd, 0);
+    rd.finish(Status::Aborted, Some("test".into()), 1.0)
+        .unwrap();
+    drop(rd);
+    let path = dir.join(MANIFEST_JSON);
+    let text = fs::read_to_string(&path).unwrap();
+    // a misspelt key of the [plan] section, now at the top of the manifest's plan
+    fs::write(&path, text.replacen("\"rates_dps\"", "\"rate_dps\"", 1)).unwrap();
+    let msg = load(&dir).unwrap_err().to_string();
+    assert!(
+        msg.contains("manifest.json:") && msg.contains("`rate_dps`"),
+        "{msg}"
+    );
+    let msg = RunDir::open_for_resume(&dir, &plan())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        msg.contains("manifest.json:") && msg.contains("`rate_dps`"),
+        "{msg}"
+    );
+}
