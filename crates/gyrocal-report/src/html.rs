@@ -247,9 +247,13 @@ fn simulated_banner(html: &mut String, input: &Input, run: Option<usize>) {
             " It ran in <em>virtual time</em>: the simulation skipped every wait, so the run \
              clock counts the {:.1} s a real bench would have taken (the elapsed time, every \
              <code>t_s</code> and the <code>t_utc</code> times derived from it) while the \
-             simulation itself took {} of wall-clock time (started to ended).",
+             simulation itself took {} of wall-clock time (started to ended{}).",
             m.elapsed_s,
-            wall.as_deref().unwrap_or("a fraction of that")
+            wall.as_deref().unwrap_or("a fraction of that"),
+            match m.resumes.len() {
+                0 => String::new(),
+                n => format!(", including the pauses between its {} sessions", n + 1),
+            }
         );
     }
     let _ = writeln!(
