@@ -1036,8 +1036,36 @@ impl RunDir {
     /// and torn last lines, records the resume and marks the run `running`.
     pub fn open_for_resume(path: &Path, plan: &Plan) -> Result<RunDir, RunError> {
         let mpath = path.join(MANIFEST_JSON);
-        let mut manifest = read_manifest(&mpath)?;
-        let lock = lock_dir(path)?;
+        let manifest = read_manifest(&mpath)?;
+        let finished = manifest.status != Status::Running;
+        let mut lock = Some(lock_dir(path)?);
+        let result = Self::resume_locked(path, plan, manifest, &mut lock);
+        // A refused resume of a finished run leaves it as it was: without a `.lock` (removed
+        // while still held, as `Drop` does).
+        if result.is_err()
+            && finished
+            && let Some(file) = lock.take()
+        {
+            let lpath = path.join(LOCK_FILE);
+            if let Err(e) = fs::remove_file(&lpath)
+                && e.kind() != std::io::ErrorKind::NotFound
+            {
+                tracing::warn!(file = %lpath.display(), error = %e, "cannot remove the lock file");
+            }
+            drop(file);
+        }
+        result
+    }
+
+    /// [`RunDir::open_for_resume`] under the lock, which it takes from `lock` into the
+    /// [`RunDir`] it returns (and leaves there on an error).
+    fn resume_locked(
+        path: &Path,
+        plan: &Plan,
+        mut manifest: Manifest,
+        lock: &mut Option<File>,
+    ) -> Result<RunDir, RunError> {
+        let mpath = path.join(MANIFEST_JSON);
         let plan_hash = plan.hash();
         if manifest.plan_hash != plan_hash {
             return Err(RunError::PlanChanged {
@@ -1093,6 +1121,12 @@ impl RunDir {
         // the manifest is rewritten in this version's format (steps.csv was upgraded above)
         manifest.format_version = FORMAT_VERSION;
         let clock = ClockAnchor::now(manifest.elapsed_s);
+        let Some(lock) = lock.take() else {
+            return Err(RunError::Protocol {
+                path: path.join(LOCK_FILE),
+                message: "the run directory's lock was not held".into(),
+            });
+        };
         let mut rd = RunDir {
             dir: path.to_path_buf(),
             _lock: lock,

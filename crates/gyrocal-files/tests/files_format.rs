@@ -405,3 +405,24 @@ fn a_bad_plan_key_in_the_manifest_is_named_with_the_file_and_line() {
         "{msg}"
     );
 }
+
+#[test]
+fn a_refused_resume_of_a_finished_run_leaves_no_lock() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    drop(complete_run(&dir));
+    assert!(!dir.join(LOCK_FILE).exists());
+    let err = RunDir::open_for_resume(&dir, &plan()).unwrap_err();
+    assert!(matches!(err, RunError::AlreadyComplete { .. }), "{err}");
+    assert!(
+        !dir.join(LOCK_FILE).exists(),
+        "a refused resume left a .lock"
+    );
+    let other = Plan::from_toml_str(&PLAN.replace("= 4", "= 5"), Path::new("other.toml")).unwrap();
+    let err = RunDir::open_for_resume(&dir, &other).unwrap_err();
+    assert!(matches!(err, RunError::PlanChanged { .. }), "{err}");
+    assert!(
+        !dir.join(LOCK_FILE).exists(),
+        "a refused resume left a .lock"
+    );
+}
