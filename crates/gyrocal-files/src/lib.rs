@@ -12,9 +12,11 @@
 //!   samples) before the sequencer moves on; `manifest.json` is replaced atomically at every
 //!   change. After a crash, even a `SIGKILL` in the middle of a write,
 //!   [`RunDir::open_for_resume`] keeps every finished step, drops the partial step's readings
-//!   and a torn last line, and tells the sequencer where to continue.
+//!   and a torn last line, and tells the sequencer where to continue. The file formats are
+//!   documented in [`rundir`]; [`num`] says how computed numbers are written.
 //! - [`fit_run`]: a run directory's steps fitted, the analysis stored beside them.
 
+pub mod num;
 pub mod plan;
 pub mod rundir;
 mod time;
@@ -24,10 +26,10 @@ pub use plan::{
     Simulation, Step, TableDialect, TableSettings,
 };
 pub use rundir::{
-    Instruments, Manifest, Resume, Retry, RunData, RunDir, RunError, RunMeta, Sample, SampleRow,
-    Status, StepRecord, Timing, load, load_samples,
+    FitSummary, Instruments, Manifest, Resume, Retry, RunData, RunDir, RunError, RunMeta, Sample,
+    SampleRow, Status, StepRecord, Timing, load, load_fit, load_samples,
 };
-pub use time::rfc3339_utc;
+pub use time::{ClockAnchor, parse_rfc3339_utc, rfc3339_utc};
 
 /// The fitting crate's data set from a run's recorded steps: the demanded rate (as in the
 /// method; the measured rate is reported separately), the mean voltage, its spread and count
@@ -48,8 +50,8 @@ pub fn dataset_from_steps(steps: &[StepRecord], source: &str) -> gyrocal_fit::Da
     }
 }
 
-/// Fits a run directory's steps with `options`, stores the analysis in the manifest and in
-/// `fit.json`, and returns it. With the default options, models the data cannot determine are
+/// Fits a run directory's steps with `options`, stores the analysis in `fit.json` (referenced
+/// from the manifest with its hash and headline figures), and returns it. With the default options, models the data cannot determine are
 /// skipped and listed in the analysis (`skipped`), so a complete run always gets its
 /// `fit.json`; only data that cannot determine a line is an error.
 ///

@@ -1,19 +1,64 @@
-//! The durable run directory: `samples.csv`, `steps.csv`, `manifest.json` (and later
-//! `fit.json`, `report.html`).
+//! The durable run directory: `samples.csv`, `steps.csv`, `manifest.json`, `fit.json` (and,
+//! written by others, `report.html` with its `.svg` plots and `run.log`).
 //!
 //! # Files
 //!
-//! - `samples.csv`: `step,index,t_s,rate_dps,volts,overload`, one row per raw reading in the
-//!   order taken. `index` is 0-based and contiguous within a step; `t_s` is the run clock
-//!   (seconds); `rate_dps` the demanded rate. **Overloads are written, never dropped**: the row
-//!   has `overload = 1` and an *empty* `volts` (the meter's `9.9E+37` is a marker, not a
-//!   voltage; an empty field makes a naive reader fail loudly instead of averaging it), so the
-//!   indices stay contiguous and the overload count is auditable.
+//! - `samples.csv`: `step,index,t_s,rate_dps,volts,overload,t_utc`, one row per raw reading in
+//!   the order taken. `step` is the schedule's 0-based index of the step (its position in the
+//!   plan's `repeat × rates_dps`); `index` is 0-based and contiguous within a step; `t_s` is the
+//!   run clock (seconds, see `elapsed_s` below); `rate_dps` the demanded rate. **Overloads are
+//!   written, never dropped**: the row has `overload = 1` and an *empty* `volts` (the meter's
+//!   `9.9E+37` is a marker, not a voltage; an empty field makes a naive reader fail loudly
+//!   instead of averaging it), so the indices stay contiguous and the overload count is
+//!   auditable.
 //! - `steps.csv`: one row per finished step, see [`StepRecord`] and [`STEPS_HEADER`]. It is a
 //!   valid input of `gyrocal fit`, which reads `rate_dps`, `volts`, `volts_std` (optional,
 //!   empty when `n = 1`) and `n` by name.
 //! - `manifest.json`: [`Manifest`], replaced atomically (temp file in the same directory,
-//!   fsync, rename, fsync of the directory) at every change, so it always parses.
+//!   fsync, rename, fsync of the directory) at every change, so it always parses. It holds the
+//!   run's state, the plan, the instruments, the times and, once fitted, a [`FitSummary`]: the
+//!   name and SHA-256 of `fit.json` and the headline figures (K, K0, their standard errors,
+//!   the best model). It stays a few kilobytes, so an index of many runs reads it cheaply.
+//! - `fit.json`: the whole fit (the `gyrocal fit --json` document: every model, the
+//!   residuals, the error surface), written by [`crate::fit_run`]; read it with [`load_fit`].
+//!
+//! ## Times
+//!
+//! Every row has two times: the run clock `t_s` (`t_start_s`, `t_end_s` in steps.csv),
+//! seconds since the run began, exact and monotonic, and `t_utc` (`t_start_utc`,
+//! `t_end_utc`), the same instant as UTC wall-clock time, RFC 3339 with milliseconds
+//! (`2026-03-21T10:22:33.123Z`), for joining with other logs (a lab's temperature record).
+//! The run directory converts one into the other through a [`ClockAnchor`]: the wall-clock time
+//! at which the run clock read a known value, taken when a session starts (see
+//! [`RunDir::anchor_clock`]). The run clock does not count the time between sessions (a
+//! resume continues from the previous `elapsed_s`); the anchor is taken again at each
+//! session, so `t_utc` is right across resumes. In a simulated run in virtual time
+//! ([`Manifest::virtual_time`]) the run clock counts the time a real bench would have taken,
+//! and `t_utc` is the start time plus that: ahead of the wall clock.
+//!
+//! The manifest's `elapsed_s` is the run clock at its last write: the whole run, each session
+//! from connecting to the instruments to the table at rest, added up. `timing` compares the
+//! last session's *schedule* alone (`schedule_elapsed_s`: first rate demanded to the stop
+//! command) with its physical bound: it leaves out connecting and the table's stop, so it is
+//! a little shorter.
+//!
+//! ## Numbers
+//!
+//! Computed numbers (means, standard deviations, interpolated times, the elapsed time, the
+//! fit) are rounded once to 12 significant digits and written as the shortest text that reads
+//! back to the same value, so the files carry no float noise (`10.521512`, not
+//! `10.521512000000001`); values read as text (the plan's rates, the meter's readings) come
+//! out as they went in. Why 12 digits: see [`crate::num`].
+//!
+//! ## Formats read
+//!
+//! Files written by earlier gyrocal versions still load, resume and report: a manifest of
+//! format 1 (the plan nested as `plan.plan`, `timing.elapsed_s`, the whole fit embedded as
+//! `fit`, read into [`Manifest::legacy_fit`]); a `steps.csv` without the UTC columns or
+//! without `rate_samples` (a resume rewrites it with the current header, the old rows' new
+//! cells empty); a `samples.csv` without `t_utc` (a resume keeps appending rows of its
+//! columns: the file is never rewritten, it can be gigabytes). A resume rewrites the manifest
+//! in the current format.
 //!
 //! # Durability rules
 //!
@@ -28,6 +73,9 @@
 //!   finished step's rows.
 //!
 //! One process at a time: a writer holds an OS lock on `.lock` (released even by a crash).
+//! A writer that closes the run (complete, failed or aborted) removes `.lock` when it lets go,
+//! so a finished run directory holds only data; a run left `running` (a crash, a kill) keeps
+//! the file, whose lock died with its process: the next resume takes it.
 //!
 //! # Bounds and failures
 //!
@@ -45,8 +93,9 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use crate::num::{round_json, round_opt, round_significant};
 use crate::plan::{Plan, Step};
-use crate::time::now_utc;
+use crate::time::{ClockAnchor, now_utc};
 
 /// File name of the raw readings.
 pub const SAMPLES_CSV: &str = "samples.csv";
@@ -58,13 +107,49 @@ pub const MANIFEST_JSON: &str = "manifest.json";
 pub const FIT_JSON: &str = "fit.json";
 /// File name of the HTML report (written by the report crate via [`RunDir::write_file`]).
 pub const REPORT_HTML: &str = "report.html";
-/// Version of the run-directory format, recorded in the manifest.
-pub const FORMAT_VERSION: u32 = 1;
+/// Version of the run-directory format written, recorded in the manifest. Version 1
+/// (gyrocal before the UTC columns and the slim manifest) is still read: see
+/// [`FORMAT_VERSIONS_READ`].
+pub const FORMAT_VERSION: u32 = 2;
+/// The manifest versions this gyrocal reads.
+pub const FORMAT_VERSIONS_READ: [u32; 2] = [1, 2];
 
-/// Columns of `samples.csv`, in order.
-pub const SAMPLES_HEADER: [&str; 6] = ["step", "index", "t_s", "rate_dps", "volts", "overload"];
-/// Columns of `steps.csv`, in order.
-pub const STEPS_HEADER: [&str; 15] = [
+/// Columns of `samples.csv`, in order; `t_utc` is the run directory's conversion of `t_s`
+/// (see the module docs, *Times*), last so that readers by position keep working.
+pub const SAMPLES_HEADER: [&str; 7] = [
+    "step", "index", "t_s", "rate_dps", "volts", "overload", "t_utc",
+];
+/// Columns of `samples.csv` before `t_utc` existed. Such a file still reads, and a resume
+/// keeps appending rows of these columns to it (the file is never rewritten: it can hold
+/// gigabytes).
+pub const SAMPLES_HEADER_V1: [&str; 6] = ["step", "index", "t_s", "rate_dps", "volts", "overload"];
+/// Columns of `steps.csv`, in order: the [`StepRecord`]'s fields, then `t_start_utc` and
+/// `t_end_utc`, which the run directory computes from `t_start_s` and `t_end_s` (see the
+/// module docs, *Times*). New columns go at the end, so a script that reads columns by
+/// position keeps working.
+pub const STEPS_HEADER: [&str; 17] = [
+    "step",
+    "pass",
+    "rate_dps",
+    "rate_meas_dps",
+    "rate_meas_std_dps",
+    "rate_meas_min_dps",
+    "rate_meas_max_dps",
+    "rate_samples",
+    "volts",
+    "volts_std",
+    "n",
+    "overloads",
+    "retries",
+    "t_start_s",
+    "t_end_s",
+    "t_start_utc",
+    "t_end_utc",
+];
+
+/// Columns of `steps.csv` before the UTC columns existed. Such a file still reads; a resume
+/// rewrites it with [`STEPS_HEADER`] (empty UTC cells in the old rows) before appending.
+pub const STEPS_HEADER_V2: [&str; 15] = [
     "step",
     "pass",
     "rate_dps",
@@ -83,8 +168,8 @@ pub const STEPS_HEADER: [&str; 15] = [
 ];
 
 /// Columns of `steps.csv` as gyrocal wrote them before `rate_samples` existed. Such a file
-/// still reads; a resume rewrites it with [`STEPS_HEADER`] (an empty `rate_samples` in the old
-/// rows) before appending.
+/// still reads; a resume rewrites it with [`STEPS_HEADER`] (an empty `rate_samples` and empty
+/// UTC cells in the old rows) before appending.
 pub const STEPS_HEADER_V1: [&str; 14] = [
     "step",
     "pass",
@@ -101,6 +186,11 @@ pub const STEPS_HEADER_V1: [&str; 14] = [
     "t_start_s",
     "t_end_s",
 ];
+
+/// Every `steps.csv` header read, current first.
+const STEPS_HEADERS: &[&[&str]] = &[&STEPS_HEADER, &STEPS_HEADER_V2, &STEPS_HEADER_V1];
+/// Every `samples.csv` header read, current first.
+const SAMPLES_HEADERS: &[&[&str]] = &[&SAMPLES_HEADER, &SAMPLES_HEADER_V1];
 
 /// The most bytes read from `manifest.json` (64 MiB; a manifest is kilobytes, a megabyte or
 /// two with a large fit document).
@@ -241,7 +331,7 @@ pub struct Sample {
 }
 
 /// One row of `samples.csv`, as read back by [`load_samples`].
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SampleRow {
     /// Step index in the schedule.
     pub step: usize,
@@ -255,6 +345,49 @@ pub struct SampleRow {
     pub volts: Option<f64>,
     /// 1 for an overload, else 0.
     pub overload: u8,
+    /// `t_s` as UTC wall-clock time, RFC 3339 with milliseconds (see [`ClockAnchor`]); `None`
+    /// in files written before the column existed.
+    #[serde(default)]
+    pub t_utc: Option<String>,
+}
+
+/// A row of `steps.csv` as written: the sequencer's [`StepRecord`] with its times converted
+/// to UTC by the run directory and its computed numbers rounded (see [`crate::num`]).
+#[derive(Debug, Serialize)]
+struct StepRow<'a> {
+    step: usize,
+    pass: u32,
+    rate_dps: f64,
+    rate_meas_dps: Option<f64>,
+    rate_meas_std_dps: Option<f64>,
+    rate_meas_min_dps: Option<f64>,
+    rate_meas_max_dps: Option<f64>,
+    rate_samples: Option<u64>,
+    volts: f64,
+    volts_std: Option<f64>,
+    n: u64,
+    overloads: u64,
+    retries: u32,
+    t_start_s: f64,
+    t_end_s: f64,
+    t_start_utc: &'a str,
+    t_end_utc: &'a str,
+}
+
+/// `rec` with its computed numbers rounded once (the demanded rate, the plan's own number,
+/// is kept bit for bit: a resume compares it with the schedule).
+fn rounded(rec: &StepRecord) -> StepRecord {
+    StepRecord {
+        rate_meas_dps: round_opt(rec.rate_meas_dps),
+        rate_meas_std_dps: round_opt(rec.rate_meas_std_dps),
+        rate_meas_min_dps: round_opt(rec.rate_meas_min_dps),
+        rate_meas_max_dps: round_opt(rec.rate_meas_max_dps),
+        volts: round_significant(rec.volts),
+        volts_std: round_opt(rec.volts_std),
+        t_start_s: round_significant(rec.t_start_s),
+        t_end_s: round_significant(rec.t_end_s),
+        ..rec.clone()
+    }
 }
 
 /// One row of `steps.csv`: a finished step. The sequencer fills it; [`RunDir::append_step`]
@@ -351,14 +484,20 @@ pub struct Retry {
     pub message: String,
 }
 
-/// Timing figures of a run (the physical bound versus the elapsed time).
+/// Timing figures of the schedule of the last session (the physical bound versus the time the
+/// schedule took). Not the run's elapsed time: see [`Manifest::elapsed_s`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Timing {
-    /// The physical lower bound of the run's duration, s.
+    /// The physical lower bound of the schedule's duration, s.
     pub bound_s: f64,
-    /// Elapsed on the run clock, s.
+    /// The schedule of the last session on the run clock, s: from the first rate demanded to
+    /// the stop command after the last step. Without connecting, identifying and configuring
+    /// the instruments before it and the wait for the table's rest after it, which
+    /// [`Manifest::elapsed_s`] includes. Written as `schedule_elapsed_s` (manifests of format 1
+    /// called it `elapsed_s`, still read).
+    #[serde(rename = "schedule_elapsed_s", alias = "elapsed_s")]
     pub elapsed_s: f64,
-    /// `elapsed_s / bound_s`.
+    /// `schedule_elapsed_s / bound_s`.
     pub ratio: f64,
     /// The acquisition strategy actually used (`stream`, `memory`, `poll`).
     pub acquisition: Option<String>,
@@ -373,6 +512,60 @@ pub struct RunMeta {
     pub instruments: Instruments,
     /// Whether the run uses the simulated bench.
     pub simulated: bool,
+    /// Whether the run clock is virtual (the simulated bench in virtual time): see
+    /// [`Manifest::virtual_time`].
+    pub virtual_time: bool,
+}
+
+/// What the manifest says about the fit: a reference to `fit.json` and the headline figures
+/// an index of runs needs. The fit itself (every model, residuals, the error surface) lives
+/// only in `fit.json`, which can be large.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FitSummary {
+    /// The fit document's file name in the run directory ([`FIT_JSON`]).
+    pub file: String,
+    /// SHA-256 (lower-case hex) of that file's bytes as written: a `fit.json` edited or
+    /// replaced afterwards no longer matches.
+    pub sha256: String,
+    /// Scale factor K of the least-squares line, V/(°/s).
+    pub scale_factor: f64,
+    /// Standard error of K, V/(°/s) (absent without degrees of freedom).
+    pub scale_factor_std_error: Option<f64>,
+    /// Bias K0 of the least-squares line, V.
+    pub bias_volts: f64,
+    /// Standard error of K0, V.
+    pub bias_std_error: Option<f64>,
+    /// The least-squares model with the smallest residual standard error, if any.
+    pub best_model: Option<gyrocal_fit::Model>,
+}
+
+impl FitSummary {
+    /// The summary of `fit`, whose document's bytes hash to `sha256`.
+    pub fn of(fit: &gyrocal_fit::Analysis, sha256: String) -> FitSummary {
+        let line = fit.fit(
+            gyrocal_fit::Method::LeastSquares,
+            gyrocal_fit::Model::Linear,
+        );
+        FitSummary {
+            file: FIT_JSON.to_string(),
+            sha256,
+            scale_factor: round_significant(fit.metrics.scale_factor),
+            scale_factor_std_error: round_opt(line.and_then(|l| l.std_errors.k1)),
+            bias_volts: round_significant(fit.metrics.bias_volts),
+            bias_std_error: round_opt(line.and_then(|l| l.std_errors.k0)),
+            best_model: fit.best_model,
+        }
+    }
+}
+
+/// SHA-256 of `bytes`, lower-case hex.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::Digest as _;
+    sha2::Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
 }
 
 /// `manifest.json`.
@@ -389,10 +582,20 @@ pub struct Manifest {
     pub gyrocal_version: String,
     /// SHA-256 of the plan ([`Plan::hash`]).
     pub plan_hash: String,
-    /// The plan as parsed (validated again when read).
+    /// The plan as parsed, defaults explicit (validated again when read). Written with the
+    /// `[plan]` section's keys at the top (`plan.name`, `plan.rates_dps`, ...) and the other
+    /// sections beside them (`plan.table`, `plan.dmm`, `plan.simulation`); a manifest of
+    /// format 1 nested the `[plan]` section (`plan.plan.name`) and still reads.
+    #[serde(with = "manifest_plan")]
     pub plan: Plan,
     /// Whether the run uses the simulated bench.
     pub simulated: bool,
+    /// Whether a session of the run ran the simulated bench in virtual time: the run clock
+    /// (`elapsed_s`, every `t_s`, and the `t_utc` derived from it) then counts the time a
+    /// real bench would have taken, while the wall clock (`started_utc` to `ended_utc`) shows
+    /// the seconds the simulation took. Absent (false) in manifests of format 1.
+    #[serde(default)]
+    pub virtual_time: bool,
     /// Instrument identities.
     pub instruments: Instruments,
     /// Wall-clock start, RFC 3339 UTC.
@@ -401,7 +604,9 @@ pub struct Manifest {
     pub ended_utc: Option<String>,
     /// Wall-clock time of the last manifest write, RFC 3339 UTC.
     pub updated_utc: String,
-    /// Elapsed on the run's own clock, s (the caller's figure).
+    /// The run clock at the last write, s: the run's elapsed time, every session from
+    /// connecting to the instruments to the table at rest, added up over the resumes. It is
+    /// the time base of every `t_s`. The schedule alone is `timing.schedule_elapsed_s`.
     pub elapsed_s: f64,
     /// Steps in the schedule.
     pub steps_total: usize,
@@ -411,13 +616,80 @@ pub struct Manifest {
     pub resumes: Vec<Resume>,
     /// Retries, oldest first.
     pub retries: Vec<Retry>,
-    /// Bound versus elapsed, when computed.
+    /// Bound versus elapsed of the last session's schedule, when it completed.
     pub timing: Option<Timing>,
-    /// The fit (the fit crate's [`gyrocal_fit::Analysis`], the `gyrocal fit --json`
-    /// document), when done. A fit this version cannot read back (written by another version)
-    /// is `None` here, with a warning: `fit.json` beside the manifest stays the source of truth.
-    #[serde(default, deserialize_with = "lenient_fit")]
-    pub fit: Option<gyrocal_fit::Analysis>,
+    /// The fit's reference and headline figures, when fitted; the fit is in `fit.json`.
+    #[serde(default)]
+    pub fit_summary: Option<FitSummary>,
+    /// The whole fit as manifests of format 1 embedded it (key `fit`): read, never written.
+    /// A fit this version cannot read back is `None` here, with a warning: `fit.json` beside
+    /// the manifest is the source of truth (see [`load_fit`]).
+    #[serde(
+        default,
+        rename = "fit",
+        deserialize_with = "lenient_fit",
+        skip_serializing
+    )]
+    pub legacy_fit: Option<gyrocal_fit::Analysis>,
+}
+
+/// The manifest's plan: the [`crate::PlanDoc`] with the `[plan]` section's keys lifted to the
+/// top (no `plan.plan.name`). Reading accepts both shapes.
+mod manifest_plan {
+    use std::path::Path;
+
+    use serde::de::Error as _;
+    use serde::ser::Error as _;
+    use serde::{Deserialize as _, Deserializer, Serialize as _, Serializer};
+    use serde_json::{Map, Value};
+
+    use crate::plan::{Plan, PlanDoc};
+
+    /// The sections that stay sections; every other key belongs to `[plan]`.
+    const SECTIONS: [&str; 3] = ["table", "dmm", "simulation"];
+
+    pub(super) fn serialize<S: Serializer>(plan: &Plan, s: S) -> Result<S::Ok, S::Error> {
+        let doc = serde_json::to_value(plan.to_doc()).map_err(S::Error::custom)?;
+        let Value::Object(mut doc) = doc else {
+            return Err(S::Error::custom("a plan serialises to a JSON object"));
+        };
+        let mut out = match doc.remove("plan") {
+            Some(Value::Object(section)) => section,
+            _ => return Err(S::Error::custom("a plan has a [plan] section")),
+        };
+        for key in SECTIONS {
+            if let Some(v) = doc.remove(key) {
+                out.insert(key.to_string(), v);
+            }
+        }
+        // a section a later plan format adds stays a section
+        out.extend(doc);
+        Value::Object(out).serialize(s)
+    }
+
+    pub(super) fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Plan, D::Error> {
+        let value = Value::deserialize(d)?;
+        let Value::Object(mut obj) = value else {
+            return Err(D::Error::custom("`plan` must be an object"));
+        };
+        let nested = matches!(obj.get("plan"), Some(Value::Object(_)));
+        let doc = if nested {
+            // format 1: the TOML document's shape
+            Value::Object(obj)
+        } else {
+            let mut doc = Map::new();
+            for key in SECTIONS {
+                if let Some(v) = obj.remove(key) {
+                    doc.insert(key.to_string(), v);
+                }
+            }
+            doc.insert("plan".to_string(), Value::Object(obj));
+            Value::Object(doc)
+        };
+        let doc: PlanDoc =
+            serde_json::from_value(doc).map_err(|e| D::Error::custom(format!("plan: {e}")))?;
+        Plan::from_doc(doc, Path::new("manifest.json: plan")).map_err(D::Error::custom)
+    }
 }
 
 /// Reads the manifest's fit, or `None` (with a warning) when it is not an analysis this
@@ -492,21 +764,55 @@ fn holds_at_most_header(path: &Path, headers: &[&[&str]]) -> bool {
 }
 
 /// Takes the run directory's exclusive lock.
+///
+/// A finished run's writer removes `.lock` (see [`RunDir`]'s `Drop`), so the file may vanish
+/// between this process opening it and locking it: the lock would then be on a file nobody
+/// else can find, while another process creates and locks a new `.lock`. So the lock counts
+/// only when the file locked is still the one at the path (same device and inode); otherwise
+/// it is taken again.
 fn lock_dir(dir: &Path) -> Result<File, RunError> {
     let path = dir.join(LOCK_FILE);
-    let file = fs::OpenOptions::new()
-        .create(true)
-        .truncate(false)
-        .write(true)
-        .open(&path)
-        .map_err(io(&path, "open the lock file"))?;
-    match file.try_lock() {
-        Ok(()) => Ok(file),
-        Err(std::fs::TryLockError::WouldBlock) => Err(RunError::Locked {
-            path: dir.to_path_buf(),
-        }),
-        Err(std::fs::TryLockError::Error(e)) => Err(io(&path, "lock")(e)),
+    for _ in 0..8 {
+        let file = fs::OpenOptions::new()
+            .create(true)
+            .truncate(false)
+            .write(true)
+            .open(&path)
+            .map_err(io(&path, "open the lock file"))?;
+        match file.try_lock() {
+            Ok(()) => {}
+            Err(std::fs::TryLockError::WouldBlock) => {
+                return Err(RunError::Locked {
+                    path: dir.to_path_buf(),
+                });
+            }
+            Err(std::fs::TryLockError::Error(e)) => return Err(io(&path, "lock")(e)),
+        }
+        if still_at_path(&file, &path) {
+            return Ok(file);
+        }
+        tracing::debug!(file = %path.display(), "the lock file was replaced meanwhile; locking again");
     }
+    // the file keeps being replaced under us: another process is busy with this directory
+    Err(RunError::Locked {
+        path: dir.to_path_buf(),
+    })
+}
+
+/// True when `file` is the file at `path` (same device and inode).
+#[cfg(unix)]
+fn still_at_path(file: &File, path: &Path) -> bool {
+    use std::os::unix::fs::MetadataExt as _;
+    match (file.metadata(), fs::metadata(path)) {
+        (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
+        _ => false,
+    }
+}
+
+/// Elsewhere the lock file is never removed (see `Drop for RunDir`), so it cannot be replaced.
+#[cfg(not(unix))]
+fn still_at_path(_file: &File, _path: &Path) -> bool {
+    true
 }
 
 /// The step whose samples are being written.
@@ -531,9 +837,35 @@ pub struct RunDir {
     schedule: Vec<Step>,
     manifest: Manifest,
     samples: csv::Writer<File>,
+    /// Whether samples.csv has the `t_utc` column (not when a resume appends to a file an
+    /// older gyrocal began).
+    samples_utc: bool,
     steps: csv::Writer<File>,
     done: BTreeSet<usize>,
     current: Option<Current>,
+    /// Converts the run clock to UTC for the `t_utc` columns.
+    clock: ClockAnchor,
+}
+
+/// A finished run (complete, failed or aborted) leaves no `.lock` behind: the file is removed
+/// while the lock is still held (the lock itself goes with the file handle, right after).
+/// A run still `running` keeps it: its process died or failed to close the manifest, and the
+/// next resume takes the lock as usual (an OS lock dies with its process, so a stale `.lock`
+/// never blocks). Not on Windows, where an open file cannot be removed.
+impl Drop for RunDir {
+    fn drop(&mut self) {
+        if self.manifest.status == Status::Running || cfg!(not(unix)) {
+            return;
+        }
+        let path = self.dir.join(LOCK_FILE);
+        match fs::remove_file(&path) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => {
+                tracing::warn!(file = %path.display(), error = %e, "cannot remove the lock file")
+            }
+        }
+    }
 }
 
 impl RunDir {
@@ -630,10 +962,8 @@ impl RunDir {
             let regular = fs::symlink_metadata(&file).is_ok_and(|m| m.is_file());
             let ok = match name {
                 LOCK_FILE | MANIFEST_TMP => regular,
-                SAMPLES_CSV => regular && holds_at_most_header(&file, &[&SAMPLES_HEADER]),
-                STEPS_CSV => {
-                    regular && holds_at_most_header(&file, &[&STEPS_HEADER, &STEPS_HEADER_V1])
-                }
+                SAMPLES_CSV => regular && holds_at_most_header(&file, SAMPLES_HEADERS),
+                STEPS_CSV => regular && holds_at_most_header(&file, STEPS_HEADERS),
                 _ => false,
             };
             if !ok {
@@ -669,6 +999,7 @@ impl RunDir {
             plan_hash: plan.hash(),
             plan: plan.clone(),
             simulated: meta.simulated,
+            virtual_time: meta.virtual_time,
             instruments: meta.instruments,
             started_utc: now.clone(),
             ended_utc: None,
@@ -679,7 +1010,8 @@ impl RunDir {
             resumes: Vec::new(),
             retries: Vec::new(),
             timing: None,
-            fit: None,
+            fit_summary: None,
+            legacy_fit: None,
         };
         let mut rd = RunDir {
             dir: path.to_path_buf(),
@@ -687,9 +1019,11 @@ impl RunDir {
             schedule: plan.schedule(),
             manifest,
             samples,
+            samples_utc: true,
             steps,
             done: BTreeSet::new(),
             current: None,
+            clock: ClockAnchor::now(0.0),
         };
         sync_dir(path)?;
         rd.write_manifest()?;
@@ -702,8 +1036,36 @@ impl RunDir {
     /// and torn last lines, records the resume and marks the run `running`.
     pub fn open_for_resume(path: &Path, plan: &Plan) -> Result<RunDir, RunError> {
         let mpath = path.join(MANIFEST_JSON);
-        let mut manifest = read_manifest(&mpath)?;
-        let lock = lock_dir(path)?;
+        let manifest = read_manifest(&mpath)?;
+        let finished = manifest.status != Status::Running;
+        let mut lock = Some(lock_dir(path)?);
+        let result = Self::resume_locked(path, plan, manifest, &mut lock);
+        // A refused resume of a finished run leaves it as it was: without a `.lock` (removed
+        // while still held, as `Drop` does).
+        if result.is_err()
+            && finished
+            && let Some(file) = lock.take()
+        {
+            let lpath = path.join(LOCK_FILE);
+            if let Err(e) = fs::remove_file(&lpath)
+                && e.kind() != std::io::ErrorKind::NotFound
+            {
+                tracing::warn!(file = %lpath.display(), error = %e, "cannot remove the lock file");
+            }
+            drop(file);
+        }
+        result
+    }
+
+    /// [`RunDir::open_for_resume`] under the lock, which it takes from `lock` into the
+    /// [`RunDir`] it returns (and leaves there on an error).
+    fn resume_locked(
+        path: &Path,
+        plan: &Plan,
+        mut manifest: Manifest,
+        lock: &mut Option<File>,
+    ) -> Result<RunDir, RunError> {
+        let mpath = path.join(MANIFEST_JSON);
         let plan_hash = plan.hash();
         if manifest.plan_hash != plan_hash {
             return Err(RunError::PlanChanged {
@@ -719,8 +1081,7 @@ impl RunDir {
 
         // steps.csv: repair the tail, then every row must fit the schedule.
         let spath = path.join(STEPS_CSV);
-        let (steps_bytes, torn_steps) =
-            read_repaired(&spath, &[&STEPS_HEADER, &STEPS_HEADER_V1], MAX_STEPS_BYTES)?;
+        let (steps_bytes, torn_steps) = read_repaired(&spath, STEPS_HEADERS, MAX_STEPS_BYTES)?;
         let records = parse_steps(&spath, &steps_bytes, &schedule)?;
         let done: BTreeSet<usize> = records.iter().map(|r| r.step).collect();
         let expected: BTreeMap<usize, u64> = records
@@ -730,7 +1091,7 @@ impl RunDir {
 
         // samples.csv: keep the finished steps' rows, drop everything from the first other row.
         let sapath = path.join(SAMPLES_CSV);
-        let (samples_len, torn_samples) = repair_samples(&sapath)?;
+        let (samples_len, torn_samples, samples_utc) = repair_samples(&sapath)?;
         let (keep_len, dropped) = scan_samples(&sapath, samples_len, &schedule, &expected)?;
         truncate(&sapath, keep_len)?;
         truncate(&spath, steps_bytes.len() as u64)?;
@@ -757,15 +1118,26 @@ impl RunDir {
             from_step = ?from_step,
             "resuming run"
         );
+        // the manifest is rewritten in this version's format (steps.csv was upgraded above)
+        manifest.format_version = FORMAT_VERSION;
+        let clock = ClockAnchor::now(manifest.elapsed_s);
+        let Some(lock) = lock.take() else {
+            return Err(RunError::Protocol {
+                path: path.join(LOCK_FILE),
+                message: "the run directory's lock was not held".into(),
+            });
+        };
         let mut rd = RunDir {
             dir: path.to_path_buf(),
             _lock: lock,
             schedule,
             manifest,
             samples,
+            samples_utc,
             steps,
             done,
             current: None,
+            clock,
         };
         rd.write_manifest()?;
         Ok(rd)
@@ -779,6 +1151,33 @@ impl RunDir {
     /// The manifest as last written.
     pub fn manifest(&self) -> &Manifest {
         &self.manifest
+    }
+
+    /// Tells the run directory that the run clock reads `run_clock_s` now, so that the `t_utc`
+    /// columns are the wall-clock times of the run clock's `t_s`. [`RunDir::create`] and
+    /// [`RunDir::open_for_resume`] set this (run clock 0, or the manifest's `elapsed_s`), which
+    /// is right to the few milliseconds between opening the directory and starting the clock;
+    /// a writer whose clock starts later calls this when it starts it. A non-finite or
+    /// negative value is ignored.
+    pub fn anchor_clock(&mut self, run_clock_s: f64) {
+        if run_clock_s.is_finite() && run_clock_s >= 0.0 {
+            self.clock = ClockAnchor::now(run_clock_s);
+        }
+    }
+
+    /// The wall-clock anchor of the run clock (see [`RunDir::anchor_clock`]).
+    pub fn clock_anchor(&self) -> ClockAnchor {
+        self.clock
+    }
+
+    /// Records that this session runs in virtual time ([`Manifest::virtual_time`]; a
+    /// [`RunMeta`] says so for a new run).
+    pub fn set_virtual_time(&mut self) -> Result<(), RunError> {
+        if self.manifest.virtual_time {
+            return Ok(());
+        }
+        self.manifest.virtual_time = true;
+        self.write_manifest()
     }
 
     /// The schedule of the plan this run follows.
@@ -855,14 +1254,26 @@ impl RunDir {
             let row = SampleRow {
                 step,
                 index: smp.index,
-                t_s: smp.t_s,
+                t_s: round_significant(smp.t_s),
                 rate_dps: s.rate_dps,
-                volts: smp.volts,
+                volts: round_opt(smp.volts),
                 overload: u8::from(smp.volts.is_none()),
+                t_utc: self.samples_utc.then(|| self.clock.utc(smp.t_s)),
             };
-            self.samples
-                .serialize(row)
-                .map_err(|e| csv_write(&path, e))?;
+            let written = if self.samples_utc {
+                self.samples.serialize(row)
+            } else {
+                // an older file's columns: no t_utc
+                self.samples.serialize((
+                    row.step,
+                    row.index,
+                    row.t_s,
+                    row.rate_dps,
+                    row.volts,
+                    row.overload,
+                ))
+            };
+            written.map_err(|e| csv_write(&path, e))?;
         }
         self.samples.flush().map_err(io(&path, "write"))?;
         cur.count += samples.len() as u64;
@@ -931,8 +1342,30 @@ impl RunDir {
             .get_ref()
             .sync_data()
             .map_err(io(&sapath, "sync"))?;
+        let start_utc = self.clock.utc(rec.t_start_s);
+        let end_utc = self.clock.utc(rec.t_end_s);
+        let r = rounded(&rec);
+        let row = StepRow {
+            step: r.step,
+            pass: r.pass,
+            rate_dps: r.rate_dps,
+            rate_meas_dps: r.rate_meas_dps,
+            rate_meas_std_dps: r.rate_meas_std_dps,
+            rate_meas_min_dps: r.rate_meas_min_dps,
+            rate_meas_max_dps: r.rate_meas_max_dps,
+            rate_samples: r.rate_samples,
+            volts: r.volts,
+            volts_std: r.volts_std,
+            n: r.n,
+            overloads: r.overloads,
+            retries: r.retries,
+            t_start_s: r.t_start_s,
+            t_end_s: r.t_end_s,
+            t_start_utc: &start_utc,
+            t_end_utc: &end_utc,
+        };
         self.steps
-            .serialize(&rec)
+            .serialize(&row)
             .map_err(|e| csv_write(&spath, e))?;
         self.steps.flush().map_err(io(&spath, "write"))?;
         self.steps
@@ -960,14 +1393,17 @@ impl RunDir {
     /// Sets the elapsed run-clock time, s (the caller's figure; finite, ≥ 0).
     pub fn set_elapsed(&mut self, elapsed_s: f64) -> Result<(), RunError> {
         self.check_finite("elapsed_s", elapsed_s)?;
-        self.manifest.elapsed_s = elapsed_s;
+        self.manifest.elapsed_s = round_significant(elapsed_s);
         self.write_manifest()
     }
 
     /// Logs a retry.
     pub fn log_retry(&mut self, retry: Retry) -> Result<(), RunError> {
         self.check_finite("retry t_s", retry.t_s)?;
-        self.manifest.retries.push(retry);
+        self.manifest.retries.push(Retry {
+            t_s: round_significant(retry.t_s),
+            ..retry
+        });
         self.write_manifest()
     }
 
@@ -980,19 +1416,31 @@ impl RunDir {
         ] {
             self.check_finite(what, v)?;
         }
-        self.manifest.timing = Some(timing);
+        self.manifest.timing = Some(Timing {
+            bound_s: round_significant(timing.bound_s),
+            elapsed_s: round_significant(timing.elapsed_s),
+            ratio: round_significant(timing.ratio),
+            ..timing
+        });
         self.write_manifest()
     }
 
-    /// Stores the fit document: writes `fit.json` atomically and puts it in the manifest.
+    /// Stores the fit document: writes `fit.json` atomically (every computed number rounded
+    /// once, see [`crate::num`]) and references it from the manifest ([`FitSummary`]: its
+    /// name, the SHA-256 of its bytes, the headline figures).
     pub fn set_fit(&mut self, fit: gyrocal_fit::Analysis) -> Result<(), RunError> {
         let path = self.dir.join(FIT_JSON);
-        let bytes = serde_json::to_vec_pretty(&fit).map_err(|e| RunError::Protocol {
+        let cannot = |e: serde_json::Error| RunError::Protocol {
             path: path.clone(),
             message: format!("cannot serialise the fit: {e}"),
-        })?;
+        };
+        let mut doc = serde_json::to_value(&fit).map_err(cannot)?;
+        round_json(&mut doc);
+        let mut bytes = serde_json::to_vec_pretty(&doc).map_err(cannot)?;
+        bytes.push(b'\n');
         write_atomic(&self.dir, FIT_JSON, &bytes)?;
-        self.manifest.fit = Some(fit);
+        self.manifest.fit_summary = Some(FitSummary::of(&fit, sha256_hex(&bytes)));
+        self.manifest.legacy_fit = None;
         self.write_manifest()
     }
 
@@ -1031,7 +1479,7 @@ impl RunDir {
             .map_err(io(&sapath, "sync"))?;
         self.manifest.status = status;
         self.manifest.reason = reason;
-        self.manifest.elapsed_s = elapsed_s;
+        self.manifest.elapsed_s = round_significant(elapsed_s);
         self.manifest.ended_utc = Some(now_utc());
         self.write_manifest()
     }
@@ -1080,10 +1528,32 @@ pub fn load(dir: &Path) -> Result<RunData, RunError> {
     let spath = dir.join(STEPS_CSV);
     let bytes = read_capped(&spath, MAX_STEPS_BYTES)?;
     let (bytes, _) = complete_lines(&bytes);
-    check_header(&spath, bytes, &[&STEPS_HEADER, &STEPS_HEADER_V1])?;
+    check_header(&spath, bytes, STEPS_HEADERS)?;
     let schedule = manifest.plan.schedule();
     let steps = parse_steps(&spath, bytes, &schedule)?;
     Ok(RunData { manifest, steps })
+}
+
+/// Reads a run directory's `fit.json` (what [`crate::fit_run`] wrote): `Ok(None)` when the run
+/// has none (not fitted yet, or written before fit.json existed: see
+/// [`Manifest::legacy_fit`]). A file that does not parse is an error naming it, its line and
+/// column.
+pub fn load_fit(dir: &Path) -> Result<Option<gyrocal_fit::Analysis>, RunError> {
+    let path = dir.join(FIT_JSON);
+    match fs::symlink_metadata(&path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(io(&path, "read")(e)),
+        Ok(_) => {}
+    }
+    let bytes = read_capped(&path, MAX_FIT_BYTES)?;
+    serde_json::from_slice(&bytes)
+        .map(Some)
+        .map_err(|e| RunError::Json {
+            path: path.clone(),
+            line: e.line(),
+            column: e.column(),
+            message: e.to_string(),
+        })
 }
 
 /// Reads every complete row of samples.csv (a torn last line is ignored).
@@ -1091,10 +1561,11 @@ pub fn load_samples(dir: &Path) -> Result<Vec<SampleRow>, RunError> {
     let path = dir.join(SAMPLES_CSV);
     let bytes = read_capped(&path, MAX_SAMPLES_BYTES)?;
     let (bytes, _) = complete_lines(&bytes);
-    check_header(&path, bytes, &[&SAMPLES_HEADER])?;
+    check_header(&path, bytes, SAMPLES_HEADERS)?;
     let mut rdr = csv::ReaderBuilder::new()
         .has_headers(true)
         .from_reader(bytes);
+    // by name: files written before `t_utc` existed lack that column
     let mut out = Vec::new();
     for row in rdr.deserialize::<SampleRow>() {
         out.push(row.map_err(|e| csv_read(&path, &e))?);
@@ -1140,11 +1611,12 @@ fn read_manifest(path: &Path) -> Result<Manifest, RunError> {
         column: e.column(),
         message: e.to_string(),
     })?;
-    if m.format_version != FORMAT_VERSION {
+    if !FORMAT_VERSIONS_READ.contains(&m.format_version) {
         return Err(RunError::Inconsistent {
             path: path.to_path_buf(),
             message: format!(
-                "format_version {} is not {FORMAT_VERSION}, the one this gyrocal writes",
+                "format_version {} is not one this gyrocal reads ({FORMAT_VERSIONS_READ:?}); \
+                 a newer gyrocal wrote it",
                 m.format_version
             ),
         });
@@ -1244,8 +1716,9 @@ fn read_repaired(path: &Path, accepted: &[&[&str]], cap: u64) -> Result<(Vec<u8>
 
 /// Prepares samples.csv for a resume without reading it whole: finds the end of its last
 /// complete line (a torn tail is dropped later by the truncation), checks the header, and
-/// writes the header into an empty file. Returns (length of the complete lines, torn bytes).
-fn repair_samples(path: &Path) -> Result<(u64, u64), RunError> {
+/// writes the header into an empty file. Returns (length of the complete lines, torn bytes,
+/// whether the header has `t_utc`).
+fn repair_samples(path: &Path) -> Result<(u64, u64, bool), RunError> {
     use std::io::{Read as _, Seek as _, SeekFrom};
     let mut file = File::open(path).map_err(io(path, "read"))?;
     let meta = file.metadata().map_err(io(path, "read"))?;
@@ -1284,7 +1757,7 @@ fn repair_samples(path: &Path) -> Result<(u64, u64), RunError> {
         let mut h = SAMPLES_HEADER.join(",").into_bytes();
         h.push(b'\n');
         fs::write(path, &h).map_err(io(path, "write"))?;
-        return Ok((h.len() as u64, torn));
+        return Ok((h.len() as u64, torn, true));
     }
     let mut first = Vec::new();
     file.seek(SeekFrom::Start(0)).map_err(io(path, "read"))?;
@@ -1292,11 +1765,14 @@ fn repair_samples(path: &Path) -> Result<(u64, u64), RunError> {
         .take(4096.min(keep))
         .read_to_end(&mut first)
         .map_err(io(path, "read"))?;
-    check_header(path, &first, &[&SAMPLES_HEADER])?;
+    let which = check_header(path, &first, SAMPLES_HEADERS)?;
     if torn > 0 {
         tracing::warn!(file = %path.display(), bytes = torn, "dropping a torn last line");
     }
-    Ok((keep, torn))
+    if which != 0 {
+        tracing::info!(file = %path.display(), "samples.csv has no t_utc column (an older gyrocal began it); its rows stay without one");
+    }
+    Ok((keep, torn, which == 0))
 }
 
 /// Rewrites CSV rows written with the columns `old` for the columns `new` (which contain every
@@ -1403,8 +1879,9 @@ fn scan_samples(
     let mut cut: Option<u64> = None;
     let mut dropped = 0u64;
     let mut rec = csv::StringRecord::new();
-    // The header's end, in case there is no row at all.
-    rdr.headers().map_err(|e| csv_read(path, &e))?;
+    // The header's end, in case there is no row at all; rows are read by name (files written
+    // before `t_utc` existed lack that column).
+    let headers = rdr.headers().map_err(|e| csv_read(path, &e))?.clone();
     let mut keep = rdr.position().byte();
     loop {
         match rdr.read_record(&mut rec) {
@@ -1439,7 +1916,9 @@ fn scan_samples(
             dropped += 1;
             continue;
         }
-        let row: SampleRow = rec.deserialize(None).map_err(|e| bad(e.to_string()))?;
+        let row: SampleRow = rec
+            .deserialize(Some(&headers))
+            .map_err(|e| bad(e.to_string()))?;
         if !expected.contains_key(&row.step) {
             cut = Some(pos.byte());
             dropped += 1;

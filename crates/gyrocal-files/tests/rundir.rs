@@ -158,12 +158,12 @@ fn a_full_run_writes_what_the_fit_needs() {
     assert!(ov.iter().all(|s| s.volts.is_none() && s.index == 4));
     let text = fs::read_to_string(dir.join(SAMPLES_CSV)).unwrap();
     assert!(
-        text.starts_with("step,index,t_s,rate_dps,volts,overload\n"),
+        text.starts_with("step,index,t_s,rate_dps,volts,overload,t_utc\n"),
         "{text}"
     );
     assert!(
         text.lines()
-            .any(|l| l.starts_with("0,4,") && l.ends_with(",,1")),
+            .any(|l| l.starts_with("0,4,") && l.contains(",,1,")),
         "{text}"
     );
 
@@ -181,13 +181,16 @@ fn a_full_run_writes_what_the_fit_needs() {
         m.instruments.dmm.as_deref(),
         Some("HEWLETT-PACKARD,34401A,0,11-5-2")
     );
-    // the manifest's fit is the typed analysis, read back as written (to JSON's float
-    // precision)
-    let back = m.fit.as_ref().expect("the fit in the manifest");
+    // the fit is fit.json's, read back as written (to the 12 significant digits the run
+    // directory writes); the manifest names it and carries its headline figures
+    let back = gyrocal_files::load_fit(&dir).unwrap().expect("fit.json");
     assert_eq!(back.fits.len(), analysis.fits.len());
     let k = |a: &gyrocal_fit::Analysis| a.metrics.scale_factor;
-    assert!((k(back) / k(&analysis) - 1.0).abs() < 1e-15);
-    assert!(dir.join("fit.json").exists());
+    assert!((k(&back) / k(&analysis) - 1.0).abs() < 1e-11);
+    let summary = m.fit_summary.as_ref().expect("fit summary in the manifest");
+    assert_eq!(summary.file, "fit.json");
+    assert!((summary.scale_factor / k(&analysis) - 1.0).abs() < 1e-11);
+    assert!(m.legacy_fit.is_none());
     assert_eq!(data.steps.len(), 5);
     // no temp file left behind
     let leftovers: Vec<_> = fs::read_dir(&dir)
@@ -589,11 +592,13 @@ fn rate_samples_round_trip_and_older_steps_csv_still_read_and_resume() {
     assert_eq!(pos("rate_samples"), pos("rate_meas_max_dps") + 1);
     assert_eq!(load(&dir).unwrap().steps[0].rate_samples, Some(12));
 
-    // The same run as an older gyrocal wrote it: no rate_samples column.
+    // The same run as an older gyrocal wrote it: no rate_samples column (and none of the
+    // UTC columns, which came later).
     let old: String = text
         .lines()
         .map(|l| {
             let mut cells: Vec<&str> = l.split(',').collect();
+            cells.truncate(pos("t_start_utc"));
             cells.remove(pos("rate_samples"));
             cells.join(",") + "\n"
         })
@@ -610,7 +615,7 @@ fn rate_samples_round_trip_and_older_steps_csv_still_read_and_resume() {
     drop(rd);
     let text = fs::read_to_string(dir.join(STEPS_CSV)).unwrap();
     assert!(text.starts_with(&gyrocal_files::rundir::STEPS_HEADER.join(",")));
-    assert!(text.lines().all(|l| l.split(',').count() == 15), "{text}");
+    assert!(text.lines().all(|l| l.split(',').count() == 17), "{text}");
     let steps = load(&dir).unwrap().steps;
     assert_eq!(
         steps.iter().map(|s| s.rate_samples).collect::<Vec<_>>(),
@@ -715,6 +720,6 @@ fn a_manifest_fit_this_version_cannot_read_leaves_the_run_readable() {
     m["fit"] = serde_json::json!({"scale_factor": 0.3612});
     fs::write(&path, serde_json::to_string_pretty(&m).unwrap()).unwrap();
     let data = gyrocal_files::load(&dir).unwrap();
-    assert!(data.manifest.fit.is_none());
+    assert!(data.manifest.legacy_fit.is_none());
     assert_eq!(data.steps.len(), 1);
 }

@@ -20,6 +20,9 @@ h3 { font-size: 1.1rem; margin-top: 1.5rem; }
 .sub { color: #555; margin: 0 0 1rem; }
 .banner { border: 2px solid #b00020; background: #fdecee; color: #6b0012; padding: 0.75rem 1rem;
   border-radius: 4px; font-weight: 600; margin: 1rem 0; }
+.banner.simulated { border-color: #7a4d00; background: #fff4d6; color: #4a2f00; font-weight: 400; }
+.banner.simulated strong { font-size: 1.15rem; letter-spacing: 0.05em; }
+.banner.plans { border-color: #7a4d00; background: #fff4d6; color: #4a2f00; }
 .note { color: #444; font-size: 0.95rem; }
 table { border-collapse: collapse; margin: 0.5rem 0 1rem; font-size: 0.92rem; }
 th, td { border: 1px solid #ccc; padding: 0.25rem 0.6rem; text-align: left; vertical-align: top; }
@@ -89,6 +92,14 @@ pub(crate) fn render(inputs: &[Input]) -> Result<Report, ReportError> {
         svgs: Vec::new(),
     };
     let many = inputs.len() > 1;
+    let plans = plans_differ(inputs);
+    let mut warnings = Vec::new();
+    if let Some(p) = &plans {
+        warnings.push(p.warning());
+    }
+    let simulated = inputs
+        .iter()
+        .any(|i| i.manifest.as_ref().is_some_and(|m| m.simulated));
     doc.html.push_str("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n");
     let title = match inputs {
         [one] => match &one.manifest {
@@ -96,6 +107,11 @@ pub(crate) fn render(inputs: &[Input]) -> Result<Report, ReportError> {
             None => format!("Calibration report: {}", one.path.display()),
         },
         _ => format!("Calibration report: {} runs", inputs.len()),
+    };
+    let title = if simulated {
+        format!("SIMULATED · {title}")
+    } else {
+        title
     };
     let _ = write!(
         doc.html,
@@ -108,12 +124,31 @@ pub(crate) fn render(inputs: &[Input]) -> Result<Report, ReportError> {
         esc(&title),
         env!("CARGO_PKG_VERSION")
     );
-    // Banners first: an incomplete run must be seen before any number.
+    // Banners first: a simulated or incomplete run, or runs of different plans, must be seen
+    // before any number.
+    for (i, input) in inputs.iter().enumerate() {
+        simulated_banner(&mut doc.html, input, many.then_some(i + 1));
+    }
     for (i, input) in inputs.iter().enumerate() {
         banner(&mut doc.html, input, many.then_some(i + 1));
+        for note in &input.notes {
+            warnings.push(note.clone());
+            let _ = writeln!(
+                doc.html,
+                "<div class=\"banner\" role=\"alert\">{}</div>",
+                esc(note)
+            );
+        }
+    }
+    if let Some(p) = &plans {
+        let _ = writeln!(
+            doc.html,
+            "<div class=\"banner plans\" role=\"alert\" id=\"banner-plans\">{}</div>",
+            esc(&p.warning())
+        );
     }
     if many {
-        repeatability(&mut doc, inputs)?;
+        repeatability(&mut doc, inputs, plans.as_ref())?;
     }
     for (i, input) in inputs.iter().enumerate() {
         let run = many.then_some(i + 1);
@@ -130,7 +165,102 @@ pub(crate) fn render(inputs: &[Input]) -> Result<Report, ReportError> {
     Ok(Report {
         html: doc.html,
         svgs: doc.svgs,
+        warnings,
     })
+}
+
+/// Runs of different plans given to one report.
+pub(crate) struct PlansDiffer {
+    /// Each run's plan hash (`None`: a bare CSV, plan unknown), in input order.
+    hashes: Vec<Option<String>>,
+}
+
+impl PlansDiffer {
+    fn distinct(&self) -> usize {
+        let mut known: Vec<&str> = self.hashes.iter().flatten().map(String::as_str).collect();
+        known.sort_unstable();
+        known.dedup();
+        known.len()
+    }
+
+    /// The sentence for stderr and the report.
+    pub(crate) fn warning(&self) -> String {
+        let runs: Vec<String> = self
+            .hashes
+            .iter()
+            .enumerate()
+            .map(|(i, h)| match h {
+                Some(h) => format!("run {} plan {}", i + 1, h.get(..12).unwrap_or(h)),
+                None => format!("run {} plan unknown (a CSV file)", i + 1),
+            })
+            .collect();
+        format!(
+            "the runs come from {} different plans ({}): the spread of their scale factors is \
+             not the repeatability of one plan (different rates, readings or settings change K \
+             as well as drift does)",
+            self.distinct().max(2),
+            runs.join(", ")
+        )
+    }
+}
+
+/// `Some` when the inputs do not all follow one plan (by plan hash). A bare CSV has no plan:
+/// it differs only from nothing, and is named as unknown when run directories disagree.
+fn plans_differ(inputs: &[Input]) -> Option<PlansDiffer> {
+    let hashes: Vec<Option<String>> = inputs
+        .iter()
+        .map(|i| i.manifest.as_ref().map(|m| m.plan_hash.clone()))
+        .collect();
+    let d = PlansDiffer { hashes };
+    (d.distinct() > 1).then_some(d)
+}
+
+/// The banner of a simulated run: it comes first, so that simulated numbers are never
+/// mistaken for a calibration. In virtual time it explains why the run clock and the wall
+/// clock disagree.
+fn simulated_banner(html: &mut String, input: &Input, run: Option<usize>) {
+    let Some(m) = &input.manifest else { return };
+    if !m.simulated {
+        return;
+    }
+    let which = run.map_or_else(String::new, |r| format!("Run {r}: "));
+    let mut text = format!(
+        "<strong>SIMULATED.</strong> {which}These data come from gyrocal's simulated bench (a \
+         simulated rate table and multimeter with a modelled gyroscope), not from an instrument: \
+         they calibrate nothing."
+    );
+    if m.virtual_time {
+        let wall = match (
+            gyrocal_files::parse_rfc3339_utc(&m.started_utc),
+            m.ended_utc
+                .as_deref()
+                .and_then(gyrocal_files::parse_rfc3339_utc),
+        ) {
+            (Some(a), Some(b)) => b
+                .duration_since(a)
+                .ok()
+                .map(|d| format!("{:.1} s", d.as_secs_f64())),
+            _ => None,
+        };
+        let _ = write!(
+            text,
+            " It ran in <em>virtual time</em>: the simulation skipped every wait, so the run \
+             clock counts the {:.1} s a real bench would have taken (the elapsed time, every \
+             <code>t_s</code> and the <code>t_utc</code> times derived from it) while the \
+             simulation itself took {} of wall-clock time (started to ended{}).",
+            m.elapsed_s,
+            wall.as_deref().unwrap_or("a fraction of that"),
+            match m.resumes.len() {
+                0 => String::new(),
+                n => format!(", including the pauses between its {} sessions", n + 1),
+            }
+        );
+    }
+    let _ = writeln!(
+        html,
+        "<div class=\"banner simulated\" role=\"note\" id=\"simulated{}\">{text}</div>",
+        suffix(run)
+    );
 }
 
 fn suffix(run: Option<usize>) -> String {
@@ -670,7 +800,11 @@ fn metadata(html: &mut String, input: &Input, sfx: &str) {
     );
     let e = m.elapsed_s.max(0.0);
     row(
-        "elapsed",
+        if m.virtual_time {
+            "elapsed (run clock, virtual)"
+        } else {
+            "elapsed (run clock)"
+        },
         format!(
             "{e:.1} s ({}:{:02}:{:02})",
             (e / 3600.0).floor(),
@@ -682,7 +816,10 @@ fn metadata(html: &mut String, input: &Input, sfx: &str) {
         row(
             "timing",
             format!(
-                "physical bound {:.1} s, elapsed / bound = {:.3}{}",
+                "schedule {:.1} s (first demand to the stop command; the elapsed time adds \
+                 connecting before it and the table's stop after it), physical bound {:.1} s, \
+                 schedule / bound = {:.3}{}",
+                t.elapsed_s,
                 t.bound_s,
                 t.ratio,
                 t.acquisition
@@ -743,17 +880,29 @@ fn metadata(html: &mut String, input: &Input, sfx: &str) {
     html.push_str("</table>\n");
 }
 
-fn repeatability(doc: &mut Doc, inputs: &[Input]) -> Result<(), ReportError> {
+fn repeatability(
+    doc: &mut Doc,
+    inputs: &[Input],
+    plans: Option<&PlansDiffer>,
+) -> Result<(), ReportError> {
     let analyses: Vec<Analysis> = inputs
         .iter()
         .filter_map(|i| i.analysis.as_ref().ok().cloned())
         .collect();
     let multi = MultiAnalysis::from_analyses(analyses);
-    let _ = writeln!(
-        doc.html,
-        "<h2 id=\"repeatability\">Repeatability over {} runs</h2>",
-        inputs.len()
-    );
+    if plans.is_some() {
+        let _ = writeln!(
+            doc.html,
+            "<h2 id=\"repeatability\">Scale factor across {} runs of different plans</h2>",
+            inputs.len()
+        );
+    } else {
+        let _ = writeln!(
+            doc.html,
+            "<h2 id=\"repeatability\">Repeatability over {} runs</h2>",
+            inputs.len()
+        );
+    }
     doc.html.push_str("<table class=\"repeatability\">\n<tr><th>run</th><th>source</th><th>K (V/(°/s))</th><th>std error</th><th>K0 (V)</th><th>status</th></tr>\n");
     let mut ks = Vec::new();
     for (i, input) in inputs.iter().enumerate() {
@@ -789,17 +938,30 @@ fn repeatability(doc: &mut Doc, inputs: &[Input]) -> Result<(), ReportError> {
         }
     }
     doc.html.push_str("</table>\n");
-    let _ = writeln!(
-        doc.html,
-        "<p>Repeatability K<sub>r</sub> = std(K<sub>i</sub>, ddof = 1) / mean(K<sub>i</sub>) = <strong id=\"sum-repeatability\">{}</strong> ppm over {} fitted runs.</p>",
-        opt(multi.repeatability_ppm, |v| format!("{v:.1}")),
-        multi.scale_factors.len()
-    );
+    if plans.is_some() {
+        let _ = writeln!(
+            doc.html,
+            "<p id=\"spread-across-plans\">No repeatability: the runs follow different plans. The spread std(K<sub>i</sub>, ddof = 1) / mean(K<sub>i</sub>) across them is {} ppm over {} fitted runs; it mixes the plans' differences with drift and is not a repeatability figure. Report the runs of each plan together for that.</p>",
+            opt(multi.repeatability_ppm, |v| format!("{v:.1}")),
+            multi.scale_factors.len()
+        );
+    } else {
+        let _ = writeln!(
+            doc.html,
+            "<p>Repeatability K<sub>r</sub> = std(K<sub>i</sub>, ddof = 1) / mean(K<sub>i</sub>) = <strong id=\"sum-repeatability\">{}</strong> ppm over {} fitted runs.</p>",
+            opt(multi.repeatability_ppm, |v| format!("{v:.1}")),
+            multi.scale_factors.len()
+        );
+    }
     if !ks.is_empty() {
         doc.figure(
             "repeatability.svg".to_string(),
             plots::repeatability_plot(&ks)?,
-            "Least-squares scale factor of each run with ± one standard error, and their mean. Scatter well beyond the error bars is drift between runs (temperature, turn-on), not measurement noise.",
+            if plans.is_some() {
+                "Least-squares scale factor of each run with ± one standard error, and their mean. The runs follow different plans: differences between them are not only drift."
+            } else {
+                "Least-squares scale factor of each run with ± one standard error, and their mean. Scatter well beyond the error bars is drift between runs (temperature, turn-on), not measurement noise."
+            },
         );
     }
     Ok(())

@@ -15,7 +15,8 @@ use crate::ReportError;
 pub enum FitSource {
     /// The run's `fit.json` (the numbers are exactly the run's).
     FitJson(PathBuf),
-    /// The `fit` member of the run's manifest (no `fit.json` on disk).
+    /// The `fit` member of a manifest of format 1, which embedded the whole fit (no
+    /// `fit.json` on disk).
     Manifest(PathBuf),
     /// Fitted by the report from the data with `gyrocal-fit`'s default options.
     Computed,
@@ -49,6 +50,9 @@ pub struct Input {
     pub analysis: Result<Analysis, String>,
     /// Where the analysis came from.
     pub fit_source: FitSource,
+    /// What the reader must know about the input's files (e.g. a `fit.json` that no longer
+    /// matches the hash its manifest recorded); shown at the top of the report.
+    pub notes: Vec<String>,
 }
 
 /// Reads a run directory (a directory) or a steps CSV (a file).
@@ -90,8 +94,20 @@ pub(crate) fn load_run(dir: &Path) -> Result<Input, ReportError> {
         })
         .collect();
     let fit_path = dir.join(FIT_JSON);
+    let mut notes = Vec::new();
     let (analysis, fit_source) = if fit_path.exists() {
         let bytes = gyrocal_files::rundir::read_capped(&fit_path, MAX_FIT_BYTES)?;
+        if let Some(s) = &run.manifest.fit_summary
+            && s.sha256 != gyrocal_files::rundir::sha256_hex(&bytes)
+        {
+            notes.push(format!(
+                "{} is not the file the run wrote: its SHA-256 differs from the one the \
+                 manifest recorded ({}); it was edited or replaced since, and the fit below is \
+                 that file's",
+                fit_path.display(),
+                s.sha256
+            ));
+        }
         let value: serde_json::Value =
             serde_json::from_slice(&bytes).map_err(|e| ReportError::FitDocument {
                 path: fit_path.clone(),
@@ -101,7 +117,7 @@ pub(crate) fn load_run(dir: &Path) -> Result<Input, ReportError> {
             Ok(analysis_from_json(&fit_path, value)?),
             FitSource::FitJson(fit_path),
         )
-    } else if let Some(analysis) = run.manifest.fit.clone() {
+    } else if let Some(analysis) = run.manifest.legacy_fit.clone() {
         (Ok(analysis), FitSource::Manifest(dir.join(MANIFEST_JSON)))
     } else {
         (fit(&data), FitSource::Computed)
@@ -113,6 +129,7 @@ pub(crate) fn load_run(dir: &Path) -> Result<Input, ReportError> {
         steps,
         analysis,
         fit_source,
+        notes,
     })
 }
 
@@ -155,6 +172,7 @@ pub(crate) fn load_csv(path: &Path) -> Result<Input, ReportError> {
         steps,
         analysis,
         fit_source: FitSource::Computed,
+        notes: Vec::new(),
     })
 }
 

@@ -126,6 +126,9 @@ pub struct Report {
     /// The plots as `(file name, SVG document)`, e.g. `("fit.svg", "<svg ...")`, in the order
     /// they appear in the HTML.
     pub svgs: Vec<(String, String)>,
+    /// What the reader must be told besides the report (the report says it too), e.g. that
+    /// the runs come from different plans; the CLI prints each on stderr.
+    pub warnings: Vec<String>,
 }
 
 impl Report {
@@ -170,7 +173,9 @@ fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
 }
 
 /// Renders the report of one or more inputs. With several, each gets its own sections (plot
-/// files prefixed `run1-`, `run2-`, ...) and the report adds the repeatability across them.
+/// files prefixed `run1-`, `run2-`, ...) and the report adds the repeatability across them;
+/// when their plans differ (by plan hash) it says so instead of calling their spread a
+/// repeatability, and [`Report::warnings`] says it too.
 pub fn render(inputs: &[Input]) -> Result<Report, ReportError> {
     if inputs.is_empty() {
         return Err(ReportError::NoInput);

@@ -76,6 +76,7 @@ fn make_run(dir: &Path, spec: &RunSpec<'_>) {
             table: Some("ACUTRONIC ACUTROL <sim>".into()),
         },
         simulated: true,
+        virtual_time: false,
     };
     let mut rd = RunDir::create(dir, &plan, meta).unwrap();
     let mut noise = Noise(0x9E37_79B9_7F4A_7C15 ^ spec.seed);

@@ -114,7 +114,7 @@ async fn paper_plan_completes_and_recovers_the_truth() {
     // the linear fit recovers the simulated gyro's line over the same schedule (the ideal
     // linear calibration of the true, slightly nonlinear and asymmetric model) within 3
     // reported standard errors
-    let fit = data.manifest.fit.expect("fit in manifest");
+    let fit = gyrocal_files::load_fit(&dir).unwrap().expect("fit.json");
     let lin = fit
         .fit(
             gyrocal_fit::Method::LeastSquares,
@@ -368,7 +368,7 @@ async fn a_repeated_schedule_reports_the_repeatability_of_its_passes() {
     let dir = tmp.path().join("run");
     let (summary, _) = run_plan(&plan, &dir, false, None).await;
     assert_eq!(summary.status, Status::Complete, "{:?}", summary.reason);
-    let fit = load(&dir).unwrap().manifest.fit.unwrap();
+    let fit = gyrocal_files::load_fit(&dir).unwrap().unwrap();
     let r = fit
         .metrics
         .repeatability_ppm
@@ -380,7 +380,7 @@ async fn a_repeated_schedule_reports_the_repeatability_of_its_passes() {
     let single = tmp.path().join("single");
     let one = plan_with("quick.toml", |_| {});
     run_plan(&one, &single, false, None).await;
-    let fit = load(&single).unwrap().manifest.fit.unwrap();
+    let fit = gyrocal_files::load_fit(&single).unwrap().unwrap();
     assert!(fit.metrics.repeatability_ppm.is_none());
 }
 

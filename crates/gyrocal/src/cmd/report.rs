@@ -13,23 +13,44 @@ use crate::BadInput;
 pub struct ReportArgs {
     /// Run directories (manifest.json, steps.csv, fit.json) or steps CSV files (columns
     /// rate_dps, volts; optional volts_std, n, rate_meas_dps). Several: one report with the
-    /// repeatability across them.
+    /// repeatability across them (runs of different plans are reported, with a warning, but
+    /// get no repeatability).
     #[arg(required = true, value_name = "RUN_DIR|STEPS.csv")]
     pub inputs: Vec<PathBuf>,
-    /// The HTML file to write; the plots (.svg) are written next to it. Default:
-    /// RUN_DIR/report.html for one run directory, else report.html in the current directory.
-    #[arg(long, value_name = "FILE")]
+    /// The HTML file to write; the plots (.svg) are written next to it. Default: report.html
+    /// in the run directory (for a steps CSV, in the CSV's directory). Required with several
+    /// inputs, whose combined report belongs to none of them.
+    #[arg(short = 'o', long, value_name = "FILE")]
     pub out: Option<PathBuf>,
+}
+
+/// Where the report goes: `--out`, else beside the one input (never the current directory,
+/// where the report and its many plots would land among unrelated files).
+fn destination(args: &ReportArgs) -> Result<PathBuf, BadInput> {
+    match (&args.out, args.inputs.as_slice()) {
+        (Some(out), _) => Ok(out.clone()),
+        (None, [one]) if one.is_dir() => Ok(one.join(gyrocal_run::rundir::REPORT_HTML)),
+        (None, [one]) => Ok(one
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty())
+            .unwrap_or(std::path::Path::new("."))
+            .join(gyrocal_run::rundir::REPORT_HTML)),
+        (None, many) => Err(BadInput(format!(
+            "{} inputs: say where their combined report goes with -o FILE (for example -o \
+             reports/combined.html; the plots are written beside it); each run directory keeps \
+             its own report.html",
+            many.len()
+        ))),
+    }
 }
 
 /// Runs `gyrocal report`: prints the path of the HTML written.
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
-    let out = match (&args.out, args.inputs.as_slice()) {
-        (Some(out), _) => out.clone(),
-        (None, [one]) if one.is_dir() => one.join(gyrocal_run::rundir::REPORT_HTML),
-        (None, _) => PathBuf::from(gyrocal_run::rundir::REPORT_HTML),
-    };
+    let out = destination(args)?;
     let report = render_many(&args.inputs).map_err(classify)?;
+    for w in &report.warnings {
+        eprintln!("gyrocal: warning: {w}");
+    }
     if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("{}: cannot create the directory", dir.display()))?;

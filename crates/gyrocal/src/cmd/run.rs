@@ -167,9 +167,11 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
 }
 
 fn open_run_dir(args: &RunArgs, plan: &Plan) -> anyhow::Result<(PathBuf, RunDir)> {
+    let virtual_time = args.simulate && args.sim_time_scale.is_none();
     let meta = RunMeta {
         gyrocal_version: env!("CARGO_PKG_VERSION").into(),
         simulated: args.simulate,
+        virtual_time,
         ..RunMeta::default()
     };
     // A directory whose creation was interrupted holds no data: the run starts in it.
@@ -186,8 +188,12 @@ fn open_run_dir(args: &RunArgs, plan: &Plan) -> anyhow::Result<(PathBuf, RunDir)
         return Ok((dir.clone(), run));
     }
     if let Some(dir) = &args.resume {
-        let run =
+        let mut run =
             RunDir::open_for_resume(dir, plan).map_err(|e| BadInput(format!("--resume: {e}")))?;
+        if virtual_time {
+            run.set_virtual_time()
+                .map_err(|e| BadInput(format!("--resume: {e}")))?;
+        }
         let done = run.done_steps().len();
         say!(
             "resuming {}: {done} of {} steps done, {} to go",
@@ -789,11 +795,13 @@ fn finish(
     out!("{out}");
     if let Some(t) = &summary.timing {
         out!(
-            "timing: elapsed {} (run clock), physical bound {}, ratio {:.4} (acquisition {})",
+            "timing: schedule {} (run clock), physical bound {}, ratio {:.4} (acquisition {}); \
+             elapsed {} with connecting and the stop",
             hms(t.elapsed_s),
             hms(t.bound_s),
             t.ratio,
-            t.acquisition.as_deref().unwrap_or("?")
+            t.acquisition.as_deref().unwrap_or("?"),
+            hms(summary.elapsed_s)
         );
     }
     if !args.no_report {
