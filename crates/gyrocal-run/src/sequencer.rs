@@ -420,6 +420,8 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
     pub async fn run(&mut self, mut stop: watch::Receiver<StopRequest>) -> RunSummary {
         use futures_util::FutureExt as _;
         self.origin = Instant::now();
+        // the run directory converts run-clock times into UTC from this instant
+        self.run.anchor_clock(self.offset_s);
         let run_span =
             tracing::info_span!("run", plan = %self.plan.name(), dir = %self.run.path().display());
         let outcome = {
