@@ -279,8 +279,9 @@ pub enum RunError {
     },
     /// `--resume` with a plan whose hash differs from the run's.
     #[error(
-        "{}: the plan changed since this run started (run's plan hash {run_hash}, this plan's {plan_hash}); resume with the original plan or start a new run",
-        path.display()
+        "{}: the plan changed since this run started: {}; resume without a plan (the run's own is in its manifest) or start a new run",
+        path.display(),
+        if changes.is_empty() { format!("plan hash {run_hash} vs {plan_hash}") } else { changes.join("; ") }
     )]
     PlanChanged {
         /// The manifest.
@@ -289,6 +290,17 @@ pub enum RunError {
         run_hash: String,
         /// Hash of the plan given now.
         plan_hash: String,
+        /// What differs, one entry per key: `[dmm] range_v: 10 (run) vs 100 (this plan)`.
+        changes: Vec<String>,
+    },
+    /// A directory that holds no run (no `manifest.json`).
+    #[error(
+        "{} is not a gyrocal run directory (it has no manifest.json); give the directory a run wrote",
+        path.display()
+    )]
+    NotARun {
+        /// The directory.
+        path: PathBuf,
     },
     /// `--resume` of a run that is already complete.
     #[error("{}: the run is already complete; nothing to resume", path.display())]
@@ -1068,10 +1080,12 @@ impl RunDir {
         let mpath = path.join(MANIFEST_JSON);
         let plan_hash = plan.hash();
         if manifest.plan_hash != plan_hash {
+            let changes = plan_changes(&manifest.plan, plan);
             return Err(RunError::PlanChanged {
                 path: mpath,
                 run_hash: manifest.plan_hash,
                 plan_hash,
+                changes,
             });
         }
         if manifest.status == Status::Complete {
@@ -1601,6 +1615,54 @@ pub fn read_capped(path: &Path, cap: u64) -> Result<Vec<u8>, RunError> {
         return Err(too_large());
     }
     Ok(bytes)
+}
+
+/// The plan a run was started with, from its manifest: `gyrocal run --resume DIR` needs no
+/// plan file. A directory without a manifest is said to be no run directory.
+pub fn run_plan(dir: &Path) -> Result<Plan, RunError> {
+    let path = dir.join(MANIFEST_JSON);
+    if !path.exists() {
+        return Err(RunError::NotARun {
+            path: dir.to_path_buf(),
+        });
+    }
+    read_manifest(&path).map(|m| m.plan)
+}
+
+/// The keys whose values differ between the plan of a run and another plan, as
+/// `[section] key: run's value (run) vs other value (this plan)`, in the plan file's order.
+pub fn plan_changes(run: &Plan, other: &Plan) -> Vec<String> {
+    let (Ok(a), Ok(b)) = (
+        serde_json::to_value(run.to_doc()),
+        serde_json::to_value(other.to_doc()),
+    ) else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    for section in ["plan", "table", "dmm", "simulation"] {
+        let empty = serde_json::Map::new();
+        let sa = a.get(section).and_then(|v| v.as_object()).unwrap_or(&empty);
+        let sb = b.get(section).and_then(|v| v.as_object()).unwrap_or(&empty);
+        let mut keys: Vec<&String> = sa.keys().chain(sb.keys()).collect();
+        keys.dedup();
+        let mut seen = std::collections::BTreeSet::new();
+        for key in keys {
+            if !seen.insert(key) {
+                continue;
+            }
+            let (va, vb) = (sa.get(key), sb.get(key));
+            if va != vb {
+                let show =
+                    |v: Option<&serde_json::Value>| v.map_or("(none)".into(), |v| v.to_string());
+                out.push(format!(
+                    "[{section}] {key}: {} (run) vs {} (this plan)",
+                    show(va),
+                    show(vb)
+                ));
+            }
+        }
+    }
+    out
 }
 
 fn read_manifest(path: &Path) -> Result<Manifest, RunError> {

@@ -301,6 +301,10 @@ pub struct RunSummary {
     pub elapsed_s: f64,
     /// Where the table was left, as far as gyrocal could confirm.
     pub table: TableRest,
+    /// Whether resuming the same plan can complete the run. False when the plan itself must
+    /// change (every reading of a step overloaded: the range is too small), which makes it
+    /// another plan: a new run.
+    pub resumable: bool,
 }
 
 /// What the steps share: how to reach the rate and how to read.
@@ -483,6 +487,7 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
             timing: Some(timing.clone()),
             elapsed_s,
             table,
+            resumable: false,
         };
         let result = self
             .run
@@ -508,6 +513,7 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
             _ => Status::Failed,
         };
         let reason = error.to_string();
+        let resumable = !matches!(error, SequenceError::AllOverloaded { .. });
         tracing::warn!(%reason, ?status, "run stopping");
         // Table first: it is the dangerous one. A table that faulted or stopped answering gets
         // the emergency path too (rate-table.md: "for a second interrupt or a fault"): a
@@ -545,6 +551,7 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
             timing: None,
             elapsed_s,
             table,
+            resumable,
         }
     }
 

@@ -289,7 +289,77 @@ fn resume_with_a_changed_plan_is_refused() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("plan"), "{err}");
+    // the key that changed, with both values, not two hashes
+    assert!(
+        err.contains("[plan] samples_per_rate: 50 (run) vs 60 (this plan)"),
+        "{err}"
+    );
+}
+
+/// A failed run's closing hint is a command that works as printed: `gyrocal run --simulate
+/// --resume DIR`, with no plan (the run's own is in its manifest); the resumed session
+/// completes the run.
+#[test]
+fn a_run_resumes_from_its_directory_alone_with_the_printed_command() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let out = gyrocal()
+        .arg("run")
+        .arg(config("quick.toml"))
+        .args(["--simulate", "--sim-fault", "table:trip@demand3", "-o"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    let hint = stderr
+        .lines()
+        .find_map(|l| {
+            l.split_once("resume with: ")
+                .map(|(_, c)| c.trim().to_string())
+        })
+        .unwrap_or_else(|| panic!("no resume hint in:\n{stderr}"));
+    assert_eq!(
+        hint,
+        format!("gyrocal run --simulate --resume {}", dir.display())
+    );
+    let words: Vec<&str> = hint.split(' ').skip(1).collect();
+    let out = gyrocal().args(&words).output().unwrap();
+    let resumed = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{resumed}");
+    check_complete(&dir, 5, 50);
+    assert!(resumed.contains("step 5 done"), "{resumed}");
+
+    // a directory that is not a run says so
+    let out = gyrocal()
+        .args(["run", "--simulate", "--resume"])
+        .arg(tmp.path())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("is not a gyrocal run directory"), "{err}");
+}
+
+/// When the plan itself must change (every reading overloaded: the range is too small), the
+/// run cannot be resumed, and gyrocal does not suggest it.
+#[test]
+fn an_overloaded_range_is_not_followed_by_a_resume_that_cannot_work() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = bad_plan(tmp.path(), "range_v = 10", "range_v = 0.1");
+    let dir = tmp.path().join("run");
+    let out = gyrocal()
+        .arg("run")
+        .arg(&plan)
+        .args(["--simulate", "-o"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("is range_v too small?"), "{stderr}");
+    assert!(!stderr.contains("resume with"), "{stderr}");
+    assert!(stderr.contains("start a new run"), "{stderr}");
 }
 
 fn bad_plan(dir: &Path, find: &str, replace: &str) -> PathBuf {

@@ -35,8 +35,10 @@ use crate::cmd::check::{hms, load_plan};
 /// Arguments of `gyrocal run`.
 #[derive(Debug, Args)]
 pub struct RunArgs {
-    /// The test plan (TOML).
-    pub plan: PathBuf,
+    /// The test plan (TOML). Not needed with --resume: the run's own plan is in its manifest
+    /// (given anyway, it must be the same plan; the keys that differ are named).
+    #[arg(required_unless_present = "resume")]
+    pub plan: Option<PathBuf>,
     /// Run against the in-process simulated bench built from the plan's `[simulation]`
     /// section, in virtual time (a full plan takes seconds).
     #[arg(long)]
@@ -116,7 +118,15 @@ pub const EXIT_ABORTED: u8 = 130;
 
 /// Runs `gyrocal run`; returns the process exit code.
 pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
-    let mut plan = load_plan(&args.plan)?;
+    let (mut plan, plan_path) = match (&args.plan, &args.resume) {
+        (Some(path), _) => (load_plan(path)?, path.clone()),
+        (None, Some(dir)) => {
+            let plan = gyrocal_run::rundir::run_plan(dir)
+                .map_err(|e| BadInput(format!("--resume: {e}")))?;
+            (plan, dir.join(gyrocal_run::rundir::MANIFEST_JSON))
+        }
+        (None, None) => return Err(BadInput("a plan (or --resume DIR) is needed".into()).into()),
+    };
     if let Some(p) = &args.dmm_port {
         let port = Port::parse(p).map_err(|e| BadInput(format!("--dmm-port: {e}")))?;
         crate::cmd::check::check_port(Path::new("--dmm-port"), "port", &port)?;
@@ -136,7 +146,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
         check_resume_mode(dir, args.simulate)?;
     }
     // what `check` warns about, said again before the instruments move
-    for w in crate::cmd::check::model_warnings(&plan, &args.plan) {
+    for w in crate::cmd::check::model_warnings(&plan, &plan_path) {
         say!("gyrocal: warning: {w}");
     }
     let mut faults = Vec::with_capacity(args.sim_faults.len());
@@ -206,7 +216,7 @@ fn open_run_dir(args: &RunArgs, plan: &Plan) -> anyhow::Result<(PathBuf, RunDir)
     }
     let dir = match &args.out {
         Some(d) => d.clone(),
-        None => default_dir(&args.plan),
+        None => default_dir(args.plan.as_deref().unwrap_or(Path::new("run"))),
     };
     let run = RunDir::create(&dir, plan, meta).map_err(|e| BadInput(e.to_string()))?;
     attach_log(&dir);
@@ -736,7 +746,9 @@ fn line(tty: bool, bar: &indicatif::ProgressBar, text: String) {
 
 /// The command line that continues this run, with the options it was started with.
 fn resume_command(args: &RunArgs, dir: &Path) -> String {
-    let mut c = format!("gyrocal run {}", args.plan.display());
+    // the run's plan is in its manifest: the resume needs no plan file (one that was edited
+    // since would be refused)
+    let mut c = "gyrocal run".to_string();
     if args.simulate {
         c.push_str(" --simulate");
     }
@@ -779,11 +791,17 @@ fn finish(
             return Ok(signal.map_or(EXIT_ABORTED, |s| s.exit_code));
         }
         Status::Failed | Status::Running => {
+            let next = if summary.resumable {
+                format!("resume with: {}", resume_command(args, dir))
+            } else {
+                // the plan must change, so the same run cannot go on
+                "fix the plan and start a new run (a changed plan cannot resume this one)"
+                    .to_string()
+            };
             say!(
-                "gyrocal: run failed: {}\n  {} step(s) recorded this session; resume with: {}\n  {rest_line}",
+                "gyrocal: run failed: {}\n  {} step(s) recorded this session; {next}\n  {rest_line}",
                 summary.reason.as_deref().unwrap_or("unknown"),
                 summary.steps_recorded,
-                resume_command(args, dir)
             );
             return Ok(1);
         }
