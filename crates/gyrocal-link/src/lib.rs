@@ -49,8 +49,8 @@ pub use prologix::{
 pub use scripted::{ScriptStep, ScriptedTransport};
 #[cfg(unix)]
 pub use serial::pseudo_terminal;
-pub use socket::{ConnectFuture, Connector, SocketTransport, tcp_connector};
 pub use serial::{Framing, LinkOptions, SUPPORTED_BAUDS, open_serial};
+pub use socket::{ConnectFuture, Connector, SocketTransport, tcp_connector};
 pub use stream::{AsyncStream, DynStream, StreamTransport, memory_pair};
 pub use tokio_serial::SerialStream;
 

@@ -306,7 +306,11 @@ pub async fn open(spec: &str, options: &LinkOptions) -> Result<Link, LinkError> 
     match parse_port(spec)? {
         PortSpec::Tcp(addr) if options.scpi_socket => {
             let connector = tcp_connector(addr, options.connect_timeout);
-            let name = format!("{}{}", crate::TCP_SCHEME, spec.trim_start_matches(crate::TCP_SCHEME));
+            let name = format!(
+                "{}{}",
+                crate::TCP_SCHEME,
+                spec.trim_start_matches(crate::TCP_SCHEME)
+            );
             let mut t = SocketTransport::connect(name, connector).await?;
             t.discard_input().await?;
             Ok(Link::Socket(t))

@@ -77,16 +77,16 @@ impl SocketTransport {
     /// Closes the connection and opens a new one (input buffered from the old one is gone).
     pub async fn reconnect(&mut self) -> Result<(), LinkError> {
         // a polite close; a peer that is gone already is no error here
-        let _ = tokio::time::timeout(
-            Duration::from_millis(100),
-            self.inner.get_mut().shutdown(),
-        )
-        .await;
+        let _ =
+            tokio::time::timeout(Duration::from_millis(100), self.inner.get_mut().shutdown()).await;
         let name = self.inner.describe().to_string();
         let stream = (self.connect)().await?;
         self.inner = StreamTransport::new(stream, name);
         self.reconnects += 1;
-        tracing::debug!(device = self.inner.describe(), "socket reconnected (device clear)");
+        tracing::debug!(
+            device = self.inner.describe(),
+            "socket reconnected (device clear)"
+        );
         Ok(())
     }
 }
@@ -175,7 +175,9 @@ mod tests {
             scpi_socket: true,
             ..crate::LinkOptions::default()
         };
-        let mut link = crate::open(&format!("tcp://{addr}"), &options).await.unwrap();
+        let mut link = crate::open(&format!("tcp://{addr}"), &options)
+            .await
+            .unwrap();
         assert!(matches!(link, crate::Link::Socket(_)));
         assert!(!link.needs_remote_command());
         link.send_line("*IDN?").await.unwrap();
@@ -184,7 +186,10 @@ mod tests {
         let reply = link.read_line(Some(Duration::from_secs(2))).await.unwrap();
         assert_eq!(reply, "FRESH");
         let (old_rest, new_first) = server.await.unwrap();
-        assert!(old_rest.is_empty(), "bytes after the query on the old socket: {old_rest:?}");
+        assert!(
+            old_rest.is_empty(),
+            "bytes after the query on the old socket: {old_rest:?}"
+        );
         assert_eq!(new_first, b"SYST:ERR?\n");
     }
 

@@ -177,7 +177,10 @@ pub fn check(model: Model, settings: &DcVolts, mem_option: bool) -> Result<(), F
     if settings.line_hz != 50 && settings.line_hz != 60 {
         return Err(FactsError {
             key: "line_hz",
-            message: format!("line frequency {} Hz is neither 50 nor 60", settings.line_hz),
+            message: format!(
+                "line frequency {} Hz is neither 50 nor 60",
+                settings.line_hz
+            ),
         });
     }
     if mem_option && !model.has_mem_option() {

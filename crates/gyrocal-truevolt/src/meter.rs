@@ -238,7 +238,11 @@ impl<T: Transport> TruevoltMeter<T> {
                 version: field(3),
             });
         }
-        if !want.personalities().iter().any(|p| p.eq_ignore_ascii_case(&said)) {
+        if !want
+            .personalities()
+            .iter()
+            .any(|p| p.eq_ignore_ascii_case(&said))
+        {
             return Err(refuse(format!(
                 "the plan names a {want} but *IDN? answered {raw:?}, not a Truevolt"
             )));
@@ -394,8 +398,8 @@ impl<T: Transport> TruevoltMeter<T> {
         let mut first = true;
         for c in timing.stream_chunks(k) {
             let command = format!("DATA:REM? {c},WAIT");
-            let mut expected = timing.reading_time() * u32::try_from(c).unwrap_or(u32::MAX)
-                + timing.transfer(c);
+            let mut expected =
+                timing.reading_time() * u32::try_from(c).unwrap_or(u32::MAX) + timing.transfer(c);
             if first {
                 expected += timing.defaults.arm_time;
                 first = false;
@@ -570,14 +574,21 @@ impl<T: Transport> TruevoltMeter<T> {
         self.identity = Some(id);
         match self.settings {
             Some(s) => {
-                self.apply(&s, "re-applying the configuration after re-establishing the link")
-                    .await
+                self.apply(
+                    &s,
+                    "re-applying the configuration after re-establishing the link",
+                )
+                .await
             }
             None => self.expect_no_errors("re-establishing the link").await,
         }
     }
 
-    async fn measure_stream(&mut self, n: usize, timing: &TruevoltTiming) -> Result<Acquired, Error> {
+    async fn measure_stream(
+        &mut self,
+        n: usize,
+        timing: &TruevoltTiming,
+    ) -> Result<Acquired, Error> {
         let mut acc = Acquired::default();
         let mut readings = Vec::with_capacity(n);
         while readings.len() < n {
@@ -613,7 +624,10 @@ impl<T: Transport> TruevoltMeter<T> {
                 }));
             }
             let base = acc.readings.len();
-            match self.fetch_retrying(k, epoch, base, n, timing, &mut acc).await {
+            match self
+                .fetch_retrying(k, epoch, base, n, timing, &mut acc)
+                .await
+            {
                 Ok(r) => acc.readings.extend(r),
                 Err(e)
                     if e.kind() == gyrocal_meter::ErrorKind::ReadingsLost
@@ -709,11 +723,18 @@ impl<T: Transport + 'static> Multimeter for TruevoltMeter<T> {
             .map(|t| Box::new(t) as Box<dyn TimingModel>)
     }
 
-    async fn measure(&mut self, n: usize, may_defer: bool) -> Result<Measured<PendingFetch>, Error> {
+    async fn measure(
+        &mut self,
+        n: usize,
+        may_defer: bool,
+    ) -> Result<Measured<PendingFetch>, Error> {
         let timing = self.configured()?;
         match timing.acquisition {
             Acquisition::Memory => self.measure_memory(n, may_defer, &timing).await,
-            _ => self.measure_stream(n, &timing).await.map(Measured::Complete),
+            _ => self
+                .measure_stream(n, &timing)
+                .await
+                .map(Measured::Complete),
         }
     }
 

@@ -287,7 +287,10 @@ mod tests {
         // 500 readings: 20 ms + 500 x 41.5 ms + the last chunk's transfer
         let c = t.cost(500, true);
         let last = Duration::from_micros(250) * u32::try_from(*chunks.last().unwrap()).unwrap();
-        assert_eq!(c.in_step, Duration::from_millis(20) + Duration::from_micros(20_750_000) + last);
+        assert_eq!(
+            c.in_step,
+            Duration::from_millis(20) + Duration::from_micros(20_750_000) + last
+        );
         assert_eq!(c.deferred, Duration::ZERO);
         assert_eq!(
             c.bound,

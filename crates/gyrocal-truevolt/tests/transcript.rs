@@ -42,7 +42,13 @@ impl Transport for Lan {
 }
 
 fn readings(k: usize, v: f64) -> String {
-    vec![format!("{v:+.8E}").replace("E", "E+0").replace("E+0-", "E-0"); k].join(",")
+    vec![
+        format!("{v:+.8E}")
+            .replace("E", "E+0")
+            .replace("E+0-", "E-0");
+        k
+    ]
+    .join(",")
 }
 
 fn options(model: Model) -> TruevoltOptions {
