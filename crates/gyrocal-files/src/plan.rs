@@ -462,6 +462,7 @@ fn default_model() -> String {
     DmmModel::Hp34401a.as_str().into()
 }
 
+#[allow(clippy::ptr_arg)] // serde's skip_serializing_if passes a &String
 fn is_default_model(m: &String) -> bool {
     m.eq_ignore_ascii_case(DmmModel::Hp34401a.as_str())
 }

@@ -197,7 +197,7 @@ impl TruevoltTiming {
         }
         .max(1);
         let mut out = vec![size; n / size];
-        if n % size > 0 {
+        if !n.is_multiple_of(size) {
             out.push(n % size);
         }
         out
