@@ -42,8 +42,56 @@ pub struct BenchConfig {
     pub gyro: GyroConfig,
     /// The multimeter.
     pub dmm: DmmConfig,
-    /// How the multimeter is reached. Default its RS-232 port.
+    /// How the multimeter is reached. Default its RS-232 port. A Truevolt ([`DmmModel`]) is
+    /// always reached on its LAN socket, whatever this says.
     pub dmm_link: DmmLink,
+    /// Which multimeter. Default the HP 34401A (`dmm` configures it); a Truevolt takes its
+    /// line frequency, noise and power-off time from `dmm` and the rest from `truevolt`.
+    pub dmm_model: DmmModel,
+    /// The Truevolt's own settings (its model is `dmm_model`'s).
+    pub truevolt: crate::truevolt::TruevoltConfig,
+}
+
+/// Which simulated multimeter the bench has.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum DmmModel {
+    /// The HP 34401A.
+    #[default]
+    #[serde(rename = "34401a")]
+    Hp34401a,
+    /// A Keysight Truevolt.
+    #[serde(untagged)]
+    Truevolt(gyrocal_truevolt::Model),
+}
+
+impl DmmModel {
+    /// The Truevolt model, if the meter is one.
+    pub fn truevolt(self) -> Option<gyrocal_truevolt::Model> {
+        match self {
+            DmmModel::Hp34401a => None,
+            DmmModel::Truevolt(m) => Some(m),
+        }
+    }
+
+    /// The name used by `gyrocal sim --dmm` and plans (`34401a`, `34461a`, ...).
+    pub fn key(self) -> &'static str {
+        match self {
+            DmmModel::Hp34401a => "34401a",
+            DmmModel::Truevolt(m) => m.key(),
+        }
+    }
+}
+
+impl std::str::FromStr for DmmModel {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s.eq_ignore_ascii_case("34401a") {
+            return Ok(DmmModel::Hp34401a);
+        }
+        s.parse::<gyrocal_truevolt::Model>()
+            .map(DmmModel::Truevolt)
+            .map_err(|_| format!("{s:?} is not a meter (34401a, 34460a, 34461a, 34465a, 34470a)"))
+    }
 }
 
 /// How the simulated multimeter is reached.
@@ -55,6 +103,8 @@ pub enum DmmLink {
     Rs232,
     /// GPIB through a simulated Prologix controller (the meter in GPIB mode behind it).
     Prologix(crate::prologix::PrologixConfig),
+    /// A LAN SCPI socket (a Truevolt's only link here).
+    Lan,
 }
 
 impl Default for BenchConfig {
@@ -67,6 +117,8 @@ impl Default for BenchConfig {
             gyro: GyroConfig::default(),
             dmm: DmmConfig::default(),
             dmm_link: DmmLink::default(),
+            dmm_model: DmmModel::default(),
+            truevolt: crate::truevolt::TruevoltConfig::default(),
         }
     }
 }
@@ -103,6 +155,8 @@ pub struct BenchHandle {
     pub dmm: DmmHandle,
     /// The gyro's true coefficients.
     pub truth: GyroTruth,
+    /// A Truevolt's LAN port (more connections, reconnects); `None` for a 34401A.
+    pub lan: Option<crate::truevolt::LanPort>,
 }
 
 /// A running bench: the drivers' transports and the simulators' handle.
@@ -128,7 +182,11 @@ impl Bench {
     /// in-memory pipes. Must be called inside a tokio runtime; fine in paused virtual time.
     pub fn spawn(config: BenchConfig) -> Bench {
         let (table_link, table_dev) = memory_pair("sim-table");
-        let (dmm_link, dmm_dev) = memory_pair("sim-34401a");
+        let name = match config.dmm_model {
+            DmmModel::Hp34401a => "sim-34401a".to_string(),
+            DmmModel::Truevolt(m) => format!("sim-{}", m.key()),
+        };
+        let (dmm_link, dmm_dev) = memory_pair(name);
         let handle = Bench::spawn_on(config, dmm_dev, table_dev);
         Bench {
             dmm: dmm_link,
@@ -154,6 +212,8 @@ impl Bench {
             gyro,
             dmm: mut dmm_config,
             dmm_link,
+            dmm_model,
+            truevolt,
         } = config;
         let time_scale = if time_scale.is_finite() && time_scale > 0.0 {
             time_scale
@@ -170,11 +230,30 @@ impl Bench {
         };
         let signal = GyroSignal::new(gyro, table_handle.clone(), derive_seed(seed, 2));
         let truth = signal.truth();
-        let dmm_handle = match dmm_link {
-            DmmLink::Rs232 => {
+        let mut lan = None;
+        let dmm_handle = match (dmm_model, dmm_link) {
+            (DmmModel::Truevolt(model), _) => {
+                let config = crate::truevolt::TruevoltConfig {
+                    model,
+                    line_hz: dmm_config.line_hz,
+                    noise_v: dmm_config.noise_v,
+                    power_off_s: dmm_config.power_off_s,
+                    time_scale,
+                    ..truevolt
+                };
+                let (handle, port) = crate::truevolt::SimTruevolt::spawn(
+                    config,
+                    Some(Box::new(dmm)),
+                    Box::new(signal),
+                    derive_seed(seed, 3),
+                );
+                lan = Some(port);
+                handle
+            }
+            (DmmModel::Hp34401a, DmmLink::Rs232 | DmmLink::Lan) => {
                 SimDmm::spawn(dmm, dmm_config, Box::new(signal), derive_seed(seed, 3))
             }
-            DmmLink::Prologix(ctl) => {
+            (DmmModel::Hp34401a, DmmLink::Prologix(ctl)) => {
                 // the controller task lives as long as its host link; its handle is not needed
                 let (_controller, meter) = crate::prologix::spawn_gpib_meter(
                     dmm,
@@ -190,6 +269,7 @@ impl Bench {
             table: table_handle,
             dmm: dmm_handle,
             truth,
+            lan,
         }
     }
 }

@@ -17,7 +17,7 @@
 //! The gyro's own white noise is switched off, so `noise_v` alone sets the reading scatter
 //! and a plan reads as what it means.
 
-use gyrocal_files::{Framing, Plan, Port, TableDialect};
+use gyrocal_files::{DmmModel, Framing, Plan, Port, TableDialect};
 
 use crate::bench::{BenchConfig, DmmLink, TableWire};
 
@@ -47,8 +47,18 @@ pub fn bench_config(plan: &Plan) -> BenchConfig {
         TableDialect::Acl => TableWire::Acl,
         TableDialect::Aerosmith => TableWire::Aerosmith(Default::default()),
     };
-    // a meter the plan reaches through a Prologix controller sits behind a simulated one
-    if matches!(plan.dmm().port, Port::Gpib(_)) {
+    // a Truevolt is served on its LAN socket; a 34401A the plan reaches through a Prologix
+    // controller sits behind a simulated one
+    b.dmm_model = match plan.dmm().model {
+        DmmModel::Hp34401a => crate::bench::DmmModel::Hp34401a,
+        DmmModel::K34460a => crate::bench::DmmModel::Truevolt(gyrocal_truevolt::Model::M34460A),
+        DmmModel::K34461a => crate::bench::DmmModel::Truevolt(gyrocal_truevolt::Model::M34461A),
+        DmmModel::K34465a => crate::bench::DmmModel::Truevolt(gyrocal_truevolt::Model::M34465A),
+        DmmModel::K34470a => crate::bench::DmmModel::Truevolt(gyrocal_truevolt::Model::M34470A),
+    };
+    if plan.dmm().model.is_truevolt() {
+        b.dmm_link = DmmLink::Lan;
+    } else if matches!(plan.dmm().port, Port::Gpib(_)) {
         b.dmm_link = DmmLink::Prologix(Default::default());
     }
     b.table.rate_noise_std = s.rate_noise_dps;

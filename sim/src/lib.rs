@@ -1,7 +1,7 @@
 //! # gyrocal-sim
 //!
 //! The simulated bench gyrocal's tests (and operators in training) run against: an HP 34401A
-//! multimeter, an ACUTROL-style rate table (also served in the experimental Ideal Aerosmith ASCII
+//! multimeter (or a Keysight Truevolt on its LAN socket, [`truevolt`]), an ACUTROL-style rate table (also served in the experimental Ideal Aerosmith ASCII
 //! dialect, [`table::aerosmith`], with the same motion model) and the hemispherical resonator
 //! gyro that sits on it.
 //!
@@ -21,5 +21,6 @@ pub mod gyro;
 pub mod prologix;
 pub mod signal;
 pub mod table;
+pub mod truevolt;
 
 pub use signal::SignalSource;

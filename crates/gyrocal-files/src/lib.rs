@@ -22,7 +22,7 @@ pub mod rundir;
 mod time;
 
 pub use plan::{
-    Acquire, Acquisition, DmmSettings, Framing, Location, Plan, PlanDoc, PlanError, Port,
+    Acquire, Acquisition, DmmModel, DmmSettings, Framing, Location, Plan, PlanDoc, PlanError, Port,
     Simulation, Step, TableDialect, TableSettings,
 };
 pub use rundir::{

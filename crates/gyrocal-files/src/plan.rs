@@ -58,6 +58,11 @@ pub const MAX_DURATION_S: f64 = 86_400.0;
 pub const BAUD_RATES: [u32; 6] = [300, 600, 1200, 2400, 4800, 9600];
 /// Integration times (power-line cycles) the HP 34401A offers for DC volts.
 pub const NPLC_VALUES: [f64; 5] = [0.02, 0.2, 1.0, 10.0, 100.0];
+/// Every integration time some supported meter offers (the 34401A's and the Truevolt
+/// 34465A/70A's 0.06). The plan refuses anything else at once, with the line and column;
+/// which of these the named model offers is the driver crate's fact, checked by the CLI
+/// (`gyrocal check`, `gyrocal run`) before anything opens.
+pub const KNOWN_NPLC_VALUES: [f64; 6] = [0.02, 0.06, 0.2, 1.0, 10.0, 100.0];
 /// DC voltage ranges of the HP 34401A, in volts.
 pub const RANGES_V: [f64; 5] = [0.1, 1.0, 10.0, 100.0, 1000.0];
 /// Mains frequencies the meter integrates against.
@@ -225,6 +230,7 @@ struct RawTable {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawDmm {
+    model: Option<S<String>>,
     port: S<String>,
     baud: Option<S<RawInt>>,
     framing: Option<S<String>>,
@@ -429,6 +435,11 @@ pub struct TableDoc {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DmmDoc {
+    /// `34401a` (the default), `34460a`, `34461a`, `34465a` or `34470a`. Left out of the
+    /// serialised form when it is the default, so a 34401A plan's hash is what it was before
+    /// the key existed.
+    #[serde(default = "default_model", skip_serializing_if = "is_default_model")]
+    pub model: String,
     /// Serial device path or `tcp://HOST:PORT`.
     pub port: String,
     /// Serial baud rate.
@@ -447,9 +458,62 @@ pub struct DmmDoc {
     pub acquisition: String,
 }
 
+fn default_model() -> String {
+    DmmModel::Hp34401a.as_str().into()
+}
+
+#[allow(clippy::ptr_arg)] // serde's skip_serializing_if passes a &String
+fn is_default_model(m: &String) -> bool {
+    m.eq_ignore_ascii_case(DmmModel::Hp34401a.as_str())
+}
+
 // ---------------------------------------------------------------------------------------------
 // Validated types
 // ---------------------------------------------------------------------------------------------
+
+/// The multimeter model a plan names (`[dmm] model`). The plan knows the names only; each
+/// model's facts (NPLC values, memory) are its driver crate's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum DmmModel {
+    /// HP 34401A on RS-232 or GPIB (the default).
+    #[default]
+    Hp34401a,
+    /// Keysight Truevolt 34460A, over LAN.
+    K34460a,
+    /// Keysight Truevolt 34461A, over LAN.
+    K34461a,
+    /// Keysight Truevolt 34465A, over LAN.
+    K34465a,
+    /// Keysight Truevolt 34470A, over LAN.
+    K34470a,
+}
+
+impl DmmModel {
+    /// Every model.
+    pub const ALL: [DmmModel; 5] = [
+        DmmModel::Hp34401a,
+        DmmModel::K34460a,
+        DmmModel::K34461a,
+        DmmModel::K34465a,
+        DmmModel::K34470a,
+    ];
+
+    /// The name used in plan files.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            DmmModel::Hp34401a => "34401a",
+            DmmModel::K34460a => "34460a",
+            DmmModel::K34461a => "34461a",
+            DmmModel::K34465a => "34465a",
+            DmmModel::K34470a => "34470a",
+        }
+    }
+
+    /// True for a Keysight Truevolt (reached over LAN).
+    pub fn is_truevolt(self) -> bool {
+        self != DmmModel::Hp34401a
+    }
+}
 
 /// Where an instrument is connected.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -618,6 +682,8 @@ pub struct TableSettings {
 /// The validated `[dmm]` section.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DmmSettings {
+    /// The meter's model.
+    pub model: DmmModel,
     /// Where the multimeter is connected.
     pub port: Port,
     /// Serial baud rate (one of [`BAUD_RATES`]).
@@ -626,7 +692,8 @@ pub struct DmmSettings {
     pub framing: Framing,
     /// DC range, V (one of [`RANGES_V`]).
     pub range_v: f64,
-    /// Integration time in power-line cycles (one of [`NPLC_VALUES`]).
+    /// Integration time in power-line cycles (one of [`KNOWN_NPLC_VALUES`]; the model's own
+    /// list is checked by its driver crate).
     pub nplc: f64,
     /// Autozero on (doubles each reading's time).
     pub autozero: bool,
@@ -852,6 +919,7 @@ impl Plan {
                 at_rate_timeout_s: self.table.at_rate_timeout.as_secs_f64(),
             },
             dmm: DmmDoc {
+                model: self.dmm.model.as_str().into(),
                 port: self.dmm.port.to_string(),
                 baud: self.dmm.baud.into(),
                 framing: self.dmm.framing.as_str().into(),
@@ -1007,6 +1075,7 @@ fn raw_to_doc(raw: RawFile, sp: &mut Spans) -> Result<PlanDoc, (&'static str, St
         at_rate_timeout_s: sp.opt("table.at_rate_timeout_s", t.at_rate_timeout_s, 60.0),
     };
     let dmm = DmmDoc {
+        model: sp.opt("dmm.model", m.model, default_model()),
         port: sp.take("dmm.port", m.port),
         baud: sp.int("dmm.baud", m.baud, 9600)?,
         framing: sp.opt("dmm.framing", m.framing, "8N2".into()),
@@ -1256,7 +1325,28 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
     let settle = cx.duration("plan.settle_s", p.settle_s, false)?;
 
     // [dmm]
+    let model = DmmModel::ALL
+        .into_iter()
+        .find(|d| d.as_str().eq_ignore_ascii_case(m.model.trim()))
+        .ok_or_else(|| {
+            cx.err(
+                "dmm.model",
+                format!(
+                    "must be \"34401a\", \"34460a\", \"34461a\", \"34465a\" or \"34470a\" (got {:?})",
+                    m.model
+                ),
+            )
+        })?;
     let dmm_port = cx.port("dmm.port", &m.port)?;
+    if model.is_truevolt() && !matches!(dmm_port, Port::Tcp { .. }) {
+        return Err(cx.err(
+            "dmm.port",
+            format!(
+                "a {} is reached over LAN: use tcp://HOST:5025 (got {dmm_port})",
+                model.as_str()
+            ),
+        ));
+    }
     if dmm_port == table_port {
         return Err(cx.err(
             "dmm.port",
@@ -1276,7 +1366,7 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
         }
     };
     let range_v = cx.one_of_f64("dmm.range_v", m.range_v, &RANGES_V)?;
-    let nplc = cx.one_of_f64("dmm.nplc", m.nplc, &NPLC_VALUES)?;
+    let nplc = cx.one_of_f64("dmm.nplc", m.nplc, &KNOWN_NPLC_VALUES)?;
     let line_hz = cx.one_of_u32("dmm.line_hz", m.line_hz, &LINE_HZ)?;
     let acquisition = match m.acquisition.to_ascii_lowercase().as_str() {
         "auto" => Acquisition::Auto,
@@ -1346,6 +1436,7 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
             at_rate_timeout: timeout,
         },
         dmm: DmmSettings {
+            model,
             port: dmm_port,
             baud: dmm_baud,
             framing,

@@ -510,3 +510,52 @@ fn plan_files_larger_than_the_cap_are_refused_before_being_read_whole() {
     let err = Plan::from_file(&path).unwrap_err();
     assert!(err.to_string().contains("big.toml"), "{err}");
 }
+
+#[test]
+fn the_meter_model_defaults_to_the_34401a_and_keeps_the_hash() {
+    use gyrocal_files::DmmModel;
+    let plain = parse(GOOD).unwrap();
+    assert_eq!(plain.dmm().model, DmmModel::Hp34401a);
+    let spelled = parse(&GOOD.replace(
+        "port = \"/dev/ttyUSB0\"",
+        "model = \"34401A\"\nport = \"/dev/ttyUSB0\"",
+    ))
+    .unwrap();
+    assert_eq!(
+        plain.hash(),
+        spelled.hash(),
+        "a spelled-out default changes nothing"
+    );
+    let doc = serde_json::to_string(&plain.to_doc()).unwrap();
+    assert!(!doc.contains("model"), "the default is left out: {doc}");
+    let tv = parse(&GOOD.replace(
+        "port = \"/dev/ttyUSB0\"",
+        "model = \"34461a\"\nport = \"tcp://10.0.0.9:5025\"",
+    ))
+    .unwrap();
+    assert_eq!(tv.dmm().model, DmmModel::K34461a);
+    assert_ne!(tv.hash(), plain.hash());
+}
+
+#[test]
+fn a_truevolt_needs_a_tcp_port_and_unknown_models_are_refused() {
+    let e = bad(
+        "port = \"/dev/ttyUSB0\"",
+        "model = \"34465a\"\nport = \"/dev/ttyUSB0\"",
+    );
+    assert_at(&e, 11, "port");
+    assert!(e.to_string().contains("tcp://HOST:5025"), "{e}");
+    let e = bad(
+        "port = \"/dev/ttyUSB0\"",
+        "model = \"34410a\"\nport = \"/dev/ttyUSB0\"",
+    );
+    assert_at(&e, 10, "model");
+    // 0.06 is some meter's NPLC: the plan takes it, the CLI checks it against the model
+    assert!(
+        parse(&GOOD.replace(
+            "port = \"/dev/ttyUSB0\"",
+            "port = \"/dev/ttyUSB0\"\nnplc = 0.06"
+        ))
+        .is_ok()
+    );
+}

@@ -35,6 +35,7 @@ mod open;
 mod prologix;
 mod scripted;
 mod serial;
+mod socket;
 mod stream;
 
 pub use codec::{Cut, FrameCodec, Garbled, LineCodec};
@@ -49,6 +50,7 @@ pub use scripted::{ScriptStep, ScriptedTransport};
 #[cfg(unix)]
 pub use serial::pseudo_terminal;
 pub use serial::{Framing, LinkOptions, SUPPORTED_BAUDS, open_serial};
+pub use socket::{ConnectFuture, Connector, SocketTransport, tcp_connector};
 pub use stream::{AsyncStream, DynStream, StreamTransport, memory_pair};
 pub use tokio_serial::SerialStream;
 
@@ -143,11 +145,13 @@ pub trait Transport: Send {
     /// How it is done belongs to the interface:
     /// - RS-232 (the provided implementation, used by [`StreamTransport`] and
     ///   [`ScriptedTransport`]): the Ctrl-C byte [`DEVICE_CLEAR`], the 34401A's RS-232 device
-    ///   clear, then [`Transport::discard_input`]. A `tcp://` link is an RS-232 instrument
-    ///   behind a serial-to-Ethernet converter, so it gets the same byte, passed through.
-    ///   (A native LAN SCPI socket would have no in-band device clear: its transport would
-    ///   implement this as a reconnect, or the instrument's control connection, or a documented
-    ///   no-op; no such transport exists yet.)
+    ///   clear, then [`Transport::discard_input`]. A `tcp://` link is by default an RS-232
+    ///   instrument behind a serial-to-Ethernet converter, so it gets the same byte, passed
+    ///   through.
+    /// - A LAN instrument's raw SCPI socket ([`SocketTransport`], `tcp://` opened with
+    ///   [`LinkOptions::scpi_socket`]): no byte at all (the parser would take it as data);
+    ///   the socket is closed and connected again, as `viClear()` does on a socket, so the
+    ///   instrument drops the output it owed.
     /// - GPIB through a Prologix controller ([`PrologixTransport`]): `++clr`, the bus's
     ///   Selected Device Clear.
     fn device_clear(&mut self) -> impl Future<Output = Result<(), LinkError>> + Send {

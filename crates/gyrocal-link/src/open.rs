@@ -16,7 +16,10 @@ use std::time::Duration;
 use tokio::net::TcpStream;
 
 use crate::prologix::{PROLOGIX_TCP_PORT, PrologixOptions, PrologixTransport};
-use crate::{DynStream, Field, LinkError, LinkOptions, StreamTransport, Transport, open_serial};
+use crate::{
+    DynStream, Field, LinkError, LinkOptions, SocketTransport, StreamTransport, Transport,
+    open_serial, tcp_connector,
+};
 
 /// The scheme prefix that selects TCP (an instrument behind a serial-to-Ethernet converter).
 pub const TCP_SCHEME: &str = "tcp://";
@@ -203,6 +206,8 @@ pub enum Link {
     Stream(StreamTransport<DynStream>),
     /// An instrument on GPIB behind a Prologix controller.
     Prologix(PrologixTransport<StreamTransport<DynStream>>),
+    /// A LAN instrument's raw SCPI socket: device clear reconnects.
+    Socket(SocketTransport),
 }
 
 impl Link {
@@ -211,6 +216,7 @@ impl Link {
         match self {
             Link::Stream(t) => t,
             Link::Prologix(p) => p.get_mut(),
+            Link::Socket(s) => s.get_mut(),
         }
     }
 }
@@ -220,36 +226,42 @@ impl Transport for Link {
         match self {
             Link::Stream(t) => t.describe(),
             Link::Prologix(t) => t.describe(),
+            Link::Socket(t) => t.describe(),
         }
     }
     async fn write_raw(&mut self, bytes: &[u8]) -> Result<(), LinkError> {
         match self {
             Link::Stream(t) => t.write_raw(bytes).await,
             Link::Prologix(t) => t.write_raw(bytes).await,
+            Link::Socket(t) => t.write_raw(bytes).await,
         }
     }
     async fn send_line(&mut self, line: &str) -> Result<(), LinkError> {
         match self {
             Link::Stream(t) => t.send_line(line).await,
             Link::Prologix(t) => t.send_line(line).await,
+            Link::Socket(t) => t.send_line(line).await,
         }
     }
     async fn read_line(&mut self, timeout: Option<Duration>) -> Result<String, LinkError> {
         match self {
             Link::Stream(t) => t.read_line(timeout).await,
             Link::Prologix(t) => t.read_line(timeout).await,
+            Link::Socket(t) => t.read_line(timeout).await,
         }
     }
     async fn discard_input(&mut self) -> Result<usize, LinkError> {
         match self {
             Link::Stream(t) => t.discard_input().await,
             Link::Prologix(t) => t.discard_input().await,
+            Link::Socket(t) => t.discard_input().await,
         }
     }
     async fn read_field(&mut self, sep: u8, timeout: Option<Duration>) -> Result<Field, LinkError> {
         match self {
             Link::Stream(t) => t.read_field(sep, timeout).await,
             Link::Prologix(t) => t.read_field(sep, timeout).await,
+            Link::Socket(t) => t.read_field(sep, timeout).await,
         }
     }
     async fn read_until(
@@ -260,24 +272,28 @@ impl Transport for Link {
         match self {
             Link::Stream(t) => t.read_until(delimiter, timeout).await,
             Link::Prologix(t) => t.read_until(delimiter, timeout).await,
+            Link::Socket(t) => t.read_until(delimiter, timeout).await,
         }
     }
     async fn device_clear(&mut self) -> Result<(), LinkError> {
         match self {
             Link::Stream(t) => t.device_clear().await,
             Link::Prologix(t) => t.device_clear().await,
+            Link::Socket(t) => t.device_clear().await,
         }
     }
     fn needs_remote_command(&self) -> bool {
         match self {
             Link::Stream(t) => t.needs_remote_command(),
             Link::Prologix(t) => t.needs_remote_command(),
+            Link::Socket(t) => t.needs_remote_command(),
         }
     }
     async fn return_to_local(&mut self) -> Result<(), LinkError> {
         match self {
             Link::Stream(t) => t.return_to_local().await,
             Link::Prologix(t) => t.return_to_local().await,
+            Link::Socket(t) => t.return_to_local().await,
         }
     }
 }
@@ -288,6 +304,17 @@ impl Transport for Link {
 /// controller is set up and must answer `++ver`.
 pub async fn open(spec: &str, options: &LinkOptions) -> Result<Link, LinkError> {
     match parse_port(spec)? {
+        PortSpec::Tcp(addr) if options.scpi_socket => {
+            let connector = tcp_connector(addr, options.connect_timeout);
+            let name = format!(
+                "{}{}",
+                crate::TCP_SCHEME,
+                spec.trim_start_matches(crate::TCP_SCHEME)
+            );
+            let mut t = SocketTransport::connect(name, connector).await?;
+            t.discard_input().await?;
+            Ok(Link::Socket(t))
+        }
         PortSpec::Tcp(addr) => {
             let mut t = open_tcp(&addr, options.connect_timeout).await?.boxed();
             t.discard_input().await?;

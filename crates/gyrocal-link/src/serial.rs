@@ -86,6 +86,12 @@ pub struct LinkOptions {
     /// How long a TCP connection may take to establish. Default 5 s.
     #[serde(with = "secs")]
     pub connect_timeout: Duration,
+    /// A `tcp://` port is a LAN instrument's raw SCPI socket (port 5025 of a Keysight
+    /// Truevolt), not an RS-232 instrument behind a serial-to-Ethernet converter: [`crate::open`]
+    /// then returns a [`crate::SocketTransport`], whose device clear reconnects instead of
+    /// sending the RS-232 Ctrl-C byte. Default false (a converter: the byte passes through).
+    #[serde(default)]
+    pub scpi_socket: bool,
 }
 
 impl Default for LinkOptions {
@@ -94,6 +100,7 @@ impl Default for LinkOptions {
             baud: 9600,
             framing: Framing::EightNone,
             connect_timeout: Duration::from_secs(5),
+            scpi_socket: false,
         }
     }
 }

@@ -85,6 +85,11 @@ impl<S: AsyncStream, C: FrameCodec> StreamTransport<S, C> {
         &mut self.stream
     }
 
+    /// The wrapped stream back (input buffered here is dropped).
+    pub fn into_stream(self) -> S {
+        self.stream
+    }
+
     /// Erases the stream type.
     pub fn boxed(self) -> StreamTransport<DynStream, C>
     where

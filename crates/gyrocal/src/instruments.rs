@@ -11,6 +11,7 @@
 use gyrocal_hp34401a::{AutoZero, DcvConfig, DriverOptions, MeterTiming, Strategy};
 use gyrocal_link::Transport;
 use gyrocal_meter::{Multimeter, TimingModel};
+use gyrocal_run::plan::DmmModel;
 use gyrocal_run::{Framing, Plan, TableDialect};
 use gyrocal_table::RateTable;
 
@@ -41,20 +42,81 @@ pub fn hp34401a_strategy(plan: &Plan) -> Strategy {
     }
 }
 
-/// Checks the plan's meter settings against the meter's own facts (before anything opens).
+/// The Truevolt model a plan names, if it names one.
+pub fn truevolt_model(plan: &Plan) -> Option<gyrocal_truevolt::Model> {
+    match plan.dmm().model {
+        DmmModel::Hp34401a => None,
+        DmmModel::K34460a => Some(gyrocal_truevolt::Model::M34460A),
+        DmmModel::K34461a => Some(gyrocal_truevolt::Model::M34461A),
+        DmmModel::K34465a => Some(gyrocal_truevolt::Model::M34465A),
+        DmmModel::K34470a => Some(gyrocal_truevolt::Model::M34470A),
+    }
+}
+
+/// The DC-volts settings the plan asks of any meter.
+pub fn dc_volts(plan: &Plan) -> gyrocal_meter::DcVolts {
+    let d = plan.dmm();
+    gyrocal_meter::DcVolts {
+        range_v: Some(d.range_v),
+        nplc: d.nplc,
+        autozero: d.autozero,
+        line_hz: d.line_hz,
+    }
+}
+
+/// The Truevolt options a plan asks for (`acquisition`: `auto` and `stream` stream, `memory`
+/// is memory; `poll` is refused by [`check_meter`]).
+pub fn truevolt_options(
+    model: gyrocal_truevolt::Model,
+    plan: &Plan,
+) -> gyrocal_truevolt::TruevoltOptions {
+    let acquisition = match plan.dmm().acquisition {
+        gyrocal_run::Acquisition::Memory => gyrocal_truevolt::Acquisition::Memory,
+        gyrocal_run::Acquisition::Stream => gyrocal_truevolt::Acquisition::Stream,
+        _ => gyrocal_truevolt::Acquisition::Auto,
+    };
+    gyrocal_truevolt::TruevoltOptions {
+        acquisition,
+        ..gyrocal_truevolt::TruevoltOptions::new(model)
+    }
+}
+
+/// Checks the plan's meter settings against the named model's own facts (before anything
+/// opens). The message names the key (`[dmm] nplc`) and the model; the caller adds the file.
 pub fn check_meter(plan: &Plan) -> Result<(), String> {
-    hp34401a_config(plan)
-        .validate()
-        .map_err(|e| format!("[dmm] {e}"))
+    match truevolt_model(plan) {
+        None => hp34401a_config(plan).validate().map_err(|e| {
+            // the plan checked range, baud and line frequency against the 34401A's own lists;
+            // what is left is an NPLC another meter offers (0.06)
+            if gyrocal_hp34401a::NPLC_VALUES.contains(&plan.dmm().nplc) {
+                format!("[dmm] {e}")
+            } else {
+                format!("[dmm] nplc: the 34401A refuses it: {e}")
+            }
+        }),
+        Some(model) => {
+            if plan.dmm().acquisition == gyrocal_run::Acquisition::Poll {
+                return Err(format!(
+                    "[dmm] acquisition: \"poll\" is a 34401A baseline; the {model} streams \
+                     (use auto, stream or memory)"
+                ));
+            }
+            gyrocal_truevolt::check(model, &dc_volts(plan), false)
+                .map_err(|e| format!("[dmm] {}: {e}", e.key))
+        }
+    }
 }
 
 /// The meter's timing model at the plan's settings, for an estimate before any instrument is
 /// connected (`gyrocal check`).
 pub fn meter_timing(plan: &Plan) -> Box<dyn TimingModel> {
-    Box::new(MeterTiming::new(
-        &hp34401a_config(plan),
-        hp34401a_strategy(plan),
-    ))
+    match truevolt_model(plan) {
+        None => Box::new(MeterTiming::new(
+            &hp34401a_config(plan),
+            hp34401a_strategy(plan),
+        )),
+        Some(model) => Box::new(truevolt_options(model, plan).timing_at(&dc_volts(plan))),
+    }
 }
 
 /// The serial framing a plan names, as the link opens it.
@@ -104,13 +166,21 @@ where
     L: Transport + 'static,
     J: WithInstruments,
 {
-    let dmm = gyrocal_hp34401a::Hp34401aMeter::new(
-        dmm_link,
-        DriverOptions::default(),
-        hp34401a_strategy(plan),
-        plan.dmm().baud,
-    );
-    with_table(plan, dmm, table_link, job).await
+    match truevolt_model(plan) {
+        None => {
+            let dmm = gyrocal_hp34401a::Hp34401aMeter::new(
+                dmm_link,
+                DriverOptions::default(),
+                hp34401a_strategy(plan),
+                plan.dmm().baud,
+            );
+            with_table(plan, dmm, table_link, job).await
+        }
+        Some(model) => {
+            let dmm = gyrocal_truevolt::TruevoltMeter::new(dmm_link, truevolt_options(model, plan));
+            with_table(plan, dmm, table_link, job).await
+        }
+    }
 }
 
 /// The table arm: one per dialect.

@@ -288,7 +288,7 @@ pub struct DmmStats {
     pub stopped: bool,
 }
 
-enum Ctl {
+pub(crate) enum Ctl {
     Fault(Fault),
     AtReading(u64, Fault),
     Stop,
@@ -302,6 +302,16 @@ pub struct DmmHandle {
 }
 
 impl DmmHandle {
+    /// A handle on another simulated meter's task (the Truevolt's), driven by the same
+    /// control messages, so the fault grammar and the counters work for every meter.
+    pub(crate) fn from_parts(
+        ctl: mpsc::UnboundedSender<Ctl>,
+        stats: Arc<Mutex<DmmStats>>,
+        task: JoinHandle<()>,
+    ) -> Self {
+        DmmHandle { ctl, stats, task }
+    }
+
     /// Injects a fault now.
     pub fn inject(&self, fault: Fault) {
         let _ = self.ctl.send(Ctl::Fault(fault));
@@ -1531,7 +1541,7 @@ impl Meter {
 }
 
 /// `bytes` with the second digit (or the first, or the first byte) replaced by `#`.
-fn garbled(bytes: &[u8]) -> String {
+pub(crate) fn garbled(bytes: &[u8]) -> String {
     let mut b = bytes.to_vec();
     let mut digits = b
         .iter()

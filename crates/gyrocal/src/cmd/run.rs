@@ -298,6 +298,14 @@ async fn execute(
                     .context("opening the simulated Prologix controller")?;
                 sequence(plan, dmm, bench.table, run).await?
             }
+            // a Truevolt on its LAN socket: device clear reconnects to the simulated meter
+            _ if plan.dmm().model.is_truevolt() => {
+                let Some(lan) = bench.handle.lan.clone() else {
+                    anyhow::bail!("the simulated bench has no LAN meter for a Truevolt plan");
+                };
+                let dmm = gyrocal_link::SocketTransport::new(bench.dmm.boxed(), lan.connector());
+                sequence(plan, dmm, bench.table, run).await?
+            }
             _ => sequence(plan, bench.dmm, bench.table, run).await?,
         };
         // let the simulator take the last commands before it is dropped
@@ -326,6 +334,9 @@ async fn execute(
         let dmm_opts = LinkOptions {
             baud: d.baud,
             framing: crate::instruments::link_framing(d.framing),
+            // a Truevolt's tcp:// port is its SCPI socket (device clear reconnects); a
+            // 34401A's is a serial converter
+            scpi_socket: d.model.is_truevolt(),
             ..LinkOptions::default()
         };
         let dmm = gyrocal_link::open(&d.port.to_string(), &dmm_opts)

@@ -52,6 +52,20 @@ pub struct SimArgs {
     /// table.
     #[arg(long, value_name = "PORT")]
     pub table_tcp: Option<u16>,
+    /// The multimeter: 34401a (on its RS-232 port, the default) or a Keysight Truevolt
+    /// (34460a, 34461a, 34465a, 34470a), served on its SCPI socket tcp://127.0.0.1:P (the JSON
+    /// line's "dmm"). Default: the configuration's.
+    #[arg(long, value_name = "MODEL")]
+    pub dmm: Option<String>,
+    /// How the multimeter is reached: serial (a 34401A's RS-232 port), prologix (a 34401A
+    /// on GPIB behind a simulated Prologix GPIB-USB controller: open the JSON line's "dmm" as
+    /// prologix:PATH?addr=22) or lan (a Truevolt's socket, the only link a Truevolt has here).
+    /// Default: the configuration's.
+    #[arg(long, value_name = "LINK", value_parser = ["serial", "prologix", "lan"])]
+    pub link: Option<String>,
+    /// The table's dialect: acl or aerosmith. Default: the configuration's.
+    #[arg(long, value_name = "DIALECT", value_parser = ["acl", "aerosmith"])]
+    pub table: Option<String>,
 }
 
 const AFTER_HELP: &str = "\
@@ -91,6 +105,43 @@ pub fn run(args: &SimArgs) -> Result<()> {
     }
     if let Some(x) = args.time_scale {
         config.time_scale = x;
+    }
+    if let Some(model) = &args.dmm {
+        config.dmm_model = model
+            .parse::<gyrocal_sim::bench::DmmModel>()
+            .map_err(|e| BadInput(format!("--dmm: {e}")))?;
+    }
+    match args.link.as_deref() {
+        Some("serial") => config.dmm_link = gyrocal_sim::bench::DmmLink::Rs232,
+        Some("prologix") => {
+            config.dmm_link = gyrocal_sim::bench::DmmLink::Prologix(Default::default());
+        }
+        Some(_) => config.dmm_link = gyrocal_sim::bench::DmmLink::Lan,
+        None => {}
+    }
+    let truevolt = config.dmm_model.truevolt().is_some();
+    if truevolt
+        && !matches!(
+            config.dmm_link,
+            gyrocal_sim::bench::DmmLink::Rs232 | gyrocal_sim::bench::DmmLink::Lan
+        )
+    {
+        return Err(
+            BadInput("a Truevolt is served on its LAN socket only (--link lan)".into()).into(),
+        );
+    }
+    if !truevolt && config.dmm_link == gyrocal_sim::bench::DmmLink::Lan {
+        return Err(BadInput(
+            "--link lan is a Truevolt's (--dmm 34460a|34461a|34465a|34470a)".into(),
+        )
+        .into());
+    }
+    match args.table.as_deref() {
+        Some("aerosmith") => {
+            config.table_wire = gyrocal_sim::bench::TableWire::Aerosmith(Default::default());
+        }
+        Some(_) => config.table_wire = gyrocal_sim::bench::TableWire::Acl,
+        None => {}
     }
     if !(config.time_scale.is_finite() && config.time_scale > 0.0 && config.time_scale <= 1e6) {
         return Err(BadInput(format!(
@@ -149,6 +200,9 @@ fn emit(value: &Value) -> Result<()> {
 }
 
 async fn serve(config: BenchConfig, specs: Vec<FaultSpec>, table_tcp: Option<u16>) -> Result<()> {
+    if config.dmm_model.truevolt().is_some() {
+        return serve_lan(config, specs, table_tcp).await;
+    }
     let (dmm_dev, dmm_slave, dmm_path) =
         gyrocal_link::pseudo_terminal().context("creating the multimeter's pseudo-terminal")?;
     let (table_dev, table_slave, table_path) =
@@ -260,4 +314,101 @@ fn final_state(signal: &str, bench: &BenchHandle, schedule: &FaultSchedule) -> V
             "fired": s.fired,
         })).collect::<Vec<_>>(),
     })
+}
+
+/// `gyrocal sim` with a Truevolt: the meter on tcp://127.0.0.1:P (every accepted connection
+/// handed to the instrument, the newest served), the table on a pseudo-terminal (and TCP when
+/// asked). Same JSON contract, with "dmm" the meter's tcp:// address.
+async fn serve_lan(
+    config: BenchConfig,
+    specs: Vec<FaultSpec>,
+    table_tcp: Option<u16>,
+) -> Result<()> {
+    let (table_dev, table_slave, table_path) =
+        gyrocal_link::pseudo_terminal().context("creating the table's pseudo-terminal")?;
+    let dmm_listener = tokio::net::TcpListener::bind(("127.0.0.1", 0))
+        .await
+        .context("listening for the multimeter's SCPI socket on 127.0.0.1")?;
+    let dmm_addr = dmm_listener
+        .local_addr()
+        .context("reading the multimeter's TCP address")?;
+    let table_listener = match table_tcp {
+        Some(port) => Some(
+            tokio::net::TcpListener::bind(("127.0.0.1", port))
+                .await
+                .with_context(|| format!("listening on 127.0.0.1:{port}"))?,
+        ),
+        None => None,
+    };
+    let mut sigint = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())
+        .context("installing the SIGINT handler")?;
+    let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+        .context("installing the SIGTERM handler")?;
+    let (seed, time_scale, wire) = (config.seed, config.time_scale, config.table_wire);
+    // the meter's first "connection" is a pipe nobody holds: clients come over TCP
+    let (_unused, dmm_dev) = tokio::io::duplex(16);
+    drop(_unused);
+    let bench = Bench::spawn_on(config, dmm_dev, table_dev);
+    let mut schedule = faults::schedule(&specs, &bench, time_scale);
+    let Some(lan) = bench.lan.clone() else {
+        anyhow::bail!("the simulated bench has no LAN meter");
+    };
+    let dmm_acceptor = tokio::spawn(async move {
+        loop {
+            match dmm_listener.accept().await {
+                Ok((sock, peer)) => {
+                    tracing::info!(%peer, "multimeter client connected over TCP");
+                    let _ = sock.set_nodelay(true);
+                    if !lan.attach(Box::new(sock)) {
+                        break;
+                    }
+                }
+                Err(e) => {
+                    tracing::warn!(error = %e, "accepting a multimeter client failed");
+                    tokio::time::sleep(Duration::from_millis(50)).await;
+                }
+            }
+        }
+    });
+    let mut hello = json!({
+        "dmm": format!("tcp://{dmm_addr}"),
+        "table": table_path,
+        "pid": std::process::id(),
+        "seed": seed,
+        "time_scale": time_scale,
+        "truth": bench.truth,
+        "faults": specs.iter().map(ToString::to_string).collect::<Vec<_>>(),
+    });
+    let table_acceptor = match table_listener {
+        Some(listener) => {
+            let addr = listener
+                .local_addr()
+                .context("reading the TCP port's address")?;
+            hello["table_tcp"] = json!(format!("tcp://{addr}"));
+            let table = bench.table.clone();
+            Some(tokio::spawn(async move {
+                while let Ok((sock, _)) = listener.accept().await {
+                    let _ = sock.set_nodelay(true);
+                    table.serve_wire(sock, wire);
+                }
+            }))
+        }
+        None => None,
+    };
+    emit(&hello)?;
+    let signal = tokio::select! {
+        _ = sigint.recv() => "SIGINT",
+        _ = sigterm.recv() => "SIGTERM",
+    };
+    schedule.stop();
+    emit(&final_state(signal, &bench, &schedule))?;
+    dmm_acceptor.abort();
+    if let Some(a) = table_acceptor {
+        a.abort();
+    }
+    let BenchHandle { table, dmm, .. } = bench;
+    table.shutdown();
+    let _ = tokio::time::timeout(Duration::from_secs(1), dmm.stop()).await;
+    drop(table_slave);
+    Ok(())
 }
