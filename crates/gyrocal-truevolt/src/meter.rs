@@ -378,7 +378,14 @@ impl<T: Transport> TruevoltMeter<T> {
             });
         }
         if let Some(p) = self.progress.as_mut() {
-            p(base + out.len(), total);
+            // one call per reading: the run's display keeps a running mean over all of them
+            for (i, &latest) in out.iter().enumerate() {
+                p(gyrocal_meter::Progress {
+                    done: base + i + 1,
+                    total,
+                    latest,
+                });
+            }
         }
         Ok(out)
     }

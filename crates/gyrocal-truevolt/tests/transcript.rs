@@ -212,8 +212,8 @@ async fn stream_of_10000_readings_on_a_34461a() {
     let mut m = ready(t, options(Model::M34461A)).await;
     let seen = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
     let s = seen.clone();
-    m.set_progress(Some(Box::new(move |done, total| {
-        s.lock().unwrap().push((done, total));
+    m.set_progress(Some(Box::new(move |p: gyrocal_meter::Progress| {
+        s.lock().unwrap().push((p.done, p.total, p.latest));
     })));
     let Measured::Complete(acq) = m.measure(10_000, true).await.unwrap() else {
         panic!("streaming never defers")
@@ -223,8 +223,16 @@ async fn stream_of_10000_readings_on_a_34461a() {
     assert_eq!(acq.readings[0], Reading::Volts(1.25));
     assert_eq!(acq.readings[9_999], Reading::Overload { positive: true });
     let seen = seen.lock().unwrap();
-    assert_eq!(seen.len(), 835, "progress with every chunk");
-    assert_eq!(seen.last(), Some(&(10_000, 10_000)));
+    assert_eq!(
+        seen.len(),
+        10_000,
+        "progress with every reading, as each chunk arrives"
+    );
+    assert_eq!(
+        seen.last(),
+        Some(&(10_000, 10_000, Reading::Overload { positive: true }))
+    );
+    assert_eq!(seen[0], (1, 10_000, Reading::Volts(1.25)));
     m.into_inner().0.done();
 }
 
