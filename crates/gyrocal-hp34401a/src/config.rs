@@ -89,6 +89,11 @@ pub struct DcvConfig {
     pub line_hz: u32,
     /// Baud rate of the link, used only for the timing estimates. Default 9600.
     pub baud: u32,
+    /// The meter is reached over GPIB (through a controller): its wire time is the bus's,
+    /// [`crate::timing::GPIB_CHAR_TIME`] per character, and `baud` is not used. Default
+    /// false (RS-232).
+    #[serde(default)]
+    pub gpib: bool,
 }
 
 impl Default for DcvConfig {
@@ -102,6 +107,7 @@ impl Default for DcvConfig {
             trigger_delay: None,
             line_hz: 50,
             baud: 9600,
+            gpib: false,
         }
     }
 }
@@ -132,7 +138,7 @@ impl DcvConfig {
                 self.line_hz
             ));
         }
-        if !gyrocal_link::SUPPORTED_BAUDS.contains(&self.baud) {
+        if !self.gpib && !gyrocal_link::SUPPORTED_BAUDS.contains(&self.baud) {
             return bad(format!(
                 "baud {} is not one of {:?}",
                 self.baud,

@@ -24,6 +24,7 @@ pub struct Hp34401aMeter<T: Transport> {
     driver: Hp34401a<T>,
     strategy: Strategy,
     baud: u32,
+    gpib: bool,
 }
 
 /// The last memory burst of a measurement, still in the meter, with the readings before it.
@@ -42,7 +43,15 @@ impl<T: Transport> Hp34401aMeter<T> {
             driver: Hp34401a::new(link, options),
             strategy,
             baud,
+            gpib: false,
         }
+    }
+
+    /// The meter is reached over GPIB (through a controller): its timing model uses the bus's
+    /// wire time, not the baud rate's.
+    pub fn over_gpib(mut self, gpib: bool) -> Self {
+        self.gpib = gpib;
+        self
     }
 
     /// The driver underneath.
@@ -176,6 +185,7 @@ impl<T: Transport + 'static> Multimeter for Hp34401aMeter<T> {
             },
             line_hz: s.line_hz,
             baud: self.baud,
+            gpib: self.gpib,
             ..DcvConfig::default()
         };
         self.driver.configure(&config).await

@@ -23,6 +23,10 @@ pub const READING_CHARS: usize = 16;
 pub const BITS_PER_CHAR: u32 = 11;
 /// Most readings one `INIT` can store in the meter's memory.
 pub const MEMORY_READINGS: usize = 512;
+/// Time of one character on a GPIB bus behind a Prologix controller: about 100 kB/s end to
+/// end [U] (the bus itself is faster; the controller's USB or TCP side and its `++read`
+/// handling bound it). The simulated bench's GPIB uses the same figure.
+pub const GPIB_CHAR_TIME: Duration = Duration::from_micros(10);
 /// Most readings per trigger (`SAMP:COUN`).
 pub const MAX_SAMPLE_COUNT: usize = 50_000;
 
@@ -77,8 +81,10 @@ pub struct Timing {
     pub autozero: bool,
     /// Trigger delay before every sample.
     pub trigger_delay: Duration,
-    /// Link baud rate.
+    /// Link baud rate (RS-232).
     pub baud: u32,
+    /// Reached over GPIB: the wire time is [`GPIB_CHAR_TIME`] per character, not the baud's.
+    pub gpib: bool,
 }
 
 impl Timing {
@@ -93,6 +99,7 @@ impl Timing {
                 .and_then(|d| Duration::try_from_secs_f64(d).ok())
                 .unwrap_or_else(|| auto_trigger_delay(config.nplc)),
             baud: config.baud,
+            gpib: config.gpib,
         }
     }
 
@@ -103,7 +110,11 @@ impl Timing {
 
     /// Time one character takes on the wire.
     pub fn char_time(&self) -> Duration {
-        char_time(self.baud)
+        if self.gpib {
+            GPIB_CHAR_TIME
+        } else {
+            char_time(self.baud)
+        }
     }
 
     /// Time `chars` characters take on the wire.

@@ -28,6 +28,7 @@ pub fn hp34401a_config(plan: &Plan) -> DcvConfig {
         },
         line_hz: d.line_hz,
         baud: d.baud,
+        gpib: matches!(d.port, gyrocal_run::Port::Gpib(_)),
         ..DcvConfig::default()
     }
 }
@@ -173,7 +174,8 @@ where
                 DriverOptions::default(),
                 hp34401a_strategy(plan),
                 plan.dmm().baud,
-            );
+            )
+            .over_gpib(matches!(plan.dmm().port, gyrocal_run::Port::Gpib(_)));
             with_table(plan, dmm, table_link, job).await
         }
         Some(model) => {

@@ -89,9 +89,10 @@ pub const GPIB_SDC: u8 = gyrocal_link::DEVICE_CLEAR;
 pub const GPIB_TALK: u8 = 0x05;
 /// GPIB mode: the in-band byte that unaddresses the meter (UNT on a real bus).
 pub const GPIB_UNTALK: u8 = 0x06;
-/// GPIB mode: time per byte on the bus, before scaling (an assumption: about 100 kB/s, well
-/// above what the meter produces; the bus is never the bottleneck).
-pub const GPIB_CHAR_TIME: Duration = Duration::from_micros(10);
+/// GPIB mode: time per byte on the bus, before scaling: the driver's figure (about 100 kB/s
+/// through a Prologix controller, an assumption), so the driver's timing model and the
+/// simulated bus agree.
+pub const GPIB_CHAR_TIME: Duration = gyrocal_hp34401a::timing::GPIB_CHAR_TIME;
 
 /// Which remote interface the simulated meter serves.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
