@@ -151,12 +151,18 @@ impl Sim {
 
     /// With another time scale (a slower bench makes a phase long enough to hit).
     fn start_scaled(plan: &Path, faults: &[&str], time_scale: &str) -> Sim {
+        Sim::start_with(plan, faults, time_scale, &[])
+    }
+
+    /// With more arguments for `gyrocal sim` (`--link prologix-tcp`, ...).
+    fn start_with(plan: &Path, faults: &[&str], time_scale: &str, extra: &[&str]) -> Sim {
         let mut cmd = Command::new(BIN);
         cmd.env_remove("RUST_LOG")
             .arg("sim")
             .arg("--config")
             .arg(plan)
-            .args(["--time-scale", time_scale, "--seed", SEED]);
+            .args(["--time-scale", time_scale, "--seed", SEED])
+            .args(extra);
         for f in faults {
             cmd.args(["--fault", f]);
         }
@@ -176,8 +182,10 @@ impl Sim {
         Sim { guard, lines, info }
     }
 
+    /// The multimeter's port as a plan names it (a device path, `prologix:PATH?addr=22`,
+    /// `prologix-tcp://127.0.0.1:P?addr=22`).
     fn dmm(&self) -> &str {
-        self.info["dmm"].as_str().unwrap()
+        self.info["dmm_port"].as_str().unwrap()
     }
 
     fn table(&self) -> &str {
@@ -1207,7 +1215,9 @@ fn e2e_meter_over_gpib_through_a_prologix_controller_completes() {
     std::fs::write(&plan, text).unwrap();
     let dir = tmp.path().join("run");
     let sim = Sim::start(&plan, &[]);
-    let dmm_port = format!("prologix:{}?addr=22", sim.dmm());
+    // the simulator says the port a plan names for it
+    let dmm_port = sim.dmm().to_string();
+    assert!(dmm_port.starts_with("prologix:/dev/"), "{dmm_port}");
     let mut cmd = Command::new(BIN);
     let out = cmd
         .env_remove("RUST_LOG")
@@ -1242,4 +1252,51 @@ fn e2e_aerosmith_table_gone_silent_is_never_called_at_rest() {
     let last = sim.finish();
     assert!(fault_fired(&last, spec), "{last}");
     assert_eq!(last["table"]["stopped"], false, "{last}");
+}
+
+// ---------------------------------------------------------------------------------------------
+// the 34401A on GPIB: behind a simulated Prologix GPIB-USB controller (pseudo-terminal) and a
+// GPIB-ETHERNET one (TCP), through the real Prologix transport
+
+#[test]
+fn e2e_prologix_usb_and_ethernet_run_the_plan_with_a_retried_fault_and_stop_at_rest() {
+    for link in ["prologix", "prologix-tcp"] {
+        let tmp = tempfile::tempdir().unwrap();
+        let plan = write_plan(tmp.path());
+        let spec = "dmm:garble@reading40";
+        let sim = Sim::start_with(&plan, &[spec], TIME_SCALE, &["--link", link]);
+        let port = sim.dmm().to_string();
+        let scheme = if link == "prologix" {
+            "prologix:/dev/"
+        } else {
+            "prologix-tcp://127.0.0.1:"
+        };
+        assert!(port.starts_with(scheme), "{link}: {port}");
+        let dir = tmp.path().join("run");
+        let end = Run::start(&plan, &sim, &out_args(&dir), None).wait();
+        assert_eq!(end.code, Some(0), "{link}: {end:?}");
+        check_complete(&dir);
+        let m = manifest(&dir);
+        let dmm_retries = m["retries"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|r| r["instrument"] == "dmm")
+            .count();
+        assert!(
+            dmm_retries >= 1,
+            "{link}: the garbled reading was retried: {m}"
+        );
+        assert!(
+            end.stderr.contains("table at rest"),
+            "{link}: {}",
+            end.stderr
+        );
+        let last = sim.finish();
+        assert!(fault_fired(&last, spec), "{link}: {last}");
+        assert_eq!(last["table"]["stopped"], true, "{link}: {last}");
+        // over GPIB the meter gets no SYST:REM (an RS-232-only command) and is handed back
+        // to its front panel by the controller's ++loc
+        assert_eq!(last["dmm"]["errors_raised"], 0, "{link}: {last}");
+    }
 }

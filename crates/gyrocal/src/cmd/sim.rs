@@ -3,7 +3,8 @@
 //!
 //! Output contract (stdout, one JSON object per line, nothing else):
 //!
-//! 1. once the bench serves: `{"dmm": "/dev/pts/N", "table": "/dev/pts/M",
+//! 1. once the bench serves: `{"dmm": "/dev/pts/N", "dmm_port": "<the plan's [dmm] port>",
+//!    "table": "/dev/pts/M",
 //!    ["table_tcp": "tcp://127.0.0.1:P",] "pid", "seed", "time_scale", "truth": {...},
 //!    "faults": ["dmm:garble@reading100", ...]}`;
 //! 2. on SIGINT or SIGTERM, before exiting with 0: `{"exit": "SIGINT"|"SIGTERM", "table":
@@ -58,10 +59,11 @@ pub struct SimArgs {
     #[arg(long, value_name = "MODEL")]
     pub dmm: Option<String>,
     /// How the multimeter is reached: serial (a 34401A's RS-232 port), prologix (a 34401A
-    /// on GPIB behind a simulated Prologix GPIB-USB controller: open the JSON line's "dmm" as
-    /// prologix:PATH?addr=22) or lan (a Truevolt's socket, the only link a Truevolt has here).
-    /// Default: the configuration's.
-    #[arg(long, value_name = "LINK", value_parser = ["serial", "prologix", "lan"])]
+    /// on GPIB behind a simulated Prologix GPIB-USB controller, on a pseudo-terminal),
+    /// prologix-tcp (the same behind a GPIB-ETHERNET controller, on tcp://127.0.0.1:P) or lan
+    /// (a Truevolt's socket, the only link a Truevolt has here). The JSON line's "dmm_port" is
+    /// the plan's `[dmm] port` for it. Default: the configuration's.
+    #[arg(long, value_name = "LINK", value_parser = ["serial", "prologix", "prologix-tcp", "lan"])]
     pub link: Option<String>,
     /// The table's dialect: acl or aerosmith. Default: the configuration's.
     #[arg(long, value_name = "DIALECT", value_parser = ["acl", "aerosmith"])]
@@ -70,7 +72,8 @@ pub struct SimArgs {
 
 const AFTER_HELP: &str = "\
 Output: one JSON line on stdout once the bench serves, with the device paths and the truth:
-  {\"dmm\": \"/dev/pts/N\", \"table\": \"/dev/pts/M\", [\"table_tcp\": \"tcp://127.0.0.1:P\",]
+  {\"dmm\": \"/dev/pts/N\", \"dmm_port\": \"(the plan's [dmm] port)\", \"table\": \"/dev/pts/M\",
+   [\"table_tcp\": \"tcp://127.0.0.1:P\",]
    \"pid\": ..., \"seed\": ..., \"time_scale\": ..., \"truth\": {\"k0\", \"k1_pos\", \"k1_neg\", \"k2\",
    \"k3\", \"earth_rate\"}, \"faults\": [...]}
 then, on SIGINT or SIGTERM, one more line before exiting with 0:
@@ -113,7 +116,7 @@ pub fn run(args: &SimArgs) -> Result<()> {
     }
     match args.link.as_deref() {
         Some("serial") => config.dmm_link = gyrocal_sim::bench::DmmLink::Rs232,
-        Some("prologix") => {
+        Some("prologix") | Some("prologix-tcp") => {
             config.dmm_link = gyrocal_sim::bench::DmmLink::Prologix(Default::default());
         }
         Some(_) => config.dmm_link = gyrocal_sim::bench::DmmLink::Lan,
@@ -159,7 +162,12 @@ pub fn run(args: &SimArgs) -> Result<()> {
         .enable_all()
         .build()
         .context("starting the async runtime")?;
-    runtime.block_on(serve(config, specs, args.table_tcp))
+    let prologix_tcp = args.link.as_deref() == Some("prologix-tcp");
+    let plan = args
+        .config
+        .as_ref()
+        .map_or("PLAN".to_string(), |p| p.display().to_string());
+    runtime.block_on(serve(config, specs, args.table_tcp, prologix_tcp, plan))
 }
 
 /// Reads a bench TOML or a plan TOML (see [`SimArgs::config`]).
@@ -199,12 +207,16 @@ fn emit(value: &Value) -> Result<()> {
     out.flush().context("flushing stdout")
 }
 
-async fn serve(config: BenchConfig, specs: Vec<FaultSpec>, table_tcp: Option<u16>) -> Result<()> {
+async fn serve(
+    config: BenchConfig,
+    specs: Vec<FaultSpec>,
+    table_tcp: Option<u16>,
+    prologix_tcp: bool,
+    plan: String,
+) -> Result<()> {
     if config.dmm_model.truevolt().is_some() {
-        return serve_lan(config, specs, table_tcp).await;
+        return serve_lan(config, specs, table_tcp, plan).await;
     }
-    let (dmm_dev, dmm_slave, dmm_path) =
-        gyrocal_link::pseudo_terminal().context("creating the multimeter's pseudo-terminal")?;
     let (table_dev, table_slave, table_path) =
         gyrocal_link::pseudo_terminal().context("creating the table's pseudo-terminal")?;
     let listener = match table_tcp {
@@ -222,11 +234,43 @@ async fn serve(config: BenchConfig, specs: Vec<FaultSpec>, table_tcp: Option<u16
         .context("installing the SIGTERM handler")?;
 
     let (seed, time_scale, wire) = (config.seed, config.time_scale, config.table_wire);
-    let bench = Bench::spawn_on(config, dmm_dev, table_dev);
+    let prologix = matches!(config.dmm_link, gyrocal_sim::bench::DmmLink::Prologix(_));
+    // the meter's end: a pseudo-terminal, or (GPIB-ETHERNET) a TCP port bridged to the
+    // simulated controller, so a client may disconnect and connect again
+    let (bench, dmm_shown, dmm_port, dmm_slave, bridge) = if prologix_tcp {
+        let (ours, theirs) = tokio::io::duplex(1 << 16);
+        let listener = tokio::net::TcpListener::bind(("127.0.0.1", 0))
+            .await
+            .context("listening for the Prologix GPIB-ETHERNET clients")?;
+        let addr = listener
+            .local_addr()
+            .context("reading the TCP port's address")?;
+        let bench = Bench::spawn_on(config, theirs, table_dev);
+        let bridge = tokio::spawn(bridge_clients(listener, ours));
+        (
+            bench,
+            format!("tcp://{addr}"),
+            format!("prologix-tcp://{addr}?addr=22"),
+            None,
+            Some(bridge),
+        )
+    } else {
+        let (dmm_dev, dmm_slave, dmm_path) =
+            gyrocal_link::pseudo_terminal().context("creating the multimeter's pseudo-terminal")?;
+        let shown = dmm_path;
+        let port = if prologix {
+            format!("prologix:{shown}?addr=22")
+        } else {
+            shown.clone()
+        };
+        let bench = Bench::spawn_on(config, dmm_dev, table_dev);
+        (bench, shown, port, Some(dmm_slave), None)
+    };
     let mut schedule = faults::schedule(&specs, &bench, time_scale);
 
     let mut hello = json!({
-        "dmm": dmm_path,
+        "dmm": dmm_shown,
+        "dmm_port": dmm_port,
         "table": table_path,
         "pid": std::process::id(),
         "seed": seed,
@@ -260,7 +304,8 @@ async fn serve(config: BenchConfig, specs: Vec<FaultSpec>, table_tcp: Option<u16
         None => None,
     };
     emit(&hello)?;
-    tracing::info!(dmm = %dmm_path, table = %table_path, "simulated bench serving");
+    tell_operator(&hello, &plan);
+    tracing::info!(dmm = %dmm_port, table = %table_path, "simulated bench serving");
 
     let signal = tokio::select! {
         _ = sigint.recv() => "SIGINT",
@@ -273,12 +318,53 @@ async fn serve(config: BenchConfig, specs: Vec<FaultSpec>, table_tcp: Option<u16
     if let Some(a) = acceptor {
         a.abort();
     }
+    if let Some(b) = bridge {
+        b.abort();
+    }
     let BenchHandle { table, dmm, .. } = bench;
     table.shutdown();
     let _ = tokio::time::timeout(Duration::from_secs(1), dmm.stop()).await;
     // the slave sides were kept open so clients could come and go; now they may close
     drop((dmm_slave, table_slave));
     Ok(())
+}
+
+/// The human line (on stderr; stdout stays one JSON document per line for scripts): the
+/// command that runs a plan against this bench.
+fn tell_operator(hello: &Value, plan: &str) {
+    let dmm = hello["dmm_port"].as_str().unwrap_or("?");
+    let table = hello["table"].as_str().unwrap_or("?");
+    eprintln!(
+        "simulated bench ready (Ctrl-C to stop it). Run a plan against it with:\n  gyrocal run {plan} --dmm-port {dmm} --table-port {table}"
+    );
+}
+
+/// Hands the simulated controller's byte stream to the newest TCP client (a client that
+/// reconnects takes over, as with a real GPIB-ETHERNET controller, which serves one at a time).
+async fn bridge_clients(listener: tokio::net::TcpListener, end: tokio::io::DuplexStream) {
+    let end = std::sync::Arc::new(tokio::sync::Mutex::new(end));
+    let mut current: Option<tokio::task::JoinHandle<()>> = None;
+    loop {
+        match listener.accept().await {
+            Ok((mut sock, peer)) => {
+                tracing::info!(%peer, "Prologix client connected over TCP");
+                let _ = sock.set_nodelay(true);
+                if let Some(previous) = current.take() {
+                    previous.abort();
+                    let _ = previous.await;
+                }
+                let end = end.clone();
+                current = Some(tokio::spawn(async move {
+                    let mut end = end.lock().await;
+                    let _ = tokio::io::copy_bidirectional(&mut sock, &mut *end).await;
+                }));
+            }
+            Err(e) => {
+                tracing::warn!(error = %e, "accepting a Prologix client failed");
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+        }
+    }
 }
 
 fn final_state(signal: &str, bench: &BenchHandle, schedule: &FaultSchedule) -> Value {
@@ -323,6 +409,7 @@ async fn serve_lan(
     config: BenchConfig,
     specs: Vec<FaultSpec>,
     table_tcp: Option<u16>,
+    plan: String,
 ) -> Result<()> {
     let (table_dev, table_slave, table_path) =
         gyrocal_link::pseudo_terminal().context("creating the table's pseudo-terminal")?;
@@ -372,6 +459,7 @@ async fn serve_lan(
     });
     let mut hello = json!({
         "dmm": format!("tcp://{dmm_addr}"),
+        "dmm_port": format!("tcp://{dmm_addr}"),
         "table": table_path,
         "pid": std::process::id(),
         "seed": seed,
@@ -396,6 +484,7 @@ async fn serve_lan(
         None => None,
     };
     emit(&hello)?;
+    tell_operator(&hello, &plan);
     let signal = tokio::select! {
         _ = sigint.recv() => "SIGINT",
         _ = sigterm.recv() => "SIGTERM",
