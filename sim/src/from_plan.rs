@@ -17,7 +17,7 @@
 //! The gyro's own white noise is switched off, so `noise_v` alone sets the reading scatter
 //! and a plan reads as what it means.
 
-use gyrocal_files::{DmmModel, Framing, Plan, Port, TableDialect};
+use gyrocal_files::{DmmModel, Plan, Port, TableDialect};
 
 use crate::bench::{BenchConfig, DmmLink, TableWire};
 
@@ -66,10 +66,6 @@ pub fn bench_config(plan: &Plan) -> BenchConfig {
     b.dmm.noise_v = s.noise_v;
     b.dmm.baud = plan.dmm().baud;
     b.dmm.line_hz = plan.dmm().line_hz;
-    b.dmm.framing = match plan.dmm().framing {
-        Framing::N8 => gyrocal_link::Framing::EightNone,
-        Framing::E7 => gyrocal_link::Framing::SevenEven,
-        Framing::O7 => gyrocal_link::Framing::SevenOdd,
-    };
+    b.dmm.framing = plan.dmm().framing;
     b
 }

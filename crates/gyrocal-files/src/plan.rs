@@ -54,19 +54,22 @@ pub const MAX_WHOLE_REVOLUTIONS: u32 = 1000;
 /// Upper bound for every duration key (`settle_s`, `stability_window_s`, `at_rate_timeout_s`):
 /// one day.
 pub const MAX_DURATION_S: f64 = 86_400.0;
-/// Baud rates the HP 34401A offers (also accepted for the table's serial link).
-pub const BAUD_RATES: [u32; 6] = [300, 600, 1200, 2400, 4800, 9600];
-/// Integration times (power-line cycles) the HP 34401A offers for DC volts.
-pub const NPLC_VALUES: [f64; 5] = [0.02, 0.2, 1.0, 10.0, 100.0];
-/// Every integration time some supported meter offers (the 34401A's and the Truevolt
-/// 34465A/70A's 0.06). The plan refuses anything else at once, with the line and column;
-/// which of these the named model offers is the driver crate's fact, checked by the CLI
-/// (`gyrocal check`, `gyrocal run`) before anything opens.
-pub const KNOWN_NPLC_VALUES: [f64; 6] = [0.02, 0.06, 0.2, 1.0, 10.0, 100.0];
-/// DC voltage ranges of the HP 34401A, in volts.
-pub const RANGES_V: [f64; 5] = [0.1, 1.0, 10.0, 100.0, 1000.0];
-/// Mains frequencies the meter integrates against.
-pub const LINE_HZ: [u32; 2] = [50, 60];
+// The instruments' facts are their crates' (one copy each, built without I/O for this
+// synchronous crate); the plan checks against them.
+/// Mains frequencies the meter integrates against: the 34401A's.
+pub use gyrocal_hp34401a::facts::LINE_HZ;
+/// Integration times (power-line cycles) the HP 34401A offers for DC volts: its driver's.
+pub use gyrocal_hp34401a::facts::NPLC_VALUES;
+/// DC voltage ranges, in volts: the 34401A's (the Truevolts' are the same; a test keeps it so).
+pub use gyrocal_hp34401a::facts::RANGES as RANGES_V;
+/// Baud rates the HP 34401A offers (also accepted for the table's serial link): the link's.
+pub use gyrocal_link::facts::SUPPORTED_BAUDS as BAUD_RATES;
+/// Every integration time some supported meter offers: the Truevolt 34465A/70A's list, which
+/// holds the 34401A's and the 34460A/61A's (a test keeps it so). The plan refuses anything
+/// else at once, with the line and column; which of these the named model offers is the
+/// driver crate's fact, checked by the CLI (`gyrocal check`, `gyrocal run`) before anything
+/// opens.
+pub use gyrocal_truevolt::facts::NPLC_65_70 as KNOWN_NPLC_VALUES;
 
 const HASH_DOMAIN: &str = "gyrocal-plan-v1\n";
 
@@ -611,27 +614,9 @@ impl TableDialect {
     }
 }
 
-/// RS-232 character framing of the 34401A: parity and data bits are tied, always 2 stop bits.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Framing {
-    /// 8 data bits, no parity, 2 stop bits.
-    N8,
-    /// 7 data bits, even parity, 2 stop bits.
-    E7,
-    /// 7 data bits, odd parity, 2 stop bits.
-    O7,
-}
-
-impl Framing {
-    /// The name used in plan files (`8N2`, `7E2`, `7O2`).
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Framing::N8 => "8N2",
-            Framing::E7 => "7E2",
-            Framing::O7 => "7O2",
-        }
-    }
-}
+/// RS-232 character framing (`8N2`, `7E2`, `7O2`): the link's type, named in plans as it
+/// displays.
+pub use gyrocal_link::Framing;
 
 /// How the multimeter acquires a step's readings (see `hp34401a.md`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -922,7 +907,7 @@ impl Plan {
                 model: self.dmm.model.as_str().into(),
                 port: self.dmm.port.to_string(),
                 baud: self.dmm.baud.into(),
-                framing: self.dmm.framing.as_str().into(),
+                framing: self.dmm.framing.to_string(),
                 range_v: self.dmm.range_v,
                 nplc: self.dmm.nplc,
                 autozero: self.dmm.autozero,
@@ -1354,16 +1339,11 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
         ));
     }
     let dmm_baud = cx.one_of_u32("dmm.baud", m.baud, &BAUD_RATES)?;
-    let framing = match m.framing.to_ascii_uppercase().as_str() {
-        "8N2" => Framing::N8,
-        "7E2" => Framing::E7,
-        "7O2" => Framing::O7,
-        _ => {
-            return Err(cx.err(
-                "dmm.framing",
-                format!("must be \"8N2\", \"7E2\" or \"7O2\" (got {:?})", m.framing),
-            ));
-        }
+    let Ok(framing) = m.framing.parse::<Framing>() else {
+        return Err(cx.err(
+            "dmm.framing",
+            format!("must be \"8N2\", \"7E2\" or \"7O2\" (got {:?})", m.framing),
+        ));
     };
     let range_v = cx.one_of_f64("dmm.range_v", m.range_v, &RANGES_V)?;
     let nplc = cx.one_of_f64("dmm.nplc", m.nplc, &KNOWN_NPLC_VALUES)?;

@@ -75,7 +75,7 @@ fn paper_plan_is_the_published_schedule() {
     assert!(plan.dmm().autozero);
     assert_eq!(plan.dmm().line_hz, 50);
     assert_eq!(plan.dmm().acquisition, Acquisition::Auto);
-    assert_eq!(plan.dmm().framing, Framing::N8);
+    assert_eq!(plan.dmm().framing, Framing::EightNone);
     assert_eq!(plan.table().max_rate_dps, 20.0);
     assert_eq!(plan.table().acceleration_dps2, 10.0);
     assert_eq!(plan.dmm().port, Port::Serial("/dev/ttyUSB0".into()));
@@ -558,4 +558,22 @@ fn a_truevolt_needs_a_tcp_port_and_unknown_models_are_refused() {
         ))
         .is_ok()
     );
+}
+
+/// The plan keeps no copy of an instrument's facts: it takes them from the crates that own
+/// the instruments, and its one list that spans models covers every model's.
+#[test]
+fn the_plans_instrument_lists_are_the_instruments_own() {
+    use gyrocal_files::plan::{BAUD_RATES, KNOWN_NPLC_VALUES, NPLC_VALUES, RANGES_V};
+    assert_eq!(BAUD_RATES, gyrocal_link::facts::SUPPORTED_BAUDS);
+    assert_eq!(NPLC_VALUES, gyrocal_hp34401a::facts::NPLC_VALUES);
+    for model in gyrocal_truevolt::Model::ALL {
+        for n in model.nplc_values() {
+            assert!(KNOWN_NPLC_VALUES.contains(n), "{model}: NPLC {n}");
+        }
+    }
+    for n in NPLC_VALUES {
+        assert!(KNOWN_NPLC_VALUES.contains(&n), "34401A: NPLC {n}");
+    }
+    assert_eq!(RANGES_V, gyrocal_truevolt::facts::RANGES_V);
 }

@@ -4,11 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::Error;
 
-/// The legal integration times in power-line cycles. The meter rejects anything else (-222).
-pub const NPLC_VALUES: [f64; 5] = [0.02, 0.2, 1.0, 10.0, 100.0];
-
-/// The DC voltage ranges, in volts.
-pub const RANGES: [f64; 5] = [0.1, 1.0, 10.0, 100.0, 1000.0];
+use crate::facts::{LINE_HZ, NPLC_VALUES, RANGES};
 
 /// Autozero mode (`ZERO:AUTO`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
@@ -132,7 +128,7 @@ impl DcvConfig {
         {
             return bad(format!("trigger delay {d} s is outside 0..3600 s"));
         }
-        if self.line_hz != 50 && self.line_hz != 60 {
+        if !LINE_HZ.contains(&self.line_hz) {
             return bad(format!(
                 "line frequency {} Hz is neither 50 nor 60",
                 self.line_hz

@@ -30,6 +30,9 @@
 //!   the lost part again, and a burst armed before it cannot be fetched
 //!   ([`Error::ReadingsLost`]).
 //!
+//! Features: `driver` (the default) is all of the above; without it only [`facts`] is built
+//! (no async runtime), for the synchronous plan crate.
+//!
 //! ```no_run
 //! # async fn demo() -> Result<(), Box<dyn std::error::Error>> {
 //! use gyrocal_hp34401a::{DcvConfig, DriverOptions, Hp34401a, Strategy};
@@ -43,19 +46,34 @@
 //! # Ok(()) }
 //! ```
 
+pub mod facts;
+pub use facts::{NPLC_VALUES, RANGES};
+
+#[cfg(feature = "driver")]
 mod config;
+#[cfg(feature = "driver")]
 mod driver;
+#[cfg(feature = "driver")]
 mod error;
+#[cfg(feature = "driver")]
 mod meter;
+#[cfg(feature = "driver")]
 mod reading;
+#[cfg(feature = "driver")]
 pub mod timing;
 
-pub use config::{AutoZero, DcvConfig, NPLC_VALUES, RANGES, TriggerSource};
+#[cfg(feature = "driver")]
+pub use config::{AutoZero, DcvConfig, TriggerSource};
+#[cfg(feature = "driver")]
 pub use driver::{
     Acquisition, Burst, DriverOptions, Hp34401a, Identity, LinkLoss, Progress, ProgressFn,
     Recovery, parse_error,
 };
+#[cfg(feature = "driver")]
 pub use error::{Error, ErrorKind, InstrumentError};
+#[cfg(feature = "driver")]
 pub use meter::{Hp34401aMeter, PendingBurst};
+#[cfg(feature = "driver")]
 pub use reading::{OVERLOAD, Reading, parse_reading};
+#[cfg(feature = "driver")]
 pub use timing::{MeterTiming, Strategy, Timing};

@@ -8,8 +8,6 @@
 //! fatal. Whatever the previous user of the port left in its input buffer is thrown away after
 //! opening, so the first reply the driver reads is an answer to its own first question.
 
-use std::fmt;
-use std::str::FromStr;
 use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
@@ -17,61 +15,14 @@ use tokio_serial::{
     ClearBuffer, DataBits, FlowControl, Parity, SerialPort, SerialStream, StopBits,
 };
 
-use crate::{LinkError, StreamTransport};
+use crate::{Framing, LinkError, SUPPORTED_BAUDS, StreamTransport};
 
-/// The baud rates the supported instruments offer (HP 34401A: 300 to 9600).
-pub const SUPPORTED_BAUDS: [u32; 6] = [300, 600, 1200, 2400, 4800, 9600];
-
-/// Character framing: parity and data bits are tied, always one start and two stop bits, so every
-/// character is 11 bits on the wire.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
-pub enum Framing {
-    /// 8 data bits, no parity, 2 stop bits (`8N2`).
-    #[default]
-    #[serde(rename = "8N2")]
-    EightNone,
-    /// 7 data bits, even parity, 2 stop bits (`7E2`).
-    #[serde(rename = "7E2")]
-    SevenEven,
-    /// 7 data bits, odd parity, 2 stop bits (`7O2`).
-    #[serde(rename = "7O2")]
-    SevenOdd,
-}
-
-impl Framing {
-    /// Bits on the wire per character: 1 start + 7 or 8 data + parity + 2 stop = 11.
-    pub const BITS_PER_CHAR: u32 = 11;
-
-    fn settings(self) -> (DataBits, Parity) {
-        match self {
-            Framing::EightNone => (DataBits::Eight, Parity::None),
-            Framing::SevenEven => (DataBits::Seven, Parity::Even),
-            Framing::SevenOdd => (DataBits::Seven, Parity::Odd),
-        }
-    }
-}
-
-impl fmt::Display for Framing {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            Framing::EightNone => "8N2",
-            Framing::SevenEven => "7E2",
-            Framing::SevenOdd => "7O2",
-        })
-    }
-}
-
-impl FromStr for Framing {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s.to_ascii_uppercase().as_str() {
-            "8N2" => Ok(Framing::EightNone),
-            "7E2" => Ok(Framing::SevenEven),
-            "7O2" => Ok(Framing::SevenOdd),
-            other => Err(format!(
-                "unsupported framing {other:?} (use 8N2, 7E2 or 7O2)"
-            )),
-        }
+/// The serial settings of a framing.
+fn settings(framing: Framing) -> (DataBits, Parity) {
+    match framing {
+        Framing::EightNone => (DataBits::Eight, Parity::None),
+        Framing::SevenEven => (DataBits::Seven, Parity::Even),
+        Framing::SevenOdd => (DataBits::Seven, Parity::Odd),
     }
 }
 
@@ -154,7 +105,7 @@ pub fn open_serial(
     options: &LinkOptions,
 ) -> Result<StreamTransport<SerialStream>, LinkError> {
     options.validate(path)?;
-    let (data_bits, parity) = options.framing.settings();
+    let (data_bits, parity) = settings(options.framing);
     let builder = tokio_serial::new(path, options.baud)
         .data_bits(data_bits)
         .parity(parity)

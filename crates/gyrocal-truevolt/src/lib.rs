@@ -26,12 +26,18 @@
 //!   [`gyrocal_meter::ErrorKind::ReadingsLost`]). Retries are counted once, here, and
 //!   reported in [`gyrocal_meter::Acquired`].
 
+#[cfg(feature = "driver")]
 pub mod error;
 pub mod facts;
+#[cfg(feature = "driver")]
 mod meter;
+#[cfg(feature = "driver")]
 pub mod timing;
 
+#[cfg(feature = "driver")]
 pub use error::{Error, InstrumentError, parse_error};
 pub use facts::{FactsError, Model, check};
+#[cfg(feature = "driver")]
 pub use meter::{PendingFetch, TruevoltMeter, TruevoltOptions, parse_reading};
+#[cfg(feature = "driver")]
 pub use timing::{Acquisition, TimingDefaults, TruevoltTiming};

@@ -12,7 +12,7 @@ use gyrocal_hp34401a::{AutoZero, DcvConfig, DriverOptions, MeterTiming, Strategy
 use gyrocal_link::Transport;
 use gyrocal_meter::{Multimeter, TimingModel};
 use gyrocal_run::plan::DmmModel;
-use gyrocal_run::{Framing, Plan, TableDialect};
+use gyrocal_run::{Plan, TableDialect};
 use gyrocal_table::RateTable;
 
 /// The 34401A configuration a plan asks for.
@@ -117,15 +117,6 @@ pub fn meter_timing(plan: &Plan) -> Box<dyn TimingModel> {
             hp34401a_strategy(plan),
         )),
         Some(model) => Box::new(truevolt_options(model, plan).timing_at(&dc_volts(plan))),
-    }
-}
-
-/// The serial framing a plan names, as the link opens it.
-pub fn link_framing(f: Framing) -> gyrocal_link::Framing {
-    match f {
-        Framing::N8 => gyrocal_link::Framing::EightNone,
-        Framing::E7 => gyrocal_link::Framing::SevenEven,
-        Framing::O7 => gyrocal_link::Framing::SevenOdd,
     }
 }
 

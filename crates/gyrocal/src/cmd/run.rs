@@ -333,7 +333,7 @@ async fn execute(
         let d = plan.dmm();
         let dmm_opts = LinkOptions {
             baud: d.baud,
-            framing: crate::instruments::link_framing(d.framing),
+            framing: d.framing,
             // a Truevolt's tcp:// port is its SCPI socket (device clear reconnects); a
             // 34401A's is a serial converter
             scpi_socket: d.model.is_truevolt(),
