@@ -130,7 +130,8 @@ impl AclConfig {
 ///
 /// ```no_run
 /// # async fn demo() -> Result<(), gyrocal_table::TableError> {
-/// use gyrocal_table::{RateTable, SettleCriteria, acl::{AclConfig, AclTable}};
+/// use gyrocal_acl::{AclConfig, AclTable};
+/// use gyrocal_table::{RateTable, SettleCriteria};
 /// let (transport, _device) = gyrocal_link::memory_pair("table");
 /// let mut table = AclTable::new(transport, AclConfig::default());
 /// table.connect().await?;
