@@ -188,7 +188,8 @@ impl Default for AerosmithConfig {
 ///
 /// ```no_run
 /// # async fn demo() -> Result<(), gyrocal_table::TableError> {
-/// use gyrocal_table::{RateTable, aerosmith::{AerosmithConfig, AerosmithTable}};
+/// use gyrocal_aerosmith::{AerosmithConfig, AerosmithTable};
+/// use gyrocal_table::RateTable;
 /// let (transport, _device) = gyrocal_link::memory_pair("table");
 /// let mut table = AerosmithTable::new(transport, AerosmithConfig::default());
 /// table.connect().await?;
