@@ -143,3 +143,92 @@ fn completions_and_man_pages_come_from_the_real_options() {
         assert!(roff.contains(".TH"), "{}", p.display());
     }
 }
+
+/// `gyrocal run --json`: stdout is one JSON document a script can act on, complete or not;
+/// the human text goes to stderr.
+#[test]
+fn run_json_is_one_document_whatever_the_outcome() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = config("quick.toml");
+    let dir = tmp.path().join("ok");
+    let out = gyrocal(
+        &[
+            "run",
+            plan.to_str().unwrap(),
+            "--simulate",
+            "--json",
+            "-o",
+            dir.to_str().unwrap(),
+        ],
+        &[],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("{e}: {}", text(&out.stdout)));
+    assert_eq!(doc["status"], "complete", "{doc}");
+    assert_eq!(doc["exit_code"], 0, "{doc}");
+    assert_eq!(doc["table"]["at_rest"], true, "{doc}");
+    assert_eq!(doc["steps_done"], 5, "{doc}");
+    assert_eq!(doc["steps_total"], 5, "{doc}");
+    assert_eq!(doc["simulated"], true, "{doc}");
+    assert_eq!(doc["simulated_bench"]["table"]["stopped"], true, "{doc}");
+    let k = doc["fit"]["scale_factor"].as_f64().unwrap();
+    assert!((k - 0.3612).abs() < 0.001, "{doc}");
+    assert!(doc["resume_command"].is_null(), "{doc}");
+    assert!(
+        text(&out.stderr).contains("scale factor"),
+        "the human fit on stderr"
+    );
+
+    let dir = tmp.path().join("failed");
+    let out = gyrocal(
+        &[
+            "run",
+            plan.to_str().unwrap(),
+            "--simulate",
+            "--json",
+            "--sim-fault",
+            "table:trip@demand3",
+            "-o",
+            dir.to_str().unwrap(),
+        ],
+        &[],
+    );
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(doc["status"], "failed", "{doc}");
+    assert_eq!(doc["exit_code"], 1, "{doc}");
+    assert_eq!(doc["steps_done"], 2, "{doc}");
+    assert_eq!(
+        doc["resume_command"],
+        format!("gyrocal run --simulate --resume {}", dir.display()),
+        "{doc}"
+    );
+    assert!(
+        doc["reason"].as_str().unwrap().contains("rate table"),
+        "{doc}"
+    );
+}
+
+/// `gyrocal check --json`: the schedule with the plan's step numbers, the estimate, warnings.
+#[test]
+fn check_json_is_one_document_with_the_schedule() {
+    let out = gyrocal(
+        &["check", config("paper.toml").to_str().unwrap(), "--json"],
+        &[],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let steps = doc["steps"].as_array().unwrap();
+    assert_eq!(steps.len(), 19);
+    assert_eq!(steps[0]["number"], 1);
+    assert_eq!(steps[18]["number"], 19);
+    assert_eq!(steps[18]["index"], 18);
+    assert_eq!(doc["readings"], 19 * 500);
+    let (est, bound) = (
+        doc["estimated_s"].as_f64().unwrap(),
+        doc["bound_s"].as_f64().unwrap(),
+    );
+    assert!(bound > 600.0 && est >= bound && est < bound * 1.01, "{doc}");
+    assert_eq!(doc["dmm"]["acquisition"], "stream");
+}

@@ -108,13 +108,28 @@ fn steps(dir: &Path) -> Vec<(usize, u64, u64)> {
         .collect()
 }
 
-/// The table's state the simulated bench reports at the end of the run.
+/// The simulated table's state at the end of a run, from gyrocal's closing line
+/// `simulated table at the end: mode Off, demand +0 °/s, at rest`.
 fn table_at_end(stderr: &str) -> serde_json::Value {
     let line = stderr
         .lines()
         .find_map(|l| l.strip_prefix("simulated table at the end: "))
         .unwrap_or_else(|| panic!("no final table state in:\n{stderr}"));
-    serde_json::from_str(line).unwrap()
+    let mode = line
+        .strip_prefix("mode ")
+        .and_then(|r| r.split(',').next())
+        .unwrap_or_else(|| panic!("no mode in {line:?}"));
+    let demand: f64 = line
+        .split("demand ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no demand in {line:?}"));
+    serde_json::json!({
+        "mode": mode,
+        "demanded_dps": demand,
+        "stopped": line.ends_with(", at rest"),
+    })
 }
 
 /// Every combination on quick.toml, in parallel threads (each run is its own process).

@@ -98,12 +98,28 @@ fn resume_simulated(plan: &Path, dir: &Path) -> String {
     stderr
 }
 
+/// The simulated table's state at the end of a run, from gyrocal's closing line
+/// `simulated table at the end: mode Off, demand +0 °/s, at rest`.
 fn final_table_state(stderr: &str) -> serde_json::Value {
     let line = stderr
         .lines()
         .find_map(|l| l.strip_prefix("simulated table at the end: "))
         .unwrap_or_else(|| panic!("no final table state in:\n{stderr}"));
-    serde_json::from_str(line).unwrap()
+    let mode = line
+        .strip_prefix("mode ")
+        .and_then(|r| r.split(',').next())
+        .unwrap_or_else(|| panic!("no mode in {line:?}"));
+    let demand: f64 = line
+        .split("demand ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no demand in {line:?}"));
+    serde_json::json!({
+        "mode": mode,
+        "demanded_dps": demand,
+        "stopped": line.ends_with(", at rest"),
+    })
 }
 
 fn check_complete(dir: &Path, steps: usize, per_step: u64) {

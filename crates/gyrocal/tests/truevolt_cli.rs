@@ -45,12 +45,28 @@ fn csv_rows(path: &Path) -> Vec<BTreeMap<String, String>> {
     r.deserialize().map(Result::unwrap).collect()
 }
 
+/// The simulated table's state at the end of a run, from gyrocal's closing line
+/// `simulated table at the end: mode Off, demand +0 °/s, at rest`.
 fn final_table_state(stderr: &str) -> serde_json::Value {
     let line = stderr
         .lines()
         .find_map(|l| l.strip_prefix("simulated table at the end: "))
         .unwrap_or_else(|| panic!("no final table state in:\n{stderr}"));
-    serde_json::from_str(line).unwrap()
+    let mode = line
+        .strip_prefix("mode ")
+        .and_then(|r| r.split(',').next())
+        .unwrap_or_else(|| panic!("no mode in {line:?}"));
+    let demand: f64 = line
+        .split("demand ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no demand in {line:?}"));
+    serde_json::json!({
+        "mode": mode,
+        "demanded_dps": demand,
+        "stopped": line.ends_with(", at rest"),
+    })
 }
 
 struct Done {

@@ -18,6 +18,10 @@ use crate::BadInput;
 pub struct CheckArgs {
     /// The test plan (TOML).
     pub plan: PathBuf,
+    /// Print exactly one JSON document on stdout (the schedule, the estimate, the warnings)
+    /// instead of the human text.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Reads and validates a plan; a bad plan is the user's to fix (exit 2).
@@ -50,8 +54,13 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
     let steps = plan.schedule();
     let timing = crate::instruments::meter_timing(&plan);
     let est = estimate::estimate(&plan, &steps, 0.0, timing.as_ref());
+    let warnings = model_warnings(&plan, &args.plan);
+    if args.json {
+        println!("{:#}", json(&plan, &args.plan, &est, &warnings));
+        return Ok(());
+    }
     print!("{}", render(&plan, &args.plan, &est));
-    for w in model_warnings(&plan, &args.plan) {
+    for w in warnings {
         eprintln!("gyrocal: warning: {w}");
     }
     Ok(())
@@ -99,6 +108,52 @@ pub fn hms(s: f64) -> String {
     } else {
         format!("{sec:.2} s")
     }
+}
+
+/// The `--json` document: what `render` says, for scripts. Steps carry the plan's 1-based
+/// `number` and the 0-based `index` of the run directory's files.
+fn json(
+    plan: &Plan,
+    path: &std::path::Path,
+    est: &Estimate,
+    warnings: &[String],
+) -> serde_json::Value {
+    let steps: Vec<serde_json::Value> = est
+        .steps
+        .iter()
+        .map(|s| {
+            serde_json::json!({
+                "number": s.step.index + 1,
+                "index": s.step.index,
+                "pass": s.step.pass + 1,
+                "rate_dps": s.step.rate_dps,
+                "samples": s.samples,
+                "ramp_s": s.ramp.as_secs_f64(),
+                "dwell_s": s.settle.as_secs_f64(),
+                "acquire_s": s.acquire.as_secs_f64(),
+            })
+        })
+        .collect();
+    serde_json::json!({
+        "plan": path,
+        "name": plan.name(),
+        "hash": plan.hash(),
+        "table": {
+            "dialect": plan.table().dialect.as_str(),
+            "port": plan.table().port.to_string(),
+        },
+        "dmm": {
+            "model": plan.dmm().model.as_str(),
+            "port": plan.dmm().port.to_string(),
+            "reading_time_s": est.reading_time.as_secs_f64(),
+            "acquisition": est.acquisition,
+        },
+        "steps": steps,
+        "readings": est.steps.iter().map(|s| s.samples).sum::<u64>(),
+        "estimated_s": est.total.as_secs_f64(),
+        "bound_s": est.bound.as_secs_f64(),
+        "warnings": warnings,
+    })
 }
 
 fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {

@@ -52,6 +52,11 @@ pub struct RunArgs {
     /// rehearsing what a run does when an instrument misbehaves.
     #[arg(long = "sim-fault", value_name = "SPEC", requires = "simulate")]
     pub sim_faults: Vec<String>,
+    /// Print exactly one JSON document on stdout at the end (status, exit code, where the
+    /// table was left, steps, timing, the fit's headline, the run directory, the resume
+    /// command); the human text goes to stderr.
+    #[arg(long)]
+    pub json: bool,
     /// The run directory to create (default: runs/<plan>-<UTC time>).
     #[arg(short = 'o', long, value_name = "DIR", conflicts_with = "resume")]
     pub out: Option<PathBuf>,
@@ -172,8 +177,17 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
         .enable_all()
         .build()
         .context("starting the async runtime")?;
-    let (dir, summary, run, signal) = rt.block_on(execute(args, plan, &faults))?;
-    finish(args, &dir, &summary, run, signal)
+    let (dir, summary, run, signal, bench) = rt.block_on(execute(args, plan, &faults))?;
+    let mut doc = serde_json::json!({ "simulated_bench": bench });
+    let code = finish(args, &dir, &summary, run, signal, &mut doc);
+    if args.json {
+        // one document on stdout, whatever happened after the sequencer
+        if let Err(e) = &code {
+            doc["error"] = serde_json::json!(format!("{e:#}"));
+        }
+        out!("{doc:#}");
+    }
+    code
 }
 
 fn open_run_dir(args: &RunArgs, plan: &Plan) -> anyhow::Result<(PathBuf, RunDir)> {
@@ -274,7 +288,13 @@ async fn execute(
     args: &RunArgs,
     plan: Plan,
     faults: &[gyrocal_sim::faults::FaultSpec],
-) -> anyhow::Result<(PathBuf, RunSummary, RunDir, Option<StopSignal>)> {
+) -> anyhow::Result<(
+    PathBuf,
+    RunSummary,
+    RunDir,
+    Option<StopSignal>,
+    Option<serde_json::Value>,
+)> {
     if args.simulate {
         let mut cfg = gyrocal_sim::from_plan::bench_config(&plan);
         if let Some(x) = args.sim_time_scale {
@@ -319,16 +339,25 @@ async fn execute(
         }
         schedule.stop();
         let t = &bench.handle.table;
-        // one machine-readable line, so an operator (and a test) can see the table was parked
+        // what the simulated table itself says (the run's own account came from the driver)
         say!(
-            "simulated table at the end: {}",
-            serde_json::json!({
+            "simulated table at the end: mode {:?}, demand {:+} °/s, {}",
+            t.mode(),
+            t.demanded_rate(),
+            if t.is_stopped() {
+                "at rest"
+            } else {
+                "NOT at rest"
+            }
+        );
+        let state = serde_json::json!({
+            "table": {
                 "mode": format!("{:?}", t.mode()),
                 "demanded_dps": t.demanded_rate(),
                 "stopped": t.is_stopped(),
-            })
-        );
-        Ok((dir, summary, run, signal))
+            }
+        });
+        Ok((dir, summary, run, signal, Some(state)))
     } else {
         let d = plan.dmm();
         let dmm_opts = LinkOptions {
@@ -352,7 +381,7 @@ async fn execute(
             .with_context(|| format!("opening the rate table at {}", t.port))?;
         let (dir, run) = open_run_dir(args, &plan)?;
         let (summary, run, signal) = sequence(plan, dmm, table, run).await?;
-        Ok((dir, summary, run, signal))
+        Ok((dir, summary, run, signal, None))
     }
 }
 
@@ -784,6 +813,54 @@ fn finish(
     summary: &RunSummary,
     mut run: RunDir,
     signal: Option<StopSignal>,
+    doc: &mut serde_json::Value,
+) -> anyhow::Result<u8> {
+    // human text on stdout, or on stderr when stdout carries the JSON document
+    let human = |text: String| {
+        if args.json {
+            say!("{text}");
+        } else {
+            out!("{text}");
+        }
+    };
+    let resume = summary.resumable.then(|| resume_command(args, dir));
+    let table = match &summary.table {
+        TableRest::AtRest { rate_dps, waited } => serde_json::json!({
+            "at_rest": true, "rate_dps": rate_dps, "waited_s": waited.as_secs_f64(),
+        }),
+        TableRest::NotConfirmed { reason } | TableRest::NeverReached { reason } => {
+            serde_json::json!({ "at_rest": false, "reason": reason })
+        }
+    };
+    let m = run.manifest();
+    doc["run_dir"] = serde_json::json!(dir);
+    doc["status"] = serde_json::json!(summary.status);
+    doc["reason"] = serde_json::json!(summary.reason);
+    doc["table"] = table;
+    doc["steps_recorded_this_session"] = serde_json::json!(summary.steps_recorded);
+    doc["steps_done"] = serde_json::json!(run.done_steps().len());
+    doc["steps_total"] = serde_json::json!(run.schedule().len());
+    doc["elapsed_s"] = serde_json::json!(summary.elapsed_s);
+    doc["timing"] = serde_json::json!(summary.timing);
+    doc["simulated"] = serde_json::json!(m.simulated);
+    doc["resume_command"] = serde_json::json!(match summary.status {
+        Status::Complete => None,
+        _ => resume,
+    });
+    let code = finish_human(args, dir, summary, &mut run, signal, &human, doc)?;
+    doc["exit_code"] = serde_json::json!(code);
+    Ok(code)
+}
+
+/// The human side of [`finish`]: the closing lines, the fit and the report.
+fn finish_human(
+    args: &RunArgs,
+    dir: &Path,
+    summary: &RunSummary,
+    run: &mut RunDir,
+    signal: Option<StopSignal>,
+    human: &dyn Fn(String),
+    doc: &mut serde_json::Value,
 ) -> anyhow::Result<u8> {
     let rest_line = match &summary.table {
         TableRest::AtRest { .. } => "the table is at rest".to_string(),
@@ -817,13 +894,14 @@ fn finish(
             return Ok(1);
         }
     }
-    let analysis = fit_run(&mut run, &gyrocal_fit::Options::default())
+    let analysis = fit_run(run, &gyrocal_fit::Options::default())
         .with_context(|| format!("fitting {}", dir.display()))?;
+    doc["fit"] = serde_json::json!(run.manifest().fit_summary);
     let mut out = String::new();
     crate::cmd::fit::human(&mut out, &analysis);
-    out!("{out}");
+    human(out);
     if let Some(t) = &summary.timing {
-        out!(
+        human(format!(
             "timing: schedule {} (run clock), physical bound {}, ratio {:.4} (acquisition {}); \
              elapsed {} with connecting and the stop",
             hms(t.elapsed_s),
@@ -831,16 +909,19 @@ fn finish(
             t.ratio,
             t.acquisition.as_deref().unwrap_or("?"),
             hms(summary.elapsed_s)
-        );
+        ));
     }
     if !args.no_report {
         // the data and the fit are safe on disk already: a report failure is a warning
         match gyrocal_report::write_run_report(dir) {
-            Ok(path) => out!("report: {}", path.display()),
+            Ok(path) => {
+                doc["report"] = serde_json::json!(path);
+                human(format!("report: {}", path.display()));
+            }
             Err(e) => say!("gyrocal: warning: no report: {e}"),
         }
     }
-    out!("run directory: {}", dir.display());
+    human(format!("run directory: {}", dir.display()));
     if !summary.table.is_at_rest() {
         say!(
             "gyrocal: all steps recorded, but {}",
