@@ -115,13 +115,26 @@ impl Default for BenchConfig {
             table: TableConfig::default(),
             table_wire: TableWire::default(),
             gyro: GyroConfig::default(),
-            dmm: DmmConfig::default(),
+            // a simulated bench says it is one, in its meters' serial fields as the table's
+            // (SIM0001): a run against it is recorded as simulated. (The meters' own
+            // defaults keep what a real unit answers: the 34401A's serial field is 0.)
+            dmm: DmmConfig {
+                identity: SIMULATED_34401A_IDENTITY.into(),
+                ..DmmConfig::default()
+            },
             dmm_link: DmmLink::default(),
             dmm_model: DmmModel::default(),
-            truevolt: crate::truevolt::TruevoltConfig::default(),
+            truevolt: crate::truevolt::TruevoltConfig {
+                serial: "SIM0001".into(),
+                ..crate::truevolt::TruevoltConfig::default()
+            },
         }
     }
 }
+
+/// The simulated bench's 34401A identity: a real unit's, with `SIM0001` in the serial field
+/// (a real one answers 0 there).
+pub const SIMULATED_34401A_IDENTITY: &str = "HEWLETT-PACKARD,34401A,SIM0001,11-5-2";
 
 /// The wire protocol the simulated table speaks (the motion, limits and faults are the same).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]

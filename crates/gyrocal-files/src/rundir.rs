@@ -103,6 +103,10 @@ pub const SAMPLES_CSV: &str = "samples.csv";
 pub const STEPS_CSV: &str = "steps.csv";
 /// File name of the manifest.
 pub const MANIFEST_JSON: &str = "manifest.json";
+/// The start of the serial field of an instrument's identity (`*IDN?`) by which gyrocal's
+/// simulators say they are simulators (`ACUTRONIC,ACUTROL3000,SIM0001,1.0`), so a run against
+/// `gyrocal sim` is recorded as simulated.
+pub const SIMULATOR_SERIAL_PREFIX: &str = "SIM";
 /// File name of the fit document.
 pub const FIT_JSON: &str = "fit.json";
 /// File name of the HTML report (written by the report crate via [`RunDir::write_file`]).
@@ -600,8 +604,14 @@ pub struct Manifest {
     /// format 1 nested the `[plan]` section (`plan.plan.name`) and still reads.
     #[serde(with = "manifest_plan")]
     pub plan: Plan,
-    /// Whether the run uses the simulated bench.
+    /// Whether the run uses a simulated bench: the in-process one (`gyrocal run --simulate`),
+    /// or instruments that identify themselves as simulators (`gyrocal sim`; see
+    /// [`SIMULATOR_SERIAL_PREFIX`] and `simulated_by`).
     pub simulated: bool,
+    /// Who said the run is simulated when it was not started with `--simulate`: the
+    /// instruments' identities (a run against `gyrocal sim`). Absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub simulated_by: Option<String>,
     /// Whether a session of the run ran the simulated bench in virtual time: the run clock
     /// (`elapsed_s`, every `t_s`, and the `t_utc` derived from it) then counts the time a
     /// real bench would have taken, while the wall clock (`started_utc` to `ended_utc`) shows
@@ -1011,6 +1021,7 @@ impl RunDir {
             plan_hash: plan.hash(),
             plan: plan.clone(),
             simulated: meta.simulated,
+            simulated_by: None,
             virtual_time: meta.virtual_time,
             instruments: meta.instruments,
             started_utc: now.clone(),
@@ -1395,6 +1406,17 @@ impl RunDir {
             n = rec.n,
             "step recorded"
         );
+        self.write_manifest()
+    }
+
+    /// Marks the run simulated because `by` says so (instruments that identify as
+    /// simulators); a run started with `--simulate` is already.
+    pub fn mark_simulated(&mut self, by: &str) -> Result<(), RunError> {
+        if self.manifest.simulated {
+            return Ok(());
+        }
+        self.manifest.simulated = true;
+        self.manifest.simulated_by = Some(by.to_string());
         self.write_manifest()
     }
 

@@ -252,6 +252,19 @@ pub enum SequenceError {
         /// What the table did.
         detail: String,
     },
+    /// The instruments now answering are simulators and the recorded steps were measured, or
+    /// the reverse: continuing would mix simulated and measured data in one calibration.
+    #[error(
+        "the recorded steps of this run were measured on {recorded_on}, and the instruments now \
+         answering are {now}: continuing would mix simulated and measured data in one \
+         calibration; start a new run"
+    )]
+    Mixed {
+        /// What the recorded steps were measured on.
+        recorded_on: &'static str,
+        /// What answers now.
+        now: &'static str,
+    },
     /// The run was stopped by the operator or a signal.
     #[error("{}", stopped_text(.0))]
     Stopped(StopRequest),
@@ -513,7 +526,10 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
             _ => Status::Failed,
         };
         let reason = error.to_string();
-        let resumable = !matches!(error, SequenceError::AllOverloaded { .. });
+        let resumable = !matches!(
+            error,
+            SequenceError::AllOverloaded { .. } | SequenceError::Mixed { .. }
+        );
         tracing::warn!(%reason, ?status, "run stopping");
         // Table first: it is the dangerous one. A table that faulted or stopped answering gets
         // the emergency path too (rate-table.md: "for a second interrupt or a fault"): a
@@ -674,10 +690,36 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
         let Some(dmm) = self.dmm.as_mut() else {
             return Err(released());
         };
-        let dmm_id = dmm.connect().await.map_err(dmm_error)?.raw;
+        let dmm_identity = dmm.connect().await.map_err(dmm_error)?;
+        let dmm_id = dmm_identity.raw.clone();
         let t = self.table.connect().await?;
         self.table_reached = true;
         let table_id = format!("{},{},{},{}", t.manufacturer, t.model, t.serial, t.version);
+        // simulators say so in their serial field: a run's data are all simulated or all
+        // measured, never both
+        let prefix = crate::rundir::SIMULATOR_SERIAL_PREFIX;
+        let simulators = dmm_identity.serial.starts_with(prefix) || t.serial.starts_with(prefix);
+        let recorded = !self.run.done_steps().is_empty();
+        if simulators != self.run.manifest().simulated {
+            if recorded {
+                return Err(SequenceError::Mixed {
+                    recorded_on: if self.run.manifest().simulated {
+                        "a simulated bench"
+                    } else {
+                        "real instruments"
+                    },
+                    now: if simulators {
+                        "simulators"
+                    } else {
+                        "real instruments"
+                    },
+                });
+            }
+            if simulators {
+                self.run
+                    .mark_simulated("the instruments identify as simulators (serial SIM...)")?;
+            }
+        }
         self.emit(Event::Connected {
             dmm: dmm_id.clone(),
             table: table_id.clone(),

@@ -419,3 +419,44 @@ async fn a_table_fault_during_a_long_fetch_is_caught_at_once() {
     );
     assert!(load(&dir).unwrap().steps.is_empty());
 }
+
+/// A run whose steps were measured on instruments that did not identify as simulators is not
+/// continued on a simulated bench (nor the reverse): the refusal comes before the table moves.
+#[tokio::test(start_paused = true)]
+async fn a_run_is_never_continued_on_the_other_kind_of_bench() {
+    let plan = plan_with("quick.toml", |_| {});
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    // "real" instruments: the serial fields a real 34401A and table answer
+    let mut real = bench_config(&plan);
+    real.dmm.identity = "HEWLETT-PACKARD,34401A,0,11-5-2".into();
+    real.table.identity = "ACUTRONIC,ACUTROL3000,1234,3.1".into();
+    let meta = RunMeta {
+        gyrocal_version: "test".into(),
+        ..RunMeta::default()
+    };
+    let run = RunDir::create(&dir, &plan, meta).unwrap();
+    let (summary, _) = run_with(&plan, Bench::spawn(real), run, Some(2)).await;
+    assert_eq!(summary.status, Status::Aborted);
+    assert!(!load(&dir).unwrap().manifest.simulated);
+    let done = load(&dir).unwrap().steps.len();
+    assert!(done >= 2);
+
+    // the same run on the simulated bench (serial SIM0001)
+    let run = RunDir::open_for_resume(&dir, &plan).unwrap();
+    let bench = Bench::spawn(bench_config(&plan));
+    let (summary, handle) = run_with(&plan, bench, run, None).await;
+    assert_eq!(summary.status, Status::Failed);
+    let reason = summary.reason.unwrap();
+    assert!(
+        reason.contains("mix simulated and measured data"),
+        "{reason}"
+    );
+    assert!(!summary.resumable);
+    assert_eq!(
+        handle.table.demands_seen(),
+        0,
+        "the simulated table never moved"
+    );
+    assert_eq!(load(&dir).unwrap().steps.len(), done, "nothing recorded");
+}

@@ -498,6 +498,14 @@ fn e2e_clean_run_completes_and_its_fit_matches_the_truth() {
     assert_eq!(end.code, Some(0), "{end:?}");
     check_complete(&dir);
     assert!(manifest(&dir)["retries"].as_array().unwrap().is_empty());
+    // the bench said it is a simulator (serial SIM0001): the run is recorded as simulated,
+    // though started without --simulate
+    let m = manifest(&dir);
+    assert_eq!(m["simulated"], true, "{m}");
+    assert!(
+        m["simulated_by"].as_str().unwrap().contains("simulators"),
+        "{m}"
+    );
     assert!(end.stdout.contains("least-squares linear"), "{end:?}");
 
     let fit: Value =

@@ -247,11 +247,18 @@ fn check_resume_mode(dir: &Path, simulate: bool) -> anyhow::Result<()> {
     else {
         return Ok(()); // the resume names the missing, unreadable or oversized manifest itself
     };
-    let simulated = serde_json::from_slice::<serde_json::Value>(&bytes)
-        .ok()
+    let manifest = serde_json::from_slice::<serde_json::Value>(&bytes).ok();
+    let simulated = manifest
+        .as_ref()
         .and_then(|m| m.get("simulated").and_then(serde_json::Value::as_bool));
+    // a run against `gyrocal sim` (marked by its instruments' identities) goes on against the
+    // instruments' ports; the sequencer checks again who answers there
+    let by_instruments = manifest
+        .as_ref()
+        .is_some_and(|m| m.get("simulated_by").is_some_and(|v| !v.is_null()));
     if let Some(simulated) = simulated
         && simulated != simulate
+        && !(simulated && by_instruments)
     {
         let (was, now) = if simulate {
             ("on the instruments", "--simulate")
