@@ -1308,3 +1308,79 @@ fn e2e_prologix_usb_and_ethernet_run_the_plan_with_a_retried_fault_and_stop_at_r
         assert_eq!(last["dmm"]["errors_raised"], 0, "{link}: {last}");
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// the connection probe
+
+#[test]
+fn e2e_check_probe_identifies_both_instruments_and_a_silent_meter_leaves_no_run_directory() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_plan(tmp.path());
+    let sim = Sim::start(&plan, &[]);
+    let out = Command::new(BIN)
+        .env_remove("RUST_LOG")
+        .arg("check")
+        .arg(&plan)
+        .args([
+            "--probe",
+            "--dmm-port",
+            sim.dmm(),
+            "--table-port",
+            sim.table(),
+        ])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("probe: multimeter HEWLETT-PACKARD,34401A,SIM0001"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("probe: rate table ACUTRONIC,ACUTROL3000,SIM0001"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("(mode Off"), "{stdout}");
+
+    // a meter port where nothing answers (a pseudo-terminal nobody serves)
+    let pty = nix::pty::openpty(None, None).unwrap();
+    let silent = nix::unistd::ttyname(&pty.slave).unwrap();
+    let dir = tmp.path().join("run");
+    let out = Command::new(BIN)
+        .env_remove("RUST_LOG")
+        .arg("run")
+        .arg(&plan)
+        .args([
+            "--dmm-port",
+            silent.to_str().unwrap(),
+            "--table-port",
+            sim.table(),
+        ])
+        .args(["--no-report", "--out", dir.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "the multimeter at {} did not answer",
+            silent.display()
+        )),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("9600 baud and 8N2") && stderr.contains("null-modem"),
+        "the likely causes for RS-232: {stderr}"
+    );
+    assert!(
+        !dir.exists(),
+        "nothing created on disk when an instrument does not answer"
+    );
+    drop(pty);
+    let last = sim.finish();
+    assert_eq!(last["table"]["demands_seen"], 0, "{last}");
+}

@@ -22,6 +22,16 @@ pub struct CheckArgs {
     /// instead of the human text.
     #[arg(long)]
     pub json: bool,
+    /// Also open each instrument, identify it, read the table's mode and rate (nothing
+    /// moves); on silence, say what to check on that link. Exit 1 when one does not answer.
+    #[arg(long)]
+    pub probe: bool,
+    /// With --probe: the multimeter's port instead of the plan's.
+    #[arg(long, value_name = "PORT", requires = "probe")]
+    pub dmm_port: Option<String>,
+    /// With --probe: the rate table's port instead of the plan's.
+    #[arg(long, value_name = "PORT", requires = "probe")]
+    pub table_port: Option<String>,
 }
 
 /// Reads and validates a plan; a bad plan is the user's to fix (exit 2).
@@ -50,7 +60,18 @@ pub fn check_port(
 
 /// Runs `gyrocal check`.
 pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
-    let plan = load_plan(&args.plan)?;
+    let mut plan = load_plan(&args.plan)?;
+    if let Some(p) = &args.dmm_port {
+        let port = gyrocal_run::Port::parse(p).map_err(|e| BadInput(format!("--dmm-port: {e}")))?;
+        check_port(std::path::Path::new("--dmm-port"), "port", &port)?;
+        plan.set_dmm_port(port);
+    }
+    if let Some(p) = &args.table_port {
+        let port =
+            gyrocal_run::Port::parse(p).map_err(|e| BadInput(format!("--table-port: {e}")))?;
+        check_port(std::path::Path::new("--table-port"), "port", &port)?;
+        plan.set_table_port(port);
+    }
     let steps = plan.schedule();
     let timing = crate::instruments::meter_timing(&plan);
     let est = estimate::estimate(&plan, &steps, 0.0, timing.as_ref());
@@ -62,6 +83,20 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
     print!("{}", render(&plan, &args.plan, &est));
     for w in warnings {
         eprintln!("gyrocal: warning: {w}");
+    }
+    if args.probe {
+        use anyhow::Context as _;
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .context("starting the async runtime")?;
+        let found = rt.block_on(crate::cmd::probe::probe(&plan))?;
+        println!();
+        println!("probe: multimeter {}", found.dmm);
+        println!(
+            "probe: rate table {} (mode {}, {:+.4} °/s)",
+            found.table, found.table_mode, found.table_rate_dps
+        );
     }
     Ok(())
 }

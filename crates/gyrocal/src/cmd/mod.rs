@@ -3,6 +3,7 @@
 pub mod check;
 pub mod completions;
 pub mod fit;
+pub mod probe;
 pub mod report;
 pub mod run;
 pub mod sim;

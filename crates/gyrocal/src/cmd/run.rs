@@ -22,7 +22,7 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use clap::Args;
-use gyrocal_link::{LinkOptions, Transport};
+use gyrocal_link::Transport;
 use gyrocal_run::{
     Event, Phase, Plan, Port, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status,
     StopRequest, TableRest, fit_run,
@@ -366,26 +366,27 @@ async fn execute(
         });
         Ok((dir, summary, run, signal, Some(state)))
     } else {
+        // Every instrument must answer before anything is created on disk.
+        let found = crate::cmd::probe::probe(&plan).await?;
+        say!(
+            "probe: both instruments answer (the table in mode {} at {:+.4} °/s)",
+            found.table_mode,
+            found.table_rate_dps
+        );
         let d = plan.dmm();
-        let dmm_opts = LinkOptions {
-            baud: d.baud,
-            framing: d.framing,
-            // a Truevolt's tcp:// port is its SCPI socket (device clear reconnects); a
-            // 34401A's is a serial converter
-            scpi_socket: d.model.is_truevolt(),
-            ..LinkOptions::default()
-        };
-        let dmm = gyrocal_link::open(&d.port.to_string(), &dmm_opts)
-            .await
-            .with_context(|| format!("opening the multimeter at {}", d.port))?;
+        let dmm = gyrocal_link::open(
+            &d.port.to_string(),
+            &crate::cmd::probe::dmm_link_options(&plan),
+        )
+        .await
+        .with_context(|| format!("opening the multimeter at {}", d.port))?;
         let t = plan.table();
-        let table_opts = LinkOptions {
-            baud: t.baud,
-            ..LinkOptions::default()
-        };
-        let table = gyrocal_link::open(&t.port.to_string(), &table_opts)
-            .await
-            .with_context(|| format!("opening the rate table at {}", t.port))?;
+        let table = gyrocal_link::open(
+            &t.port.to_string(),
+            &crate::cmd::probe::table_link_options(&plan),
+        )
+        .await
+        .with_context(|| format!("opening the rate table at {}", t.port))?;
         let (dir, run) = open_run_dir(args, &plan)?;
         let (summary, run, signal) = sequence(plan, dmm, table, run).await?;
         Ok((dir, summary, run, signal, None))

@@ -356,7 +356,14 @@ async fn bridge_clients(listener: tokio::net::TcpListener, end: tokio::io::Duple
                 let end = end.clone();
                 current = Some(tokio::spawn(async move {
                     let mut end = end.lock().await;
-                    let _ = tokio::io::copy_bidirectional(&mut sock, &mut *end).await;
+                    // copy both ways until the client goes, never shutting the controller's
+                    // side down (copy_bidirectional would: the next client would find it closed)
+                    let (mut from_client, mut to_client) = sock.split();
+                    let (mut from_bench, mut to_bench) = tokio::io::split(&mut *end);
+                    tokio::select! {
+                        _ = tokio::io::copy(&mut from_client, &mut to_bench) => {}
+                        _ = tokio::io::copy(&mut from_bench, &mut to_client) => {}
+                    }
                 }));
             }
             Err(e) => {
