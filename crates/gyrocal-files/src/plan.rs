@@ -2,10 +2,14 @@
 //!
 //! Parsing happens in two stages, ripgrep-style:
 //!
-//! 1. **Raw**: private serde structs mirror the file (`[plan]`, `[table]`, `[dmm]`,
-//!    `[simulation]`), reject unknown keys (`deny_unknown_fields`) and keep the byte span of
-//!    every value ([`toml::Spanned`]). TOML syntax errors, unknown keys, missing keys and wrong
-//!    types are reported here from `toml`'s own spans.
+//! 1. **Raw**: the file is parsed into `toml`'s spanned document and its shape checked against
+//!    a small schema (sections, keys, the kind of each value): a missing key is reported under
+//!    its own section at that section's header, an unknown section or key gets "did you mean
+//!    \[table\]?" (edit distance), a value of the wrong kind is said in words ("write a whole
+//!    number from 1 to 1000000"). Then private serde structs mirror the file (`[plan]`,
+//!    `[table]`, `[dmm]`, `[simulation]`), reject unknown keys (`deny_unknown_fields`) and keep
+//!    the byte span of every value ([`toml::Spanned`]). TOML syntax errors are reported from
+//!    `toml`'s own spans.
 //! 2. **Validated**: the raw values, with defaults filled in, become a [`PlanDoc`] (the plain,
 //!    serialisable form with the file's key names) and are checked against the instruments'
 //!    limits. Every semantic error points at the offending value through the span kept in
@@ -127,7 +131,7 @@ pub enum PlanError {
         /// The limit, bytes.
         cap: u64,
     },
-    /// TOML syntax error, unknown key, missing key or wrong type (stage 1).
+    /// TOML syntax error, unknown or missing section, unknown key (stage 1).
     #[error("{location}: {}{message}", section.as_ref().map(|s| format!("[{s}] ")).unwrap_or_default())]
     Syntax {
         /// Where.
@@ -137,7 +141,8 @@ pub enum PlanError {
         /// What `toml`/serde said (names the key for unknown and missing keys).
         message: String,
     },
-    /// A value that parses but is not acceptable (stage 2).
+    /// A missing key or a value of the wrong kind (stage 1), or a value that parses but is not
+    /// acceptable (stage 2).
     #[error("{location}: [{section}] {key} {message}")]
     Invalid {
         /// Where (the offending value, when the file had it).
