@@ -2,10 +2,14 @@
 //!
 //! Parsing happens in two stages, ripgrep-style:
 //!
-//! 1. **Raw**: private serde structs mirror the file (`[plan]`, `[table]`, `[dmm]`,
-//!    `[simulation]`), reject unknown keys (`deny_unknown_fields`) and keep the byte span of
-//!    every value ([`toml::Spanned`]). TOML syntax errors, unknown keys, missing keys and wrong
-//!    types are reported here from `toml`'s own spans.
+//! 1. **Raw**: the file is parsed into `toml`'s spanned document and its shape checked against
+//!    a small schema (sections, keys, the kind of each value): a missing key is reported under
+//!    its own section at that section's header, an unknown section or key gets "did you mean
+//!    \[table\]?" (edit distance), a value of the wrong kind is said in words ("write a whole
+//!    number from 1 to 1000000"). Then private serde structs mirror the file (`[plan]`,
+//!    `[table]`, `[dmm]`, `[simulation]`), reject unknown keys (`deny_unknown_fields`) and keep
+//!    the byte span of every value ([`toml::Spanned`]). TOML syntax errors are reported from
+//!    `toml`'s own spans.
 //! 2. **Validated**: the raw values, with defaults filled in, become a [`PlanDoc`] (the plain,
 //!    serialisable form with the file's key names) and are checked against the instruments'
 //!    limits. Every semantic error points at the offending value through the span kept in
@@ -35,6 +39,7 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 use toml::Spanned;
+use toml::de::{DeTable, DeValue};
 
 /// Hard ceiling for `[table] max_rate_dps`, in °/s. Laboratory single-axis rate tables reach a
 /// few hundred to about 1000 °/s; a larger figure is a typo, and a dangerous one.
@@ -126,7 +131,7 @@ pub enum PlanError {
         /// The limit, bytes.
         cap: u64,
     },
-    /// TOML syntax error, unknown key, missing key or wrong type (stage 1).
+    /// TOML syntax error, unknown or missing section, unknown key (stage 1).
     #[error("{location}: {}{message}", section.as_ref().map(|s| format!("[{s}] ")).unwrap_or_default())]
     Syntax {
         /// Where.
@@ -136,7 +141,8 @@ pub enum PlanError {
         /// What `toml`/serde said (names the key for unknown and missing keys).
         message: String,
     },
-    /// A value that parses but is not acceptable (stage 2).
+    /// A missing key or a value of the wrong kind (stage 1), or a value that parses but is not
+    /// acceptable (stage 2).
     #[error("{location}: [{section}] {key} {message}")]
     Invalid {
         /// Where (the offending value, when the file had it).
@@ -327,19 +333,16 @@ fn int_rule(key: &str) -> IntRule {
     }
 }
 
-/// The message for an integer key whose value (`shown`, as written) is not allowed.
+/// The message for an integer key whose value (`shown`, as written) is not allowed: the
+/// allowed values in words and what to write.
 fn int_error(key: &str, shown: &str, whole: bool) -> String {
-    let what = if whole {
-        "is out of range"
-    } else {
-        "is not a whole number"
-    };
+    let words = int_words(key);
+    if !whole {
+        return format!("= {shown} is not a whole number: write {words}");
+    }
     match int_rule(key) {
-        IntRule::Range(lo, hi) => format!("= {shown} {what} ({lo} to {hi})"),
-        IntRule::OneOf(allowed) if whole => {
-            format!("must be one of {allowed:?} (got {shown})")
-        }
-        IntRule::OneOf(allowed) => format!("= {shown} {what} (one of {allowed:?})"),
+        IntRule::Range(..) => format!("= {shown} is out of range: write {words}"),
+        IntRule::OneOf(_) => format!("= {shown} is not allowed: write {words}"),
     }
 }
 
@@ -372,6 +375,387 @@ impl Spans {
             Some(RawInt::Other(shown, whole)) => Err((key, int_error(key, &shown, whole))),
         }
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Stage 1a: the file's shape, checked before serde so errors name the right place in words
+// ---------------------------------------------------------------------------------------------
+
+/// What a key holds, in the words an operator reads in an error message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    /// A number (integer or float).
+    Number,
+    /// A whole number (the allowed values are [`int_rule`]'s).
+    Int,
+    /// Text in quotes.
+    Text,
+    /// `true` or `false`.
+    Bool,
+    /// A list of numbers.
+    Numbers,
+}
+
+/// A section of the file: its name, whether it is required, and its keys (name, kind,
+/// required). Kept in step with the `Raw*` structs by a unit test.
+type SectionSchema = (&'static str, bool, &'static [(&'static str, Kind, bool)]);
+
+const SCHEMA: &[SectionSchema] = &[
+    (
+        "plan",
+        true,
+        &[
+            ("name", Kind::Text, false),
+            ("rates_dps", Kind::Numbers, true),
+            ("samples_per_rate", Kind::Int, true),
+            ("settle_s", Kind::Number, false),
+            ("repeat", Kind::Int, false),
+            ("whole_revolutions", Kind::Int, false),
+        ],
+    ),
+    (
+        "table",
+        true,
+        &[
+            ("dialect", Kind::Text, false),
+            ("port", Kind::Text, true),
+            ("baud", Kind::Int, false),
+            ("max_rate_dps", Kind::Number, true),
+            ("acceleration_dps2", Kind::Number, true),
+            ("rate_tolerance_dps", Kind::Number, false),
+            ("stability_window_s", Kind::Number, false),
+            ("at_rate_timeout_s", Kind::Number, false),
+        ],
+    ),
+    (
+        "dmm",
+        true,
+        &[
+            ("model", Kind::Text, false),
+            ("port", Kind::Text, true),
+            ("baud", Kind::Int, false),
+            ("framing", Kind::Text, false),
+            ("range_v", Kind::Number, false),
+            ("nplc", Kind::Number, false),
+            ("autozero", Kind::Bool, false),
+            ("line_hz", Kind::Int, false),
+            ("acquisition", Kind::Text, false),
+        ],
+    ),
+    (
+        "simulation",
+        false,
+        &[
+            ("seed", Kind::Int, false),
+            ("scale_factor", Kind::Number, false),
+            ("bias", Kind::Number, false),
+            ("k2", Kind::Number, false),
+            ("k3", Kind::Number, false),
+            ("asymmetry", Kind::Number, false),
+            ("noise_v", Kind::Number, false),
+            ("bias_walk", Kind::Number, false),
+            ("latitude_deg", Kind::Number, false),
+            ("rate_noise_dps", Kind::Number, false),
+            ("ripple_dps", Kind::Number, false),
+        ],
+    ),
+];
+
+/// An example line for a required key, for "add ..." hints.
+fn example(section: &str, key: &str) -> &'static str {
+    match (section, key) {
+        ("plan", "rates_dps") => "rates_dps = [0, 5, -5]",
+        ("plan", "samples_per_rate") => "samples_per_rate = 500",
+        ("table", "port") => "port = \"/dev/ttyUSB1\"",
+        ("dmm", "port") => "port = \"/dev/ttyUSB0\"",
+        ("table", "max_rate_dps") => "max_rate_dps = 20",
+        ("table", "acceleration_dps2") => "acceleration_dps2 = 10",
+        _ => "",
+    }
+}
+
+/// Optimal-string-alignment distance (Levenshtein plus adjacent transpositions), ASCII
+/// case-insensitive.
+fn edit_distance(a: &str, b: &str) -> usize {
+    let a: Vec<char> = a.chars().map(|c| c.to_ascii_lowercase()).collect();
+    let b: Vec<char> = b.chars().map(|c| c.to_ascii_lowercase()).collect();
+    let w = b.len() + 1;
+    let mut d = vec![0usize; (a.len() + 1) * w];
+    for (i, row) in d.chunks_mut(w).enumerate() {
+        if let Some(first) = row.first_mut() {
+            *first = i;
+        }
+    }
+    for (j, cell) in d.iter_mut().take(w).enumerate() {
+        *cell = j;
+    }
+    for i in 1..=a.len() {
+        for j in 1..=b.len() {
+            let cost = usize::from(a[i - 1] != b[j - 1]);
+            let mut best = (d[(i - 1) * w + j] + 1)
+                .min(d[i * w + j - 1] + 1)
+                .min(d[(i - 1) * w + j - 1] + cost);
+            if i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1] {
+                best = best.min(d[(i - 2) * w + j - 2] + 1);
+            }
+            d[i * w + j] = best;
+        }
+    }
+    d[a.len() * w + b.len()]
+}
+
+/// The candidate closest to `name`, when it is close enough to be a likely misspelling (a
+/// small edit distance, or one is a prefix of the other).
+fn closest<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
+    let lower = name.to_ascii_lowercase();
+    candidates
+        .into_iter()
+        .filter_map(|c| {
+            let d = edit_distance(name, c);
+            let prefix = lower.len() >= 3 && (c.starts_with(&lower) || lower.starts_with(c));
+            let close = d <= 1 || d * 3 <= name.chars().count().max(c.len());
+            (close || prefix).then_some((d, c))
+        })
+        .min_by_key(|&(d, _)| d)
+        .map(|(_, c)| c)
+}
+
+/// `a, b or c`.
+fn or_list<T: fmt::Display>(items: &[T]) -> String {
+    word_list(items, "or")
+}
+
+/// `a, b and c`.
+fn and_list<T: fmt::Display>(items: &[T]) -> String {
+    word_list(items, "and")
+}
+
+fn word_list<T: fmt::Display>(items: &[T], conjunction: &str) -> String {
+    let words: Vec<String> = items.iter().map(ToString::to_string).collect();
+    match words.split_last() {
+        None => String::new(),
+        Some((last, [])) => last.clone(),
+        Some((last, rest)) => format!("{} {conjunction} {last}", rest.join(", ")),
+    }
+}
+
+/// A value as it reads in an error message, and what kind of thing it is, in words.
+fn shown(v: &DeValue<'_>) -> (String, &'static str) {
+    match v {
+        DeValue::String(s) => (format!("{:?}", s.as_ref()), "text"),
+        DeValue::Integer(i) => (i.as_str().to_string(), "a whole number"),
+        DeValue::Float(f) => (f.as_str().to_string(), "a number with a fraction"),
+        DeValue::Boolean(b) => (b.to_string(), "true/false"),
+        DeValue::Datetime(d) => (d.to_string(), "a date/time"),
+        DeValue::Array(_) => ("a list".into(), "a list"),
+        DeValue::Table(_) => ("a table".into(), "a table"),
+    }
+}
+
+/// What an integer key allows, in words: `a whole number from 1 to 1000000`, `one of 50 or 60`.
+fn int_words(key: &str) -> String {
+    match int_rule(key) {
+        IntRule::Range(lo, hi) => format!("a whole number from {lo} to {hi}"),
+        IntRule::OneOf(allowed) => format!("one of {}", or_list(allowed)),
+    }
+}
+
+/// A stage-1 finding: where (byte offset, when known), section, key, message.
+struct Finding {
+    /// 0: a wrong key or value; 1: a missing key; 2: a missing section (reported in this order).
+    rank: u8,
+    offset: Option<usize>,
+    section: Option<String>,
+    key: Option<String>,
+    message: String,
+}
+
+/// The message for a value of the wrong kind for `section.key`, or `None` when it fits.
+fn wrong_kind(section: &str, key: &str, kind: Kind, v: &DeValue<'_>) -> Option<String> {
+    let (shown, what) = shown(v);
+    let quoted_number = v.as_str().is_some_and(|s| s.trim().parse::<f64>().is_ok());
+    match kind {
+        Kind::Number if v.is_integer() || v.is_float() => None,
+        Kind::Number if quoted_number => Some(format!(
+            "= {shown} is text, not a number: write the number without quotes"
+        )),
+        Kind::Number => Some(format!(
+            "= {shown} is {what}: write a number, e.g. {key} = 10"
+        )),
+        Kind::Int if v.is_integer() => None,
+        Kind::Int => {
+            let words = int_words(&format!("{section}.{key}"));
+            Some(if quoted_number {
+                format!("= {shown} is text, not a number: write {words}, without quotes")
+            } else if v.is_float() {
+                format!("= {shown} is not a whole number: write {words}")
+            } else {
+                format!("= {shown} is {what}, not a number: write {words}")
+            })
+        }
+        Kind::Text if v.is_str() => None,
+        Kind::Text => Some(format!(
+            "= {shown} is {what}: write text in quotes, e.g. {key} = \"{}\"",
+            v.as_integer()
+                .map(|i| i.as_str().to_string())
+                .or_else(|| v.as_float().map(|f| f.as_str().to_string()))
+                .unwrap_or_else(|| "...".into())
+        )),
+        Kind::Bool if v.is_bool() => None,
+        Kind::Bool => Some(format!(
+            "= {shown} is {what}: write true or false (no quotes)"
+        )),
+        Kind::Numbers if v.is_array() => None,
+        Kind::Numbers => Some(format!(
+            "= {shown} is {what}: write a list of numbers in brackets, e.g. {key} = [0, 5, -5]"
+        )),
+    }
+}
+
+/// Checks the file's sections, keys and value kinds against [`SCHEMA`]; returns every finding.
+fn check_shape(root: &DeTable<'_>) -> Vec<Finding> {
+    let mut out = Vec::new();
+    let section_names = || SCHEMA.iter().map(|s| s.0);
+    for (name, value) in root.iter() {
+        let name_str: &str = name.get_ref().as_ref();
+        let Some((sname, _, keys)) = SCHEMA.iter().find(|s| s.0 == name_str) else {
+            let all = and_list(
+                &section_names()
+                    .map(|s| format!("[{s}]"))
+                    .collect::<Vec<_>>(),
+            );
+            let hint = match closest(name_str, section_names()) {
+                Some(s) => format!("did you mean [{s}]? (the sections are {all})"),
+                None => format!("the sections are {all}"),
+            };
+            let what = if value.get_ref().is_table() {
+                format!("unknown section [{name_str}]")
+            } else {
+                format!("unknown key `{name_str}` outside any section")
+            };
+            out.push(Finding {
+                rank: 0,
+                offset: Some(name.span().start),
+                section: None,
+                key: None,
+                message: format!("{what}: {hint}"),
+            });
+            continue;
+        };
+        let Some(table) = value.get_ref().as_table() else {
+            out.push(Finding {
+                rank: 0,
+                offset: Some(name.span().start),
+                section: None,
+                key: None,
+                message: format!(
+                    "`{sname}` must be a section: write a line [{sname}] followed by its keys"
+                ),
+            });
+            continue;
+        };
+        for (key, v) in table.iter() {
+            let key_str: &str = key.get_ref().as_ref();
+            let Some(&(kname, kind, _)) = keys.iter().find(|k| k.0 == key_str) else {
+                let elsewhere: Vec<String> = SCHEMA
+                    .iter()
+                    .filter(|s| s.0 != *sname && s.2.iter().any(|k| k.0 == key_str))
+                    .map(|s| format!("[{}]", s.0))
+                    .collect();
+                let hint = if !elsewhere.is_empty() {
+                    format!("it belongs in {}", or_list(&elsewhere))
+                } else if let Some(k) = closest(key_str, keys.iter().map(|k| k.0)) {
+                    format!("did you mean `{k}`?")
+                } else {
+                    format!(
+                        "the keys of [{sname}] are {}",
+                        and_list(&keys.iter().map(|k| k.0).collect::<Vec<_>>())
+                    )
+                };
+                out.push(Finding {
+                    rank: 0,
+                    offset: Some(key.span().start),
+                    section: Some((*sname).to_string()),
+                    key: None,
+                    message: format!("unknown key `{key_str}`: {hint}"),
+                });
+                continue;
+            };
+            if let Some(message) = wrong_kind(sname, kname, kind, v.get_ref()) {
+                out.push(Finding {
+                    rank: 0,
+                    offset: Some(v.span().start),
+                    section: Some((*sname).to_string()),
+                    key: Some(kname.to_string()),
+                    message,
+                });
+            } else if let (Kind::Numbers, Some(items)) = (kind, v.get_ref().as_array()) {
+                for (i, item) in items.iter().enumerate() {
+                    if let Some(message) = wrong_kind(sname, kname, Kind::Number, item.get_ref()) {
+                        out.push(Finding {
+                            rank: 0,
+                            offset: Some(item.span().start),
+                            section: Some((*sname).to_string()),
+                            key: Some(format!("{kname}[{i}]")),
+                            message,
+                        });
+                    }
+                }
+            }
+        }
+        for &(kname, _, required) in keys.iter() {
+            if required && !table.keys().any(|k| k.get_ref().as_ref() == kname) {
+                let ex = example(sname, kname);
+                let add = if ex.is_empty() {
+                    format!("add `{kname}` under [{sname}]")
+                } else {
+                    format!("add a line such as {ex} under [{sname}]")
+                };
+                out.push(Finding {
+                    rank: 1,
+                    offset: Some(name.span().start),
+                    section: Some((*sname).to_string()),
+                    key: Some(kname.to_string()),
+                    message: format!("is missing (required): {add}"),
+                });
+            }
+        }
+    }
+    for &(sname, required, keys) in SCHEMA {
+        if required && !root.keys().any(|k| k.get_ref().as_ref() == sname) {
+            let needed: Vec<&str> = keys.iter().filter(|k| k.2).map(|k| k.0).collect();
+            out.push(Finding {
+                rank: 2,
+                offset: None,
+                section: None,
+                key: None,
+                message: format!(
+                    "the section [{sname}] is missing (required): add a line [{sname}] followed \
+                     by {}",
+                    needed.join(", ")
+                ),
+            });
+        }
+    }
+    out
+}
+
+/// Serde's type names, as words (for the rare serde message that gets past [`check_shape`]).
+fn plain_words(message: &str) -> String {
+    let mut m = message.to_string();
+    for (jargon, words) in [
+        ("u32", "a whole number"),
+        ("u64", "a whole number"),
+        ("i64", "a whole number"),
+        ("f64", "a number"),
+        ("a boolean", "true or false"),
+        ("a string", "text in quotes"),
+        ("a sequence", "a list"),
+        ("struct ", ""),
+    ] {
+        m = m.replace(jargon, words);
+    }
+    m
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -841,24 +1225,49 @@ impl Plan {
 
     /// Parses and validates plan text; `origin` is the file name used in errors.
     pub fn from_toml_str(src: &str, origin: &Path) -> Result<Plan, PlanError> {
-        let raw: RawFile = toml::from_str(src).map_err(|e| {
-            let (line, column, section) = match e.span() {
-                Some(span) => {
-                    let (l, c) = line_col(src, span.start);
-                    (Some(l), Some(c), section_at(src, span.start))
+        let location = |offset: Option<usize>| {
+            let (line, column) = match offset {
+                Some(o) => {
+                    let (l, c) = line_col(src, o);
+                    (Some(l), Some(c))
                 }
-                None => (None, None, None),
+                None => (None, None),
             };
-            PlanError::Syntax {
-                location: Location {
-                    file: origin.to_path_buf(),
-                    line,
-                    column,
-                },
-                section,
-                message: e.message().trim().to_string(),
+            Location {
+                file: origin.to_path_buf(),
+                line,
+                column,
             }
-        })?;
+        };
+        let syntax = |e: toml::de::Error| {
+            let offset = e.span().map(|span| span.start);
+            PlanError::Syntax {
+                location: location(offset),
+                section: offset.and_then(|o| section_at(src, o)),
+                message: plain_words(e.message().trim()),
+            }
+        };
+        // The shape first (sections, keys, kinds of value), so a missing key names its own
+        // section and a wrong type is said in words; then serde, with the spans.
+        let root = DeTable::parse(src).map_err(syntax)?;
+        let mut findings = check_shape(root.get_ref());
+        findings.sort_by_key(|f| (f.rank, f.offset.unwrap_or(usize::MAX)));
+        if let Some(f) = findings.into_iter().next() {
+            return Err(match (f.section, f.key) {
+                (Some(section), Some(key)) => PlanError::Invalid {
+                    location: location(f.offset),
+                    section,
+                    key,
+                    message: f.message,
+                },
+                (section, _) => PlanError::Syntax {
+                    location: location(f.offset),
+                    section,
+                    message: f.message,
+                },
+            });
+        }
+        let raw: RawFile = toml::from_str(src).map_err(syntax)?;
         let mut spans = Spans::default();
         let doc = raw_to_doc(raw, &mut spans);
         let cx = Ctx {
@@ -1247,13 +1656,30 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
         } else {
             "table.stability_window_s"
         };
-        return Err(cx.err(
-            key,
+        let default = |k: &str| {
+            if cx.src.is_none() || cx.has(k) {
+                ""
+            } else {
+                " (the default)"
+            }
+        };
+        let (timeout_s, window_s) = (t.at_rate_timeout_s, t.stability_window_s);
+        let timeout_d = default("table.at_rate_timeout_s");
+        let window_d = default("table.stability_window_s");
+        let message = if key == "table.at_rate_timeout_s" {
             format!(
-                "at_rate_timeout_s ({}) must be > stability_window_s ({})",
-                t.at_rate_timeout_s, t.stability_window_s
-            ),
-        ));
+                "= {timeout_s}{timeout_d} must be greater than stability_window_s = \
+                 {window_s}{window_d} (the rate must hold for the window before the timeout \
+                 ends): raise at_rate_timeout_s or lower stability_window_s"
+            )
+        } else {
+            format!(
+                "= {window_s}{window_d} must be less than at_rate_timeout_s = \
+                 {timeout_s}{timeout_d} (the rate must hold for the window before the timeout \
+                 ends): lower stability_window_s or raise at_rate_timeout_s"
+            )
+        };
+        return Err(cx.err(key, message));
     }
 
     // [plan]
@@ -1428,4 +1854,72 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
         },
         simulation: s,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A sample value of each kind, as TOML.
+    fn sample(kind: Kind) -> &'static str {
+        match kind {
+            Kind::Number => "1.5",
+            Kind::Int => "1",
+            Kind::Text => "\"x\"",
+            Kind::Bool => "true",
+            Kind::Numbers => "[0, 1]",
+        }
+    }
+
+    /// The schema and the raw structs name the same sections and keys: every schema key is one
+    /// serde accepts, and a file without a key the schema calls required is one serde refuses.
+    #[test]
+    fn schema_matches_the_raw_structs() {
+        let doc = |skip: Option<(&str, &str)>| {
+            let mut text = String::new();
+            for &(section, _, keys) in SCHEMA {
+                text.push_str(&format!("[{section}]\n"));
+                for &(key, kind, _) in keys {
+                    if skip != Some((section, key)) {
+                        text.push_str(&format!("{key} = {}\n", sample(kind)));
+                    }
+                }
+            }
+            text
+        };
+        let full = doc(None);
+        assert!(toml::from_str::<RawFile>(&full).is_ok(), "{full}");
+        for &(section, _, keys) in SCHEMA {
+            for &(key, _, required) in keys {
+                let text = doc(Some((section, key)));
+                assert_eq!(
+                    toml::from_str::<RawFile>(&text).is_err(),
+                    required,
+                    "[{section}] {key}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn misspellings_find_their_key() {
+        assert_eq!(
+            closest("tabel", ["plan", "table", "dmm", "simulation"]),
+            Some("table")
+        );
+        assert_eq!(
+            closest("sim", ["plan", "table", "dmm", "simulation"]),
+            Some("simulation")
+        );
+        assert_eq!(
+            closest("rate_dps", ["rates_dps", "settle_s"]),
+            Some("rates_dps")
+        );
+        assert_eq!(
+            closest("colour", ["plan", "table", "dmm", "simulation"]),
+            None
+        );
+        assert_eq!(edit_distance("tabel", "table"), 1);
+        assert_eq!(edit_distance("", "dmm"), 3);
+    }
 }

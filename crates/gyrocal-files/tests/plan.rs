@@ -410,74 +410,74 @@ fn integer_keys_out_of_range_name_the_key_the_value_and_the_range() {
     let err = bad("samples_per_rate = 10", "samples_per_rate = 1000000000000");
     assert_eq!(
         err.to_string(),
-        "configs/bad.toml:4:20: [plan] samples_per_rate = 1000000000000 is out of range (1 to 1000000)"
+        "configs/bad.toml:4:20: [plan] samples_per_rate = 1000000000000 is out of range: write a whole number from 1 to 1000000"
     );
     let cases: &[(&str, &str, u32, &str)] = &[
         (
             "samples_per_rate = 10",
             "samples_per_rate = 99999999999999999999",
             4,
-            "[plan] samples_per_rate = 99999999999999999999 is out of range (1 to 1000000)",
+            "[plan] samples_per_rate = 99999999999999999999 is out of range: write a whole number from 1 to 1000000",
         ),
         (
             "samples_per_rate = 10",
             "samples_per_rate = 1.5",
             4,
-            "[plan] samples_per_rate = 1.5 is not a whole number (1 to 1000000)",
+            "[plan] samples_per_rate = 1.5 is not a whole number: write a whole number from 1 to 1000000",
         ),
         (
             "samples_per_rate = 10",
             "samples_per_rate = \"ten\"",
             4,
-            "[plan] samples_per_rate = \"ten\" is not a whole number (1 to 1000000)",
+            "[plan] samples_per_rate = \"ten\" is text, not a number: write a whole number from 1 to 1000000",
         ),
         (
             "port = \"/dev/ttyUSB0\"",
             "port = \"/dev/ttyUSB0\"\nbaud = 9600.0",
             11,
-            "[dmm] baud = 9600.0 is not a whole number (one of [300, 600, 1200, 2400, 4800, 9600])",
+            "[dmm] baud = 9600.0 is not a whole number: write one of 300, 600, 1200, 2400, 4800 or 9600",
         ),
         (
             "samples_per_rate = 10",
             "samples_per_rate = -3",
             4,
-            "samples_per_rate = -3 is out of range (1 to 1000000)",
+            "[plan] samples_per_rate = -3 is out of range: write a whole number from 1 to 1000000",
         ),
         (
             "samples_per_rate = 10",
             "samples_per_rate = 10\nrepeat = 4294967297",
             5,
-            "[plan] repeat = 4294967297 is out of range (1 to 1000)",
+            "[plan] repeat = 4294967297 is out of range: write a whole number from 1 to 1000",
         ),
         (
             "samples_per_rate = 10",
             "samples_per_rate = 10\nwhole_revolutions = -1",
             5,
-            "[plan] whole_revolutions = -1 is out of range (0 to 1000)",
+            "[plan] whole_revolutions = -1 is out of range: write a whole number from 0 to 1000",
         ),
         (
             "max_rate_dps = 20",
             "max_rate_dps = 20\nbaud = 4294967296",
             8,
-            "[table] baud must be one of [300, 600, 1200, 2400, 4800, 9600] (got 4294967296)",
+            "[table] baud = 4294967296 is not allowed: write one of 300, 600, 1200, 2400, 4800 or 9600",
         ),
         (
             "port = \"/dev/ttyUSB0\"",
             "port = \"/dev/ttyUSB0\"\nbaud = -9600",
             11,
-            "[dmm] baud must be one of",
+            "[dmm] baud = -9600 is not allowed: write one of",
         ),
         (
             "port = \"/dev/ttyUSB0\"",
             "port = \"/dev/ttyUSB0\"\nline_hz = 9223372036854775807",
             11,
-            "[dmm] line_hz must be one of [50, 60] (got 9223372036854775807)",
+            "[dmm] line_hz = 9223372036854775807 is not allowed: write one of 50 or 60",
         ),
         (
             "port = \"/dev/ttyUSB0\"",
             "port = \"/dev/ttyUSB0\"\n[simulation]\nseed = -1",
             12,
-            "[simulation] seed = -1 is out of range (0 to 9223372036854775807)",
+            "[simulation] seed = -1 is out of range: write a whole number from 0 to 9223372036854775807",
         ),
     ];
     for (from, to, line, needle) in cases {
@@ -576,4 +576,162 @@ fn the_plans_instrument_lists_are_the_instruments_own() {
         assert!(KNOWN_NPLC_VALUES.contains(&n), "34401A: NPLC {n}");
     }
     assert_eq!(RANGES_V, gyrocal_truevolt::facts::RANGES_V);
+}
+
+#[test]
+fn a_missing_key_names_its_own_section_and_line() {
+    // [dmm] is line 9; the key before it is [table]'s
+    let e = bad(
+        "[dmm]\nport = \"/dev/ttyUSB0\"\n",
+        "[dmm]\nautozero = true\n",
+    );
+    assert_at(&e, 9, "[dmm] port");
+    assert_eq!(
+        e.to_string(),
+        "configs/bad.toml:9:2: [dmm] port is missing (required): add a line such as \
+         port = \"/dev/ttyUSB0\" under [dmm]"
+    );
+    let e = bad("samples_per_rate = 10\n", "");
+    assert_at(&e, 1, "[plan] samples_per_rate is missing");
+    let e = parse(GOOD.split("[dmm]").next().unwrap()).unwrap_err();
+    assert!(
+        e.to_string()
+            .starts_with("configs/bad.toml: the section [dmm] is missing (required)"),
+        "{e}"
+    );
+    assert!(e.to_string().contains("port"), "{e}");
+}
+
+#[test]
+fn a_misspelt_section_or_key_gets_a_suggestion() {
+    let e = bad("[table]", "[tabel]");
+    assert!(matches!(e, PlanError::Syntax { .. }), "{e}");
+    assert_at(&e, 5, "unknown section [tabel]: did you mean [table]?");
+    assert!(!e.to_string().contains("[plan] unknown"), "{e}");
+    assert!(
+        e.to_string()
+            .ends_with("(the sections are [plan], [table], [dmm] and [simulation])"),
+        "{e}"
+    );
+    let e = bad("rates_dps = [0, 1, -1]", "rate_dps = [0, 1, -1]");
+    assert_at(
+        &e,
+        3,
+        "[plan] unknown key `rate_dps`: did you mean `rates_dps`?",
+    );
+    let e = bad("[plan]\n", "[plan]\nport = \"/dev/ttyUSB2\"\n");
+    assert_at(
+        &e,
+        2,
+        "[plan] unknown key `port`: it belongs in [table] or [dmm]",
+    );
+    let e = bad(
+        "acceleration_dps2 = 10",
+        "acceleration_dps2 = 10\ncolour = 1",
+    );
+    assert_at(&e, 9, "the keys of [table] are dialect, port, baud");
+    let e = parse(&format!("{GOOD}[sim]\nseed = 3\n")).unwrap_err();
+    assert_at(&e, 11, "unknown section [sim]: did you mean [simulation]?");
+}
+
+#[test]
+fn wrong_types_are_said_in_words() {
+    let cases: &[(&str, &str, u32, &str)] = &[
+        (
+            "samples_per_rate = 10",
+            "samples_per_rate = \"five\"",
+            4,
+            "configs/bad.toml:4:20: [plan] samples_per_rate = \"five\" is text, not a number: \
+             write a whole number from 1 to 1000000",
+        ),
+        (
+            "samples_per_rate = 10",
+            "samples_per_rate = -3",
+            4,
+            "configs/bad.toml:4:20: [plan] samples_per_rate = -3 is out of range: \
+             write a whole number from 1 to 1000000",
+        ),
+        (
+            "samples_per_rate = 10",
+            "samples_per_rate = \"10\"",
+            4,
+            "configs/bad.toml:4:20: [plan] samples_per_rate = \"10\" is text, not a number: \
+             write a whole number from 1 to 1000000, without quotes",
+        ),
+        (
+            "max_rate_dps = 20",
+            "max_rate_dps = \"20\"",
+            7,
+            "configs/bad.toml:7:16: [table] max_rate_dps = \"20\" is text, not a number: \
+             write the number without quotes",
+        ),
+        (
+            "max_rate_dps = 20",
+            "max_rate_dps = true",
+            7,
+            "configs/bad.toml:7:16: [table] max_rate_dps = true is true/false: \
+             write a number, e.g. max_rate_dps = 10",
+        ),
+        (
+            "port = \"/dev/ttyUSB0\"",
+            "port = \"/dev/ttyUSB0\"\nautozero = \"yes\"",
+            11,
+            "configs/bad.toml:11:12: [dmm] autozero = \"yes\" is text: write true or false \
+             (no quotes)",
+        ),
+        (
+            "port = \"/dev/ttyUSB1\"",
+            "port = 1",
+            6,
+            "configs/bad.toml:6:8: [table] port = 1 is a whole number: write text in quotes, \
+             e.g. port = \"1\"",
+        ),
+        (
+            "rates_dps = [0, 1, -1]",
+            "rates_dps = 5",
+            3,
+            "configs/bad.toml:3:13: [plan] rates_dps = 5 is a whole number: write a list of \
+             numbers in brackets, e.g. rates_dps = [0, 5, -5]",
+        ),
+        (
+            "rates_dps = [0, 1, -1]",
+            "rates_dps = [0, \"one\", -1]",
+            3,
+            "configs/bad.toml:3:17: [plan] rates_dps[1] = \"one\" is text: write a number, \
+             e.g. rates_dps = 10",
+        ),
+    ];
+    for (from, to, line, want) in cases {
+        let e = bad(from, to);
+        assert_at(&e, *line, "");
+        assert_eq!(&e.to_string(), want);
+        for jargon in ["u32", "f64", "i64", "expected", "invalid type"] {
+            assert!(!e.to_string().contains(jargon), "{e}");
+        }
+    }
+}
+
+#[test]
+fn timeout_not_above_the_window_is_one_sentence_naming_both_keys() {
+    let e = bad(
+        "acceleration_dps2 = 10",
+        "acceleration_dps2 = 10\nstability_window_s = 5\nat_rate_timeout_s = 5",
+    );
+    assert_eq!(
+        e.to_string(),
+        "configs/bad.toml:10:21: [table] at_rate_timeout_s = 5 must be greater than \
+         stability_window_s = 5 (the rate must hold for the window before the timeout ends): \
+         raise at_rate_timeout_s or lower stability_window_s"
+    );
+    // only the window written: it is the one blamed, the timeout's default said
+    let e = bad(
+        "acceleration_dps2 = 10",
+        "acceleration_dps2 = 10\nstability_window_s = 90",
+    );
+    assert_eq!(
+        e.to_string(),
+        "configs/bad.toml:9:22: [table] stability_window_s = 90 must be less than \
+         at_rate_timeout_s = 60 (the default) (the rate must hold for the window before the \
+         timeout ends): lower stability_window_s or raise at_rate_timeout_s"
+    );
 }

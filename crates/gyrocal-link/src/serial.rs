@@ -111,10 +111,62 @@ pub fn open_serial(
         .parity(parity)
         .stop_bits(StopBits::Two)
         .flow_control(FlowControl::None);
-    let mut port = SerialStream::open(&builder).map_err(|e| serial_err(path, "opening", e))?;
+    let mut port = SerialStream::open(&builder).map_err(|e| match not_a_terminal(path) {
+        Some(what) => LinkError::io(
+            path,
+            "opening",
+            std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                format!(
+                    "{path} is not a serial port (not a terminal device: it is {what}); set the \
+                     port to the serial adapter's device (e.g. /dev/ttyUSB0) or to \
+                     tcp://HOST:PORT"
+                ),
+            ),
+        ),
+        None => serial_err(path, "opening", e),
+    })?;
     prepare(&mut port, path);
     tracing::debug!(port = path, baud = options.baud, framing = %options.framing, "serial port open");
     Ok(StreamTransport::new(port, path))
+}
+
+/// What `path` is when it plainly cannot be a serial port (a regular file, a directory, a pipe,
+/// a socket, or a character device that is not a terminal such as `/dev/null`); `None` when it
+/// is a terminal, does not exist or cannot be looked at (the open error then speaks for itself).
+/// Called only after opening it as a serial port failed.
+#[cfg(unix)]
+fn not_a_terminal(path: &str) -> Option<&'static str> {
+    use std::io::IsTerminal as _;
+    use std::os::unix::fs::{FileTypeExt as _, OpenOptionsExt as _};
+    let kind = std::fs::metadata(path).ok()?.file_type();
+    if kind.is_file() {
+        Some("a regular file")
+    } else if kind.is_dir() {
+        Some("a directory")
+    } else if kind.is_fifo() {
+        Some("a pipe")
+    } else if kind.is_socket() {
+        Some("a socket")
+    } else if kind.is_block_device() {
+        Some("a block device")
+    } else if kind.is_char_device() {
+        // Non-blocking and without becoming the controlling terminal: a real port that is busy
+        // or has no carrier must not hang this check.
+        let file = std::fs::OpenOptions::new()
+            .read(true)
+            .custom_flags(libc::O_NONBLOCK | libc::O_NOCTTY)
+            .open(path)
+            .ok()?;
+        (!file.is_terminal()).then_some("a device that is not a terminal")
+    } else {
+        None
+    }
+}
+
+#[cfg(not(unix))]
+fn not_a_terminal(_path: &str) -> Option<&'static str> {
+    None
 }
 
 /// Asserts DTR and RTS and clears stale input; on ports without modem lines (pseudo-terminals,
@@ -150,4 +202,49 @@ pub fn pseudo_terminal() -> Result<(SerialStream, SerialStream, String), LinkErr
         )
     })?;
     Ok((master, slave, path))
+}
+
+#[cfg(all(test, unix))]
+mod tests {
+    use super::*;
+
+    /// A regular file, `/dev/null` or a directory named as a port is said not to be a serial
+    /// port, naming it, instead of the bare `ENOTTY` ("Not a typewriter").
+    #[tokio::test]
+    async fn a_port_that_is_not_a_terminal_says_so() {
+        let dir = std::env::temp_dir().join(format!("gyrocal-link-notty-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
+        let file = dir.join("plan.toml");
+        std::fs::write(&file, "not a port\n").unwrap_or_else(|e| panic!("{e}"));
+        let file = file.to_string_lossy().into_owned();
+        let dir_s = dir.to_string_lossy().into_owned();
+        for (path, what) in [
+            (file.as_str(), "a regular file"),
+            ("/dev/null", "a device that is not a terminal"),
+            (dir_s.as_str(), "a directory"),
+        ] {
+            let Err(err) = open_serial(path, &LinkOptions::default()) else {
+                panic!("{path} opened as a serial port");
+            };
+            let text = err.to_string();
+            assert!(
+                text.contains(&format!(
+                    "{path} is not a serial port (not a terminal device: it is {what})"
+                )),
+                "{text}"
+            );
+            assert!(!text.contains("typewriter"), "{text}");
+            assert_eq!(err.kind(), crate::ErrorKind::Io);
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A pseudo-terminal (no modem lines: asserting DTR gives ENOTTY) still opens.
+    #[tokio::test]
+    async fn a_pseudo_terminal_still_opens() {
+        let (_master, placeholder, path) = pseudo_terminal().unwrap_or_else(|e| panic!("{e}"));
+        let opened = open_serial(&path, &LinkOptions::default());
+        drop(placeholder);
+        assert!(opened.is_ok(), "{:?}", opened.err().map(|e| e.to_string()));
+    }
 }

@@ -284,7 +284,7 @@ fn check_refuses_endless_and_out_of_range_plans_with_exit_2() {
     let out = gyrocal(&["check", plan.to_str().unwrap()]);
     assert_user_error(
         &out,
-        "[plan] samples_per_rate = 1000000000000 is out of range (1 to 1000000)",
+        "[plan] samples_per_rate = 1000000000000 is out of range: write a whole number from 1 to 1000000",
     );
     assert!(stderr(&out).contains("plan.toml:"), "{}", stderr(&out));
 }
