@@ -863,7 +863,8 @@ fn metadata(html: &mut String, input: &Input, sfx: &str) {
                 format!(
                     "<li>t = {:.1} s, step {}, {}: {}</li>",
                     r.t_s,
-                    r.step.map_or_else(|| "—".into(), |s| s.to_string()),
+                    // the plan's step number, as the run's display said it
+                    r.step.map_or_else(|| "—".into(), |s| (s + 1).to_string()),
                     esc(&r.instrument),
                     esc(&r.message)
                 )

@@ -232,3 +232,33 @@ fn check_json_is_one_document_with_the_schedule() {
     assert!(bound > 600.0 && est >= bound && est < bound * 1.01, "{doc}");
     assert_eq!(doc["dmm"]["acquisition"], "stream");
 }
+
+/// `gyrocal report --json`: one document with the report's path and every file written.
+#[test]
+fn report_json_is_one_document_with_the_files_written() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let plan = config("quick.toml");
+    let out = gyrocal(
+        &[
+            "run",
+            plan.to_str().unwrap(),
+            "--simulate",
+            "--no-report",
+            "-o",
+            dir.to_str().unwrap(),
+        ],
+        &[],
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let out = gyrocal(&["report", dir.to_str().unwrap(), "--json"], &[]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let report = PathBuf::from(doc["report"].as_str().unwrap());
+    assert_eq!(report, dir.join("report.html"), "{doc}");
+    let files = doc["files"].as_array().unwrap();
+    assert!(files.len() > 1, "the HTML and its plots: {doc}");
+    for f in files {
+        assert!(Path::new(f.as_str().unwrap()).is_file(), "{f}");
+    }
+}

@@ -22,6 +22,10 @@ pub struct ReportArgs {
     /// inputs, whose combined report belongs to none of them.
     #[arg(short = 'o', long, value_name = "FILE")]
     pub out: Option<PathBuf>,
+    /// Print exactly one JSON document on stdout (the report's path, every file written, the
+    /// warnings) instead of the human line.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Where the report goes: `--out`, else beside the one input (never the current directory,
@@ -56,7 +60,19 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
             .with_context(|| format!("{}: cannot create the directory", dir.display()))?;
     }
     let written = report.write(&out).map_err(classify)?;
-    println!("report: {}", out.display());
+    if args.json {
+        println!(
+            "{:#}",
+            serde_json::json!({
+                "report": out,
+                "files": written,
+                "inputs": args.inputs,
+                "warnings": report.warnings,
+            })
+        );
+    } else {
+        println!("report: {}", out.display());
+    }
     tracing::info!(files = written.len(), "report written");
     Ok(())
 }
