@@ -5,7 +5,8 @@
 //!
 //! - `samples.csv`: `step,index,t_s,rate_dps,volts,overload,t_utc`, one row per raw reading in
 //!   the order taken. `step` is the schedule's 0-based index of the step (its position in the
-//!   plan's `repeat × rates_dps`); `index` is 0-based and contiguous within a step; `t_s` is the
+//!   plan's `repeat × rates_dps`; gyrocal's messages, display and report say `step + 1`, the
+//!   plan's step number: `step 4/19` is `step = 3` here); `index` is 0-based and contiguous within a step; `t_s` is the
 //!   run clock (seconds, see `elapsed_s` below); `rate_dps` the demanded rate. **Overloads are
 //!   written, never dropped**: the row has `overload = 1` and an *empty* `volts` (the meter's
 //!   `9.9E+37` is a marker, not a voltage; an empty field makes a naive reader fail loudly
