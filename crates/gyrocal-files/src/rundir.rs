@@ -585,6 +585,74 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
         .collect()
 }
 
+/// SHA-256 of a file's bytes, lower-case hex, read in chunks (memory stays bounded whatever
+/// the file's size).
+pub fn sha256_file(path: &Path) -> std::io::Result<String> {
+    use sha2::Digest as _;
+    use std::io::Read as _;
+    let mut file = File::open(path)?;
+    let mut hasher = sha2::Sha256::new();
+    let mut buf = vec![0u8; 1 << 16];
+    loop {
+        let n = file.read(&mut buf)?;
+        if n == 0 {
+            break;
+        }
+        hasher.update(&buf[..n]);
+    }
+    Ok(hasher
+        .finalize()
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect())
+}
+
+/// One data file checked by [`verify`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FileCheck {
+    /// The file's name in the run directory.
+    pub file: String,
+    /// The SHA-256 the manifest recorded.
+    pub recorded: String,
+    /// The SHA-256 of the file now (`None`: missing or unreadable).
+    pub now: Option<String>,
+}
+
+impl FileCheck {
+    /// The file is as it was recorded.
+    pub fn ok(&self) -> bool {
+        self.now.as_deref() == Some(self.recorded.as_str())
+    }
+}
+
+/// Re-checks the data files of the completed run in `dir` against the checksums its manifest
+/// recorded (`samples.csv` and `steps.csv` at completion, `fit.json` when it was written). An
+/// empty list: the run recorded none (not complete, or from an earlier version).
+pub fn verify(dir: &Path) -> Result<Vec<FileCheck>, RunError> {
+    let path = dir.join(MANIFEST_JSON);
+    if !path.exists() {
+        return Err(RunError::NotARun {
+            path: dir.to_path_buf(),
+        });
+    }
+    let m = read_manifest(&path)?;
+    let mut recorded: Vec<(String, String)> = m.checksums.into_iter().collect();
+    if let Some(f) = m.fit_summary {
+        recorded.push((f.file, f.sha256));
+    }
+    Ok(recorded
+        .into_iter()
+        .map(|(file, recorded)| {
+            let now = sha256_file(&dir.join(&file)).ok();
+            FileCheck {
+                file,
+                recorded,
+                now,
+            }
+        })
+        .collect())
+}
+
 /// `manifest.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -644,6 +712,12 @@ pub struct Manifest {
     /// The fit's reference and headline figures, when fitted; the fit is in `fit.json`.
     #[serde(default)]
     pub fit_summary: Option<FitSummary>,
+    /// SHA-256 (lower-case hex) of the data files as they were when the run completed
+    /// (`samples.csv`, `steps.csv`; `fit.json`'s is in `fit_summary`), so a file edited
+    /// afterwards is found (`gyrocal verify`). Empty until the run completes, and in runs of
+    /// earlier versions.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub checksums: BTreeMap<String, String>,
     /// The whole fit as manifests of format 1 embedded it (key `fit`): read, never written.
     /// A fit this version cannot read back is `None` here, with a warning: `fit.json` beside
     /// the manifest is the source of truth (see [`load_fit`]).
@@ -1023,6 +1097,7 @@ impl RunDir {
             plan: plan.clone(),
             simulated: meta.simulated,
             simulated_by: None,
+            checksums: BTreeMap::new(),
             virtual_time: meta.virtual_time,
             instruments: meta.instruments,
             started_utc: now.clone(),
@@ -1514,6 +1589,13 @@ impl RunDir {
             .get_ref()
             .sync_data()
             .map_err(io(&sapath, "sync"))?;
+        if status == Status::Complete {
+            for name in [SAMPLES_CSV, STEPS_CSV] {
+                let path = self.dir.join(name);
+                let sum = sha256_file(&path).map_err(io(&path, "read"))?;
+                self.manifest.checksums.insert(name.to_string(), sum);
+            }
+        }
         self.manifest.status = status;
         self.manifest.reason = reason;
         self.manifest.elapsed_s = round_significant(elapsed_s);

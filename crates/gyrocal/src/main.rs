@@ -38,6 +38,8 @@ enum Command {
     Sim(cmd::sim::SimArgs),
     /// Write the HTML calibration report (with SVG plots) of run directories or steps CSV files.
     Report(cmd::report::ReportArgs),
+    /// Check that the data files of completed runs are as recorded (SHA-256 in the manifest).
+    Verify(cmd::verify::VerifyArgs),
     /// Print the shell completion script for SHELL (bash, zsh, fish, elvish, powershell).
     Completions(cmd::completions::CompletionsArgs),
     /// Print the man page (roff), or write one page per subcommand into a directory.
@@ -90,6 +92,7 @@ fn main() -> ExitCode {
         Command::Run(args) => cmd::run::run(&args),
         Command::Sim(args) => cmd::sim::run(&args).map(|()| 0),
         Command::Report(args) => cmd::report::run(&args).map(|()| 0),
+        Command::Verify(args) => cmd::verify::run(&args),
         Command::Completions(args) => cmd::completions::completions(&args).map(|()| 0),
         Command::Man(args) => cmd::completions::man(&args).map(|()| 0),
     };

@@ -326,3 +326,48 @@ fn a_fit_json_changed_after_the_run_is_flagged_by_the_report() {
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
     assert!(html.contains("is not the file the run wrote"));
 }
+
+/// A completed run records SHA-256 of its data files; `gyrocal verify` finds an edited CSV
+/// (exit 1, naming the file) and passes an untouched run.
+#[test]
+fn verify_catches_an_edited_csv() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let plan = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/quick.toml");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_gyrocal"))
+        .arg("run")
+        .arg(&plan)
+        .args(["--simulate", "--no-report", "-o"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let verify = || {
+        std::process::Command::new(env!("CARGO_BIN_EXE_gyrocal"))
+            .arg("verify")
+            .arg(&dir)
+            .output()
+            .unwrap()
+    };
+    let ok = verify();
+    let text = String::from_utf8_lossy(&ok.stdout).into_owned();
+    assert_eq!(ok.status.code(), Some(0), "{text}");
+    for f in ["samples.csv ok", "steps.csv ok", "fit.json ok"] {
+        assert!(text.contains(f), "{f} in:\n{text}");
+    }
+    // one step's count of readings changed by hand
+    let path = dir.join("steps.csv");
+    let csv = std::fs::read_to_string(&path).unwrap();
+    let edited = csv.replacen(",50,0,0,", ",49,0,0,", 1);
+    assert_ne!(csv, edited, "a value to edit");
+    std::fs::write(&path, edited).unwrap();
+    let bad = verify();
+    let text = String::from_utf8_lossy(&bad.stdout).into_owned();
+    assert_eq!(bad.status.code(), Some(1), "{text}");
+    assert!(text.contains("steps.csv CHANGED"), "{text}");
+    assert!(text.contains("samples.csv ok"), "{text}");
+}

@@ -7,6 +7,7 @@ pub mod probe;
 pub mod report;
 pub mod run;
 pub mod sim;
+pub mod verify;
 
 use std::io::IsTerminal as _;
 
