@@ -532,6 +532,41 @@ pub struct RunMeta {
     /// Whether the run clock is virtual (the simulated bench in virtual time): see
     /// [`Manifest::virtual_time`].
     pub virtual_time: bool,
+    /// The gyro under test, as the operator entered it.
+    pub dut: Option<Dut>,
+    /// Who ran it, for whom, and in what environment, as entered.
+    pub context: Option<RunContext>,
+}
+
+/// The gyro under test. Not part of the plan (one plan serves many gyros): the operator names
+/// it per run; a resume refuses another serial.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Dut {
+    /// Serial number.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub serial: Option<String>,
+    /// Model.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model: Option<String>,
+}
+
+/// Who ran a run, for whom, and the environment as entered (not measured).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunContext {
+    /// The operator.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub operator: Option<String>,
+    /// The customer.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub customer: Option<String>,
+    /// Ambient temperature, °C.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ambient_c: Option<f64>,
+    /// Relative humidity, %.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub humidity_pct: Option<f64>,
 }
 
 /// What the manifest says about the fit: a reference to `fit.json` and the headline figures
@@ -687,6 +722,12 @@ pub struct Manifest {
     /// the seconds the simulation took. Absent (false) in manifests of format 1.
     #[serde(default)]
     pub virtual_time: bool,
+    /// The gyro under test, as entered (absent: not named).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dut: Option<Dut>,
+    /// Operator, customer and environment, as entered (absent: not given).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub context: Option<RunContext>,
     /// Instrument identities.
     pub instruments: Instruments,
     /// Wall-clock start, RFC 3339 UTC.
@@ -1098,6 +1139,8 @@ impl RunDir {
             simulated: meta.simulated,
             simulated_by: None,
             checksums: BTreeMap::new(),
+            dut: meta.dut,
+            context: meta.context,
             virtual_time: meta.virtual_time,
             instruments: meta.instruments,
             started_utc: now.clone(),

@@ -86,6 +86,52 @@ impl Doc {
     }
 }
 
+/// "Gyro under test: serial …, model …; operator …, customer …; ambient … °C, … % RH", as
+/// the operator entered them (a run that names no gyro says so).
+fn identification(html: &mut String, input: &Input, which: Option<usize>) {
+    let Some(m) = &input.manifest else {
+        return;
+    };
+    let prefix = which.map_or(String::new(), |n| format!("Run {n}: "));
+    let mut parts = Vec::new();
+    match &m.dut {
+        Some(d) => {
+            if let Some(s) = &d.serial {
+                parts.push(format!("serial <strong>{}</strong>", esc(s)));
+            }
+            if let Some(s) = &d.model {
+                parts.push(format!("model {}", esc(s)));
+            }
+        }
+        None => parts.push("not named (no --dut-serial)".into()),
+    }
+    let mut who = Vec::new();
+    if let Some(c) = &m.context {
+        if let Some(o) = &c.operator {
+            who.push(format!("operator {}", esc(o)));
+        }
+        if let Some(o) = &c.customer {
+            who.push(format!("customer {}", esc(o)));
+        }
+        if let Some(t) = c.ambient_c {
+            who.push(format!("ambient {t} °C"));
+        }
+        if let Some(h) = c.humidity_pct {
+            who.push(format!("{h} % RH"));
+        }
+    }
+    let who = if who.is_empty() {
+        String::new()
+    } else {
+        format!("; {}", who.join(", "))
+    };
+    let _ = writeln!(
+        html,
+        "<p class=\"dut\">{prefix}Gyro under test: {}{who}</p>",
+        parts.join(", ")
+    );
+}
+
 pub(crate) fn render(inputs: &[Input]) -> Result<Report, ReportError> {
     let mut doc = Doc {
         html: String::new(),
@@ -124,6 +170,10 @@ pub(crate) fn render(inputs: &[Input]) -> Result<Report, ReportError> {
         esc(&title),
         env!("CARGO_PKG_VERSION")
     );
+    // The gyro under test and who ran it: on the first page, before any number.
+    for (i, input) in inputs.iter().enumerate() {
+        identification(&mut doc.html, input, many.then_some(i + 1));
+    }
     // Banners first: a simulated or incomplete run, or runs of different plans, must be seen
     // before any number.
     for (i, input) in inputs.iter().enumerate() {

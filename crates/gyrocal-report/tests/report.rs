@@ -77,6 +77,7 @@ fn make_run(dir: &Path, spec: &RunSpec<'_>) {
         },
         simulated: true,
         virtual_time: false,
+        ..RunMeta::default()
     };
     let mut rd = RunDir::create(dir, &plan, meta).unwrap();
     let mut noise = Noise(0x9E37_79B9_7F4A_7C15 ^ spec.seed);

@@ -14,11 +14,11 @@ pub mod estimate;
 pub mod sequencer;
 
 pub use gyrocal_files::{
-    Acquire, Acquisition, DmmSettings, FitRunError, FitSummary, Framing, Instruments, Location,
-    Manifest, Plan, PlanDoc, PlanError, Port, Resume, Retry, RunData, RunDir, RunError, RunMeta,
-    Sample, SampleRow, Simulation, Status, Step, StepRecord, TableDialect, TableSettings, Timing,
-    dataset_from_steps, fit_run, load, load_fit, load_samples, parse_rfc3339_utc, plan,
-    rfc3339_utc, rundir,
+    Acquire, Acquisition, DmmSettings, Dut, FitRunError, FitSummary, Framing, Instruments,
+    Location, Manifest, Plan, PlanDoc, PlanError, Port, Resume, Retry, RunContext, RunData, RunDir,
+    RunError, RunMeta, Sample, SampleRow, Simulation, Status, Step, StepRecord, TableDialect,
+    TableSettings, Timing, dataset_from_steps, fit_run, load, load_fit, load_samples,
+    parse_rfc3339_utc, plan, rfc3339_utc, rundir,
 };
 pub use sequencer::{
     Event, Phase, RunSummary, SequenceError, Sequencer, SequencerOptions, StopRequest, TableRest,

@@ -371,3 +371,71 @@ fn verify_catches_an_edited_csv() {
     assert!(text.contains("steps.csv CHANGED"), "{text}");
     assert!(text.contains("samples.csv ok"), "{text}");
 }
+
+/// The gyro under test and the run's context, as the operator entered them, are in the
+/// manifest and on the report's first lines (not in the plan: its hash does not change), and a
+/// resume refuses another gyro.
+#[test]
+fn the_gyro_under_test_is_recorded_and_a_resume_refuses_another() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let plan = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/quick.toml");
+    let bin = env!("CARGO_BIN_EXE_gyrocal");
+    let out = std::process::Command::new(bin)
+        .arg("run")
+        .arg(&plan)
+        .args(["--simulate", "--sim-fault", "table:trip@demand3", "-o"])
+        .arg(&dir)
+        .args(["--dut-serial", "HRG-0421", "--dut-model", "HRG-50"])
+        .args(["--operator", "A. Tester", "--ambient-c", "22.5"])
+        .output()
+        .unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(m["dut"]["serial"], "HRG-0421", "{m}");
+    assert_eq!(m["dut"]["model"], "HRG-50", "{m}");
+    assert_eq!(m["context"]["operator"], "A. Tester", "{m}");
+    assert_eq!(m["context"]["ambient_c"], 22.5, "{m}");
+
+    // another gyro cannot continue this calibration; nothing is changed
+    let out = std::process::Command::new(bin)
+        .args(["run", "--simulate", "--resume"])
+        .arg(&dir)
+        .args(["--dut-serial", "HRG-0999"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("gyro serial HRG-0421") && err.contains("HRG-0999"),
+        "{err}"
+    );
+    // the same gyro (or none named) continues it, and the report names it first
+    let out = std::process::Command::new(bin)
+        .args(["run", "--simulate", "--resume"])
+        .arg(&dir)
+        .args(["--dut-serial", "HRG-0421"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    let dut = html
+        .find("Gyro under test: serial <strong>HRG-0421</strong>")
+        .unwrap();
+    let first_number = html.find("scale factor").unwrap_or(html.len());
+    assert!(dut < first_number, "the gyro is named before the results");
+    assert!(
+        html.contains("operator A. Tester"),
+        "operator in the report"
+    );
+}

@@ -55,6 +55,25 @@ pub struct RunArgs {
     /// rehearsing what a run does when an instrument misbehaves.
     #[arg(long = "sim-fault", value_name = "SPEC", requires = "simulate")]
     pub sim_faults: Vec<String>,
+    /// The gyro under test's serial number (recorded in the manifest and the report; not
+    /// part of the plan; a resume refuses another serial).
+    #[arg(long, value_name = "SERIAL")]
+    pub dut_serial: Option<String>,
+    /// The gyro under test's model.
+    #[arg(long, value_name = "MODEL")]
+    pub dut_model: Option<String>,
+    /// Who runs the calibration.
+    #[arg(long, value_name = "NAME")]
+    pub operator: Option<String>,
+    /// For whom.
+    #[arg(long, value_name = "NAME")]
+    pub customer: Option<String>,
+    /// Ambient temperature as read in the lab, °C.
+    #[arg(long, value_name = "CELSIUS")]
+    pub ambient_c: Option<f64>,
+    /// Relative humidity as read in the lab, %.
+    #[arg(long, value_name = "PERCENT")]
+    pub humidity_pct: Option<f64>,
     /// Print exactly one JSON document on stdout at the end (status, exit code, where the
     /// table was left, steps, timing, the fit's headline, the run directory, the resume
     /// command); the human text goes to stderr.
@@ -152,6 +171,22 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
     }
     if let Some(dir) = &args.resume {
         check_resume_mode(dir, args.simulate)?;
+        check_resume_dut(dir, args.dut_serial.as_deref())?;
+    }
+    for (key, v, range) in [
+        ("--ambient-c", args.ambient_c, -50.0..=100.0),
+        ("--humidity-pct", args.humidity_pct, 0.0..=100.0),
+    ] {
+        if let Some(v) = v
+            && !range.contains(&v)
+        {
+            return Err(BadInput(format!(
+                "{key} {v} is outside {}..={}",
+                range.start(),
+                range.end()
+            ))
+            .into());
+        }
     }
     // what `check` warns about, said again before the instruments move
     for w in crate::cmd::check::model_warnings(&plan, &plan_path) {
@@ -196,10 +231,22 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
 
 fn open_run_dir(args: &RunArgs, plan: &Plan) -> anyhow::Result<(PathBuf, RunDir)> {
     let virtual_time = args.simulate;
+    let dut = (args.dut_serial.is_some() || args.dut_model.is_some()).then(|| gyrocal_run::Dut {
+        serial: args.dut_serial.clone(),
+        model: args.dut_model.clone(),
+    });
+    let context = gyrocal_run::RunContext {
+        operator: args.operator.clone(),
+        customer: args.customer.clone(),
+        ambient_c: args.ambient_c,
+        humidity_pct: args.humidity_pct,
+    };
     let meta = RunMeta {
         gyrocal_version: env!("CARGO_PKG_VERSION").into(),
         simulated: args.simulate,
         virtual_time,
+        dut,
+        context: (context != gyrocal_run::RunContext::default()).then_some(context),
         ..RunMeta::default()
     };
     // A directory whose creation was interrupted holds no data: the run starts in it.
@@ -239,6 +286,36 @@ fn open_run_dir(args: &RunArgs, plan: &Plan) -> anyhow::Result<(PathBuf, RunDir)
     let run = RunDir::create(&dir, plan, meta).map_err(|e| BadInput(e.to_string()))?;
     attach_log(&dir);
     Ok((dir, run))
+}
+
+/// Refuses to continue a run with another gyro: `--dut-serial` on a resume must be the serial
+/// the run recorded (a calibration is of one gyro). Reads only the manifest.
+fn check_resume_dut(dir: &Path, serial: Option<&str>) -> anyhow::Result<()> {
+    let Some(serial) = serial else {
+        return Ok(());
+    };
+    let path = dir.join(gyrocal_run::rundir::MANIFEST_JSON);
+    let Ok(bytes) =
+        gyrocal_run::rundir::read_capped(&path, gyrocal_run::rundir::MAX_MANIFEST_BYTES)
+    else {
+        return Ok(()); // the resume names the missing or unreadable manifest itself
+    };
+    let recorded = serde_json::from_slice::<serde_json::Value>(&bytes)
+        .ok()
+        .and_then(|m| m["dut"]["serial"].as_str().map(str::to_string));
+    match recorded {
+        Some(r) if r != serial => Err(BadInput(format!(
+            "--resume: {} is the calibration of gyro serial {r}; --dut-serial {serial} is              another gyro: start a new run for it",
+            dir.display()
+        ))
+        .into()),
+        None => Err(BadInput(format!(
+            "--resume: {} names no gyro; --dut-serial cannot be added to a run part-way",
+            dir.display()
+        ))
+        .into()),
+        _ => Ok(()),
+    }
 }
 
 /// Refuses to continue a simulated run on the instruments or the reverse, before anything is
