@@ -266,8 +266,9 @@ fn report_json_is_one_document_with_the_files_written() {
 /// `--sim-time-scale X` paces the one virtual clock at X simulated seconds per real second:
 /// the run's own waits (dwells, at-rate windows) speed up with the instruments, and the run
 /// clock still counts simulated time. quick.toml is about 25 simulated seconds, 10 of them
-/// the run's own waits (2 s per step): at 50 it takes about 0.5 s (1 ms pacing steps, a few ms each on a loaded machine); a run whose waits stayed
-/// real would take more than 10 s. (Loose bounds: wall time on a loaded machine.)
+/// the run's own waits (2 s per step): at 50 it takes about 0.5 s (1 ms pacing steps, a few
+/// ms each on a loaded machine); a run whose waits stayed real would take more than 10 s.
+/// (Loose bounds: wall time on a loaded machine.)
 #[test]
 fn sim_time_scale_paces_the_runs_own_waits_too() {
     let tmp = tempfile::tempdir().unwrap();
