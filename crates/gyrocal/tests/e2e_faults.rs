@@ -1345,6 +1345,32 @@ fn e2e_check_probe_identifies_both_instruments_and_a_silent_meter_leaves_no_run_
         "{stdout}"
     );
     assert!(stdout.contains("(mode Off"), "{stdout}");
+    // the same as one JSON document
+    let out = Command::new(BIN)
+        .env_remove("RUST_LOG")
+        .arg("check")
+        .arg(&plan)
+        .args([
+            "--json",
+            "--probe",
+            "--dmm-port",
+            sim.dmm(),
+            "--table-port",
+            sim.table(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let doc: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(doc["probe"]["answered"], true, "{doc}");
+    assert!(
+        doc["probe"]["table"].as_str().unwrap().contains("SIM0001"),
+        "{doc}"
+    );
 
     // a meter port where nothing answers (a pseudo-terminal nobody serves)
     let pty = nix::pty::openpty(None, None).unwrap();

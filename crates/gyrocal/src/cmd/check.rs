@@ -76,29 +76,50 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
     let timing = crate::instruments::meter_timing(&plan);
     let est = estimate::estimate(&plan, &steps, 0.0, timing.as_ref());
     let warnings = model_warnings(&plan, &args.plan);
-    if args.json {
-        println!("{:#}", json(&plan, &args.plan, &est, &warnings));
-        return Ok(());
-    }
-    print!("{}", render(&plan, &args.plan, &est));
-    for w in warnings {
-        eprintln!("gyrocal: warning: {w}");
-    }
-    if args.probe {
+    let probe = if args.probe {
         use anyhow::Context as _;
         let rt = tokio::runtime::Builder::new_current_thread()
             .enable_all()
             .build()
             .context("starting the async runtime")?;
-        let found = rt.block_on(crate::cmd::probe::probe(&plan))?;
-        println!();
-        println!("probe: multimeter {}", found.dmm);
-        println!(
-            "probe: rate table {} (mode {}, {:+.4} °/s)",
-            found.table, found.table_mode, found.table_rate_dps
-        );
+        Some(rt.block_on(crate::cmd::probe::probe(&plan)))
+    } else {
+        None
+    };
+    if args.json {
+        let mut doc = json(&plan, &args.plan, &est, &warnings);
+        if let Some(p) = &probe {
+            doc["probe"] = match p {
+                Ok(f) => serde_json::json!({
+                    "answered": true,
+                    "dmm": f.dmm,
+                    "table": f.table,
+                    "table_mode": f.table_mode,
+                    "table_rate_dps": f.table_rate_dps,
+                }),
+                Err(e) => serde_json::json!({ "answered": false, "error": format!("{e:#}") }),
+            };
+        }
+        println!("{doc:#}");
+    } else {
+        print!("{}", render(&plan, &args.plan, &est));
+        for w in &warnings {
+            eprintln!("gyrocal: warning: {w}");
+        }
+        if let Some(Ok(found)) = &probe {
+            println!();
+            println!("probe: multimeter {}", found.dmm);
+            println!(
+                "probe: rate table {} (mode {}, {:+.4} °/s)",
+                found.table, found.table_mode, found.table_rate_dps
+            );
+        }
     }
-    Ok(())
+    // a silent instrument is an error (exit 1) whatever the output format
+    match probe {
+        Some(Err(e)) => Err(e),
+        _ => Ok(()),
+    }
 }
 
 /// One line per default model the plan's schedule cannot support: the fit will skip it.
