@@ -458,5 +458,9 @@ async fn a_run_is_never_continued_on_the_other_kind_of_bench() {
         0,
         "the simulated table never moved"
     );
+    // and the operator is told where the table was left: confirmed at rest
+    assert!(summary.table.is_at_rest(), "{:?}", summary.table);
+    tokio::time::sleep(Duration::from_millis(10)).await;
+    assert!(handle.table.is_stopped());
     assert_eq!(load(&dir).unwrap().steps.len(), done, "nothing recorded");
 }

@@ -1410,3 +1410,46 @@ fn e2e_check_probe_identifies_both_instruments_and_a_silent_meter_leaves_no_run_
     let last = sim.finish();
     assert_eq!(last["table"]["demands_seen"], 0, "{last}");
 }
+
+/// A run measured on instruments that do not identify as simulators, resumed against
+/// `gyrocal sim` (which does): refused before the table moves, over pseudo-terminals, and the
+/// operator is told the table is at rest.
+#[test]
+fn e2e_a_measured_run_is_not_continued_on_a_simulator_and_the_table_ends_at_rest() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_plan(tmp.path());
+    let dir = tmp.path().join("run");
+    // a bench whose instruments answer as real ones do (serial fields 0 and 1234)
+    let bench = tmp.path().join("bench.toml");
+    std::fs::write(
+        &bench,
+        "seed = 11\n[dmm]\nidentity = \"HEWLETT-PACKARD,34401A,0,11-5-2\"\n\
+         [table]\nidentity = \"ACUTRONIC,ACUTROL3000,1234,3.1\"\n",
+    )
+    .unwrap();
+    let spec = "table:trip@demand3";
+    let looks_real = Sim::start_with(&bench, &[spec], TIME_SCALE, &[]);
+    let end = Run::start(&plan, &looks_real, &out_args(&dir), None).wait();
+    assert_eq!(end.code, Some(1), "{end:?}");
+    assert_eq!(check_recorded_steps_whole(&dir), vec![0, 1]);
+    assert_eq!(manifest(&dir)["simulated"], false);
+    let _ = looks_real.finish();
+
+    let sim = Sim::start(&plan, &[]);
+    let end = Run::start(&plan, &sim, &resume_args(&dir), None).wait();
+    assert_eq!(end.code, Some(1), "{end:?}");
+    assert!(
+        end.stderr.contains("mix simulated and measured data"),
+        "{}",
+        end.stderr
+    );
+    assert!(end.stderr.contains("table at rest"), "{}", end.stderr);
+    assert_eq!(
+        check_recorded_steps_whole(&dir),
+        vec![0, 1],
+        "nothing recorded"
+    );
+    let last = sim.finish();
+    assert_eq!(last["table"]["demands_seen"], 0, "never moved: {last}");
+    assert_eq!(last["table"]["stopped"], true, "{last}");
+}
