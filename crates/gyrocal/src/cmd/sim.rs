@@ -268,41 +268,16 @@ async fn serve(
     };
     let mut schedule = faults::schedule(&specs, &bench, time_scale);
 
-    let mut hello = json!({
-        "dmm": dmm_shown,
-        "dmm_port": dmm_port,
-        "table": table_path,
-        "pid": std::process::id(),
-        "seed": seed,
-        "time_scale": time_scale,
-        "truth": bench.truth,
-        "faults": specs.iter().map(ToString::to_string).collect::<Vec<_>>(),
-    });
-    let acceptor = match listener {
-        Some(listener) => {
-            let addr = listener
-                .local_addr()
-                .context("reading the TCP port's address")?;
-            hello["table_tcp"] = json!(format!("tcp://{addr}"));
-            let table = bench.table.clone();
-            Some(tokio::spawn(async move {
-                loop {
-                    match listener.accept().await {
-                        Ok((sock, peer)) => {
-                            tracing::info!(%peer, "table client connected over TCP");
-                            let _ = sock.set_nodelay(true);
-                            table.serve_wire(sock, wire);
-                        }
-                        Err(e) => {
-                            tracing::warn!(error = %e, "accepting a table client failed");
-                            tokio::time::sleep(Duration::from_millis(50)).await;
-                        }
-                    }
-                }
-            }))
-        }
-        None => None,
-    };
+    let mut hello = hello_line(
+        &dmm_shown,
+        &dmm_port,
+        &table_path,
+        seed,
+        time_scale,
+        &bench,
+        &specs,
+    );
+    let acceptor = serve_table_tcp(listener, &bench, wire, &mut hello)?;
     emit(&hello)?;
     tell_operator(&hello, &plan);
     tracing::info!(dmm = %dmm_port, table = %table_path, "simulated bench serving");
@@ -327,6 +302,61 @@ async fn serve(
     // the slave sides were kept open so clients could come and go; now they may close
     drop((dmm_slave, table_slave));
     Ok(())
+}
+
+/// The first JSON line: where the bench serves, its seed, time scale, truth and faults.
+fn hello_line(
+    dmm: &str,
+    dmm_port: &str,
+    table: &str,
+    seed: u64,
+    time_scale: f64,
+    bench: &BenchHandle,
+    specs: &[FaultSpec],
+) -> Value {
+    json!({
+        "dmm": dmm,
+        "dmm_port": dmm_port,
+        "table": table,
+        "pid": std::process::id(),
+        "seed": seed,
+        "time_scale": time_scale,
+        "truth": bench.truth,
+        "faults": specs.iter().map(ToString::to_string).collect::<Vec<_>>(),
+    })
+}
+
+/// Serves the table on `listener` too, when there is one (every client gets the same table),
+/// and says where in `hello`.
+fn serve_table_tcp(
+    listener: Option<tokio::net::TcpListener>,
+    bench: &BenchHandle,
+    wire: gyrocal_sim::bench::TableWire,
+    hello: &mut Value,
+) -> Result<Option<tokio::task::JoinHandle<()>>> {
+    let Some(listener) = listener else {
+        return Ok(None);
+    };
+    let addr = listener
+        .local_addr()
+        .context("reading the TCP port's address")?;
+    hello["table_tcp"] = json!(format!("tcp://{addr}"));
+    let table = bench.table.clone();
+    Ok(Some(tokio::spawn(async move {
+        loop {
+            match listener.accept().await {
+                Ok((sock, peer)) => {
+                    tracing::info!(%peer, "table client connected over TCP");
+                    let _ = sock.set_nodelay(true);
+                    table.serve_wire(sock, wire);
+                }
+                Err(e) => {
+                    tracing::warn!(error = %e, "accepting a table client failed");
+                    tokio::time::sleep(Duration::from_millis(50)).await;
+                }
+            }
+        }
+    })))
 }
 
 /// The human line (on stderr; stdout stays one JSON document per line for scripts): the
@@ -464,32 +494,17 @@ async fn serve_lan(
             }
         }
     });
-    let mut hello = json!({
-        "dmm": format!("tcp://{dmm_addr}"),
-        "dmm_port": format!("tcp://{dmm_addr}"),
-        "table": table_path,
-        "pid": std::process::id(),
-        "seed": seed,
-        "time_scale": time_scale,
-        "truth": bench.truth,
-        "faults": specs.iter().map(ToString::to_string).collect::<Vec<_>>(),
-    });
-    let table_acceptor = match table_listener {
-        Some(listener) => {
-            let addr = listener
-                .local_addr()
-                .context("reading the TCP port's address")?;
-            hello["table_tcp"] = json!(format!("tcp://{addr}"));
-            let table = bench.table.clone();
-            Some(tokio::spawn(async move {
-                while let Ok((sock, _)) = listener.accept().await {
-                    let _ = sock.set_nodelay(true);
-                    table.serve_wire(sock, wire);
-                }
-            }))
-        }
-        None => None,
-    };
+    let dmm_shown = format!("tcp://{dmm_addr}");
+    let mut hello = hello_line(
+        &dmm_shown,
+        &dmm_shown,
+        &table_path,
+        seed,
+        time_scale,
+        &bench,
+        &specs,
+    );
+    let table_acceptor = serve_table_tcp(table_listener, &bench, wire, &mut hello)?;
     emit(&hello)?;
     tell_operator(&hello, &plan);
     let signal = tokio::select! {
