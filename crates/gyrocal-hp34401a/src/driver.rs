@@ -87,19 +87,9 @@ impl Identity {
     }
 }
 
-/// Progress of an acquisition: `done` of `total` readings received.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Progress {
-    /// Readings received so far.
-    pub done: usize,
-    /// Readings asked for.
-    pub total: usize,
-    /// The reading just received.
-    pub latest: Reading,
-}
-
-/// A progress callback (see [`Hp34401a::set_progress`]).
-pub type ProgressFn = Box<dyn FnMut(Progress) + Send>;
+/// Progress of an acquisition and its callback: the multimeter role's own types, so the
+/// driver's progress reaches a run unchanged.
+pub use gyrocal_meter::{Progress, ProgressFn};
 
 /// Why [`Hp34401a::recover`] re-established the link instead of a plain device clear.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

@@ -258,13 +258,7 @@ impl<T: Transport + 'static> Multimeter for Hp34401aMeter<T> {
 
     fn set_progress(&mut self, progress: Option<ProgressFn>) {
         match progress {
-            Some(mut f) => self.driver.set_progress(move |p| {
-                f(gyrocal_meter::Progress {
-                    done: p.done,
-                    total: p.total,
-                    latest: p.latest,
-                })
-            }),
+            Some(f) => self.driver.set_progress(f),
             None => self.driver.clear_progress(),
         }
     }
