@@ -58,20 +58,35 @@ pub fn check_port(
     Ok(())
 }
 
-/// Runs `gyrocal check`.
-pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
-    let mut plan = load_plan(&args.plan)?;
-    if let Some(p) = &args.dmm_port {
+/// Puts `--dmm-port` and `--table-port` in place of the plan's ports, each checked as the
+/// plan's own would be (a bad one is the user's to fix, exit 2).
+pub fn override_ports(
+    plan: &mut Plan,
+    dmm: Option<&str>,
+    table: Option<&str>,
+) -> anyhow::Result<()> {
+    if let Some(p) = dmm {
         let port = gyrocal_run::Port::parse(p).map_err(|e| BadInput(format!("--dmm-port: {e}")))?;
         check_port(std::path::Path::new("--dmm-port"), "port", &port)?;
         plan.set_dmm_port(port);
     }
-    if let Some(p) = &args.table_port {
+    if let Some(p) = table {
         let port =
             gyrocal_run::Port::parse(p).map_err(|e| BadInput(format!("--table-port: {e}")))?;
         check_port(std::path::Path::new("--table-port"), "port", &port)?;
         plan.set_table_port(port);
     }
+    Ok(())
+}
+
+/// Runs `gyrocal check`.
+pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
+    let mut plan = load_plan(&args.plan)?;
+    override_ports(
+        &mut plan,
+        args.dmm_port.as_deref(),
+        args.table_port.as_deref(),
+    )?;
     let steps = plan.schedule();
     let timing = crate::instruments::meter_timing(&plan);
     let est = estimate::estimate(&plan, &steps, 0.0, timing.as_ref());

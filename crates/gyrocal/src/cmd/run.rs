@@ -154,16 +154,11 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
         }
         (None, None) => return Err(BadInput("a plan (or --resume DIR) is needed".into()).into()),
     };
-    if let Some(p) = &args.dmm_port {
-        let port = Port::parse(p).map_err(|e| BadInput(format!("--dmm-port: {e}")))?;
-        crate::cmd::check::check_port(Path::new("--dmm-port"), "port", &port)?;
-        plan.set_dmm_port(port);
-    }
-    if let Some(p) = &args.table_port {
-        let port = Port::parse(p).map_err(|e| BadInput(format!("--table-port: {e}")))?;
-        crate::cmd::check::check_port(Path::new("--table-port"), "port", &port)?;
-        plan.set_table_port(port);
-    }
+    crate::cmd::check::override_ports(
+        &mut plan,
+        args.dmm_port.as_deref(),
+        args.table_port.as_deref(),
+    )?;
     if let Some(x) = args.sim_time_scale
         && !(x.is_finite() && x > 0.0)
     {
