@@ -26,8 +26,8 @@ pub use plan::{
     Simulation, Step, TableDialect, TableSettings,
 };
 pub use rundir::{
-    Dut, FitSummary, Instruments, Manifest, Resume, Retry, RunContext, RunData, RunDir, RunError,
-    RunMeta, Sample, SampleRow, Status, StepRecord, Timing, load, load_fit, load_samples,
+    Deviation, Dut, FitSummary, Instruments, Manifest, Resume, Retry, RunContext, RunData, RunDir,
+    RunError, RunMeta, Sample, SampleRow, Status, StepRecord, Timing, load, load_fit, load_samples,
 };
 pub use time::{ClockAnchor, parse_rfc3339_utc, rfc3339_utc};
 

@@ -549,6 +549,53 @@ pub struct Dut {
     /// Model.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub model: Option<String>,
+    /// Manufacturer.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub manufacturer: Option<String>,
+    /// Condition as received (ISO/IEC 17025 §7.8.2.1 g), e.g. "new, no visible damage".
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub condition: Option<String>,
+    /// Free text.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub notes: Option<String>,
+}
+
+impl Dut {
+    /// Whether nothing is known about the gyro.
+    pub fn is_empty(&self) -> bool {
+        self.serial.is_none()
+            && self.model.is_none()
+            && self.manufacturer.is_none()
+            && self.condition.is_none()
+            && self.notes.is_none()
+    }
+
+    /// `self` with every field `over` sets replaced by `over`'s (the command line over the
+    /// plan's `[dut]`).
+    pub fn overridden_by(self, over: Dut) -> Dut {
+        Dut {
+            serial: over.serial.or(self.serial),
+            model: over.model.or(self.model),
+            manufacturer: over.manufacturer.or(self.manufacturer),
+            condition: over.condition.or(self.condition),
+            notes: over.notes.or(self.notes),
+        }
+    }
+}
+
+/// A departure from the method, recorded when it happens (ISO/IEC 17025 §7.8.2.1 n): for
+/// example a run started with an instrument whose calibration was overdue
+/// (`--allow-expired`). The report lists these with the deviations it derives from the
+/// manifest itself (resumes, retries, a simulated bench).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Deviation {
+    /// A short machine-readable kind, e.g. `expired-calibration`.
+    pub kind: String,
+    /// What happened, in words.
+    pub text: String,
+    /// When it was recorded, RFC 3339 UTC.
+    pub at_utc: String,
 }
 
 /// Who ran a run, for whom, and the environment as entered (not measured).
@@ -730,6 +777,9 @@ pub struct Manifest {
     pub context: Option<RunContext>,
     /// Instrument identities.
     pub instruments: Instruments,
+    /// Departures from the method recorded during the run, oldest first (absent: none).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub deviations: Vec<Deviation>,
     /// Wall-clock start, RFC 3339 UTC.
     pub started_utc: String,
     /// Wall-clock end (set when the run stops), RFC 3339 UTC.
@@ -1143,6 +1193,7 @@ impl RunDir {
             context: meta.context,
             virtual_time: meta.virtual_time,
             instruments: meta.instruments,
+            deviations: Vec::new(),
             started_utc: now.clone(),
             ended_utc: None,
             updated_utc: now,
@@ -1542,6 +1593,16 @@ impl RunDir {
     /// Sets the instruments' identities.
     pub fn set_instruments(&mut self, instruments: Instruments) -> Result<(), RunError> {
         self.manifest.instruments = instruments;
+        self.write_manifest()
+    }
+
+    /// Records a departure from the method (see [`Deviation`]).
+    pub fn add_deviation(&mut self, kind: &str, text: &str) -> Result<(), RunError> {
+        self.manifest.deviations.push(Deviation {
+            kind: kind.to_string(),
+            text: text.to_string(),
+            at_utc: now_utc(),
+        });
         self.write_manifest()
     }
 

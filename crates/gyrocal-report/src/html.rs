@@ -7,7 +7,7 @@ use gyrocal_files::Status;
 use gyrocal_fit::{Analysis, Fit, Method, Model, MultiAnalysis, NeuronStatus};
 
 use crate::input::{FitSource, Input};
-use crate::{Report, ReportError, plots};
+use crate::{Report, ReportError, certificate, plots};
 
 const CSS: &str = r#"
 :root { color-scheme: light; }
@@ -40,7 +40,14 @@ code { font-size: 0.9em; word-break: break-all; }
   figure svg { max-width: 100%; border: none; }
   .banner { background: #fff; color: #000; border: 3px solid #000; }
   th { background: #fff; }
+  #conditions, #fit { break-before: page; }
+  .signatures { break-inside: avoid; }
 }
+table.cert th { width: 11rem; background: #f7f7f7; }
+table.signatures { width: 100%; margin-top: 2rem; }
+table.signatures td { height: 2.2rem; min-width: 12rem; }
+.statement { margin-top: 2rem; font-style: italic; }
+.end { text-align: center; margin-top: 2rem; font-weight: 600; letter-spacing: 0.05em; }
 "#;
 
 /// Side of the error-surface grid the report draws.
@@ -159,9 +166,21 @@ pub(crate) fn render(inputs: &[Input]) -> Result<Report, ReportError> {
     } else {
         title
     };
+    // One run directory: the report is a certificate (ISO/IEC 17025 §7.8) with an id on
+    // every printed page. Several inputs or a bare CSV: a comparison, without one.
+    let cert = match inputs {
+        [one] => one
+            .manifest
+            .as_ref()
+            .map(|m| (one, m, certificate::report_id(m, ""))),
+        _ => None,
+    };
+    let page_css = cert
+        .as_ref()
+        .map_or_else(String::new, |(_, _, id)| certificate::page_css(id));
     let _ = write!(
         doc.html,
-        "<title>{}</title>\n<style>{CSS}</style>\n</head>\n<body>\n<h1>Gyro scale-factor calibration report</h1>\n",
+        "<title>{}</title>\n<style>{CSS}{page_css}</style>\n</head>\n<body>\n<h1>Gyro scale-factor calibration report</h1>\n",
         esc(&title)
     );
     let _ = writeln!(
@@ -170,9 +189,12 @@ pub(crate) fn render(inputs: &[Input]) -> Result<Report, ReportError> {
         esc(&title),
         env!("CARGO_PKG_VERSION")
     );
-    // The gyro under test and who ran it: on the first page, before any number.
-    for (i, input) in inputs.iter().enumerate() {
-        identification(&mut doc.html, input, many.then_some(i + 1));
+    // The gyro under test and who ran it: on the first page, before any number (a
+    // certificate's head says it in full, below the banners).
+    if cert.is_none() {
+        for (i, input) in inputs.iter().enumerate() {
+            identification(&mut doc.html, input, many.then_some(i + 1));
+        }
     }
     // Banners first: a simulated or incomplete run, or runs of different plans, must be seen
     // before any number.
@@ -197,6 +219,9 @@ pub(crate) fn render(inputs: &[Input]) -> Result<Report, ReportError> {
             esc(&p.warning())
         );
     }
+    if let Some((input, m, id)) = &cert {
+        certificate::head(&mut doc.html, input, m, id, &certificate::issued_now());
+    }
     if many {
         repeatability(&mut doc, inputs, plans.as_ref())?;
     }
@@ -209,7 +234,11 @@ pub(crate) fn render(inputs: &[Input]) -> Result<Report, ReportError> {
                 esc(&input.path.display().to_string())
             );
         }
-        one(&mut doc, input, run)?;
+        one(&mut doc, input, run, cert.is_some())?;
+    }
+    if let Some((_, _, id)) = &cert {
+        certificate::closing(&mut doc.html);
+        certificate::end_mark(&mut doc.html, id);
     }
     doc.html.push_str("</body>\n</html>\n");
     Ok(Report {
@@ -348,7 +377,7 @@ fn banner(html: &mut String, input: &Input, run: Option<usize>) {
     );
 }
 
-fn one(doc: &mut Doc, input: &Input, run: Option<usize>) -> Result<(), ReportError> {
+fn one(doc: &mut Doc, input: &Input, run: Option<usize>, cert: bool) -> Result<(), ReportError> {
     let sfx = suffix(run);
     let a = match &input.analysis {
         Ok(a) => Some(a),
@@ -363,6 +392,13 @@ fn one(doc: &mut Doc, input: &Input, run: Option<usize>) -> Result<(), ReportErr
     };
     if let Some(a) = a {
         summary(&mut doc.html, a, &sfx, input);
+    }
+    if cert && let Some(m) = &input.manifest {
+        certificate::conditions(&mut doc.html, m);
+        certificate::instruments(&mut doc.html, m);
+        certificate::deviations(&mut doc.html, input, m);
+    }
+    if let Some(a) = a {
         let _ = writeln!(doc.html, "<h2 id=\"fit{sfx}\">Fit</h2>");
         let best_rule = best_rule_text(a);
         doc.figure(

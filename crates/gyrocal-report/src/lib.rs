@@ -32,6 +32,7 @@
 
 #![deny(missing_docs)]
 
+mod certificate;
 mod html;
 mod input;
 mod plots;

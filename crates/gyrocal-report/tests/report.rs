@@ -519,3 +519,50 @@ fn malformed_steps_csv_is_an_error_naming_the_file_and_line() {
     let err = write_run_report(&dir2).unwrap_err();
     assert!(err.to_string().contains("fit.json"), "{err}");
 }
+
+/// A single run's report is a certificate: a report id on the first page, in the print
+/// margins beside "page x of y" and in the end-of-report mark; the test conditions; the
+/// statement and the signature lines. The same run gives the same id.
+#[test]
+fn a_run_report_is_a_certificate_with_an_id_on_every_page_and_an_end() {
+    let (_tmp, dir) = complete_run();
+    let html = fs::read_to_string(write_run_report(&dir).unwrap()).unwrap();
+    let id = cell(&html, "report-id").expect("report id");
+    let id = id.trim_start_matches("<strong id=\"report-id\">");
+    let start = html.find("id=\"report-id\">").unwrap() + "id=\"report-id\">".len();
+    let id_text = &html[start..start + html[start..].find('<').unwrap()];
+    assert!(id.contains(id_text));
+    assert!(
+        id_text.len() == 15
+            && id_text.starts_with("GC-")
+            && id_text[3..].chars().all(|c| c.is_ascii_hexdigit()),
+        "report id {id_text}"
+    );
+    assert!(html.contains(&format!(
+        "@top-left {{ content: \"Calibration report {id_text}\""
+    )));
+    assert!(html.contains("counter(page) \" of \" counter(pages)"));
+    assert!(html.contains(&format!("End of report {id_text}")));
+    assert!(html.find("id=\"end-of-report\"").unwrap() > html.find("id=\"metadata\"").unwrap());
+    assert!(html.contains("The results relate only to the item calibrated"));
+    assert!(html.contains("Prepared by") && html.contains("Approved by"));
+    // the test conditions: every plan setting that affects the measurement
+    let conditions = &html[html.find("id=\"conditions-table\"").unwrap()..];
+    let conditions = &conditions[..conditions.find("</table>").unwrap()];
+    for needle in [
+        "NPLC",
+        "V range",
+        "autozero",
+        "acceleration",
+        "Readings per rate",
+        "Settle",
+    ] {
+        assert!(
+            conditions.contains(needle),
+            "conditions lack {needle}: {conditions}"
+        );
+    }
+    // the same run, the same id
+    let again = fs::read_to_string(write_run_report(&dir).unwrap()).unwrap();
+    assert!(again.contains(&format!("End of report {id_text}")));
+}

@@ -229,6 +229,7 @@ fn open_run_dir(args: &RunArgs, plan: &Plan) -> anyhow::Result<(PathBuf, RunDir)
     let dut = (args.dut_serial.is_some() || args.dut_model.is_some()).then(|| gyrocal_run::Dut {
         serial: args.dut_serial.clone(),
         model: args.dut_model.clone(),
+        ..gyrocal_run::Dut::default()
     });
     let context = gyrocal_run::RunContext {
         operator: args.operator.clone(),
