@@ -8,6 +8,7 @@ use crate::lsq::{Prepared, assemble, check, check_rates, fit_prepared};
 use crate::metrics::{Metrics, repeatability_ppm};
 use crate::model::{Coefficients, Fit, Method, Model, NeuronTrace};
 use crate::neuron::{NeuronOptions, RATE_MEANS_ABOVE_POINTS, train, train_rate_means};
+use crate::selection::{ModelSelection, select};
 use crate::surface::ErrorSurface;
 
 /// Default of [`Options::point_residuals_max`]: data sets of up to 10 000 points carry
@@ -90,10 +91,18 @@ pub struct Analysis {
     /// documents written before this field existed.
     #[serde(default)]
     pub skipped: Vec<Skipped>,
-    /// The model with the smallest residual standard error `sqrt(SSE/(N − p))` among the
-    /// least-squares fits (which penalises extra coefficients), when there is one.
+    /// The model the data support: [`ModelSelection::chosen`], by nested F-tests at
+    /// [`crate::MODEL_SELECTION_LEVEL`] up the chain linear → quadratic → cubic among the
+    /// least-squares fits made (see [`Analysis::model_selection`]). When no polynomial model
+    /// was fitted, the split model if it was. Documents written before the F-test existed
+    /// chose by the smallest residual standard error.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub best_model: Option<Model>,
+    /// How `best_model` was chosen: the nested F-tests, their statistics and where the climb
+    /// stopped. Absent when no polynomial model was fitted, and in documents written before
+    /// this field existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_selection: Option<ModelSelection>,
     /// Metrics from least-squares fits.
     pub metrics: Metrics,
     /// SSE of the linear model over (weight, threshold) around the least-squares optimum.
@@ -222,12 +231,14 @@ pub fn analyze_columns(data: &Columns, opts: &Options) -> Result<Analysis, FitEr
     if neuron {
         fits.push(neuron_prepared(&prep, &opts.neuron));
     }
-    let best_model = fits
-        .iter()
-        .filter(|f| f.method == Method::LeastSquares)
-        .filter_map(|f| f.residual_std_error.map(|s| (s, f.model)))
-        .min_by(|a, b| a.0.total_cmp(&b.0))
-        .map(|(_, m)| m);
+    let model_selection = select(&fits, prep.len(), rounding_floor(&prep));
+    let best_model = match &model_selection {
+        Some(s) => Some(s.chosen),
+        None => fits
+            .iter()
+            .find(|f| f.method == Method::LeastSquares && f.model == Model::Split)
+            .map(|f| f.model),
+    };
     // The metrics reuse the least-squares fits already made (the same weighting).
     let find = |m: Model| {
         fits.iter()
@@ -277,9 +288,25 @@ pub fn analyze_columns(data: &Columns, opts: &Options) -> Result<Analysis, FitEr
         fits,
         skipped,
         best_model,
+        model_selection,
         metrics,
         error_surface,
     })
+}
+
+/// The (weighted) SSE below which a fit counts as exact for the model selection: rounding
+/// noise of about `1000·ε` relative to the outputs, `(1000·ε)²·Σ (D_i/σ_i)²`.
+fn rounding_floor(prep: &Prepared<'_>) -> f64 {
+    let sum: f64 = match prep.sigmas {
+        Some(s) => prep
+            .volts()
+            .iter()
+            .zip(s)
+            .map(|(d, s)| (d / s) * (d / s))
+            .sum(),
+        None => prep.volts().iter().map(|d| d * d).sum(),
+    };
+    (1e3 * f64::EPSILON).powi(2) * sum
 }
 
 /// Fits the linear model with the paper's neuron (see [`crate::neuron`]).

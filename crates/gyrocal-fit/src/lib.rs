@@ -49,6 +49,7 @@ mod lsq;
 pub mod metrics;
 mod model;
 pub mod neuron;
+pub mod selection;
 mod surface;
 
 pub use analysis::{
@@ -63,4 +64,5 @@ pub use model::{
     Coefficients, Fit, Method, Model, NeuronTrace, RateResidual, Residual, TrainingData,
 };
 pub use neuron::{NeuronOptions, NeuronStatus};
+pub use selection::{MODEL_SELECTION_LEVEL, ModelSelection, NestedTest};
 pub use surface::ErrorSurface;

@@ -155,6 +155,141 @@ pub(crate) fn solve_poly(
     Ok(PolySolution { coef, se })
 }
 
+/// One row of a general least-squares problem: the regressors `x`, the observation `y` and the
+/// row's weight factor `w` (the row is multiplied by `w`, i.e. a weight `w²` = `1/σ²`).
+#[allow(dead_code)] // used by the asymmetry fit (next commit)
+pub(crate) type DesignRow<const P: usize> = ([f64; P], f64, f64);
+
+/// Solution of a general linear least-squares problem `y ≈ X·k` ([`solve_design`]), in the
+/// units of the regressors as given.
+#[derive(Debug, Clone, PartialEq)]
+#[allow(dead_code)]
+pub(crate) struct DesignSolution<const P: usize> {
+    /// The coefficients `k`.
+    pub coef: [f64; P],
+    /// Covariance of `coef`, `s²·(XᵀWX)⁻¹` with `s² = Σ w²r² / (N − P)`; `None` when `N = P`.
+    pub cov: Option<[[f64; P]; P]>,
+    /// Weighted residual sum of squares `Σ w²r²`.
+    pub wsse: f64,
+    /// Rows used.
+    pub points: usize,
+    /// Residual degrees of freedom `N − P`.
+    pub dof: usize,
+}
+
+/// Solves a general linear least-squares problem by Householder QR of the column-scaled
+/// design matrix, the same way as the polynomial fits: every column is divided by its largest
+/// absolute value (so all lie in [-1, 1]), the rows are taken [`QR_BLOCK`] at a time and
+/// stacked under the triangular factor of the rows before them, and the covariance comes from
+/// the triangular factor, `s²·R⁻¹R⁻ᵀ`, mapped back through the column scales.
+///
+/// `rows` is called three times (scales, factorisation, residuals) and must yield the same
+/// rows each time. Errors, in words, when there are fewer rows than coefficients, a column is
+/// zero, or the columns are (numerically) dependent.
+#[allow(dead_code)]
+pub(crate) fn solve_design<const P: usize, I>(
+    rows: impl Fn() -> I,
+) -> Result<DesignSolution<P>, String>
+where
+    I: Iterator<Item = DesignRow<P>>,
+{
+    let mut n = 0_usize;
+    let mut scale = [0.0_f64; P];
+    for (x, _, _) in rows() {
+        n += 1;
+        for j in 0..P {
+            scale[j] = scale[j].max(x[j].abs());
+        }
+    }
+    if n < P {
+        return Err(format!(
+            "{P} coefficients need at least {P} points; there are {n}"
+        ));
+    }
+    if let Some(j) = (0..P).find(|&j| scale[j] == 0.0 || !scale[j].is_finite()) {
+        return Err(format!("regressor {j} is zero on every point"));
+    }
+    let dependent = || "the regressors are linearly dependent on these rates".to_string();
+    let mut acc: Option<(DMatrix<f64>, DVector<f64>)> = None;
+    let mut block: Vec<DesignRow<P>> = Vec::with_capacity(QR_BLOCK.min(n));
+    let flush = |block: &mut Vec<DesignRow<P>>, acc: &mut Option<(DMatrix<f64>, DVector<f64>)>| {
+        let top = if acc.is_some() { P } else { 0 };
+        let m = top + block.len();
+        let mut a = DMatrix::<f64>::zeros(m, P);
+        let mut b = DVector::<f64>::zeros(m);
+        if let Some((r, qtb)) = acc.as_ref() {
+            a.rows_mut(0, P).copy_from(r);
+            b.rows_mut(0, P).copy_from(qtb);
+        }
+        for (k, (x, y, w)) in block.iter().enumerate() {
+            for j in 0..P {
+                a[(top + k, j)] = x[j] / scale[j] * w;
+            }
+            b[top + k] = y * w;
+        }
+        block.clear();
+        let qr = a.qr();
+        let r = qr.r();
+        let mut qtb = b;
+        qr.q_tr_mul(&mut qtb);
+        *acc = Some((r, qtb.rows(0, P).into_owned()));
+    };
+    for row in rows() {
+        block.push(row);
+        if block.len() == QR_BLOCK {
+            flush(&mut block, &mut acc);
+        }
+    }
+    if !block.is_empty() {
+        flush(&mut block, &mut acc);
+    }
+    let Some((r, rhs)) = acc else {
+        return Err(dependent());
+    };
+    let max_diag = (0..P).fold(0.0_f64, |m, j| m.max(r[(j, j)].abs()));
+    if (0..P).any(|j| r[(j, j)].abs() <= 1e-12 * max_diag) {
+        return Err(dependent());
+    }
+    let c = r.solve_upper_triangular(&rhs).ok_or_else(dependent)?;
+    let mut coef = [0.0; P];
+    for j in 0..P {
+        coef[j] = c[j] / scale[j];
+    }
+    let mut wsse = 0.0;
+    for (x, y, w) in rows() {
+        let fitted: f64 = (0..P).map(|j| x[j] * coef[j]).sum();
+        let res = (y - fitted) * w;
+        wsse += res * res;
+    }
+    let dof = n - P;
+    let cov = if dof > 0 {
+        let s2 = wsse / dof as f64;
+        let r_inv = r
+            .solve_upper_triangular(&DMatrix::<f64>::identity(P, P))
+            .ok_or_else(dependent)?;
+        let unscaled = &r_inv * r_inv.transpose();
+        let mut cov = [[0.0; P]; P];
+        for i in 0..P {
+            for j in 0..P {
+                cov[i][j] = s2 * unscaled[(i, j)] / (scale[i] * scale[j]);
+            }
+        }
+        Some(cov)
+    } else {
+        None
+    };
+    if !(coef.iter().all(|c| c.is_finite()) && wsse.is_finite()) {
+        return Err("the solution is not finite".to_string());
+    }
+    Ok(DesignSolution {
+        coef,
+        cov,
+        wsse,
+        points: n,
+        dof,
+    })
+}
+
 /// A data set prepared for fitting: its columns, its distinct rates (counted once), the
 /// weighting in force, and what the fits record per point.
 pub(crate) struct Prepared<'a> {
