@@ -157,13 +157,11 @@ pub(crate) fn solve_poly(
 
 /// One row of a general least-squares problem: the regressors `x`, the observation `y` and the
 /// row's weight factor `w` (the row is multiplied by `w`, i.e. a weight `w²` = `1/σ²`).
-#[allow(dead_code)] // used by the asymmetry fit (next commit)
 pub(crate) type DesignRow<const P: usize> = ([f64; P], f64, f64);
 
 /// Solution of a general linear least-squares problem `y ≈ X·k` ([`solve_design`]), in the
 /// units of the regressors as given.
 #[derive(Debug, Clone, PartialEq)]
-#[allow(dead_code)]
 pub(crate) struct DesignSolution<const P: usize> {
     /// The coefficients `k`.
     pub coef: [f64; P],
@@ -186,7 +184,6 @@ pub(crate) struct DesignSolution<const P: usize> {
 /// `rows` is called three times (scales, factorisation, residuals) and must yield the same
 /// rows each time. Errors, in words, when there are fewer rows than coefficients, a column is
 /// zero, or the columns are (numerically) dependent.
-#[allow(dead_code)]
 pub(crate) fn solve_design<const P: usize, I>(
     rows: impl Fn() -> I,
 ) -> Result<DesignSolution<P>, String>

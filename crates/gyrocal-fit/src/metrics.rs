@@ -2,6 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::asymmetry::{self, AsymmetryCommonK2};
 use crate::data::{Columns, Dataset, Weighting};
 use crate::error::FitError;
 use crate::lsq::{Prepared, check, fit_prepared};
@@ -39,6 +40,18 @@ pub struct Metrics {
     pub bias_dph: f64,
     /// Repeatability `std(K_i, ddof=1)/mean(K_i)` over several data sets, ppm; null for one.
     pub repeatability_ppm: Option<f64>,
+    /// The asymmetry without the even-order bias of `asymmetry_ppm`: one joint fit
+    /// `K0 + K+·ω⁺ + K−·ω⁻ + K2·ω²` with its standard errors ([`AsymmetryCommonK2`]).
+    /// Absent (with a [`NotComputed`] entry `asymmetry_common_k2`) when the data cannot
+    /// determine it, and in documents written before this field existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub asymmetry_common_k2: Option<AsymmetryCommonK2>,
+    /// Correlation coefficient of the least-squares line's scale factor K and bias F0
+    /// (dimensionless, −1..1; `−Σwω / √(Σw·Σwω²)`): near zero for rates symmetric about zero.
+    /// Absent when the line has no standard errors (two points), and in documents written
+    /// before this field existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale_factor_bias_correlation: Option<f64>,
     /// The metrics above that are null because the data cannot support them, with the reason
     /// (e.g. `asymmetry_ppm` when the data has one turning direction only). Empty when every
     /// metric the data set can have was computed (a single data set's `repeatability_ppm` is
@@ -117,6 +130,20 @@ impl Metrics {
             _ => None,
         };
         let bias_dps = if k != 0.0 { f0 / k } else { 0.0 };
+        let asymmetry_common_k2 = match asymmetry::fit(prep) {
+            Ok(a) => Some(a),
+            Err(reason) => {
+                not_computed.push(NotComputed {
+                    metric: "asymmetry_common_k2".to_string(),
+                    reason,
+                });
+                None
+            }
+        };
+        let scale_factor_bias_correlation = line
+            .std_errors
+            .k1
+            .and_then(|_| line_correlation(prep.rates(), prep.sigmas));
         Self {
             scale_factor: k,
             bias_volts: f0,
@@ -129,9 +156,33 @@ impl Metrics {
             bias_dps,
             bias_dph: bias_dps * SECONDS_PER_HOUR,
             repeatability_ppm: None,
+            asymmetry_common_k2,
+            scale_factor_bias_correlation,
             not_computed,
         }
     }
+}
+
+/// Correlation of the slope and intercept of a (weighted) least-squares line through points
+/// at `rates`: `−x̄_w / √(S_xx/Σw + x̄_w²)` with `x̄_w` the weighted mean rate and `S_xx` the
+/// weighted sum of squares about it (the closed form of `−Σwx/√(Σw·Σwx²)`, stable for rates
+/// far from zero). `None` when the rates do not vary.
+fn line_correlation(rates: &[f64], sigmas: Option<&[f64]>) -> Option<f64> {
+    let w = |i: usize| sigmas.map_or(1.0, |s| 1.0 / (s[i] * s[i]));
+    let sw: f64 = (0..rates.len()).map(w).sum();
+    if sw.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+        return None;
+    }
+    let mean = rates.iter().enumerate().map(|(i, x)| w(i) * x).sum::<f64>() / sw;
+    let sxx: f64 = rates
+        .iter()
+        .enumerate()
+        .map(|(i, x)| w(i) * (x - mean) * (x - mean))
+        .sum();
+    let denom = (sxx / sw + mean * mean).sqrt();
+    (denom > 0.0 && sxx > 0.0)
+        .then(|| (-mean / denom).clamp(-1.0, 1.0))
+        .filter(|c| c.is_finite())
 }
 
 /// Repeatability of the scale factor over several runs: `std(K_i, ddof=1) / mean(K_i)` in ppm.

@@ -604,7 +604,8 @@ fn models_the_data_cannot_determine_are_skipped_with_the_reason() {
         [
             "asymmetry_ppm",
             "scale_factor_positive",
-            "scale_factor_negative"
+            "scale_factor_negative",
+            "asymmetry_common_k2"
         ]
     );
     assert!(m.not_computed[0].reason.contains("both turning directions"));
