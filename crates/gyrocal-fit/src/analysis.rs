@@ -10,6 +10,7 @@ use crate::model::{Coefficients, Fit, Method, Model, NeuronTrace};
 use crate::neuron::{NeuronOptions, RATE_MEANS_ABOVE_POINTS, train, train_rate_means};
 use crate::selection::{ModelSelection, select};
 use crate::surface::ErrorSurface;
+use crate::uncertainty::Uncertainty;
 
 /// Default of [`Options::point_residuals_max`]: data sets of up to 10 000 points carry
 /// per-point residuals in every fit; larger ones per-rate summaries
@@ -108,6 +109,11 @@ pub struct Analysis {
     /// SSE of the linear model over (weight, threshold) around the least-squares optimum.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error_surface: Option<ErrorSurface>,
+    /// The uncertainty budget (k = 2), when one was attached
+    /// ([`Analysis::attach_uncertainty`]); [`analyze`] leaves it absent, as do documents
+    /// written before this field existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<Uncertainty>,
 }
 
 impl Analysis {
@@ -291,6 +297,7 @@ pub fn analyze_columns(data: &Columns, opts: &Options) -> Result<Analysis, FitEr
         model_selection,
         metrics,
         error_surface,
+        uncertainty: None,
     })
 }
 

@@ -52,6 +52,7 @@ mod model;
 pub mod neuron;
 pub mod selection;
 mod surface;
+pub mod uncertainty;
 
 pub use analysis::{
     Analysis, MultiAnalysis, Options, POINT_RESIDUALS_MAX, ResidualDetail, Skipped, analyze,
@@ -68,3 +69,4 @@ pub use model::{
 pub use neuron::{NeuronOptions, NeuronStatus};
 pub use selection::{MODEL_SELECTION_LEVEL, ModelSelection, NestedTest};
 pub use surface::ErrorSurface;
+pub use uncertainty::{MeterAccuracy, TableRateAccuracy, Uncertainty, UncertaintyInputs};
