@@ -34,9 +34,9 @@ pub const ASYMMETRY_COMMON_K2_UNITS: &str = "k0 V; k_pos, k_neg V/(°/s); k2 V/(
 /// the fit uses the same weighting.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct AsymmetryCommonK2 {
-    /// [`ASYMMETRY_COMMON_K2_MODEL`].
+    /// [`crate::ASYMMETRY_COMMON_K2_MODEL`].
     pub model: String,
-    /// [`ASYMMETRY_COMMON_K2_UNITS`].
+    /// [`crate::ASYMMETRY_COMMON_K2_UNITS`].
     #[serde(default)]
     pub units: String,
     /// Bias K0, V.

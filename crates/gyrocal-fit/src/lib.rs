@@ -58,7 +58,7 @@ pub use analysis::{
     Analysis, MultiAnalysis, Options, POINT_RESIDUALS_MAX, ResidualDetail, Skipped, analyze,
     analyze_columns, analyze_many, fit_neuron, unsupported_models,
 };
-pub use asymmetry::{ASYMMETRY_COMMON_K2_MODEL, AsymmetryCommonK2};
+pub use asymmetry::{ASYMMETRY_COMMON_K2_MODEL, ASYMMETRY_COMMON_K2_UNITS, AsymmetryCommonK2};
 pub use data::{Columns, Dataset, Point, Weighting};
 pub use error::FitError;
 pub use lsq::{check_rates, fit_least_squares, fit_least_squares_columns};
