@@ -38,6 +38,11 @@
 //!   data sets and adds the repeatability.
 //! * [`fit_least_squares`] and [`neuron::train`] are the individual estimators;
 //!   [`Fit::compensate`] turns an output voltage back into a rate.
+//! * [`Analysis::best_model`] is chosen by nested F-tests ([`selection`],
+//!   [`Analysis::model_selection`]); [`Metrics::asymmetry_common_k2`] is the asymmetry from
+//!   one joint fit with a common `K2`, free of the even-order bias of the GJB figure.
+//! * [`Analysis::attach_uncertainty`] adds the expanded uncertainty (k = 2) budget
+//!   ([`uncertainty`]) from the instruments' stated accuracies.
 
 #![deny(missing_docs)]
 
