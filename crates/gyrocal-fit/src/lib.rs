@@ -41,6 +41,7 @@
 
 #![deny(missing_docs)]
 
+pub mod acceptance;
 mod analysis;
 mod data;
 mod error;
