@@ -22,8 +22,9 @@ pub mod rundir;
 mod time;
 
 pub use plan::{
-    Acquire, Acquisition, DmmModel, DmmSettings, Framing, Location, Plan, PlanDoc, PlanError, Port,
-    Simulation, Step, TableDialect, TableSettings,
+    Acquire, Acquisition, DmmModel, DmmSettings, Framing, Location, Plan, PlanDoc, PlanDut,
+    PlanError, PlanErrorKind, Port, Simulation, Step, TableDialect, TableSettings,
+    acceptance_from_toml_str, load_acceptance,
 };
 pub use rundir::{
     Deviation, Dut, FitSummary, Instruments, Manifest, Resume, Retry, RunContext, RunData, RunDir,

@@ -142,14 +142,16 @@ pub struct Limits {
     pub marginal_max: Option<f64>,
 }
 
-/// What is wrong with a [`Limits`]: the key at fault (`None` when none is set) and the
-/// message, e.g. `max = 0.04 must be >= min = 0.049`.
+/// What is wrong with a [`Limits`]: the key at fault (`None` when none is set) and what is
+/// wrong with it. Displays as `max = 0.04 must be >= min = 0.049 (...)`: the key, then the
+/// message (which leaves the key out, so that a plan's error can name it in its own way).
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{message}")]
+#[error("{}{message}", key.map(|k| format!("{k} ")).unwrap_or_default())]
 pub struct LimitsError {
     /// `min`, `max`, `marginal_min` or `marginal_max`; `None` when no bound is set.
     pub key: Option<&'static str>,
-    /// What is wrong, naming the key(s) and values.
+    /// What is wrong, without the key: `= 0.04 must be >= min = 0.049 (...)`,
+    /// `must be a finite number (got NaN)`, `sets no limit: ...`.
     pub message: String,
 }
 
@@ -185,24 +187,32 @@ impl Limits {
             {
                 return Err(LimitsError {
                     key: Some(key),
-                    message: format!("{key} must be a finite number (got {v})"),
+                    message: format!("must be a finite number (got {v})"),
                 });
             }
         }
-        for (j, (later, b)) in bounds.iter().enumerate() {
+        const ASCEND: &str = "(the limits ascend: min <= marginal_min <= marginal_max <= max)";
+        for (j, &(later, b)) in bounds.iter().enumerate() {
             let Some(b) = b else { continue };
-            for (earlier, a) in bounds.iter().take(j) {
-                if let Some(a) = a
-                    && a > b
-                {
-                    return Err(LimitsError {
-                        key: Some(later),
-                        message: format!(
-                            "{later} = {b} must be >= {earlier} = {a} (the limits ascend: min \
-                             <= marginal_min <= marginal_max <= max)"
-                        ),
-                    });
+            for &(earlier, a) in bounds.iter().take(j) {
+                let Some(a) = a else { continue };
+                if a <= b {
+                    continue;
                 }
+                // The limits are the specification, the marginal band lies inside them: when
+                // a band's end crosses a limit, the band's end is at fault.
+                let blame_earlier = later == "max" && earlier.starts_with("marginal");
+                return Err(if blame_earlier {
+                    LimitsError {
+                        key: Some(earlier),
+                        message: format!("= {a} must be <= {later} = {b} {ASCEND}"),
+                    }
+                } else {
+                    LimitsError {
+                        key: Some(later),
+                        message: format!("= {b} must be >= {earlier} = {a} {ASCEND}"),
+                    }
+                });
             }
         }
         Ok(())
@@ -360,7 +370,7 @@ impl<'de> Deserialize<'de> for AcceptanceSpec {
                         let limits: Limits = map.next_value()?;
                         limits
                             .validate()
-                            .map_err(|e| A::Error::custom(format!("acceptance {q}: {e}")))?;
+                            .map_err(|e| A::Error::custom(format!("[acceptance.{q}] {e}")))?;
                         if spec.limits.insert(q, limits).is_some() {
                             return Err(A::Error::custom(format!("duplicate quantity `{q}`")));
                         }
@@ -690,7 +700,7 @@ mod tests {
         let e = limits(2.0, 1.0).validate().unwrap_err();
         assert_eq!(e.key, Some("max"));
         assert!(
-            e.message.contains("max = 1 must be >= min = 2"),
+            e.to_string().starts_with("max = 1 must be >= min = 2"),
             "{}",
             e.message
         );
@@ -715,7 +725,7 @@ mod tests {
         .validate()
         .unwrap_err();
         assert_eq!(e.key, Some("min"));
-        assert!(e.message.contains("finite"));
+        assert_eq!(e.to_string(), "min must be a finite number (got NaN)");
     }
 
     #[test]
