@@ -14,11 +14,14 @@
 //!   [`RunDir::open_for_resume`] keeps every finished step, drops the partial step's readings
 //!   and a torn last line, and tells the sequencer where to continue. The file formats are
 //!   documented in [`rundir`]; [`num`] says how computed numbers are written.
+//! - [`station`]: the bench a run is made on: laboratory, conditions and the instruments'
+//!   calibration records (traceability, due dates), from a station file.
 //! - [`fit_run`]: a run directory's steps fitted, the analysis stored beside them.
 
 pub mod num;
 pub mod plan;
 pub mod rundir;
+pub mod station;
 mod time;
 
 pub use plan::{
@@ -29,6 +32,10 @@ pub use plan::{
 pub use rundir::{
     Deviation, Dut, FitSummary, Instruments, Manifest, Resume, Retry, RunContext, RunData, RunDir,
     RunError, RunMeta, Sample, SampleRow, Status, StepRecord, Timing, load, load_fit, load_samples,
+};
+pub use station::{
+    InstrumentRecord, MeterAccuracySpec, Overdue, STATION_ENV, SpecPeriod, Station, StationError,
+    StationErrorKind,
 };
 pub use time::{ClockAnchor, parse_rfc3339_utc, rfc3339_utc};
 

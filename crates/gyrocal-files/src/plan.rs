@@ -684,7 +684,10 @@ fn edit_distance(a: &str, b: &str) -> usize {
 
 /// The candidate closest to `name`, when it is close enough to be a likely misspelling (a
 /// small edit distance, or one is a prefix of the other).
-fn closest<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
+pub(crate) fn closest<'a>(
+    name: &str,
+    candidates: impl IntoIterator<Item = &'a str>,
+) -> Option<&'a str> {
     let lower = name.to_ascii_lowercase();
     candidates
         .into_iter()
@@ -699,12 +702,12 @@ fn closest<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) -> Opt
 }
 
 /// `a, b or c`.
-fn or_list<T: fmt::Display>(items: &[T]) -> String {
+pub(crate) fn or_list<T: fmt::Display>(items: &[T]) -> String {
     word_list(items, "or")
 }
 
 /// `a, b and c`.
-fn and_list<T: fmt::Display>(items: &[T]) -> String {
+pub(crate) fn and_list<T: fmt::Display>(items: &[T]) -> String {
     word_list(items, "and")
 }
 
