@@ -2026,7 +2026,12 @@ impl Ctx<'_> {
         if v > MAX_DURATION_S {
             return Err(self.err(path, format!("must be <= {MAX_DURATION_S} s (got {v})")));
         }
-        Ok(Duration::from_secs_f64(v))
+        let d = Duration::from_secs_f64(v);
+        // a positive duration below a nanosecond would be stored (and read back) as 0
+        if min_exclusive && d.is_zero() {
+            return Err(self.err(path, format!("must be at least 1e-9 s (got {v})")));
+        }
+        Ok(d)
     }
 
     fn port(&self, path: &str, v: &str) -> Result<Port, PlanError> {
