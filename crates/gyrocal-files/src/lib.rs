@@ -14,20 +14,28 @@
 //!   [`RunDir::open_for_resume`] keeps every finished step, drops the partial step's readings
 //!   and a torn last line, and tells the sequencer where to continue. The file formats are
 //!   documented in [`rundir`]; [`num`] says how computed numbers are written.
+//! - [`station`]: the bench a run is made on: laboratory, conditions and the instruments'
+//!   calibration records (traceability, due dates), from a station file.
 //! - [`fit_run`]: a run directory's steps fitted, the analysis stored beside them.
 
 pub mod num;
 pub mod plan;
 pub mod rundir;
+pub mod station;
 mod time;
 
 pub use plan::{
-    Acquire, Acquisition, DmmModel, DmmSettings, Framing, Location, Plan, PlanDoc, PlanError, Port,
-    Simulation, Step, TableDialect, TableSettings,
+    Acquire, Acquisition, DmmModel, DmmSettings, Framing, Location, Plan, PlanDoc, PlanDut,
+    PlanError, PlanErrorKind, Port, Simulation, Step, TableDialect, TableSettings,
+    acceptance_from_toml_str, load_acceptance,
 };
 pub use rundir::{
     Deviation, Dut, FitSummary, Instruments, Manifest, Resume, Retry, RunContext, RunData, RunDir,
     RunError, RunMeta, Sample, SampleRow, Status, StepRecord, Timing, load, load_fit, load_samples,
+};
+pub use station::{
+    InstrumentRecord, MeterAccuracySpec, Overdue, STATION_ENV, SpecPeriod, Station, StationError,
+    StationErrorKind,
 };
 pub use time::{ClockAnchor, parse_rfc3339_utc, rfc3339_utc};
 

@@ -29,6 +29,17 @@
 //! order, numbers in shortest round-trip form) prefixed with `gyrocal-plan-v1\n`, with the
 //! two serial/TCP port fields left out: where an instrument is plugged in does not change the
 //! measurement, and an operator who moved a USB adapter must still be able to resume.
+//! The optional `[dut]` (the gyro under test) and `[acceptance]` (the specification and its
+//! decision rule) sections are left out too: one plan serves many gyros, and limits can be
+//! re-evaluated after the run (`gyrocal report RUN --acceptance FILE`), so neither changes the
+//! method, the hash, or whether a run resumes. Both are kept in the [`PlanDoc`] (and so in
+//! the manifest) when present.
+//!
+//! # Acceptance files
+//!
+//! [`load_acceptance`] reads a standalone file whose top level is what `[acceptance]` holds:
+//! `decision_rule` and one table of limits per quantity
+//! ([`gyrocal_fit::acceptance::Quantity`]); its errors name keys as a plan's would.
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -40,6 +51,8 @@ use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 use toml::Spanned;
 use toml::de::{DeTable, DeValue};
+
+use gyrocal_fit::acceptance::{AcceptanceSpec, Limits, Quantity, Rule};
 
 /// Hard ceiling for `[table] max_rate_dps`, in °/s. Laboratory single-axis rate tables reach a
 /// few hundred to about 1000 °/s; a larger figure is a typo, and a dangerous one.
@@ -111,23 +124,29 @@ impl fmt::Display for Location {
 /// also the line, the column and the section or key.
 #[derive(Debug, thiserror::Error)]
 pub enum PlanError {
-    /// The plan file could not be read.
-    #[error("{}: cannot read the plan: {source}", path.display())]
+    /// The file could not be read (or is not UTF-8 text).
+    #[error("{}: cannot read the {document}: {source}", path.display())]
     Read {
         /// The file.
         path: PathBuf,
+        /// What the file was to be: `plan` or `acceptance file`.
+        document: &'static str,
         /// The I/O error.
         source: std::io::Error,
     },
-    /// The plan file is larger than [`MAX_PLAN_BYTES`] (or endless).
+    /// The file is larger than [`MAX_PLAN_BYTES`] (or endless).
     #[error(
-        "{}: larger than the {} KiB limit for a plan (a plan is a few kilobytes); is it the right file?",
+        "{}: larger than the {} KiB limit for {} {document} ({} {document} is a few kilobytes); is it the right file?",
         path.display(),
-        cap / 1024
+        cap / 1024,
+        article(document),
+        article(document)
     )]
     TooLarge {
         /// The file.
         path: PathBuf,
+        /// What the file was to be: `plan` or `acceptance file`.
+        document: &'static str,
         /// The limit, bytes.
         cap: u64,
     },
@@ -156,7 +175,44 @@ pub enum PlanError {
     },
 }
 
+/// The kind of a [`PlanError`], for callers that act on it (exit codes, retries).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum PlanErrorKind {
+    /// The file could not be read ([`PlanError::Read`]).
+    Read,
+    /// The file is too large ([`PlanError::TooLarge`]).
+    TooLarge,
+    /// TOML syntax, an unknown or missing section or key ([`PlanError::Syntax`]).
+    Syntax,
+    /// A value that is not acceptable ([`PlanError::Invalid`]).
+    Invalid,
+}
+
+/// `a` or `an` before a document's name.
+fn article(word: &str) -> &'static str {
+    if word.starts_with(['a', 'e', 'i', 'o', 'u']) {
+        "an"
+    } else {
+        "a"
+    }
+}
+
+/// The plan document's name in read errors.
+const PLAN_DOCUMENT: &str = "plan";
+/// A standalone acceptance file's name in read errors.
+const ACCEPTANCE_DOCUMENT: &str = "acceptance file";
+
 impl PlanError {
+    /// What kind of error this is.
+    pub fn kind(&self) -> PlanErrorKind {
+        match self {
+            PlanError::Read { .. } => PlanErrorKind::Read,
+            PlanError::TooLarge { .. } => PlanErrorKind::TooLarge,
+            PlanError::Syntax { .. } => PlanErrorKind::Syntax,
+            PlanError::Invalid { .. } => PlanErrorKind::Invalid,
+        }
+    }
+
     /// The location of the error, when it has one (not for [`PlanError::Read`] and
     /// [`PlanError::TooLarge`]).
     pub fn location(&self) -> Option<&Location> {
@@ -197,6 +253,50 @@ fn section_at(src: &str, offset: usize) -> Option<String> {
     })
 }
 
+/// Why [`read_capped_text`] failed.
+pub(crate) enum ReadFailure {
+    /// Opening or reading, or not UTF-8 text (as [`std::io::ErrorKind::InvalidData`]).
+    Io(std::io::Error),
+    /// Longer than the cap.
+    TooLarge,
+}
+
+/// Reads a text file of at most `cap` bytes, reading no more than `cap + 1` of it (so an
+/// endless file such as `/dev/zero` is refused quickly).
+pub(crate) fn read_capped_text(path: &Path, cap: u64) -> Result<String, ReadFailure> {
+    use std::io::Read as _;
+    let file = std::fs::File::open(path).map_err(ReadFailure::Io)?;
+    let mut bytes = Vec::new();
+    file.take(cap.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(ReadFailure::Io)?;
+    if bytes.len() as u64 > cap {
+        return Err(ReadFailure::TooLarge);
+    }
+    String::from_utf8(bytes).map_err(|e| {
+        ReadFailure::Io(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("not UTF-8 text (byte {})", e.utf8_error().valid_up_to()),
+        ))
+    })
+}
+
+/// A plan or acceptance file's text, at most [`MAX_PLAN_BYTES`].
+fn read_document(path: &Path, document: &'static str) -> Result<String, PlanError> {
+    read_capped_text(path, MAX_PLAN_BYTES).map_err(|f| match f {
+        ReadFailure::Io(source) => PlanError::Read {
+            path: path.to_path_buf(),
+            document,
+            source,
+        },
+        ReadFailure::TooLarge => PlanError::TooLarge {
+            path: path.to_path_buf(),
+            document,
+            cap: MAX_PLAN_BYTES,
+        },
+    })
+}
+
 // ---------------------------------------------------------------------------------------------
 // Stage 1: raw structs
 // ---------------------------------------------------------------------------------------------
@@ -210,6 +310,57 @@ struct RawFile {
     table: RawTable,
     dmm: RawDmm,
     simulation: Option<RawSimulation>,
+    dut: Option<RawDut>,
+    acceptance: Option<RawAcceptance>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDut {
+    serial: Option<S<String>>,
+    model: Option<S<String>>,
+    manufacturer: Option<S<String>>,
+    condition: Option<S<String>>,
+    notes: Option<S<String>>,
+}
+
+/// `[acceptance]` of a plan, or the whole of a standalone acceptance file. One field per
+/// [`Quantity`] (a unit test keeps them in step with [`Quantity::ALL`]).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawAcceptance {
+    decision_rule: Option<S<String>>,
+    scale_factor: Option<S<RawLimits>>,
+    bias_v: Option<S<RawLimits>>,
+    bias_dph: Option<S<RawLimits>>,
+    nonlinearity_ppm: Option<S<RawLimits>>,
+    asymmetry_ppm: Option<S<RawLimits>>,
+    repeatability_ppm: Option<S<RawLimits>>,
+    k2: Option<S<RawLimits>>,
+}
+
+impl RawAcceptance {
+    /// The limits tables, by quantity.
+    fn into_limits(self) -> [(Quantity, Option<S<RawLimits>>); 7] {
+        [
+            (Quantity::ScaleFactor, self.scale_factor),
+            (Quantity::BiasV, self.bias_v),
+            (Quantity::BiasDph, self.bias_dph),
+            (Quantity::NonlinearityPpm, self.nonlinearity_ppm),
+            (Quantity::AsymmetryPpm, self.asymmetry_ppm),
+            (Quantity::RepeatabilityPpm, self.repeatability_ppm),
+            (Quantity::K2, self.k2),
+        ]
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLimits {
+    min: Option<S<f64>>,
+    max: Option<S<f64>>,
+    marginal_min: Option<S<f64>>,
+    marginal_max: Option<S<f64>>,
 }
 
 #[derive(Deserialize)]
@@ -394,6 +545,8 @@ enum Kind {
     Bool,
     /// A list of numbers.
     Numbers,
+    /// A table of acceptance limits (`min`, `max`, `marginal_min`, `marginal_max`, numbers).
+    Limits,
 }
 
 /// A section of the file: its name, whether it is required, and its keys (name, kind,
@@ -459,6 +612,31 @@ const SCHEMA: &[SectionSchema] = &[
             ("ripple_dps", Kind::Number, false),
         ],
     ),
+    (
+        "dut",
+        false,
+        &[
+            ("serial", Kind::Text, false),
+            ("model", Kind::Text, false),
+            ("manufacturer", Kind::Text, false),
+            ("condition", Kind::Text, false),
+            ("notes", Kind::Text, false),
+        ],
+    ),
+    ("acceptance", false, ACCEPTANCE_KEYS),
+];
+
+/// The keys of `[acceptance]` (and of a standalone acceptance file): the decision rule and a
+/// table of limits per [`Quantity`] (a unit test keeps them in step with [`Quantity::ALL`]).
+const ACCEPTANCE_KEYS: &[(&str, Kind, bool)] = &[
+    ("decision_rule", Kind::Text, false),
+    ("scale_factor", Kind::Limits, false),
+    ("bias_v", Kind::Limits, false),
+    ("bias_dph", Kind::Limits, false),
+    ("nonlinearity_ppm", Kind::Limits, false),
+    ("asymmetry_ppm", Kind::Limits, false),
+    ("repeatability_ppm", Kind::Limits, false),
+    ("k2", Kind::Limits, false),
 ];
 
 /// An example line for a required key, for "add ..." hints.
@@ -506,7 +684,10 @@ fn edit_distance(a: &str, b: &str) -> usize {
 
 /// The candidate closest to `name`, when it is close enough to be a likely misspelling (a
 /// small edit distance, or one is a prefix of the other).
-fn closest<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
+pub(crate) fn closest<'a>(
+    name: &str,
+    candidates: impl IntoIterator<Item = &'a str>,
+) -> Option<&'a str> {
     let lower = name.to_ascii_lowercase();
     candidates
         .into_iter()
@@ -521,12 +702,12 @@ fn closest<'a>(name: &str, candidates: impl IntoIterator<Item = &'a str>) -> Opt
 }
 
 /// `a, b or c`.
-fn or_list<T: fmt::Display>(items: &[T]) -> String {
+pub(crate) fn or_list<T: fmt::Display>(items: &[T]) -> String {
     word_list(items, "or")
 }
 
 /// `a, b and c`.
-fn and_list<T: fmt::Display>(items: &[T]) -> String {
+pub(crate) fn and_list<T: fmt::Display>(items: &[T]) -> String {
     word_list(items, "and")
 }
 
@@ -609,6 +790,131 @@ fn wrong_kind(section: &str, key: &str, kind: Kind, v: &DeValue<'_>) -> Option<S
         Kind::Numbers => Some(format!(
             "= {shown} is {what}: write a list of numbers in brackets, e.g. {key} = [0, 5, -5]"
         )),
+        Kind::Limits if v.is_table() => None,
+        Kind::Limits => Some(format!(
+            "= {shown} is {what}: write a table of limits, e.g. {key} = {{ min = 0.049, max = \
+             0.051 }}, or a section [acceptance.{key}] with its keys"
+        )),
+    }
+}
+
+/// Checks the keys of one section (`table`, whose header is at byte `header` when known)
+/// against its schema `keys`, adding every finding to `out`.
+fn check_keys(
+    sname: &str,
+    keys: &[(&'static str, Kind, bool)],
+    table: &DeTable<'_>,
+    header: Option<usize>,
+    out: &mut Vec<Finding>,
+) {
+    for (key, v) in table.iter() {
+        let key_str: &str = key.get_ref().as_ref();
+        let Some(&(kname, kind, _)) = keys.iter().find(|k| k.0 == key_str) else {
+            let elsewhere: Vec<String> = SCHEMA
+                .iter()
+                .filter(|s| s.0 != sname && s.2.iter().any(|k| k.0 == key_str))
+                .map(|s| format!("[{}]", s.0))
+                .collect();
+            let hint = if !elsewhere.is_empty() {
+                format!("it belongs in {}", or_list(&elsewhere))
+            } else if sname == "acceptance" {
+                let all = format!(
+                    "the keys of [acceptance] are decision_rule and the quantities {}",
+                    Quantity::names()
+                );
+                match closest(key_str, keys.iter().map(|k| k.0)) {
+                    Some(k) => format!("did you mean `{k}`? ({all})"),
+                    None => all,
+                }
+            } else if let Some(k) = closest(key_str, keys.iter().map(|k| k.0)) {
+                format!("did you mean `{k}`?")
+            } else {
+                format!(
+                    "the keys of [{sname}] are {}",
+                    and_list(&keys.iter().map(|k| k.0).collect::<Vec<_>>())
+                )
+            };
+            out.push(Finding {
+                rank: 0,
+                offset: Some(key.span().start),
+                section: Some(sname.to_string()),
+                key: None,
+                message: format!("unknown key `{key_str}`: {hint}"),
+            });
+            continue;
+        };
+        if let Some(message) = wrong_kind(sname, kname, kind, v.get_ref()) {
+            out.push(Finding {
+                rank: 0,
+                offset: Some(v.span().start),
+                section: Some(sname.to_string()),
+                key: Some(kname.to_string()),
+                message,
+            });
+        } else if let (Kind::Limits, Some(limits)) = (kind, v.get_ref().as_table()) {
+            check_limits(&format!("{sname}.{kname}"), limits, out);
+        } else if let (Kind::Numbers, Some(items)) = (kind, v.get_ref().as_array()) {
+            for (i, item) in items.iter().enumerate() {
+                if let Some(message) = wrong_kind(sname, kname, Kind::Number, item.get_ref()) {
+                    out.push(Finding {
+                        rank: 0,
+                        offset: Some(item.span().start),
+                        section: Some(sname.to_string()),
+                        key: Some(format!("{kname}[{i}]")),
+                        message,
+                    });
+                }
+            }
+        }
+    }
+    for &(kname, _, required) in keys.iter() {
+        if required && !table.keys().any(|k| k.get_ref().as_ref() == kname) {
+            let ex = example(sname, kname);
+            let add = if ex.is_empty() {
+                format!("add `{kname}` under [{sname}]")
+            } else {
+                format!("add a line such as {ex} under [{sname}]")
+            };
+            out.push(Finding {
+                rank: 1,
+                offset: header,
+                section: Some(sname.to_string()),
+                key: Some(kname.to_string()),
+                message: format!("is missing (required): {add}"),
+            });
+        }
+    }
+}
+
+/// Checks a table of acceptance limits (`section` is e.g. `acceptance.scale_factor`): only
+/// `min`, `max`, `marginal_min` and `marginal_max`, each a number.
+fn check_limits(section: &str, table: &DeTable<'_>, out: &mut Vec<Finding>) {
+    for (key, v) in table.iter() {
+        let key_str: &str = key.get_ref().as_ref();
+        let Some(kname) = Limits::KEYS.into_iter().find(|k| *k == key_str) else {
+            let all = "the keys of a quantity's limits are min, max, marginal_min and marginal_max";
+            let hint = match closest(key_str, Limits::KEYS) {
+                Some(k) => format!("did you mean `{k}`? ({all})"),
+                None => all.to_string(),
+            };
+            out.push(Finding {
+                rank: 0,
+                offset: Some(key.span().start),
+                section: Some(section.to_string()),
+                key: None,
+                message: format!("unknown key `{key_str}`: {hint}"),
+            });
+            continue;
+        };
+        if let Some(message) = wrong_kind(section, kname, Kind::Number, v.get_ref()) {
+            out.push(Finding {
+                rank: 0,
+                offset: Some(v.span().start),
+                section: Some(section.to_string()),
+                key: Some(kname.to_string()),
+                message,
+            });
+        }
     }
 }
 
@@ -654,72 +960,7 @@ fn check_shape(root: &DeTable<'_>) -> Vec<Finding> {
             });
             continue;
         };
-        for (key, v) in table.iter() {
-            let key_str: &str = key.get_ref().as_ref();
-            let Some(&(kname, kind, _)) = keys.iter().find(|k| k.0 == key_str) else {
-                let elsewhere: Vec<String> = SCHEMA
-                    .iter()
-                    .filter(|s| s.0 != *sname && s.2.iter().any(|k| k.0 == key_str))
-                    .map(|s| format!("[{}]", s.0))
-                    .collect();
-                let hint = if !elsewhere.is_empty() {
-                    format!("it belongs in {}", or_list(&elsewhere))
-                } else if let Some(k) = closest(key_str, keys.iter().map(|k| k.0)) {
-                    format!("did you mean `{k}`?")
-                } else {
-                    format!(
-                        "the keys of [{sname}] are {}",
-                        and_list(&keys.iter().map(|k| k.0).collect::<Vec<_>>())
-                    )
-                };
-                out.push(Finding {
-                    rank: 0,
-                    offset: Some(key.span().start),
-                    section: Some((*sname).to_string()),
-                    key: None,
-                    message: format!("unknown key `{key_str}`: {hint}"),
-                });
-                continue;
-            };
-            if let Some(message) = wrong_kind(sname, kname, kind, v.get_ref()) {
-                out.push(Finding {
-                    rank: 0,
-                    offset: Some(v.span().start),
-                    section: Some((*sname).to_string()),
-                    key: Some(kname.to_string()),
-                    message,
-                });
-            } else if let (Kind::Numbers, Some(items)) = (kind, v.get_ref().as_array()) {
-                for (i, item) in items.iter().enumerate() {
-                    if let Some(message) = wrong_kind(sname, kname, Kind::Number, item.get_ref()) {
-                        out.push(Finding {
-                            rank: 0,
-                            offset: Some(item.span().start),
-                            section: Some((*sname).to_string()),
-                            key: Some(format!("{kname}[{i}]")),
-                            message,
-                        });
-                    }
-                }
-            }
-        }
-        for &(kname, _, required) in keys.iter() {
-            if required && !table.keys().any(|k| k.get_ref().as_ref() == kname) {
-                let ex = example(sname, kname);
-                let add = if ex.is_empty() {
-                    format!("add `{kname}` under [{sname}]")
-                } else {
-                    format!("add a line such as {ex} under [{sname}]")
-                };
-                out.push(Finding {
-                    rank: 1,
-                    offset: Some(name.span().start),
-                    section: Some((*sname).to_string()),
-                    key: Some(kname.to_string()),
-                    message: format!("is missing (required): {add}"),
-                });
-            }
-        }
+        check_keys(sname, keys, table, Some(name.span().start), &mut out);
     }
     for &(sname, required, keys) in SCHEMA {
         if required && !root.keys().any(|k| k.get_ref().as_ref() == sname) {
@@ -776,6 +1017,77 @@ pub struct PlanDoc {
     pub dmm: DmmDoc,
     /// `[simulation]`
     pub simulation: Simulation,
+    /// `[dut]` (absent: not named in the plan). Not part of the hash.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dut: Option<PlanDut>,
+    /// `[acceptance]` (absent: no specification). Not part of the hash.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub acceptance: Option<AcceptanceSpec>,
+}
+
+/// `[dut]`: the gyro under test, when the plan names it (a plan written for one gyro). Every
+/// key is optional text; the command line overrides each key it gives (see
+/// [`crate::rundir::Dut::overridden_by`]). Left out of the plan's hash: one plan serves many
+/// gyros, and naming the gyro does not change the measurement.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlanDut {
+    /// Serial number.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub serial: Option<String>,
+    /// Model.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model: Option<String>,
+    /// Manufacturer.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub manufacturer: Option<String>,
+    /// Condition as received (ISO/IEC 17025 §7.8.2.1 g), e.g. "new, no visible damage".
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub condition: Option<String>,
+    /// Free text.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub notes: Option<String>,
+}
+
+impl PlanDut {
+    /// Whether no key is set.
+    pub fn is_empty(&self) -> bool {
+        self.fields().iter().all(|(_, v)| v.is_none())
+    }
+
+    /// `(key, value)` of every key, in file order.
+    fn fields(&self) -> [(&'static str, &Option<String>); 5] {
+        [
+            ("serial", &self.serial),
+            ("model", &self.model),
+            ("manufacturer", &self.manufacturer),
+            ("condition", &self.condition),
+            ("notes", &self.notes),
+        ]
+    }
+
+    /// The run directory's record of the gyro.
+    pub fn to_dut(&self) -> crate::rundir::Dut {
+        crate::rundir::Dut {
+            serial: self.serial.clone(),
+            model: self.model.clone(),
+            manufacturer: self.manufacturer.clone(),
+            condition: self.condition.clone(),
+            notes: self.notes.clone(),
+        }
+    }
+}
+
+impl From<PlanDut> for crate::rundir::Dut {
+    fn from(d: PlanDut) -> Self {
+        crate::rundir::Dut {
+            serial: d.serial,
+            model: d.model,
+            manufacturer: d.manufacturer,
+            condition: d.condition,
+            notes: d.notes,
+        }
+    }
 }
 
 /// `[plan]` as parsed.
@@ -1135,6 +1447,8 @@ pub struct Plan {
     table: TableSettings,
     dmm: DmmSettings,
     simulation: Simulation,
+    dut: Option<PlanDut>,
+    acceptance: Option<AcceptanceSpec>,
 }
 
 /// What a step acquires.
@@ -1198,28 +1512,7 @@ impl Plan {
     /// Reads and validates a plan file; errors name `path`.
     /// A file larger than [`MAX_PLAN_BYTES`] is refused after reading at most that much.
     pub fn from_file(path: &Path) -> Result<Plan, PlanError> {
-        use std::io::Read as _;
-        let read_err = |source| PlanError::Read {
-            path: path.to_path_buf(),
-            source,
-        };
-        let file = std::fs::File::open(path).map_err(read_err)?;
-        let mut bytes = Vec::new();
-        file.take(MAX_PLAN_BYTES + 1)
-            .read_to_end(&mut bytes)
-            .map_err(read_err)?;
-        if bytes.len() as u64 > MAX_PLAN_BYTES {
-            return Err(PlanError::TooLarge {
-                path: path.to_path_buf(),
-                cap: MAX_PLAN_BYTES,
-            });
-        }
-        let src = String::from_utf8(bytes).map_err(|e| {
-            read_err(std::io::Error::new(
-                std::io::ErrorKind::InvalidData,
-                format!("not UTF-8 text (byte {})", e.utf8_error().valid_up_to()),
-            ))
-        })?;
+        let src = read_document(path, PLAN_DOCUMENT)?;
         Plan::from_toml_str(&src, path)
     }
 
@@ -1253,19 +1546,7 @@ impl Plan {
         let mut findings = check_shape(root.get_ref());
         findings.sort_by_key(|f| (f.rank, f.offset.unwrap_or(usize::MAX)));
         if let Some(f) = findings.into_iter().next() {
-            return Err(match (f.section, f.key) {
-                (Some(section), Some(key)) => PlanError::Invalid {
-                    location: location(f.offset),
-                    section,
-                    key,
-                    message: f.message,
-                },
-                (section, _) => PlanError::Syntax {
-                    location: location(f.offset),
-                    section,
-                    message: f.message,
-                },
-            });
+            return Err(finding_error(f, location));
         }
         let raw: RawFile = toml::from_str(src).map_err(syntax)?;
         let mut spans = Spans::default();
@@ -1324,15 +1605,20 @@ impl Plan {
                 acquisition: self.dmm.acquisition.as_str().into(),
             },
             simulation: self.simulation.clone(),
+            dut: self.dut.clone(),
+            acceptance: self.acceptance.clone(),
         }
     }
 
     /// SHA-256 (lower-case hex) of the canonical serialisation; see the module docs for what
-    /// it covers (everything but the two port fields).
+    /// it covers (everything but the two port fields, `[dut]` and `[acceptance]`).
     pub fn hash(&self) -> String {
         let mut doc = self.to_doc();
         doc.table.port.clear();
         doc.dmm.port.clear();
+        // one plan serves many gyros, and limits can be re-evaluated: neither is the method
+        doc.dut = None;
+        doc.acceptance = None;
         let mut h = Sha256::new();
         h.update(HASH_DOMAIN.as_bytes());
         // Serialising plain structs of numbers, strings and bools to JSON cannot fail; an
@@ -1410,6 +1696,14 @@ impl Plan {
     pub fn simulation(&self) -> &Simulation {
         &self.simulation
     }
+    /// `[dut]`, when the plan names the gyro (a `[dut]` section without keys is `None`).
+    pub fn dut(&self) -> Option<&PlanDut> {
+        self.dut.as_ref()
+    }
+    /// `[acceptance]`, when the plan has a specification.
+    pub fn acceptance(&self) -> Option<&AcceptanceSpec> {
+        self.acceptance.as_ref()
+    }
     /// Overrides the table's port (`--table-port`); ports are not part of the hash.
     pub fn set_table_port(&mut self, port: Port) {
         self.table.port = port;
@@ -1430,6 +1724,99 @@ impl<'de> Deserialize<'de> for Plan {
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
         let doc = PlanDoc::deserialize(d)?;
         Plan::from_doc(doc, Path::new("plan")).map_err(serde::de::Error::custom)
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Standalone acceptance files
+// ---------------------------------------------------------------------------------------------
+
+/// Reads a standalone acceptance file (`gyrocal report RUN --acceptance FILE`): its top level
+/// is what a plan's `[acceptance]` section holds, `decision_rule` and one table per quantity:
+///
+/// ```toml
+/// decision_rule = "guarded"
+/// [scale_factor]
+/// min = 0.049
+/// max = 0.051
+/// ```
+///
+/// Errors name the file, the line and the key as a plan's would (`[acceptance.scale_factor]
+/// max ...`). A file larger than [`MAX_PLAN_BYTES`] is refused after reading at most that much.
+pub fn load_acceptance(path: &Path) -> Result<AcceptanceSpec, PlanError> {
+    let src = read_document(path, ACCEPTANCE_DOCUMENT)?;
+    acceptance_from_toml_str(&src, path)
+}
+
+/// Parses and validates the text of a standalone acceptance file (see [`load_acceptance`]);
+/// `document` is the file name used in errors.
+pub fn acceptance_from_toml_str(src: &str, document: &Path) -> Result<AcceptanceSpec, PlanError> {
+    let location = |offset: Option<usize>| {
+        let (line, column) = match offset {
+            Some(o) => {
+                let (l, c) = line_col(src, o);
+                (Some(l), Some(c))
+            }
+            None => (None, None),
+        };
+        Location {
+            file: document.to_path_buf(),
+            line,
+            column,
+        }
+    };
+    let syntax = |e: toml::de::Error| {
+        let offset = e.span().map(|span| span.start);
+        PlanError::Syntax {
+            location: location(offset),
+            section: Some(
+                offset
+                    .and_then(|o| section_at(src, o))
+                    .map_or_else(|| "acceptance".into(), |s| format!("acceptance.{s}")),
+            ),
+            message: plain_words(e.message().trim()),
+        }
+    };
+    let root = DeTable::parse(src).map_err(syntax)?;
+    let mut findings = Vec::new();
+    check_keys(
+        "acceptance",
+        ACCEPTANCE_KEYS,
+        root.get_ref(),
+        None,
+        &mut findings,
+    );
+    findings.sort_by_key(|f| (f.rank, f.offset.unwrap_or(usize::MAX)));
+    if let Some(f) = findings.into_iter().next() {
+        return Err(finding_error(f, location));
+    }
+    let raw: RawAcceptance = toml::from_str(src).map_err(syntax)?;
+    let mut spans = Spans::default();
+    let spec = raw_acceptance(raw, &mut spans);
+    let cx = Ctx {
+        origin: document,
+        src: Some(src),
+        spans: &spans,
+    };
+    let spec = spec.map_err(|(key, message)| cx.err(key, message))?;
+    validate_acceptance(&spec, &cx)?;
+    Ok(spec)
+}
+
+/// A stage-1 finding as the error it reports.
+fn finding_error(f: Finding, location: impl Fn(Option<usize>) -> Location) -> PlanError {
+    match (f.section, f.key) {
+        (Some(section), Some(key)) => PlanError::Invalid {
+            location: location(f.offset),
+            section,
+            key,
+            message: f.message,
+        },
+        (section, _) => PlanError::Syntax {
+            location: location(f.offset),
+            section,
+            message: f.message,
+        },
     }
 }
 
@@ -1507,12 +1894,61 @@ fn raw_to_doc(raw: RawFile, sp: &mut Spans) -> Result<PlanDoc, (&'static str, St
             ripple_dps: sp.opt("simulation.ripple_dps", s.ripple_dps, d.ripple_dps),
         },
     };
+    let dut = raw.dut.map(|d| PlanDut {
+        serial: d.serial.map(|v| sp.take("dut.serial", v)),
+        model: d.model.map(|v| sp.take("dut.model", v)),
+        manufacturer: d.manufacturer.map(|v| sp.take("dut.manufacturer", v)),
+        condition: d.condition.map(|v| sp.take("dut.condition", v)),
+        notes: d.notes.map(|v| sp.take("dut.notes", v)),
+    });
+    let acceptance = match raw.acceptance {
+        None => None,
+        Some(a) => Some(raw_acceptance(a, sp)?),
+    };
     Ok(PlanDoc {
         plan,
         table,
         dmm,
         simulation,
+        dut,
+        acceptance,
     })
+}
+
+/// `[acceptance]` (or a standalone acceptance file) with its spans kept under
+/// `acceptance.QUANTITY.KEY`; the decision rule is checked here, the limits by validation.
+fn raw_acceptance(
+    mut a: RawAcceptance,
+    sp: &mut Spans,
+) -> Result<AcceptanceSpec, (&'static str, String)> {
+    let rule = match a.decision_rule.take() {
+        None => Rule::default(),
+        Some(r) => {
+            let r = sp.take("acceptance.decision_rule", r);
+            Rule::from_name(&r).ok_or((
+                "acceptance.decision_rule",
+                format!("= {r:?} is not a decision rule: write \"simple\" or \"guarded\""),
+            ))?
+        }
+    };
+    let mut limits = BTreeMap::new();
+    for (q, raw) in a.into_limits() {
+        let Some(raw) = raw else { continue };
+        let at = format!("acceptance.{}", q.name());
+        let raw = sp.take(&at, raw);
+        let mut bound =
+            |key: &str, v: Option<S<f64>>| v.map(|v| sp.take(&format!("{at}.{key}"), v));
+        limits.insert(
+            q,
+            Limits {
+                min: bound("min", raw.min),
+                max: bound("max", raw.max),
+                marginal_min: bound("marginal_min", raw.marginal_min),
+                marginal_max: bound("marginal_max", raw.marginal_max),
+            },
+        );
+    }
+    Ok(AcceptanceSpec { rule, limits })
 }
 
 struct Ctx<'a> {
@@ -1524,7 +1960,8 @@ struct Ctx<'a> {
 impl Ctx<'_> {
     /// An error at `path` (`section.key`), placed at the value's span when the file had it.
     fn err(&self, path: &str, message: String) -> PlanError {
-        let (section, key) = path.split_once('.').unwrap_or(("plan", path));
+        // `acceptance.scale_factor.min` is the key `min` of [acceptance.scale_factor]
+        let (section, key) = path.rsplit_once('.').unwrap_or(("plan", path));
         let (line, column) = match (self.src, self.spans.0.get(path)) {
             (Some(src), Some(span)) => {
                 let (l, c) = line_col(src, span.start);
@@ -1589,7 +2026,12 @@ impl Ctx<'_> {
         if v > MAX_DURATION_S {
             return Err(self.err(path, format!("must be <= {MAX_DURATION_S} s (got {v})")));
         }
-        Ok(Duration::from_secs_f64(v))
+        let d = Duration::from_secs_f64(v);
+        // a positive duration below a nanosecond would be stored (and read back) as 0
+        if min_exclusive && d.is_zero() {
+            return Err(self.err(path, format!("must be at least 1e-9 s (got {v})")));
+        }
+        Ok(d)
     }
 
     fn port(&self, path: &str, v: &str) -> Result<Port, PlanError> {
@@ -1603,6 +2045,8 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
         table: t,
         dmm: m,
         simulation: s,
+        dut,
+        acceptance,
     } = doc;
 
     // [table] first: the rates are checked against its limits.
@@ -1824,6 +2268,24 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
         ));
     }
 
+    // [dut]: text, none of it empty (an empty section is no [dut])
+    if let Some(d) = &dut {
+        for (key, v) in d.fields() {
+            if v.as_ref().is_some_and(|v| v.trim().is_empty()) {
+                return Err(cx.err(
+                    &format!("dut.{key}"),
+                    "must not be empty: leave the key out when it is not known".into(),
+                ));
+            }
+        }
+    }
+    let dut = dut.filter(|d| !d.is_empty());
+
+    // [acceptance]
+    if let Some(a) = &acceptance {
+        validate_acceptance(a, cx)?;
+    }
+
     Ok(Plan {
         name: p.name,
         rates_dps: rates,
@@ -1853,6 +2315,19 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
             acquisition,
         },
         simulation: s,
+        dut,
+        acceptance,
+    })
+}
+
+/// Every quantity's limits; an error names `[acceptance.QUANTITY] KEY`, at the value.
+fn validate_acceptance(a: &AcceptanceSpec, cx: &Ctx<'_>) -> Result<(), PlanError> {
+    a.validate().map_err(|(q, e)| {
+        let path = match e.key {
+            Some(key) => format!("acceptance.{}.{key}", q.name()),
+            None => format!("acceptance.{}", q.name()),
+        };
+        cx.err(&path, e.message)
     })
 }
 
@@ -1868,6 +2343,7 @@ mod tests {
             Kind::Text => "\"x\"",
             Kind::Bool => "true",
             Kind::Numbers => "[0, 1]",
+            Kind::Limits => "{ min = 0, max = 1 }",
         }
     }
 
@@ -1899,6 +2375,30 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn acceptance_keys_are_the_quantities() {
+        let names: Vec<&str> = ACCEPTANCE_KEYS
+            .iter()
+            .filter(|k| k.1 == Kind::Limits)
+            .map(|k| k.0)
+            .collect();
+        assert_eq!(names, Quantity::ALL.map(Quantity::name));
+        let raw: RawAcceptance = toml::from_str(
+            &names
+                .iter()
+                .map(|n| format!("{n} = {{ max = 1 }}\n"))
+                .collect::<String>(),
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let quantities: Vec<Quantity> = raw
+            .into_limits()
+            .into_iter()
+            .filter(|(_, l)| l.is_some())
+            .map(|(q, _)| q)
+            .collect();
+        assert_eq!(quantities, Quantity::ALL);
     }
 
     #[test]

@@ -834,7 +834,7 @@ mod manifest_plan {
     use crate::plan::{Plan, PlanDoc};
 
     /// The sections that stay sections; every other key belongs to `[plan]`.
-    const SECTIONS: [&str; 3] = ["table", "dmm", "simulation"];
+    const SECTIONS: [&str; 5] = ["table", "dmm", "simulation", "dut", "acceptance"];
 
     pub(super) fn serialize<S: Serializer>(plan: &Plan, s: S) -> Result<S::Ok, S::Error> {
         let doc = serde_json::to_value(plan.to_doc()).map_err(S::Error::custom)?;

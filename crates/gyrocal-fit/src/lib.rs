@@ -46,6 +46,7 @@
 
 #![deny(missing_docs)]
 
+pub mod acceptance;
 mod analysis;
 mod asymmetry;
 mod data;
