@@ -115,8 +115,108 @@ pub fn fit_run(
             }
         }
     }
+    attach_records(&mut analysis, run.manifest());
     run.set_fit(analysis.clone())?;
     Ok(analysis)
+}
+
+/// The calibration records of a fit: the expanded uncertainty from the station's accuracy
+/// classes (the statistical part alone without a station) and the verdict against the plan's
+/// `[acceptance]` limits.
+pub fn attach_records(analysis: &mut gyrocal_fit::Analysis, m: &Manifest) {
+    let (inputs, missing) = uncertainty_inputs(m, analysis);
+    analysis.attach_uncertainty(&inputs);
+    if let Some(u) = &mut analysis.uncertainty {
+        u.not_included.extend(missing);
+    }
+    analysis.acceptance = m
+        .plan
+        .acceptance()
+        .and_then(|spec| analysis.evaluate_acceptance(spec));
+}
+
+/// The multimeter's range the readings were taken on, V: the plan's fixed range.
+fn meter_range(m: &Manifest) -> f64 {
+    m.plan.dmm().range_v
+}
+
+/// What the station says about the instruments' accuracy, as the budget's inputs, and what
+/// it leaves out (in words, for the budget's "not included").
+pub fn uncertainty_inputs(
+    m: &Manifest,
+    _analysis: &gyrocal_fit::Analysis,
+) -> (gyrocal_fit::uncertainty::UncertaintyInputs, Vec<String>) {
+    use gyrocal_fit::uncertainty::{MeterAccuracy, TableRateAccuracy, UncertaintyInputs};
+    let mut inputs = UncertaintyInputs::default();
+    let mut missing = Vec::new();
+    let Some(st) = &m.station else {
+        missing.push(
+            "the multimeter's and the rate table's accuracy (no station file: instruments not identified)"
+                .to_string(),
+        );
+        return (inputs, missing);
+    };
+    let range = meter_range(m);
+    let meter_name = st.multimeter.as_ref().map_or_else(
+        || "multimeter".to_string(),
+        |r| format!("{} {}", r.model, r.asset_id),
+    );
+    match st.meter_accuracy() {
+        Some(station::MeterAccuracySpec::Explicit { gain_pct, offset_pct }) => {
+            inputs.meter = Some(MeterAccuracy::from_percent(
+                format!("{meter_name}: {gain_pct} % of reading + {offset_pct} % of range (station file)"),
+                gain_pct,
+                offset_pct,
+                range,
+            ));
+        }
+        Some(station::MeterAccuracySpec::Period(p)) => {
+            if m.plan.dmm().model.is_truevolt() {
+                missing.push(format!(
+                    "{meter_name}: the Truevolt's DC V specification is not built in; give gain_pct and offset_pct in the station file"
+                ));
+            } else {
+                let period = match p {
+                    station::SpecPeriod::Hours24 => gyrocal_hp34401a::facts::SpecPeriod::Hours24,
+                    station::SpecPeriod::Days90 => gyrocal_hp34401a::facts::SpecPeriod::Days90,
+                    station::SpecPeriod::Year1 => gyrocal_hp34401a::facts::SpecPeriod::Year1,
+                };
+                match gyrocal_hp34401a::facts::dcv_accuracy(range, period) {
+                    Some((gain_pct, offset_pct)) => {
+                        inputs.meter = Some(MeterAccuracy::from_percent(
+                            format!(
+                                "{meter_name}: 34401A DC V {} specification, {range} V range: {gain_pct} % of reading + {offset_pct} % of range",
+                                p.as_str()
+                            ),
+                            gain_pct,
+                            offset_pct,
+                            range,
+                        ));
+                    }
+                    None => missing.push(format!(
+                        "{meter_name}: no 34401A DC V specification for the {range} V range"
+                    )),
+                }
+            }
+        }
+        None => missing.push(format!(
+            "{meter_name}: the station file gives no accuracy class (accuracy, or gain_pct and offset_pct)"
+        )),
+    }
+    match st.table_rate_accuracy_ppm() {
+        Some(ppm) => {
+            let label = st
+                .table
+                .as_ref()
+                .map(|r| format!("{} {}: rate accuracy (station file)", r.model, r.asset_id));
+            inputs.table_rate = Some(TableRateAccuracy::rectangular(ppm, label.as_deref()));
+        }
+        None => missing.push(
+            "the rate table's rate accuracy (rate_accuracy_ppm not in the station file)"
+                .to_string(),
+        ),
+    }
+    (inputs, missing)
 }
 
 /// Why [`fit_run`] failed.

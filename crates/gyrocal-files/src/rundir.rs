@@ -536,6 +536,9 @@ pub struct RunMeta {
     pub dut: Option<Dut>,
     /// Who ran it, for whom, and in what environment, as entered.
     pub context: Option<RunContext>,
+    /// The station: the lab, the bench and its instruments' records (asset ids, serials,
+    /// calibration certificates, due dates, accuracy classes), from the station file.
+    pub station: Option<crate::station::Station>,
 }
 
 /// The gyro under test. Not part of the plan (one plan serves many gyros): the operator names
@@ -635,7 +638,7 @@ pub struct FitSummary {
     pub bias_volts: f64,
     /// Standard error of K0, V.
     pub bias_std_error: Option<f64>,
-    /// The least-squares model with the smallest residual standard error, if any.
+    /// The model chosen by the fit's model selection (nested F-test), if any.
     pub best_model: Option<gyrocal_fit::Model>,
 }
 
@@ -775,6 +778,10 @@ pub struct Manifest {
     /// Operator, customer and environment, as entered (absent: not given).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub context: Option<RunContext>,
+    /// The station and its instruments' calibration records, from the station file (absent:
+    /// no station file; the report then says the instruments are not identified).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub station: Option<crate::station::Station>,
     /// Instrument identities.
     pub instruments: Instruments,
     /// Departures from the method recorded during the run, oldest first (absent: none).
@@ -800,6 +807,10 @@ pub struct Manifest {
     pub retries: Vec<Retry>,
     /// Bound versus elapsed of the last session's schedule, when it completed.
     pub timing: Option<Timing>,
+    /// The verdict against the plan's acceptance limits, as in `fit.json` (absent: no limits,
+    /// or not fitted yet).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub acceptance: Option<gyrocal_fit::acceptance::Acceptance>,
     /// The fit's reference and headline figures, when fitted; the fit is in `fit.json`.
     #[serde(default)]
     pub fit_summary: Option<FitSummary>,
@@ -1191,6 +1202,7 @@ impl RunDir {
             checksums: BTreeMap::new(),
             dut: meta.dut,
             context: meta.context,
+            station: meta.station,
             virtual_time: meta.virtual_time,
             instruments: meta.instruments,
             deviations: Vec::new(),
@@ -1204,6 +1216,7 @@ impl RunDir {
             retries: Vec::new(),
             timing: None,
             fit_summary: None,
+            acceptance: None,
             legacy_fit: None,
         };
         let mut rd = RunDir {
@@ -1656,6 +1669,8 @@ impl RunDir {
         bytes.push(b'\n');
         write_atomic(&self.dir, FIT_JSON, &bytes)?;
         self.manifest.fit_summary = Some(FitSummary::of(&fit, sha256_hex(&bytes)));
+        // the verdict as fit.json holds it (rounded alike), so the two documents agree
+        self.manifest.acceptance = serde_json::from_value(doc["acceptance"].clone()).ok();
         self.manifest.legacy_fit = None;
         self.write_manifest()
     }

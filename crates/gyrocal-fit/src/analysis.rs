@@ -114,6 +114,10 @@ pub struct Analysis {
     /// written before this field existed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uncertainty: Option<Uncertainty>,
+    /// The verdict against acceptance limits ([`Analysis::evaluate_acceptance`]), when the
+    /// run had limits; [`analyze`] leaves it absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub acceptance: Option<crate::acceptance::Acceptance>,
 }
 
 impl Analysis {
@@ -298,6 +302,7 @@ pub fn analyze_columns(data: &Columns, opts: &Options) -> Result<Analysis, FitEr
         metrics,
         error_surface,
         uncertainty: None,
+        acceptance: None,
     })
 }
 

@@ -59,6 +59,7 @@ pub mod neuron;
 pub mod selection;
 mod surface;
 pub mod uncertainty;
+mod verdict;
 
 pub use analysis::{
     Analysis, MultiAnalysis, Options, POINT_RESIDUALS_MAX, ResidualDetail, Skipped, analyze,

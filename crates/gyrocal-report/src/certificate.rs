@@ -12,6 +12,8 @@
 use std::fmt::Write as _;
 
 use gyrocal_files::{Manifest, Plan};
+use gyrocal_fit::acceptance::{Acceptance, Quantity, Verdict};
+use gyrocal_fit::{Analysis, Method, Model};
 
 use crate::html::esc;
 use crate::input::Input;
@@ -93,6 +95,18 @@ pub(crate) fn head(html: &mut String, input: &Input, m: &Manifest, id: &str, iss
         "<table class=\"cert\" id=\"cert-head\">\n<tr><th>Report id</th><td><strong id=\"report-id\">{}</strong></td></tr>",
         esc(id)
     );
+    if let Some(st) = &m.station {
+        row(
+            html,
+            "Laboratory",
+            Some(format!(
+                "<strong id=\"lab\">{}</strong>, {}; station {}",
+                esc(&st.lab),
+                esc(&st.address),
+                esc(&st.id)
+            )),
+        );
+    }
     let ctx = m.context.as_ref();
     row(
         html,
@@ -237,24 +251,69 @@ pub(crate) fn conditions(html: &mut String, m: &Manifest) {
     html.push_str("</table>\n");
 }
 
-/// The instruments used, as they identified themselves (the station file adds asset ids and
-/// calibration records).
+/// The instruments used: as they identified themselves, and with the station file's
+/// records (asset id, serial, calibration certificate and dates, accuracy class), which make
+/// the result traceable. Without a station file the report says so.
 pub(crate) fn instruments(html: &mut String, m: &Manifest) {
-    let _ = writeln!(
-        html,
-        "<h2 id=\"instruments\">Instruments</h2>\n<table class=\"cert\" id=\"instruments-table\">\n<tr><th>Role</th><th>Identity (as reported)</th></tr>"
-    );
-    for (role, id) in [
-        ("Multimeter", &m.instruments.dmm),
-        ("Rate table", &m.instruments.table),
+    let _ = writeln!(html, "<h2 id=\"instruments\">Instruments</h2>");
+    let Some(st) = &m.station else {
+        html.push_str("<table class=\"cert\" id=\"instruments-table\">\n<tr><th>Role</th><th>Identity (as reported)</th></tr>\n");
+        for (role, id) in [
+            ("Multimeter", &m.instruments.dmm),
+            ("Rate table", &m.instruments.table),
+        ] {
+            let _ = writeln!(
+                html,
+                "<tr><td>{role}</td><td>{}</td></tr>",
+                id.as_deref().map_or_else(|| "—".into(), esc)
+            );
+        }
+        html.push_str("</table>\n<p class=\"note\" id=\"instruments-not-identified\">Instruments not identified: no station file gave their asset ids, serial numbers and calibration certificates, so this report does not establish traceability.</p>\n");
+        return;
+    };
+    html.push_str("<table class=\"cert\" id=\"instruments-table\">\n<tr><th>Role</th><th>Model</th><th>Asset id</th><th>Serial</th><th>Calibration certificate</th><th>Calibrated</th><th>Due</th><th>Accuracy</th><th>Identity (as reported)</th></tr>\n");
+    for (role, record, reported) in [
+        ("Multimeter", st.multimeter.as_ref(), &m.instruments.dmm),
+        ("Rate table", st.table.as_ref(), &m.instruments.table),
     ] {
-        let _ = writeln!(
-            html,
-            "<tr><td>{role}</td><td>{}</td></tr>",
-            id.as_deref().map_or_else(|| "—".into(), esc)
-        );
+        let reported = reported.as_deref().map_or_else(|| "—".into(), esc);
+        match record {
+            Some(r) => {
+                let mut acc = Vec::new();
+                if let Some(p) = r.accuracy {
+                    acc.push(format!("DC V {} specification", esc(p.as_str())));
+                }
+                if let (Some(g), Some(o)) = (r.gain_pct, r.offset_pct) {
+                    acc.push(format!("{g} % of reading + {o} % of range"));
+                }
+                if let Some(ppm) = r.rate_accuracy_ppm {
+                    acc.push(format!("rate {ppm} ppm"));
+                }
+                let _ = writeln!(
+                    html,
+                    "<tr><td>{role}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{reported}</td></tr>",
+                    esc(&r.model),
+                    esc(&r.asset_id),
+                    esc(&r.serial),
+                    esc(&r.certificate),
+                    r.calibrated,
+                    r.due,
+                    if acc.is_empty() {
+                        "—".to_string()
+                    } else {
+                        acc.join("; ")
+                    },
+                );
+            }
+            None => {
+                let _ = writeln!(
+                    html,
+                    "<tr><td>{role}</td><td colspan=\"7\"><strong>not in the station file</strong>: not identified</td><td>{reported}</td></tr>"
+                );
+            }
+        }
     }
-    html.push_str("</table>\n<p class=\"note\" id=\"instruments-not-identified\">Instruments not identified: no station file gave their asset ids, serial numbers and calibration certificates, so this report does not establish traceability.</p>\n");
+    html.push_str("</table>\n");
 }
 
 /// The deviations from the method: those recorded during the run, then those the record
@@ -313,6 +372,344 @@ pub(crate) fn deviations(html: &mut String, input: &Input, m: &Manifest) {
             html,
             "<ul id=\"deviations-list\">\n<li>{}</li>\n</ul>",
             items.join("</li>\n<li>")
+        );
+    }
+}
+
+/// A value and its expanded uncertainty as a certificate prints them: U to two significant
+/// digits, the value to one digit more than U's last (GUM 7.2.6 rounds to U's digits; the
+/// extra digit keeps the rounding error well under U). Small or huge values in exponent form.
+pub(crate) fn value_and_u(v: f64, u: Option<f64>) -> (String, String) {
+    let Some(u) = u.filter(|u| u.is_finite() && *u > 0.0) else {
+        return (significant(v, 7), "—".to_string());
+    };
+    let eu = u.log10().floor() as i32;
+    let av = v.abs();
+    if av != 0.0 && !(1e-3..1e6).contains(&av) {
+        let ev = av.log10().floor() as i32;
+        let digits = (ev - eu + 2).clamp(1, 15) as usize;
+        return (format!("{v:.digits$e}"), format!("{u:.1e}"));
+    }
+    let decimals = (2 - eu).clamp(0, 15) as usize;
+    let u_decimals = (1 - eu).clamp(0, 15) as usize;
+    (format!("{v:.decimals$}"), format!("{u:.u_decimals$}"))
+}
+
+/// `v` to `n` significant digits (exponent form outside 1e-3..1e6).
+pub(crate) fn significant(v: f64, n: i32) -> String {
+    if !v.is_finite() {
+        return "—".to_string();
+    }
+    let av = v.abs();
+    if av != 0.0 && !(1e-3..1e6).contains(&av) {
+        let digits = (n - 1).clamp(0, 15) as usize;
+        return format!("{v:.digits$e}");
+    }
+    let e = if av == 0.0 {
+        0
+    } else {
+        av.log10().floor() as i32
+    };
+    let decimals = (n - 1 - e).clamp(0, 15) as usize;
+    format!("{v:.decimals$}")
+}
+
+/// The verdict box of the first page: the run's verdict, the quantities that make it, and the
+/// decision rule; or why there is none.
+pub(crate) fn verdict_box(html: &mut String, acceptance: Option<&Acceptance>, source: &str) {
+    let Some(acc) = acceptance else {
+        html.push_str("<div class=\"verdict verdict-none\" id=\"acceptance-verdict\"><strong>No verdict</strong>: no acceptance limits were given (a plan's <code>[acceptance]</code> section, or <code>gyrocal report RUN --acceptance FILE</code>).</div>\n");
+        return;
+    };
+    let deciding: Vec<String> = acc
+        .checks
+        .iter()
+        .filter(|c| c.verdict == acc.verdict && c.verdict != Verdict::Pass)
+        .map(|c| {
+            let mut t = format!("<strong>{}</strong>", esc(quantity_label(c.quantity)));
+            if let Some(r) = &c.reason {
+                let _ = write!(t, " ({})", esc(r));
+            }
+            t
+        })
+        .collect();
+    let what = match acc.verdict {
+        Verdict::Pass => format!(
+            "all {} quantit{} within the limits",
+            acc.checks.len(),
+            if acc.checks.len() == 1 { "y" } else { "ies" }
+        ),
+        Verdict::Fail => format!("outside the limits: {}", deciding.join("; ")),
+        Verdict::Marginal => format!(
+            "inside the limits but outside the marginal band: {}",
+            deciding.join("; ")
+        ),
+        Verdict::Indeterminate => format!("cannot be decided: {}", deciding.join("; ")),
+    };
+    let _ = writeln!(
+        html,
+        "<div class=\"verdict verdict-{}\" id=\"acceptance-verdict\"><span class=\"verdict-word\">Verdict: {}</span> — {what}. Decision rule: <strong>{}</strong> ({}). Limits {}.</div>",
+        acc.verdict.as_str(),
+        acc.verdict.label(),
+        acc.rule.as_str(),
+        esc(acc.rule.description()),
+        source
+    );
+}
+
+/// A quantity's name for people.
+pub(crate) fn quantity_label(q: Quantity) -> &'static str {
+    match q {
+        Quantity::ScaleFactor => "scale factor K",
+        Quantity::BiasV => "bias K0",
+        Quantity::BiasDph => "bias (as a rate)",
+        Quantity::NonlinearityPpm => "nonlinearity",
+        Quantity::AsymmetryPpm => "asymmetry",
+        Quantity::RepeatabilityPpm => "repeatability",
+        Quantity::K2 => "second-order coefficient K2",
+    }
+}
+
+/// The acceptance table: every limited quantity with its value, U, limits and verdict.
+pub(crate) fn acceptance_table(html: &mut String, acceptance: Option<&Acceptance>) {
+    let Some(acc) = acceptance else {
+        return;
+    };
+    let _ = writeln!(
+        html,
+        "<table class=\"cert\" id=\"acceptance-table\">\n<caption>Acceptance: decision rule {}</caption>\n<tr><th>Quantity</th><th>Value</th><th>U (k = 2)</th><th>Unit</th><th>Limits</th><th>Marginal band</th><th>Verdict</th></tr>",
+        acc.rule.as_str()
+    );
+    for c in &acc.checks {
+        let q = c.quantity.name();
+        let (v, u) = match c.value {
+            Some(v) => value_and_u(v, c.expanded_uncertainty),
+            None => ("not measured".to_string(), "—".to_string()),
+        };
+        let range = |lo: Option<f64>, hi: Option<f64>| match (lo, hi) {
+            (None, None) => "—".to_string(),
+            (Some(a), None) => format!("≥ {}", significant(a, 7)),
+            (None, Some(b)) => format!("≤ {}", significant(b, 7)),
+            (Some(a), Some(b)) => format!("{} to {}", significant(a, 7), significant(b, 7)),
+        };
+        let reason = c.reason.as_deref().map_or_else(String::new, |r| {
+            format!("<br><span class=\"note\">{}</span>", esc(r))
+        });
+        let _ = writeln!(
+            html,
+            "<tr><td>{}</td><td class=\"num\" id=\"acc-{q}\">{v}</td><td class=\"num\">{u}</td><td>{}</td><td>{}</td><td>{}</td><td id=\"acc-{q}-verdict\" class=\"v-{}\"><strong>{}</strong>{reason}</td></tr>",
+            esc(quantity_label(c.quantity)),
+            esc(&c.unit),
+            range(c.min, c.max),
+            range(c.marginal_min, c.marginal_max),
+            c.verdict.as_str(),
+            c.verdict.label()
+        );
+    }
+    html.push_str("</table>\n");
+}
+
+/// The results of the first page: each reported quantity with its unit and expanded
+/// uncertainty (k = 2), the unbiased asymmetry beside the GJB figure, and the model chosen.
+pub(crate) fn results(html: &mut String, a: &Analysis) {
+    let m = &a.metrics;
+    let unc = a.uncertainty.as_ref();
+    html.push_str("<table class=\"cert results\" id=\"results\">\n<caption>Results (U: expanded uncertainty, k = 2, about 95 % coverage)</caption>\n<tr><th>Quantity</th><th>Value</th><th>U (k = 2)</th><th>Unit</th><th>Note</th></tr>\n");
+    let mut row = |key: &str,
+                   name: &str,
+                   v: Option<f64>,
+                   u: Option<f64>,
+                   unit: &str,
+                   note: String| {
+        let (vs, us) = match v {
+            Some(v) => value_and_u(v, u),
+            None => ("—".to_string(), "—".to_string()),
+        };
+        let _ = writeln!(
+            html,
+            "<tr><td>{name}</td><td class=\"num\" id=\"res-{key}\">{vs}</td><td class=\"num\" id=\"res-{key}-u\">{us}</td><td>{unit}</td><td class=\"note\">{note}</td></tr>"
+        );
+    };
+    let q = |key: &str| unc.and_then(|u| u.quantity(key));
+    let value = |key: &str, fallback: Option<f64>| q(key).map(|x| x.value).or(fallback);
+    let expanded = |key: &str| q(key).map(|x| x.expanded_uncertainty);
+    row(
+        "scale_factor",
+        "Scale factor K",
+        value("scale_factor", Some(m.scale_factor)),
+        expanded("scale_factor"),
+        "V/(°/s)",
+        "least-squares line D = K·ω + K0".into(),
+    );
+    row(
+        "bias_v",
+        "Bias K0",
+        value("bias_v", Some(m.bias_volts)),
+        expanded("bias_v"),
+        "V",
+        "intercept of the same line".into(),
+    );
+    row(
+        "bias_dph",
+        "Bias as a rate",
+        value("bias_dph", Some(m.bias_dph)),
+        expanded("bias_dph"),
+        "°/h",
+        "K0/K × 3600, includes the vertical Earth rate".into(),
+    );
+    row(
+        "k_pos",
+        "K+ (ω ≥ 0)",
+        value("k_pos", m.scale_factor_positive),
+        expanded("k_pos"),
+        "V/(°/s)",
+        "line of the ω ≥ 0 points (GJB)".into(),
+    );
+    row(
+        "k_neg",
+        "K− (ω ≤ 0)",
+        value("k_neg", m.scale_factor_negative),
+        expanded("k_neg"),
+        "V/(°/s)",
+        "line of the ω ≤ 0 points (GJB)".into(),
+    );
+    let metric_u = |key: &str| {
+        unc.and_then(|u| u.metrics.entries.iter().find(|e| e.metric == key))
+            .map(|e| e.expanded_uncertainty)
+    };
+    row(
+        "nonlinearity_ppm",
+        "Nonlinearity",
+        Some(m.nonlinearity_ppm),
+        metric_u("nonlinearity_ppm"),
+        "ppm",
+        "max |deviation from the line| / max |output|".into(),
+    );
+    match &m.asymmetry_common_k2 {
+        Some(c) => row(
+            "asymmetry_common_k2",
+            "Asymmetry (common K2)",
+            Some(c.asymmetry_ppm),
+            Some(2.0 * c.asymmetry_std_error_ppm),
+            "ppm",
+            "(K+ − K−)/mean, from one fit K0 + K+·ω⁺ + K−·ω⁻ + K2·ω²: not biased by the even-order term".into(),
+        ),
+        None => row(
+            "asymmetry_common_k2",
+            "Asymmetry (common K2)",
+            None,
+            None,
+            "ppm",
+            "not computed".into(),
+        ),
+    }
+    row(
+        "asymmetry_ppm",
+        "Asymmetry (GJB)",
+        m.asymmetry_ppm,
+        metric_u("asymmetry_ppm"),
+        "ppm",
+        "|K+ − K−|/mean of two separate lines: absorbs any K2·ω² term (see Summary)".into(),
+    );
+    let quad = a.fit(Method::LeastSquares, Model::Quadratic);
+    row(
+        "k2",
+        "Second-order coefficient K2",
+        quad.and_then(|f| f.coefficients.k2),
+        quad.and_then(|f| f.std_errors.k2).map(|s| 2.0 * s),
+        "V/(°/s)²",
+        "quadratic least-squares fit; U = 2 × its standard error".into(),
+    );
+    if let Some(r) = m.repeatability_ppm {
+        row(
+            "repeatability_ppm",
+            "Repeatability",
+            Some(r),
+            metric_u("repeatability_ppm"),
+            "ppm",
+            "std(K per pass)/mean".into(),
+        );
+    }
+    html.push_str("</table>\n");
+    let chosen = match (&a.model_selection, a.best_model) {
+        (Some(sel), _) => format!(
+            "Model chosen: <strong>{}</strong>, the simplest model whose added terms are significant ({} at the {} level).",
+            sel.chosen,
+            esc(&sel.method),
+            sel.level
+        ),
+        (None, Some(b)) => format!("Best model: <strong>{b}</strong>."),
+        (None, None) => {
+            "No model choice: no least-squares model had degrees of freedom left.".into()
+        }
+    };
+    let _ = writeln!(html, "<p class=\"note\" id=\"model-choice\">{chosen}</p>");
+}
+
+/// The uncertainty budget: the method in words, then one table per quantity.
+pub(crate) fn uncertainty(html: &mut String, a: &Analysis) {
+    let _ = writeln!(html, "<h2 id=\"uncertainty\">Measurement uncertainty</h2>");
+    let Some(u) = &a.uncertainty else {
+        html.push_str("<p class=\"note\">No uncertainty budget: the fit was stored by an earlier gyrocal version.</p>\n");
+        return;
+    };
+    let _ = writeln!(
+        html,
+        "<p class=\"note\" id=\"uncertainty-method\">{}. Coverage factor k = {}.</p>",
+        esc(&u.method),
+        u.coverage_factor
+    );
+    for q in &u.quantities {
+        let (v, uu) = value_and_u(q.value, Some(q.expanded_uncertainty));
+        let _ = writeln!(
+            html,
+            "<table class=\"budget\" id=\"budget-{}\">\n<caption>{} = {v} ± {uu} {} (k = {}){}{}</caption>\n<tr><th>Source</th><th>Type</th><th>Distribution</th><th>Stated</th><th>Divisor</th><th>Sensitivity</th><th>Standard uncertainty ({})</th><th>Relative (ppm)</th><th>ν</th></tr>",
+            esc(&q.quantity),
+            esc(&q.quantity),
+            esc(&q.unit),
+            u.coverage_factor,
+            q.relative_expanded_ppm
+                .map_or_else(String::new, |r| format!(", {} ppm", significant(r, 3))),
+            q.effective_degrees_of_freedom
+                .map_or_else(String::new, |d| format!(
+                    ", ν<sub>eff</sub> = {}",
+                    significant(d, 3)
+                )),
+            esc(&q.unit),
+        );
+        for r in &q.rows {
+            let _ = writeln!(
+                html,
+                "<tr><td>{}</td><td>{}</td><td>{}</td><td class=\"num\">{} {}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td></tr>",
+                esc(&r.source),
+                esc(&format!("{:?}", r.kind)),
+                esc(&format!("{:?}", r.distribution).to_lowercase()),
+                significant(r.stated, 4),
+                esc(&r.stated_unit),
+                significant(r.divisor, 4),
+                significant(r.sensitivity, 4),
+                significant(r.standard_uncertainty, 3),
+                r.relative_ppm
+                    .map_or_else(|| "—".into(), |x| significant(x, 3)),
+                r.degrees_of_freedom
+                    .map_or_else(|| "∞".into(), |x| significant(x, 3)),
+            );
+        }
+        let _ = writeln!(
+            html,
+            "<tr class=\"combined\"><td colspan=\"6\"><strong>Combined standard uncertainty (root-sum-of-squares)</strong></td><td class=\"num\"><strong>{}</strong></td><td></td><td></td></tr>\n</table>",
+            significant(q.standard_uncertainty, 3)
+        );
+    }
+    if !u.not_included.is_empty() {
+        let _ = writeln!(
+            html,
+            "<p class=\"note\" id=\"uncertainty-not-included\">Not included in the budget: {}.</p>",
+            u.not_included
+                .iter()
+                .map(|s| esc(s))
+                .collect::<Vec<_>>()
+                .join("; ")
         );
     }
 }

@@ -40,13 +40,22 @@ code { font-size: 0.9em; word-break: break-all; }
   figure svg { max-width: 100%; border: none; }
   .banner { background: #fff; color: #000; border: 3px solid #000; }
   th { background: #fff; }
-  #conditions, #fit { break-before: page; }
+  #conditions, #uncertainty, #fit { break-before: page; }
+  .verdict { background: #fff; border-width: 3px; }
   .signatures { break-inside: avoid; }
 }
 table.cert th { width: 11rem; background: #f7f7f7; }
 table.signatures { width: 100%; margin-top: 2rem; }
 table.signatures td { height: 2.2rem; min-width: 12rem; }
 .statement { margin-top: 2rem; font-style: italic; }
+.verdict { border: 2px solid #555; border-radius: 4px; padding: 0.6rem 1rem; margin: 1rem 0; }
+.verdict-word { font-size: 1.25rem; font-weight: 700; letter-spacing: 0.04em; margin-right: 0.3rem; }
+.verdict-fail { border-color: #b00020; background: #fdecee; }
+.verdict-pass { border-color: #1b6e20; background: #eaf6ea; }
+.verdict-marginal, .verdict-indeterminate { border-color: #7a4d00; background: #fff4d6; }
+td.v-fail { color: #b00020; }
+td.v-pass { color: #1b6e20; }
+caption { text-align: left; font-weight: 600; padding: 0.2rem 0; }
 .end { text-align: center; margin-top: 2rem; font-weight: 600; letter-spacing: 0.05em; }
 "#;
 
@@ -169,10 +178,14 @@ pub(crate) fn render(inputs: &[Input]) -> Result<Report, ReportError> {
     // One run directory: the report is a certificate (ISO/IEC 17025 §7.8) with an id on
     // every printed page. Several inputs or a bare CSV: a comparison, without one.
     let cert = match inputs {
-        [one] => one
-            .manifest
-            .as_ref()
-            .map(|m| (one, m, certificate::report_id(m, ""))),
+        [one] => one.manifest.as_ref().map(|m| {
+            // limits applied at report time are part of what the report states
+            let extra = match (&one.acceptance_from, &one.analysis) {
+                (Some(_), Ok(a)) => serde_json::to_string(&a.acceptance).unwrap_or_default(),
+                _ => String::new(),
+            };
+            (one, m, certificate::report_id(m, &extra))
+        }),
         _ => None,
     };
     let page_css = cert
@@ -221,6 +234,14 @@ pub(crate) fn render(inputs: &[Input]) -> Result<Report, ReportError> {
     }
     if let Some((input, m, id)) = &cert {
         certificate::head(&mut doc.html, input, m, id, &certificate::issued_now());
+        // the verdict and the results with their uncertainty on the first page
+        let analysis = input.analysis.as_ref().ok();
+        let acceptance = analysis.and_then(|a| a.acceptance.as_ref());
+        certificate::verdict_box(&mut doc.html, acceptance, &acceptance_source(input));
+        if let Some(a) = analysis {
+            certificate::results(&mut doc.html, a);
+        }
+        certificate::acceptance_table(&mut doc.html, acceptance);
     }
     if many {
         repeatability(&mut doc, inputs, plans.as_ref())?;
@@ -241,10 +262,27 @@ pub(crate) fn render(inputs: &[Input]) -> Result<Report, ReportError> {
         certificate::end_mark(&mut doc.html, id);
     }
     doc.html.push_str("</body>\n</html>\n");
+    let acceptance = match inputs {
+        [one] => one
+            .analysis
+            .as_ref()
+            .ok()
+            .and_then(|a| a.acceptance.clone()),
+        _ => None,
+    };
     Ok(Report {
         html: doc.html,
         svgs: doc.svgs,
         warnings,
+        acceptance,
+    })
+}
+
+/// Where an input's verdict comes from, for the verdict box.
+fn acceptance_source(input: &Input) -> String {
+    input.acceptance_from.clone().unwrap_or_else(|| {
+        "from the plan's <code>[acceptance]</code> section, evaluated when the run was fitted"
+            .to_string()
     })
 }
 
@@ -390,13 +428,16 @@ fn one(doc: &mut Doc, input: &Input, run: Option<usize>, cert: bool) -> Result<(
             None
         }
     };
-    if let Some(a) = a {
-        summary(&mut doc.html, a, &sfx, input);
-    }
     if cert && let Some(m) = &input.manifest {
         certificate::conditions(&mut doc.html, m);
         certificate::instruments(&mut doc.html, m);
         certificate::deviations(&mut doc.html, input, m);
+    }
+    if let Some(a) = a {
+        if cert {
+            certificate::uncertainty(&mut doc.html, a);
+        }
+        summary(&mut doc.html, a, &sfx, input);
     }
     if let Some(a) = a {
         let _ = writeln!(doc.html, "<h2 id=\"fit{sfx}\">Fit</h2>");
@@ -444,9 +485,16 @@ fn one(doc: &mut Doc, input: &Input, run: Option<usize>, cert: bool) -> Result<(
 
 fn best_rule_text(a: &Analysis) -> String {
     match a.best_model {
-        Some(m) => format!(
-            "Best model: {m}, the least-squares model with the smallest residual standard error √(SSE/(N − p)) (p = number of coefficients), which, unlike the plain RMS, does not reward extra coefficients for fitting noise."
-        ),
+        Some(m) => match &a.model_selection {
+            Some(sel) => format!(
+                "Best model: {m}, the simplest least-squares model whose added terms are significant ({} at the {} level: a higher order is taken only when it lowers the SSE by more than noise would), so extra coefficients that only fit noise are not chosen.",
+                esc(&sel.method),
+                sel.level
+            ),
+            None => format!(
+                "Best model: {m} (chosen by an earlier gyrocal, by the smallest residual standard error)."
+            ),
+        },
         None => "No best model: no least-squares model had degrees of freedom left.".to_string(),
     }
 }
@@ -611,7 +659,30 @@ fn summary(html: &mut String, a: &Analysis, sfx: &str, input: &Input) {
         a.best_model.map_or_else(|| "—".into(), |m| m.to_string()),
         None,
         "",
-        "smallest residual standard error √(SSE/(N − p)) among the least-squares models".into(),
+        a.model_selection.as_ref().map_or_else(
+            || "chosen by an earlier gyrocal (smallest residual standard error)".to_string(),
+            |sel| {
+                let tests: Vec<String> = sel
+                    .tests
+                    .iter()
+                    .map(|t| {
+                        format!(
+                            "{} → {}: F = {}, p = {}",
+                            t.reduced,
+                            t.full,
+                            t.f.map_or_else(|| "—".into(), |f| format!("{f:.3}")),
+                            t.p_value.map_or_else(|| "—".into(), |p| format!("{p:.3}"))
+                        )
+                    })
+                    .collect();
+                format!(
+                    "the simplest model whose added terms are significant ({}, level {}): {}",
+                    esc(&sel.method),
+                    sel.level,
+                    tests.join("; ")
+                )
+            },
+        ),
     );
     html.push_str("</table>\n");
 }
@@ -741,7 +812,9 @@ pub(crate) fn verdict(a: &Analysis) -> String {
             ls.rms_residual * 1e3
         );
     } else if a.best_model == Some(Model::Linear) {
-        out.push_str("No higher-order model reduces the residual standard error below the straight line's: the linear model is adequate for this data.");
+        out.push_str(
+            "No higher-order term is significant: the linear model is adequate for this data.",
+        );
     }
     out
 }

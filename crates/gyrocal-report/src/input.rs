@@ -53,6 +53,9 @@ pub struct Input {
     /// What the reader must know about the input's files (e.g. a `fit.json` that no longer
     /// matches the hash its manifest recorded); shown at the top of the report.
     pub notes: Vec<String>,
+    /// Where the analysis's acceptance verdict came from, when not from the run's own plan
+    /// (`gyrocal report --acceptance FILE`: the limits re-evaluated at report time). HTML.
+    pub acceptance_from: Option<String>,
 }
 
 /// Reads a run directory (a directory) or a steps CSV (a file).
@@ -120,7 +123,12 @@ pub(crate) fn load_run(dir: &Path) -> Result<Input, ReportError> {
     } else if let Some(analysis) = run.manifest.legacy_fit.clone() {
         (Ok(analysis), FitSource::Manifest(dir.join(MANIFEST_JSON)))
     } else {
-        (fit(&data), FitSource::Computed)
+        // the report's own fit gets the run's records as `fit_run` would give them
+        let mut analysis = fit(&data);
+        if let Ok(a) = &mut analysis {
+            gyrocal_files::attach_records(a, &run.manifest);
+        }
+        (analysis, FitSource::Computed)
     };
     Ok(Input {
         path: dir.to_path_buf(),
@@ -130,6 +138,7 @@ pub(crate) fn load_run(dir: &Path) -> Result<Input, ReportError> {
         analysis,
         fit_source,
         notes,
+        acceptance_from: None,
     })
 }
 
@@ -173,6 +182,7 @@ pub(crate) fn load_csv(path: &Path) -> Result<Input, ReportError> {
         analysis,
         fit_source: FitSource::Computed,
         notes: Vec::new(),
+        acceptance_from: None,
     })
 }
 

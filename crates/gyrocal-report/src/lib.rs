@@ -130,6 +130,9 @@ pub struct Report {
     /// What the reader must be told besides the report (the report says it too), e.g. that
     /// the runs come from different plans; the CLI prints each on stderr.
     pub warnings: Vec<String>,
+    /// The verdict against acceptance limits of a one-run report (the run's own, or the one
+    /// [`apply_acceptance`] re-evaluated); `None` without limits or with several inputs.
+    pub acceptance: Option<gyrocal_fit::acceptance::Acceptance>,
 }
 
 impl Report {
@@ -182,6 +185,24 @@ pub fn render(inputs: &[Input]) -> Result<Report, ReportError> {
         return Err(ReportError::NoInput);
     }
     html::render(inputs)
+}
+
+/// Re-evaluates one input's acceptance against `spec` (limits from `source`, e.g. a file given
+/// to `gyrocal report --acceptance`): the verdict the report shows and returns in
+/// [`Report::acceptance`]. The run's own `fit.json` is not changed (its checksum is in the
+/// manifest); the report's id changes with the limits applied.
+pub fn apply_acceptance(
+    input: &mut Input,
+    spec: &gyrocal_fit::acceptance::AcceptanceSpec,
+    source: &str,
+) {
+    if let Ok(a) = &mut input.analysis {
+        a.acceptance = a.evaluate_acceptance(spec);
+        input.acceptance_from = Some(format!(
+            "from <code>{}</code>, re-evaluated when this report was made (the run's own verdict, if any, is in its fit.json)",
+            html::esc(source)
+        ));
+    }
 }
 
 /// Renders the report of one run directory.

@@ -397,10 +397,32 @@ pub(crate) fn human(out: &mut String, a: &Analysis) {
         let _ = writeln!(out);
     }
     if let Some(best) = a.best_model {
-        let _ = writeln!(
-            out,
-            "best model: {best} (smallest residual standard error sqrt(SSE/(N−p)) among the least-squares fits)"
-        );
+        let why = match &a.model_selection {
+            Some(sel) => {
+                let tests: Vec<String> = sel
+                    .tests
+                    .iter()
+                    .map(|t| {
+                        format!(
+                            "{}→{}: F = {}, p = {}{}",
+                            t.reduced,
+                            t.full,
+                            t.f.map_or_else(|| "—".into(), |f| format!("{f:.3}")),
+                            t.p_value.map_or_else(|| "—".into(), |p| format!("{p:.3}")),
+                            if t.significant { " significant" } else { "" }
+                        )
+                    })
+                    .collect();
+                format!(
+                    "the simplest model whose added terms are significant, {} at level {}: {}",
+                    sel.method,
+                    sel.level,
+                    tests.join("; ")
+                )
+            }
+            None => "chosen by an earlier gyrocal (smallest residual standard error)".to_string(),
+        };
+        let _ = writeln!(out, "best model: {best} ({why})");
         if let (Some(lin), Some(b)) = (ls, a.fit(Method::LeastSquares, best))
             && best != Model::Linear
             && b.sse > 0.0
@@ -500,8 +522,73 @@ pub(crate) fn human(out: &mut String, a: &Analysis) {
             let _ = writeln!(out, "  asymmetry             not computed: {reason}");
         }
     }
+    if let Some(c) = &m.asymmetry_common_k2 {
+        let _ = writeln!(
+            out,
+            "  asymmetry, common K2  {:.1} ± {:.1} ppm (1σ; one fit K0 + K+·ω⁺ + K−·ω⁻ + K2·ω², K2 = {:.3e} V/(°/s)²: not biased by the even-order term as the line pair above is)",
+            c.asymmetry_ppm, c.asymmetry_std_error_ppm, c.k2
+        );
+    }
     if let Some(r) = m.repeatability_ppm {
         let _ = writeln!(out, "  repeatability         {r:.1} ppm");
     }
     let _ = writeln!(out);
+    if let Some(u) = &a.uncertainty {
+        let _ = writeln!(
+            out,
+            "expanded uncertainty (k = {}; budget in fit.json and the report)",
+            u.coverage_factor
+        );
+        for q in &u.quantities {
+            let _ = writeln!(
+                out,
+                "  {:<20}  {:.7e} ± {:.2e} {}{}",
+                q.quantity,
+                q.value,
+                q.expanded_uncertainty,
+                q.unit,
+                q.relative_expanded_ppm
+                    .map_or_else(String::new, |r| format!(" ({r:.1} ppm)"))
+            );
+        }
+        let _ = writeln!(out);
+    }
+    if let Some(acc) = &a.acceptance {
+        let _ = writeln!(out, "{}", verdict_line(acc));
+        for c in &acc.checks {
+            let _ = writeln!(
+                out,
+                "  {:<18} {:<13} {}{}",
+                c.quantity.name(),
+                c.verdict.label(),
+                c.value
+                    .map_or_else(|| "not measured".into(), |v| format!("{v:.7e} {}", c.unit)),
+                c.reason
+                    .as_deref()
+                    .map_or_else(String::new, |r| format!(": {r}"))
+            );
+        }
+        let _ = writeln!(out);
+    }
+}
+
+/// "verdict: FAIL (simple rule): nonlinearity_ppm" — the run's verdict and the quantities
+/// that make it.
+pub fn verdict_line(acc: &gyrocal_fit::acceptance::Acceptance) -> String {
+    let deciding: Vec<&str> = acc
+        .checks
+        .iter()
+        .filter(|c| c.verdict == acc.verdict && c.verdict != gyrocal_fit::acceptance::Verdict::Pass)
+        .map(|c| c.quantity.name())
+        .collect();
+    format!(
+        "verdict: {} ({} rule){}",
+        acc.verdict.label(),
+        acc.rule.as_str(),
+        if deciding.is_empty() {
+            String::new()
+        } else {
+            format!(": {}", deciding.join(", "))
+        }
+    )
 }

@@ -26,6 +26,11 @@ pub struct ReportArgs {
     /// warnings) instead of the human line.
     #[arg(long)]
     pub json: bool,
+    /// Acceptance limits to evaluate the run against instead of its plan's `[acceptance]`
+    /// (a TOML file with `decision_rule` and a table per quantity, as in
+    /// configs/acceptance.example.toml). One run directory only; its fit.json is not changed.
+    #[arg(long, value_name = "FILE")]
+    pub acceptance: Option<PathBuf>,
 }
 
 /// Where the report goes: `--out`, else beside the one input (never the current directory,
@@ -51,7 +56,29 @@ fn destination(args: &ReportArgs) -> Result<PathBuf, BadInput> {
 /// Runs `gyrocal report`: prints the path of the HTML written.
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     let out = destination(args)?;
-    let report = render_many(&args.inputs).map_err(classify)?;
+    let report = match &args.acceptance {
+        None => render_many(&args.inputs).map_err(classify)?,
+        Some(path) => {
+            let [one] = args.inputs.as_slice() else {
+                return Err(BadInput(
+                    "--acceptance applies to one run directory: give exactly one".into(),
+                )
+                .into());
+            };
+            let spec = gyrocal_run::plan::load_acceptance(path)
+                .map_err(|e| BadInput(format!("--acceptance: {e}")))?;
+            let mut input = gyrocal_report::load_input(one).map_err(classify)?;
+            if let Err(e) = &input.analysis {
+                return Err(BadInput(format!(
+                    "--acceptance: {} has no fit to evaluate: {e}",
+                    one.display()
+                ))
+                .into());
+            }
+            gyrocal_report::apply_acceptance(&mut input, &spec, &path.display().to_string());
+            gyrocal_report::render(&[input]).map_err(classify)?
+        }
+    };
     for w in &report.warnings {
         eprintln!("gyrocal: warning: {w}");
     }
@@ -68,6 +95,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
                 "files": written,
                 "inputs": args.inputs,
                 "warnings": report.warnings,
+                "acceptance": report.acceptance,
             })
         );
     } else {

@@ -74,6 +74,17 @@ pub struct RunArgs {
     /// Relative humidity as read in the lab, %.
     #[arg(long, value_name = "PERCENT")]
     pub humidity_pct: Option<f64>,
+    /// The station file: the lab, the bench, and per instrument its asset id, serial number,
+    /// calibration certificate, due date and accuracy class (default: $GYROCAL_STATION, else
+    /// the user's config directory's gyrocal/station.toml when it exists). Recorded in the
+    /// manifest and on the report; a run refuses to start when a calibration is overdue.
+    /// Without one, the report says "instruments not identified" (a simulated run uses the
+    /// simulated bench's own records).
+    #[arg(long, value_name = "FILE")]
+    pub station: Option<PathBuf>,
+    /// Start even when an instrument's calibration is overdue; recorded as a deviation.
+    #[arg(long)]
+    pub allow_expired: bool,
     /// Print exactly one JSON document on stdout at the end (status, exit code, where the
     /// table was left, steps, timing, the fit's headline, the run directory, the resume
     /// command); the human text goes to stderr.
@@ -164,9 +175,10 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
     {
         return Err(BadInput(format!("--sim-time-scale must be > 0 (got {x})")).into());
     }
+    let dut = dut_for_run(args, &plan);
     if let Some(dir) = &args.resume {
         check_resume_mode(dir, args.simulate)?;
-        check_resume_dut(dir, args.dut_serial.as_deref())?;
+        check_resume_dut(dir, dut.as_ref().and_then(|d| d.serial.as_deref()))?;
     }
     for (key, v, range) in [
         ("--ambient-c", args.ambient_c, -50.0..=100.0),
@@ -183,6 +195,13 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
             .into());
         }
     }
+    // the station before any instrument is touched: an overdue calibration refuses the run
+    let (station, deviations) = station_for_run(args, plan.simulation().seed)?;
+    let records = Records {
+        dut,
+        station,
+        deviations,
+    };
     // what `check` warns about, said again before the instruments move
     for w in crate::cmd::check::model_warnings(&plan, &plan_path) {
         say!("gyrocal: warning: {w}");
@@ -211,7 +230,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
         .enable_all()
         .build()
         .context("starting the async runtime")?;
-    let (dir, summary, run, signal, bench) = rt.block_on(execute(args, plan, &faults))?;
+    let (dir, summary, run, signal, bench) = rt.block_on(execute(args, plan, &faults, records))?;
     let mut doc = serde_json::json!({ "simulated_bench": bench });
     let code = finish(args, &dir, &summary, run, signal, &mut doc);
     if args.json {
@@ -224,24 +243,134 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
     code
 }
 
-fn open_run_dir(args: &RunArgs, plan: &Plan) -> anyhow::Result<(PathBuf, RunDir)> {
-    let virtual_time = args.simulate;
-    let dut = (args.dut_serial.is_some() || args.dut_model.is_some()).then(|| gyrocal_run::Dut {
+/// Deviations known before the run directory exists: (kind, text).
+type PendingDeviations = Vec<(String, String)>;
+
+/// What a run records about the gyro, the station and the departures known before it starts.
+struct Records {
+    dut: Option<gyrocal_run::Dut>,
+    station: Option<gyrocal_run::station::Station>,
+    /// (kind, text) of each deviation to record when the run directory is open.
+    deviations: PendingDeviations,
+}
+
+/// The gyro under test: the plan's `[dut]`, overridden by `--dut-serial`/`--dut-model`. A new
+/// simulated run without a serial gets the simulated gyro's (`SIM-GYRO-<seed>`), so its
+/// certificate is complete; a resume keeps what the run recorded.
+fn dut_for_run(args: &RunArgs, plan: &Plan) -> Option<gyrocal_run::Dut> {
+    let from_plan = plan
+        .dut()
+        .map_or_else(gyrocal_run::Dut::default, |d| gyrocal_run::Dut {
+            serial: d.serial.clone(),
+            model: d.model.clone(),
+            manufacturer: d.manufacturer.clone(),
+            condition: d.condition.clone(),
+            notes: d.notes.clone(),
+        });
+    let mut dut = from_plan.overridden_by(gyrocal_run::Dut {
         serial: args.dut_serial.clone(),
         model: args.dut_model.clone(),
         ..gyrocal_run::Dut::default()
     });
+    if args.simulate && args.resume.is_none() && dut.serial.is_none() {
+        dut.serial = Some(format!("SIM-GYRO-{}", plan.simulation().seed));
+        dut.model
+            .get_or_insert_with(|| "simulated HRG (gyrocal)".to_string());
+    }
+    (!dut.is_empty()).then_some(dut)
+}
+
+/// The station (`--station`, `$GYROCAL_STATION`, the default file; a simulated run without
+/// one uses the simulated bench's records) and the deviation an overdue calibration brings
+/// with `--allow-expired`. Without `--allow-expired` an overdue calibration is bad input:
+/// nothing is opened or created.
+fn station_for_run(
+    args: &RunArgs,
+    sim_seed: u64,
+) -> anyhow::Result<(Option<gyrocal_run::station::Station>, PendingDeviations)> {
+    use gyrocal_run::station::Station;
+    let today = jiff::Zoned::now().date();
+    let station = match Station::resolve(args.station.as_deref())
+        .map_err(|e| BadInput(format!("station: {e}")))?
+    {
+        Some((path, s)) => {
+            say!("station: {} ({})", s.id, path.display());
+            Some(s)
+        }
+        None if args.simulate => Some(Station::simulated(sim_seed, today)),
+        None => None,
+    };
+    let mut deviations = Vec::new();
+    if let Some(s) = &station {
+        let overdue = s.overdue(today);
+        if !overdue.is_empty() {
+            let list = overdue
+                .iter()
+                .map(|o| {
+                    format!(
+                        "the {} {} was due for calibration on {}",
+                        o.role, o.asset_id, o.due
+                    )
+                })
+                .collect::<Vec<_>>()
+                .join("; ");
+            if !args.allow_expired {
+                return Err(BadInput(format!(
+                    "station {}: {list} (today is {today}): calibrate it, or start with \
+                     --allow-expired, which the report records as a deviation",
+                    s.id
+                ))
+                .into());
+            }
+            say!(
+                "gyrocal: warning: {list}: started with --allow-expired (recorded as a deviation)"
+            );
+            deviations.push((
+                "expired-calibration".to_string(),
+                format!("{list}; the run was started with --allow-expired on {today}"),
+            ));
+        }
+    }
+    Ok((station, deviations))
+}
+
+fn open_run_dir(
+    args: &RunArgs,
+    plan: &Plan,
+    records: Records,
+) -> anyhow::Result<(PathBuf, RunDir)> {
+    let (dir, mut run) = open_run_dir_inner(args, plan, records.dut, records.station)?;
+    for (kind, text) in &records.deviations {
+        run.add_deviation(kind, text)
+            .map_err(|e| anyhow::anyhow!("{}: recording a deviation: {e}", dir.display()))?;
+    }
+    Ok((dir, run))
+}
+
+fn open_run_dir_inner(
+    args: &RunArgs,
+    plan: &Plan,
+    dut: Option<gyrocal_run::Dut>,
+    station: Option<gyrocal_run::station::Station>,
+) -> anyhow::Result<(PathBuf, RunDir)> {
+    let virtual_time = args.simulate;
+    // the environment as entered, else the station's usual conditions
     let context = gyrocal_run::RunContext {
         operator: args.operator.clone(),
         customer: args.customer.clone(),
-        ambient_c: args.ambient_c,
-        humidity_pct: args.humidity_pct,
+        ambient_c: args
+            .ambient_c
+            .or_else(|| station.as_ref().and_then(|s| s.ambient_c)),
+        humidity_pct: args
+            .humidity_pct
+            .or_else(|| station.as_ref().and_then(|s| s.humidity_pct)),
     };
     let meta = RunMeta {
         gyrocal_version: env!("CARGO_PKG_VERSION").into(),
         simulated: args.simulate,
         virtual_time,
         dut,
+        station,
         context: (context != gyrocal_run::RunContext::default()).then_some(context),
         ..RunMeta::default()
     };
@@ -301,7 +430,7 @@ fn check_resume_dut(dir: &Path, serial: Option<&str>) -> anyhow::Result<()> {
         .and_then(|m| m["dut"]["serial"].as_str().map(str::to_string));
     match recorded {
         Some(r) if r != serial => Err(BadInput(format!(
-            "--resume: {} is the calibration of gyro serial {r}; --dut-serial {serial} is              another gyro: start a new run for it",
+            "--resume: {} is the calibration of gyro serial {r}; --dut-serial {serial} is another gyro: start a new run for it",
             dir.display()
         ))
         .into()),
@@ -372,6 +501,7 @@ async fn execute(
     args: &RunArgs,
     plan: Plan,
     faults: &[gyrocal_sim::faults::FaultSpec],
+    records: Records,
 ) -> anyhow::Result<(
     PathBuf,
     RunSummary,
@@ -387,7 +517,7 @@ async fn execute(
         let time_scale = cfg.time_scale;
         let bench = gyrocal_sim::bench::Bench::spawn(cfg);
         let mut schedule = gyrocal_sim::faults::schedule(faults, &bench.handle, time_scale);
-        let (dir, run) = open_run_dir(args, &plan)?;
+        let (dir, run) = open_run_dir(args, &plan, records)?;
         let (summary, run, signal) = match &plan.dmm().port {
             // the plan reaches the meter over GPIB: the bench put a simulated Prologix
             // controller in front of it, and the real Prologix transport talks to that
@@ -464,7 +594,7 @@ async fn execute(
         )
         .await
         .with_context(|| format!("opening the rate table at {}", t.port))?;
-        let (dir, run) = open_run_dir(args, &plan)?;
+        let (dir, run) = open_run_dir(args, &plan, records)?;
         let (summary, run, signal) = sequence(plan, dmm, table, run).await?;
         Ok((dir, summary, run, signal, None))
     }
@@ -1002,6 +1132,7 @@ fn finish_human(
     let analysis = fit_run(run, &gyrocal_fit::Options::default())
         .with_context(|| format!("fitting {}", dir.display()))?;
     doc["fit"] = serde_json::json!(run.manifest().fit_summary);
+    doc["acceptance"] = serde_json::json!(run.manifest().acceptance);
     let mut out = String::new();
     crate::cmd::fit::human(&mut out, &analysis);
     human(out);
