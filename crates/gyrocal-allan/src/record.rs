@@ -93,7 +93,7 @@ impl Record {
     /// spaces. Blank lines and lines starting with `#` are skipped; a first line that is not
     /// numeric is taken as a header.
     ///
-    /// With a time column, τ0 is (t_last − t_first)/(N − 1) and every step must lie within ±10 %
+    /// With a time column, τ0 is the median time step and every step must lie within ±10 %
     /// of it (a gap or a jump is an [`Error::Parse`] naming the line: Allan variances need evenly
     /// spaced samples). Without a time column `tau0_s` must be given; when both are present the
     /// given `tau0_s` wins and the times are still checked against it.
@@ -180,7 +180,11 @@ impl Record {
                     got: n,
                 });
             }
-            (None, n) => (times[n - 1] - times[0]) / (n - 1) as f64,
+            (None, _) => {
+                let mut steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
+                steps.sort_by(f64::total_cmp);
+                steps[steps.len() / 2]
+            }
         };
         check_tau0(tau0)?;
         for (k, w) in times.windows(2).enumerate() {

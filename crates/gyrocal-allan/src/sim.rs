@@ -9,10 +9,10 @@
 //! * **Angle random walk N** (°/√h): white rate with standard deviation 60·N/√τ0 (°/h). Allan
 //!   variance (60 N)²/τ.
 //! * **Bias instability B** (°/h): flicker rate noise approximated by a sum of first-order
-//!   Gauss–Markov processes with corner frequencies three per decade from 1/(2π·τ_max) to
-//!   1/(2π·τ0) (τ_max = [`GyroNoise::flicker_max_tau_s`]); each process has variance
-//!   B²·ln(10)/3/(2π), so that the sum of Lorentzians approximates the one-sided PSD B²/(2π f)
-//!   whose Allan variance is (2 ln 2/π)·B² on the flat (within a few per cent, ripple included,
+//!   Gauss–Markov processes with correlation times three per decade from τ0/3 to 30·τ_max
+//!   (τ_max = [`GyroNoise::flicker_max_tau_s`]); each process has variance
+//!   B²·ln(10)/3/π, so that the sum of Lorentzians approximates IEEE 952's two-sided PSD
+//!   B²/(2π f) (one-sided B²/(π f)), whose Allan variance is (2 ln 2/π)·B² on the flat (within a few per cent, ripple included,
 //!   for τ0·10 ≲ τ ≲ τ_max/10).
 //! * **Rate random walk K** (°/h/√h): rate performing a random walk with steps of standard
 //!   deviation (K/60)·√τ0 (°/h) per sample. Allan variance (K/60)²τ/3.
@@ -120,11 +120,14 @@ impl Generator {
         let b = noise.bias_instability_deg_per_h;
         if b > 0.0 && noise.flicker_max_tau_s > tau0_s {
             let per_decade = 3.0;
-            let var = b * b * std::f64::consts::LN_10 / per_decade / (2.0 * std::f64::consts::PI);
-            let decades = (noise.flicker_max_tau_s / tau0_s).log10();
+            let var = b * b * std::f64::consts::LN_10 / per_decade / std::f64::consts::PI;
+            // correlation times 1/(2π f_k) from τ0/3 to 30·τ_max: the Allan deviation of a sum of
+            // Lorentzians is flat only a decade inside the range of its corners
+            let t_lo = tau0_s / 3.0;
+            let decades = (30.0 * noise.flicker_max_tau_s / t_lo).log10();
             let count = (decades * per_decade).ceil() as i32 + 1;
             for i in 0..count {
-                let tc = tau0_s * 10f64.powf(f64::from(i) / per_decade); // correlation time 1/(2π f_k)
+                let tc = t_lo * 10f64.powf(f64::from(i) / per_decade);
                 let a = (-tau0_s / tc).exp();
                 let sd = (var * (1.0 - a * a)).sqrt();
                 let z: f64 = StandardNormal.sample(&mut rng);

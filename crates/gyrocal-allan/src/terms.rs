@@ -14,9 +14,9 @@
 //! | K rate random walk | (°/h)/√s | °/h/√h | ×60 | τ = 3 s |
 //! | R rate ramp | (°/h)/s | °/h² | ×3600 | τ = √2 s |
 //!
-//! Uncertainties are standard (1σ) uncertainties: for slope reads from the EDF of the points used
-//! (relative u of σ ≈ 1/√(2 Σ edf), ignoring the correlation of overlapping octave points, so a
-//! lower bound); for the bias instability half the width of the 68 % interval of σ_min; for the
+//! Uncertainties are standard (1σ) uncertainties: for slope reads the relative uncertainty of the
+//! curve point nearest the read τ, 1/√(2·edf) (conservative: the other points of the region are
+//! correlated with it and add little); for the bias instability half the width of the 68 % interval of σ_min; for the
 //! fit from the covariance of the weighted least squares, inflated by the reduced χ² when above 1.
 
 use crate::curve::Curve;
@@ -276,15 +276,23 @@ fn slope_read(pts: &[(f64, f64, f64)], term: Term) -> Option<SlopeRead> {
         return None;
     }
     let run = &pts[best.0..best.0 + best.1];
-    let wsum: f64 = run.iter().map(|p| p.2).sum();
-    let logc = run
-        .iter()
-        .map(|p| p.2 * (p.1.ln() - s * p.0.ln()))
-        .sum::<f64>()
-        / wsum;
+    // equal weights in log space: edf weights would let the shortest τ (huge edf, but where the
+    // discrete sampling bends the curve) decide alone
+    let logc = run.iter().map(|p| p.1.ln() - s * p.0.ln()).sum::<f64>() / run.len() as f64;
     let tau_r = term.read_tau_s();
     let sigma_r = (logc + s * tau_r.ln()).exp();
-    let rel_u = (1.0 / (2.0 * wsum)).sqrt();
+    // conservative: the relative uncertainty of the single point nearest the read τ
+    // (octave points overlap, so their information does not simply add)
+    let near = run
+        .iter()
+        .min_by(|a, b| {
+            (a.0 / tau_r)
+                .ln()
+                .abs()
+                .total_cmp(&(b.0 / tau_r).ln().abs())
+        })
+        .map_or(1.0, |p| p.2);
+    let rel_u = (1.0 / (2.0 * near)).sqrt();
     let value = sigma_r * term.unit_factor();
     let lo = run[0].0;
     let hi = run[run.len() - 1].0;
