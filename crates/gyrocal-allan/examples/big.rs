@@ -4,6 +4,7 @@
 //! cargo build --release -p gyrocal-allan --example big
 //! /usr/bin/time -v target/release/examples/big 100000000          # batch, in place
 //! /usr/bin/time -v target/release/examples/big 100000000 stream   # streaming accumulator
+//! /usr/bin/time -v target/release/examples/big 100000000 stream 1048576   # τ ≤ 2^20·τ0 only
 //! ```
 #![allow(clippy::print_stdout)]
 
@@ -20,15 +21,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .transpose()?
         .unwrap_or(10_000_000);
     let stream = args.get(2).is_some_and(|s| s == "stream");
+    // streaming: longest averaging factor kept (default N/4); the buffer is ≤ 2·(2·max_m + 1) f64
+    let max_m: usize = args.get(3).map(|s| s.parse()).transpose()?.unwrap_or(n / 4);
     let tau0 = 0.01;
     let noise = GyroNoise {
         arw_deg_per_sqrt_h: 0.1,
-        bias_instability_deg_per_h: 0.05,
+        rrw_deg_per_h_per_sqrt_h: 0.01,
         ..GyroNoise::default()
     };
     let mut generator = Generator::new(&noise, tau0, 1)?;
     if stream {
-        let mut acc = Streaming::new(tau0, n / 4);
+        let mut acc = Streaming::new(tau0, max_m);
         let mut buf = vec![0.0; 1 << 20];
         let mut left = n;
         let mut busy = std::time::Duration::ZERO;
