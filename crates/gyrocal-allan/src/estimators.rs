@@ -5,11 +5,11 @@
 //!
 //! | estimator | terms n | σ² |
 //! |---|---|---|
-//! | OADEV | N+1−2m | Σ (P[i+2m] − 2P[i+m] + P[i])² / (2 m² n) |
+//! | OADEV | `N+1−2m` | `Σ (P[i+2m] − 2P[i+m] + P[i])² / (2 m² n)` |
 //! | ADEV | ⌊N/m⌋ − 1 | same sum with stride m |
-//! | MDEV | N+1−3m+1 | Σ_j (Σ_{i=j}^{j+m−1} P[i+2m] − 2P[i+m] + P[i])² / (2 m⁴ n) |
-//! | OHDEV | N+1−3m | Σ (P[i+3m] − 3P[i+2m] + 3P[i+m] − P[i])² / (6 m² n) |
-//! | TOTDEV | N−1 | Σ_{k=1}^{N−1} (P*[k−m] − 2P[k] + P*[k+m])² / (2 m² n), P* reflected at both ends |
+//! | MDEV | `N+1−3m+1` | `Σ_j (Σ_{i=j}^{j+m−1} P[i+2m] − 2P[i+m] + P[i])² / (2 m⁴ n)` |
+//! | OHDEV | `N+1−3m` | `Σ (P[i+3m] − 3P[i+2m] + 3P[i+m] − P[i])² / (6 m² n)` |
+//! | TOTDEV | `N−1` | `Σ_{k=1}^{N−1} (P*[k−m] − 2P[k] + P*[k+m])² / (2 m² n), P* reflected at both ends` |
 
 use crate::sum::sum_sq;
 
