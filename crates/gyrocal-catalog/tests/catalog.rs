@@ -16,7 +16,7 @@ fn sqlite_url(dir: &tempfile::TempDir) -> CatalogUrl {
     CatalogUrl::Sqlite(dir.path().join("data/gyrocal/catalog.sqlite"))
 }
 
-/// The PostgreSQL catalog of the test environment, emptied, or None (with a note).
+/// The PostgreSQL catalog of the test environment, or None (with a note).
 async fn postgres() -> Option<Catalog> {
     let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
         eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL test skipped");
@@ -28,16 +28,26 @@ async fn postgres() -> Option<Catalog> {
     Some(catalog)
 }
 
-/// Serialises the PostgreSQL tests (one shared database).
-static PG_LOCK: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+/// A serial number no other test (or earlier run of the tests on the same PostgreSQL
+/// database) uses: tests run in parallel processes and never empty the shared catalog.
+fn uniq(serial: &str) -> String {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos();
+    format!("{serial}-{}-{nanos}", std::process::id())
+}
 
 async fn import_and_query(catalog: &Catalog, root: &std::path::Path) {
-    let a1 = clone_run(&root.join("a1"), &Spec::new("A-0421", 1, 0.3600));
-    let mut s = Spec::new("A-0421", 5, 0.3601);
+    let a = uniq("A-0421");
+    let a = a.as_str();
+    let b = uniq("B-7");
+    let a1 = clone_run(&root.join("a1"), &Spec::new(a, 1, 0.3600));
+    let mut s = Spec::new(a, 5, 0.3601);
     s.extras = true;
     let a2 = clone_run(&root.join("a2"), &s);
-    let b1 = clone_run(&root.join("b1"), &Spec::new("B-7", 3, 0.3500));
-    let mut sim = Spec::new("A-0421", 7, 0.3602);
+    let b1 = clone_run(&root.join("b1"), &Spec::new(&b, 3, 0.3500));
+    let mut sim = Spec::new(a, 7, 0.3602);
     sim.simulated = true;
     let a3 = clone_run(&root.join("a3"), &sim);
     for d in [&a1, &a2, &b1, &a3] {
@@ -49,7 +59,7 @@ async fn import_and_query(catalog: &Catalog, root: &std::path::Path) {
 
     let all = catalog
         .runs(&RunFilter {
-            serial: Some("A-0421".into()),
+            serial: Some(a.into()),
             ..RunFilter::default()
         })
         .await
@@ -60,12 +70,13 @@ async fn import_and_query(catalog: &Catalog, root: &std::path::Path) {
     assert!(all[0].run.simulated);
     let since = catalog
         .runs(&RunFilter {
+            serial: Some(a.into()),
             since: Some("2026-01-04".into()),
             ..RunFilter::default()
         })
         .await
         .unwrap();
-    assert_eq!(since.len(), 3, "{since:?}");
+    assert_eq!(since.len(), 2, "{since:?}");
 
     let steps = catalog.steps(&id).await.unwrap();
     assert_eq!(steps.len(), 5);
@@ -76,7 +87,7 @@ async fn import_and_query(catalog: &Catalog, root: &std::path::Path) {
     assert_eq!(instruments[0].model.as_deref(), Some("34401A"));
     assert_eq!(instruments[0].serial.as_deref(), Some("3146A12345"));
 
-    let h = catalog.history("A-0421", false).await.unwrap();
+    let h = catalog.history(a, false).await.unwrap();
     assert_eq!(h.calibrations.len(), 2, "simulated runs are left out");
     let r = h.calibrations[1].results.as_ref().unwrap();
     assert_eq!(r.scale_factor, Some(0.3601));
@@ -97,10 +108,10 @@ async fn import_and_query(catalog: &Catalog, root: &std::path::Path) {
         .find(|t| t.quantity == "scale_factor")
         .unwrap();
     assert_eq!(k.limits.as_ref().unwrap().max, Some(0.365));
-    let with_sim = catalog.history("A-0421", true).await.unwrap();
+    let with_sim = catalog.history(a, true).await.unwrap();
     assert_eq!(with_sim.calibrations.len(), 3);
     let html = gyrocal_catalog::history_html::render(&with_sim);
-    assert!(html.contains("<svg") && html.contains("A-0421"));
+    assert!(html.contains("<svg") && html.contains(a));
 }
 
 #[tokio::test]
@@ -115,11 +126,9 @@ async fn sqlite_imports_lists_and_tells_the_history() {
 
 #[tokio::test]
 async fn postgres_imports_lists_and_tells_the_history() {
-    let _guard = PG_LOCK.lock().await;
     let Some(catalog) = postgres().await else {
         return;
     };
-    catalog.clear().await.unwrap();
     let tmp = tempfile::tempdir().unwrap();
     import_and_query(&catalog, tmp.path()).await;
 }
@@ -153,8 +162,9 @@ async fn the_latest_outside_its_control_band_is_warned() {
 /// `writers` catalogs (separate pools, as separate processes would have) import overlapping
 /// sets of runs at once: every run appears once, with all its steps.
 async fn concurrent_writers(url: &CatalogUrl, writers: usize, root: &std::path::Path) {
+    let serial = uniq("D-9");
     let dirs: Vec<PathBuf> = (0..24)
-        .map(|i| clone_run(&root.join(format!("c{i}")), &Spec::new("D-9", i, 0.36)))
+        .map(|i| clone_run(&root.join(format!("c{i}")), &Spec::new(&serial, i, 0.36)))
         .collect();
     let mut tasks = Vec::new();
     for w in 0..writers {
@@ -178,7 +188,7 @@ async fn concurrent_writers(url: &CatalogUrl, writers: usize, root: &std::path::
     let catalog = Catalog::open(url).await.unwrap();
     let runs = catalog
         .runs(&RunFilter {
-            serial: Some("D-9".into()),
+            serial: Some(serial.clone()),
             ..RunFilter::default()
         })
         .await
@@ -198,11 +208,9 @@ async fn two_writers_share_one_sqlite_catalog() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn four_writers_share_one_postgres_catalog() {
-    let _guard = PG_LOCK.lock().await;
     let Some(catalog) = postgres().await else {
         return;
     };
-    catalog.clear().await.unwrap();
     let url = catalog.url().clone();
     catalog.close().await;
     let tmp = tempfile::tempdir().unwrap();
