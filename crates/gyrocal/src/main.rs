@@ -40,6 +40,12 @@ enum Command {
     Report(cmd::report::ReportArgs),
     /// Check that the data files of completed runs are as recorded (SHA-256 in the manifest).
     Verify(cmd::verify::VerifyArgs),
+    /// List the runs in the calibration catalog, newest first.
+    Runs(cmd::runs::RunsArgs),
+    /// A gyro's calibrations over time from the catalog: results, repeatability, trends.
+    History(cmd::history::HistoryArgs),
+    /// Fill the calibration catalog from run directories (import, rebuild).
+    Catalog(cmd::catalog::CatalogArgs),
     /// Print the shell completion script for SHELL (bash, zsh, fish, elvish, powershell).
     Completions(cmd::completions::CompletionsArgs),
     /// Print the man page (roff), or write one page per subcommand into a directory.
@@ -93,6 +99,9 @@ fn main() -> ExitCode {
         Command::Sim(args) => cmd::sim::run(&args).map(|()| 0),
         Command::Report(args) => cmd::report::run(&args).map(|()| 0),
         Command::Verify(args) => cmd::verify::run(&args),
+        Command::Runs(args) => cmd::runs::run(&args),
+        Command::History(args) => cmd::history::run(&args),
+        Command::Catalog(args) => cmd::catalog::run(&args),
         Command::Completions(args) => cmd::completions::completions(&args).map(|()| 0),
         Command::Man(args) => cmd::completions::man(&args).map(|()| 0),
     };

@@ -1,11 +1,14 @@
 //! One module per subcommand.
 
+pub mod catalog;
 pub mod check;
 pub mod completions;
 pub mod fit;
+pub mod history;
 pub mod probe;
 pub mod report;
 pub mod run;
+pub mod runs;
 pub mod sim;
 pub mod verify;
 

@@ -1,0 +1,93 @@
+//! The catalog's errors, each with a [`CatalogError::kind`].
+
+use std::path::PathBuf;
+
+/// What kind of failure, for callers that decide without matching every variant (the run
+/// hook retries [`ErrorKind::Unreachable`] later; the CLI says "bad input" for
+/// [`ErrorKind::BadUrl`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum ErrorKind {
+    /// The catalog URL is malformed or names an unknown backend.
+    BadUrl,
+    /// The directory holds no readable run.
+    NotARun,
+    /// The database cannot be reached (connection refused, timeout, DNS, pool closed).
+    Unreachable,
+    /// The database answered with an error.
+    Database,
+    /// The schema could not be brought to this version.
+    Migration,
+    /// A local file or directory could not be read or created.
+    Io,
+}
+
+/// Everything that can go wrong with the catalog. Messages name the catalog by its URL with
+/// the password replaced by `***` (see [`crate::CatalogUrl::redacted`]), never the password.
+#[derive(Debug, thiserror::Error)]
+pub enum CatalogError {
+    /// The URL does not parse.
+    #[error("catalog URL {url}: {message}")]
+    BadUrl {
+        /// The URL, redacted.
+        url: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A directory that is not (or not yet) a readable run directory.
+    #[error("{}: not a readable gyrocal run directory: {message}", path.display())]
+    NotARun {
+        /// The directory.
+        path: PathBuf,
+        /// Why.
+        message: String,
+    },
+    /// The database cannot be reached.
+    #[error("catalog {url} is unreachable: {message}")]
+    Unreachable {
+        /// The URL, redacted.
+        url: String,
+        /// The driver's message (password removed).
+        message: String,
+    },
+    /// The database refused a statement.
+    #[error("catalog {url}: {message}")]
+    Database {
+        /// The URL, redacted.
+        url: String,
+        /// The driver's message (password removed).
+        message: String,
+    },
+    /// The migrations failed.
+    #[error("catalog {url}: cannot bring the schema up to date: {message}")]
+    Migration {
+        /// The URL, redacted.
+        url: String,
+        /// The driver's message (password removed).
+        message: String,
+    },
+    /// A local file operation failed.
+    #[error("{}: cannot {action}: {source}", path.display())]
+    Io {
+        /// The file or directory.
+        path: PathBuf,
+        /// What was being done.
+        action: &'static str,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+}
+
+impl CatalogError {
+    /// The kind of failure.
+    pub fn kind(&self) -> ErrorKind {
+        match self {
+            CatalogError::BadUrl { .. } => ErrorKind::BadUrl,
+            CatalogError::NotARun { .. } => ErrorKind::NotARun,
+            CatalogError::Unreachable { .. } => ErrorKind::Unreachable,
+            CatalogError::Database { .. } => ErrorKind::Database,
+            CatalogError::Migration { .. } => ErrorKind::Migration,
+            CatalogError::Io { .. } => ErrorKind::Io,
+        }
+    }
+}

@@ -1,0 +1,241 @@
+//! A gyro's history as one self-contained HTML page: the calibrations with their results and
+//! uncertainties, the day-to-day repeatability, and a trend plot (SVG, plotters) per quantity
+//! with its acceptance limits and control band.
+
+use std::fmt::Write as _;
+
+use plotters::prelude::*;
+
+use crate::history::{History, Trend};
+
+const WIDTH: u32 = 860;
+const HEIGHT: u32 = 320;
+const FONT: &str = "sans-serif";
+
+/// HTML-escapes text.
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+fn num(v: Option<f64>) -> String {
+    match v {
+        Some(x) => format!("{x:.6e}"),
+        None => "—".to_string(),
+    }
+}
+
+fn with_u(v: Option<f64>, u: Option<f64>) -> String {
+    match (v, u) {
+        (Some(v), Some(u)) => format!("{v:.7e} ± {u:.2e}"),
+        (v, _) => num(v),
+    }
+}
+
+/// The page.
+pub fn render(h: &History) -> String {
+    let mut out = String::new();
+    let title = format!("Calibration history of gyro {}", h.serial);
+    let _ = write!(
+        out,
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{t}</title>\
+         <style>body{{font-family:sans-serif;margin:2em;max-width:1000px}}\
+         table{{border-collapse:collapse;font-size:0.85em}}td,th{{border:1px solid #bbb;padding:2px 6px;text-align:right}}\
+         th{{background:#eee}}td.l{{text-align:left}}.warn{{color:#a00;font-weight:bold}}</style></head><body>\
+         <h1>{t}</h1>",
+        t = esc(&title)
+    );
+    let _ = write!(
+        out,
+        "<p>{} complete calibration(s){}.</p>",
+        h.calibrations.len(),
+        if h.include_simulated {
+            ", simulated runs included"
+        } else {
+            "; simulated runs excluded"
+        }
+    );
+    for w in &h.warnings {
+        let _ = write!(out, "<p class=\"warn\">Warning: {}</p>", esc(w));
+    }
+    let r = &h.repeatability;
+    let _ = write!(
+        out,
+        "<h2>Repeatability from calibration to calibration</h2><ul>\
+         <li>scale factor: mean {} V/(°/s), {} ppm (std/mean over {} calibrations)</li>\
+         <li>bias: mean {} °/h, std {} °/h</li></ul>",
+        num(r.scale_factor_mean),
+        r.scale_factor_ppm
+            .map_or("—".to_string(), |v| format!("{v:.2}")),
+        r.n,
+        num(r.bias_dph_mean),
+        num(r.bias_dph),
+    );
+    out.push_str(
+        "<h2>Calibrations</h2><table><tr><th>started (UTC)</th><th>run</th><th>station</th>\
+         <th>plan</th><th>K ± U (V/(°/s))</th><th>bias ± U (°/h)</th><th>nonlinearity (ppm)</th>\
+         <th>asymmetry (ppm)</th><th>verdict</th><th>sim.</th></tr>",
+    );
+    for c in &h.calibrations {
+        let res = c.results.clone().unwrap_or_default();
+        let _ = write!(
+            out,
+            "<tr><td class=\"l\">{}</td><td class=\"l\" title=\"{}\">{}</td><td class=\"l\">{}</td>\
+             <td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td><td>{}</td></tr>",
+            esc(&c.run.started_utc),
+            esc(&c.run.directory),
+            esc(&c.run.id.chars().take(12).collect::<String>()),
+            esc(c.run.station_id.as_deref().unwrap_or("")),
+            esc(&c.run.plan_name),
+            with_u(res.scale_factor, res.u_scale_factor),
+            with_u(res.bias_dph, res.u_bias_dph),
+            num(res.nonlinearity_ppm),
+            num(res.asymmetry_ppm),
+            esc(c.run.verdict.as_deref().unwrap_or("")),
+            if c.run.simulated { "yes" } else { "" },
+        );
+    }
+    out.push_str("</table><h2>Trends</h2>");
+    for t in &h.trends {
+        let _ = write!(out, "<h3>{} ({})</h3>", esc(&t.label), esc(&t.unit));
+        match trend_svg(t) {
+            Ok(svg) => out.push_str(&svg),
+            Err(e) => {
+                let _ = write!(out, "<p>(no plot: {})</p>", esc(&e));
+            }
+        }
+        if let Some(b) = &t.band {
+            let _ = write!(
+                out,
+                "<p>Control band (mean ± 3σ of the {} earlier calibrations): {:.6e} .. {:.6e}{}</p>",
+                b.n,
+                b.low,
+                b.high,
+                if t.latest_outside_band {
+                    " <span class=\"warn\">the latest is outside</span>"
+                } else {
+                    ""
+                }
+            );
+        }
+    }
+    out.push_str("</body></html>\n");
+    out
+}
+
+fn trend_svg(t: &Trend) -> Result<String, String> {
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (WIDTH, HEIGHT)).into_drawing_area();
+        draw(&root, t).map_err(|e| e.to_string())?;
+        root.present().map_err(|e| e.to_string())?;
+    }
+    Ok(svg)
+}
+
+fn draw<DB: DrawingBackend>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    t: &Trend,
+) -> Result<(), Box<dyn std::error::Error + 'static>>
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE)?;
+    let n = t.points.len();
+    let mut ys: Vec<f64> = Vec::new();
+    for p in &t.points {
+        let u = p.expanded_uncertainty.unwrap_or(0.0);
+        ys.push(p.value - u);
+        ys.push(p.value + u);
+    }
+    if let Some(b) = &t.band {
+        ys.push(b.low);
+        ys.push(b.high);
+    }
+    if let Some(l) = &t.limits {
+        ys.extend(l.min);
+        ys.extend(l.max);
+    }
+    let ys: Vec<f64> = ys.into_iter().filter(|v| v.is_finite()).collect();
+    let lo = ys.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = ys.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let pad = if hi > lo {
+        (hi - lo) * 0.08
+    } else {
+        lo.abs().max(1e-12) * 1e-3
+    };
+    let (y0, y1) = (lo - pad, hi + pad);
+    let x1 = n as f64 - 0.5;
+    let dates: Vec<String> = t
+        .points
+        .iter()
+        .map(|p| p.started_utc.chars().take(10).collect())
+        .collect();
+    let mut chart = ChartBuilder::on(root)
+        .margin(10)
+        .x_label_area_size(36)
+        .y_label_area_size(90)
+        .build_cartesian_2d(-0.5..x1, y0..y1)?;
+    chart
+        .configure_mesh()
+        .x_desc("calibration")
+        .y_desc(format!("{} ({})", t.label, t.unit))
+        .x_labels(n.min(10))
+        .x_label_formatter(&|x| {
+            let i = x.round();
+            if (x - i).abs() < 1e-6 && i >= 0.0 {
+                dates.get(i as usize).cloned().unwrap_or_default()
+            } else {
+                String::new()
+            }
+        })
+        .y_label_formatter(&|y| format!("{y:.4e}"))
+        .label_style((FONT, 12))
+        .draw()?;
+    if let Some(b) = &t.band {
+        chart.draw_series(std::iter::once(Rectangle::new(
+            [(-0.5, b.low), (x1, b.high)],
+            RGBColor(120, 170, 230).mix(0.25).filled(),
+        )))?;
+        chart.draw_series(LineSeries::new(
+            vec![(-0.5, b.mean), (x1, b.mean)],
+            RGBColor(60, 110, 200).stroke_width(1),
+        ))?;
+    }
+    if let Some(l) = &t.limits {
+        for v in [l.min, l.max].into_iter().flatten() {
+            chart.draw_series(DashedLineSeries::new(
+                vec![(-0.5, v), (x1, v)],
+                6,
+                4,
+                RED.stroke_width(2),
+            ))?;
+        }
+    }
+    chart.draw_series(t.points.iter().enumerate().filter_map(|(i, p)| {
+        let u = p.expanded_uncertainty?;
+        Some(ErrorBar::new_vertical(
+            i as f64,
+            p.value - u,
+            p.value,
+            p.value + u,
+            BLACK.stroke_width(1),
+            6,
+        ))
+    }))?;
+    chart.draw_series(LineSeries::new(
+        t.points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (i as f64, p.value)),
+        BLACK.mix(0.4).stroke_width(1),
+    ))?;
+    chart.draw_series(t.points.iter().enumerate().map(|(i, p)| {
+        let outside = i + 1 == n && t.latest_outside_band;
+        let color = if outside { RED } else { BLACK };
+        Circle::new((i as f64, p.value), 4, color.filled())
+    }))?;
+    Ok(())
+}

@@ -1,0 +1,55 @@
+//! The calibration catalog: an index of gyrocal's run directories in a database, for listing
+//! runs and following a gyro's calibrations over time.
+//!
+//! The run directories stay the source of truth; the catalog is rebuilt from them at any time
+//! (`gyrocal catalog rebuild ROOT`). Two backends, one interface ([`Catalog`]):
+//!
+//! - **SQLite** (the default): a file in the user's data directory
+//!   (`$XDG_DATA_HOME/gyrocal/catalog.sqlite`), in WAL mode with a busy timeout, so several
+//!   gyrocal processes on one machine read and write it at once.
+//! - **PostgreSQL**: a lab's shared catalog, `postgres://user@host/db`. The password comes
+//!   from `PGPASSWORD` or `~/.pgpass` (libpq's conventions), and is never written to the
+//!   catalog, a log or a message ([`CatalogUrl`] redacts it).
+//!
+//! Which one: [`Catalog::resolve`] (`--catalog URL`, then `GYROCAL_CATALOG`, then the
+//! station file's `catalog` key, then the default file).
+//!
+//! The schema (versioned migrations, one set per backend, compiled in) is documented in
+//! `SCHEMA.md`, included below. A running calibration updates the catalog through
+//! [`CatalogWriter`], which never blocks or fails the run.
+//!
+//! Why sqlx: async like the rest of gyrocal; queries checked at run time (no database
+//! needed to build) with bound parameters; one migration system for both backends; SQLite
+//! compiled in (no system library).
+#![doc = include_str!("../SCHEMA.md")]
+
+mod db;
+mod error;
+mod history;
+pub mod history_html;
+mod record;
+mod url;
+mod writer;
+
+pub use db::{Calibration, Catalog, OpenOptions, RunFilter, RunSummary};
+pub use error::{CatalogError, ErrorKind};
+pub use history::{Band, History, Limits, QUANTITIES, Quantity, Repeatability, Trend, TrendPoint};
+pub use record::{
+    CheckRow, InstrumentRow, KIND_SCALE_FACTOR, Results, RunRecord, RunRow, StepRow, find_run_dirs,
+    host_name, is_run_dir, read_run,
+};
+pub use url::{CATALOG_ENV, CatalogUrl, redact, resolve};
+pub use writer::{CatalogWriter, WriterOptions, WriterStats};
+
+impl Catalog {
+    /// The history of the gyro `serial`: its complete calibrations (simulated ones only when
+    /// `include_simulated`), repeatability, trends and control bands.
+    pub async fn history(
+        &self,
+        serial: &str,
+        include_simulated: bool,
+    ) -> Result<History, CatalogError> {
+        let calibrations = self.calibrations(serial, include_simulated).await?;
+        Ok(History::of(serial, include_simulated, calibrations))
+    }
+}

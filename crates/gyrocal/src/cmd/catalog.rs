@@ -1,0 +1,113 @@
+//! `gyrocal catalog import DIR...` and `gyrocal catalog rebuild ROOT`: fill the calibration
+//! catalog from run directories (the source of truth). Also the catalog opening shared by
+//! `gyrocal runs` and `gyrocal history`.
+
+use std::path::PathBuf;
+
+use clap::{Args, Subcommand};
+use gyrocal_catalog::{Catalog, CatalogError, ErrorKind};
+
+use crate::BadInput;
+
+/// The `--catalog` option of the catalog commands.
+#[derive(Debug, Clone, Args)]
+pub struct CatalogOpt {
+    /// The catalog: `sqlite:PATH` or `postgres://user@host/db` (password from PGPASSWORD or
+    /// ~/.pgpass). Default: $GYROCAL_CATALOG, else $XDG_DATA_HOME/gyrocal/catalog.sqlite.
+    #[arg(long, value_name = "URL")]
+    pub catalog: Option<String>,
+}
+
+/// Arguments of `gyrocal catalog`.
+#[derive(Debug, Args)]
+pub struct CatalogArgs {
+    #[command(subcommand)]
+    command: CatalogCommand,
+}
+
+#[derive(Debug, Subcommand)]
+enum CatalogCommand {
+    /// Add run directories to the catalog (again: a run already there is replaced). A
+    /// directory that is not a run is skipped with a warning.
+    Import {
+        /// Run directories.
+        #[arg(required = true, value_name = "DIR")]
+        dirs: Vec<PathBuf>,
+        #[command(flatten)]
+        catalog: CatalogOpt,
+    },
+    /// Import every run directory under ROOT. On the SQLite catalog the catalog is emptied
+    /// first (it then holds exactly what ROOT holds); a shared PostgreSQL catalog is only
+    /// added to.
+    Rebuild {
+        /// The directory holding the runs (searched recursively).
+        #[arg(value_name = "ROOT")]
+        root: PathBuf,
+        #[command(flatten)]
+        catalog: CatalogOpt,
+    },
+}
+
+/// A catalog error for the user: a bad URL is bad input (exit 2).
+pub fn user_error(e: CatalogError) -> anyhow::Error {
+    if e.kind() == ErrorKind::BadUrl {
+        BadInput(e.to_string()).into()
+    } else {
+        e.into()
+    }
+}
+
+/// A runtime and the open catalog named by `opt`.
+pub fn open(opt: &CatalogOpt) -> anyhow::Result<(tokio::runtime::Runtime, Catalog)> {
+    let url = Catalog::resolve(opt.catalog.as_deref(), None).map_err(user_error)?;
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
+    let catalog = rt.block_on(Catalog::open(&url)).map_err(user_error)?;
+    Ok((rt, catalog))
+}
+
+/// Runs `gyrocal catalog`; the exit code.
+pub fn run(args: &CatalogArgs) -> anyhow::Result<u8> {
+    let (rt, catalog, dirs, clear) = match &args.command {
+        CatalogCommand::Import { dirs, catalog } => {
+            let (rt, catalog) = open(catalog)?;
+            (rt, catalog, dirs.clone(), false)
+        }
+        CatalogCommand::Rebuild { root, catalog } => {
+            if !root.is_dir() {
+                return Err(BadInput(format!("{}: no such directory", root.display())).into());
+            }
+            let (rt, catalog) = open(catalog)?;
+            let clear = catalog.url().is_sqlite();
+            (rt, catalog, gyrocal_catalog::find_run_dirs(root), clear)
+        }
+    };
+    rt.block_on(async {
+        if clear {
+            catalog.clear().await.map_err(user_error)?;
+        }
+        let (mut imported, mut skipped) = (0usize, 0usize);
+        for dir in &dirs {
+            match catalog.import_dir(dir).await {
+                Ok(_) => imported += 1,
+                Err(e) if e.kind() == ErrorKind::NotARun => {
+                    eprintln!("gyrocal: warning: skipped {}: {e}", dir.display());
+                    skipped += 1;
+                }
+                Err(e) => return Err(user_error(e)),
+            }
+        }
+        println!(
+            "{imported} run(s) imported into {}{}",
+            catalog.url(),
+            if skipped > 0 {
+                format!(", {skipped} directory(ies) skipped")
+            } else {
+                String::new()
+            }
+        );
+        catalog.close().await;
+        Ok(0)
+    })
+}

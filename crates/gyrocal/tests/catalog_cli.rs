@@ -1,0 +1,193 @@
+//! The calibration catalog as a user drives it: simulated calibrations by `gyrocal run`,
+//! `gyrocal catalog import`/`rebuild`, `gyrocal runs` and `gyrocal history` on the default
+//! SQLite catalog (in a temporary XDG_DATA_HOME) and, when GYROCAL_TEST_POSTGRES_URL is set,
+//! on PostgreSQL.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a panic is a failed test
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn gyrocal(data_home: &Path) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_gyrocal"));
+    c.env_remove("RUST_LOG")
+        .env_remove("GYROCAL_CATALOG")
+        .env("XDG_DATA_HOME", data_home);
+    c
+}
+
+fn config(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../configs")
+        .join(name)
+}
+
+fn ok(out: &Output) -> String {
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    stdout
+}
+
+fn calibrate(data_home: &Path, dir: &Path, serial: &str) {
+    ok(&gyrocal(data_home)
+        .args(["run", "--simulate", "--dut-serial", serial, "--out"])
+        .arg(dir)
+        .arg(config("quick.toml"))
+        .output()
+        .unwrap());
+}
+
+fn json(out: &Output) -> serde_json::Value {
+    serde_json::from_str(&ok(out)).unwrap()
+}
+
+/// Imports three calibrations and checks what `runs` and `history` say, with `extra` args
+/// (a `--catalog`) on each catalog command.
+/// `tag` makes the serials unique on a shared catalog.
+fn exercise(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
+    let (s1, s2) = (format!("0421{tag}"), format!("0777{tag}"));
+    let runs = root.join("runs");
+    calibrate(data_home, &runs.join("a1"), &s1);
+    calibrate(data_home, &runs.join("a2"), &s1);
+    calibrate(data_home, &runs.join("b1"), &s2);
+    let not_a_run = root.join("empty");
+    std::fs::create_dir_all(&not_a_run).unwrap();
+
+    let out = gyrocal(data_home)
+        .args(["catalog", "import"])
+        .args(extra)
+        .arg(runs.join("a1"))
+        .arg(runs.join("a2"))
+        .arg(&not_a_run)
+        .output()
+        .unwrap();
+    let stdout = ok(&out);
+    assert!(stdout.contains("2 run(s) imported"), "{stdout}");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("skipped") && stderr.contains("empty"),
+        "{stderr}"
+    );
+    // rebuild finds all three (and importing again duplicates nothing)
+    ok(&gyrocal(data_home)
+        .args(["catalog", "rebuild"])
+        .args(extra)
+        .arg(&runs)
+        .output()
+        .unwrap());
+    ok(&gyrocal(data_home)
+        .args(["catalog", "import"])
+        .args(extra)
+        .arg(runs.join("b1"))
+        .output()
+        .unwrap());
+
+    let list = json(
+        &gyrocal(data_home)
+            .args(["runs", "--json"])
+            .args(extra)
+            .output()
+            .unwrap(),
+    );
+    let list = list.as_array().unwrap();
+    let ours: Vec<&serde_json::Value> = list
+        .iter()
+        .filter(|r| {
+            r["directory"]
+                .as_str()
+                .unwrap()
+                .starts_with(std::fs::canonicalize(&runs).unwrap().to_str().unwrap())
+        })
+        .collect();
+    assert_eq!(ours.len(), 3, "{list:?}");
+    for r in &ours {
+        assert_eq!(r["status"], "complete");
+        assert_eq!(r["simulated"], true);
+        let k = r["results"]["scale_factor"].as_f64().unwrap();
+        assert!(k > 0.0, "{r}");
+    }
+    // newest first
+    assert!(ours[0]["started_utc"].as_str() >= ours[1]["started_utc"].as_str());
+
+    let only = json(
+        &gyrocal(data_home)
+            .args(["runs", "--json", "--serial", &s2])
+            .args(extra)
+            .output()
+            .unwrap(),
+    );
+    assert_eq!(only.as_array().unwrap().len(), 1);
+
+    let h = json(
+        &gyrocal(data_home)
+            .args(["history", &s1, "--json", "--include-simulated"])
+            .args(extra)
+            .output()
+            .unwrap(),
+    );
+    let cals = h["calibrations"].as_array().unwrap();
+    assert_eq!(cals.len(), 2, "{h}");
+    for c in cals {
+        assert_eq!(c["dut_serial"], s1.as_str());
+        assert!(c["results"]["scale_factor"].as_f64().unwrap() > 0.0);
+        assert!(c["results"]["bias_dph"].is_number());
+    }
+    assert!(h["repeatability"]["scale_factor_ppm"].is_number(), "{h}");
+    // simulated runs are left out unless asked for
+    let h = json(
+        &gyrocal(data_home)
+            .args(["history", &s1, "--json"])
+            .args(extra)
+            .output()
+            .unwrap(),
+    );
+    assert_eq!(h["calibrations"].as_array().unwrap().len(), 0);
+    // the HTML page with its plots
+    let html = root.join("h.html");
+    ok(&gyrocal(data_home)
+        .args(["history", &s1, "--include-simulated", "-o"])
+        .arg(&html)
+        .args(extra)
+        .output()
+        .unwrap());
+    let page = std::fs::read_to_string(&html).unwrap();
+    assert!(page.contains("<svg") && page.contains(&s1));
+}
+
+#[test]
+fn runs_and_history_on_the_default_sqlite_catalog() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data_home = tmp.path().join("data");
+    exercise(&data_home, tmp.path(), &[], "");
+    assert!(data_home.join("gyrocal/catalog.sqlite").is_file());
+    // the table
+    let out = ok(&gyrocal(&data_home).args(["runs"]).output().unwrap());
+    assert!(out.contains("0421") && out.contains("0777"), "{out}");
+}
+
+#[test]
+fn runs_and_history_on_postgres() {
+    let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
+        eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL test skipped");
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let data_home = tmp.path().join("data");
+    let tag = format!("-{}", std::process::id());
+    exercise(&data_home, tmp.path(), &["--catalog", &url], &tag);
+    assert!(!data_home.join("gyrocal/catalog.sqlite").exists());
+}
+
+#[test]
+fn a_bad_catalog_url_is_bad_input_and_hides_the_password() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = gyrocal(tmp.path())
+        .args(["runs", "--catalog", "mysql://lab:topsecret@db/x"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("topsecret"), "{stderr}");
+    assert!(stderr.contains("lab:***@db"), "{stderr}");
+}
