@@ -134,6 +134,11 @@ impl CatalogWriter {
         self.shared.notify.notify_one();
     }
 
+    /// The catalog's URL, its password redacted (for messages).
+    pub fn url(&self) -> &str {
+        &self.url
+    }
+
     /// A run directory was created (its manifest exists).
     pub fn register(&self, run_dir: &Path) {
         self.note(run_dir, Event::Register);

@@ -191,3 +191,68 @@ fn a_bad_catalog_url_is_bad_input_and_hides_the_password() {
     assert!(!stderr.contains("topsecret"), "{stderr}");
     assert!(stderr.contains("lab:***@db"), "{stderr}");
 }
+
+#[test]
+fn a_run_indexes_itself_and_a_dead_catalog_never_stops_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    let url = format!("sqlite:{}", tmp.path().join("lab.sqlite").display());
+    let dir = tmp.path().join("r1");
+    let doc = json(
+        &gyrocal(&data)
+            .args(["run", "--simulate", "--json", "--dut-serial", "0421"])
+            .args(["--catalog", &url, "--out"])
+            .arg(&dir)
+            .arg(config("quick.toml"))
+            .output()
+            .unwrap(),
+    );
+    assert_eq!(doc["catalog"]["updated"], true, "{doc:#}");
+    // in the catalog without an import, with its final state and results
+    let list = json(
+        &gyrocal(&data)
+            .args(["runs", "--json", "--catalog", &url])
+            .output()
+            .unwrap(),
+    );
+    let list = list.as_array().unwrap();
+    assert_eq!(list.len(), 1, "{list:?}");
+    assert_eq!(list[0]["status"], "complete");
+    assert_eq!(list[0]["dut_serial"], "0421");
+    assert!(list[0]["results"]["scale_factor"].as_f64().unwrap() > 0.0);
+
+    // a catalog nobody answers on: the run completes all the same, and says so
+    let dead = "postgres://gyrocal@127.0.0.1:1/nowhere";
+    let dir2 = tmp.path().join("r2");
+    let t0 = std::time::Instant::now();
+    let out = gyrocal(&data)
+        .args(["run", "--simulate", "--json", "--dut-serial", "0421"])
+        .args(["--catalog", dead, "--out"])
+        .arg(&dir2)
+        .arg(config("quick.toml"))
+        .output()
+        .unwrap();
+    let took = t0.elapsed();
+    let doc = json(&out);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(doc["status"], "complete");
+    assert_eq!(doc["catalog"]["updated"], false);
+    assert!(stderr.contains("gyrocal catalog import"), "{stderr}");
+    assert!(
+        took < std::time::Duration::from_secs(20),
+        "bounded wait at the end: {took:?}"
+    );
+    // an import brings the catalog up to date from the run directory
+    ok(&gyrocal(&data)
+        .args(["catalog", "import", "--catalog", &url])
+        .arg(&dir2)
+        .output()
+        .unwrap());
+    let list = json(
+        &gyrocal(&data)
+            .args(["runs", "--json", "--catalog", &url, "--serial", "0421"])
+            .output()
+            .unwrap(),
+    );
+    assert_eq!(list.as_array().unwrap().len(), 2, "{list}");
+}

@@ -54,6 +54,7 @@ fn the_run_display_fits_80_columns_names_the_plan_step_and_counts_time() {
     let pty = nix::pty::openpty(Some(&size), None).unwrap();
     let slave: OwnedFd = pty.slave;
     let mut child = Command::new(env!("CARGO_BIN_EXE_gyrocal"))
+        .env("GYROCAL_CATALOG", "off")
         .arg("run")
         .arg(config("quick.toml"))
         .args(["--simulate", "--out"])

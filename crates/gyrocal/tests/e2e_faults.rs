@@ -158,6 +158,7 @@ impl Sim {
     fn start_with(plan: &Path, faults: &[&str], time_scale: &str, extra: &[&str]) -> Sim {
         let mut cmd = Command::new(BIN);
         cmd.env_remove("RUST_LOG")
+            .env("GYROCAL_CATALOG", "off")
             .arg("sim")
             .arg("--config")
             .arg(plan)
@@ -228,7 +229,7 @@ impl Run {
     /// (`--out DIR` or `--resume DIR`), with `RUST_LOG` set to `log` when given.
     fn start(plan: &Path, sim: &Sim, args: &[&str], log: Option<&str>) -> Run {
         let mut cmd = Command::new(BIN);
-        cmd.env_remove("RUST_LOG");
+        cmd.env_remove("RUST_LOG").env("GYROCAL_CATALOG", "off");
         if let Some(l) = log {
             cmd.env("RUST_LOG", l);
         }
@@ -1229,6 +1230,7 @@ fn e2e_meter_over_gpib_through_a_prologix_controller_completes() {
     let mut cmd = Command::new(BIN);
     let out = cmd
         .env_remove("RUST_LOG")
+        .env("GYROCAL_CATALOG", "off")
         .arg("run")
         .arg(&plan)
         .args(["--dmm-port", &dmm_port, "--table-port", sim.table()])
@@ -1319,6 +1321,7 @@ fn e2e_check_probe_identifies_both_instruments_and_a_silent_meter_leaves_no_run_
     let sim = Sim::start(&plan, &[]);
     let out = Command::new(BIN)
         .env_remove("RUST_LOG")
+        .env("GYROCAL_CATALOG", "off")
         .arg("check")
         .arg(&plan)
         .args([
@@ -1348,6 +1351,7 @@ fn e2e_check_probe_identifies_both_instruments_and_a_silent_meter_leaves_no_run_
     // the same as one JSON document
     let out = Command::new(BIN)
         .env_remove("RUST_LOG")
+        .env("GYROCAL_CATALOG", "off")
         .arg("check")
         .arg(&plan)
         .args([
@@ -1378,6 +1382,7 @@ fn e2e_check_probe_identifies_both_instruments_and_a_silent_meter_leaves_no_run_
     let dir = tmp.path().join("run");
     let out = Command::new(BIN)
         .env_remove("RUST_LOG")
+        .env("GYROCAL_CATALOG", "off")
         .arg("run")
         .arg(&plan)
         .args([

@@ -10,7 +10,7 @@ use std::process::{Command, Output};
 
 fn gyrocal() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_gyrocal"));
-    c.env_remove("RUST_LOG");
+    c.env_remove("RUST_LOG").env("GYROCAL_CATALOG", "off");
     c
 }
 
@@ -334,7 +334,7 @@ fn verify_catches_an_edited_csv() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("run");
     let plan = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/quick.toml");
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_gyrocal"))
+    let out = gyrocal()
         .arg("run")
         .arg(&plan)
         .args(["--simulate", "--no-report", "-o"])
@@ -346,13 +346,7 @@ fn verify_catches_an_edited_csv() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let verify = || {
-        std::process::Command::new(env!("CARGO_BIN_EXE_gyrocal"))
-            .arg("verify")
-            .arg(&dir)
-            .output()
-            .unwrap()
-    };
+    let verify = || gyrocal().arg("verify").arg(&dir).output().unwrap();
     let ok = verify();
     let text = String::from_utf8_lossy(&ok.stdout).into_owned();
     assert_eq!(ok.status.code(), Some(0), "{text}");
@@ -380,8 +374,7 @@ fn the_gyro_under_test_is_recorded_and_a_resume_refuses_another() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("run");
     let plan = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/quick.toml");
-    let bin = env!("CARGO_BIN_EXE_gyrocal");
-    let out = std::process::Command::new(bin)
+    let out = gyrocal()
         .arg("run")
         .arg(&plan)
         .args(["--simulate", "--sim-fault", "table:trip@demand3", "-o"])
@@ -404,7 +397,7 @@ fn the_gyro_under_test_is_recorded_and_a_resume_refuses_another() {
     assert_eq!(m["context"]["ambient_c"], 22.5, "{m}");
 
     // another gyro cannot continue this calibration; nothing is changed
-    let out = std::process::Command::new(bin)
+    let out = gyrocal()
         .args(["run", "--simulate", "--resume"])
         .arg(&dir)
         .args(["--dut-serial", "HRG-0999"])
@@ -417,7 +410,7 @@ fn the_gyro_under_test_is_recorded_and_a_resume_refuses_another() {
         "{err}"
     );
     // the same gyro (or none named) continues it, and the report names it first
-    let out = std::process::Command::new(bin)
+    let out = gyrocal()
         .args(["run", "--simulate", "--resume"])
         .arg(&dir)
         .args(["--dut-serial", "HRG-0421"])

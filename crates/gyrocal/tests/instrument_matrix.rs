@@ -77,7 +77,8 @@ fn run(
         .arg(&plan)
         .args(["--simulate", "--no-report", "-o"])
         .arg(&dir)
-        .env_remove("RUST_LOG");
+        .env_remove("RUST_LOG")
+        .env("GYROCAL_CATALOG", "off");
     if let Some(f) = fault {
         cmd.args(["--sim-fault", f]);
     }

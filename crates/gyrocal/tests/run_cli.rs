@@ -12,7 +12,7 @@ use nix::unistd::Pid;
 
 fn gyrocal() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_gyrocal"));
-    c.env_remove("RUST_LOG");
+    c.env_remove("RUST_LOG").env("GYROCAL_CATALOG", "off");
     c
 }
 

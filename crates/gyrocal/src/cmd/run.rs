@@ -85,6 +85,13 @@ pub struct RunArgs {
     /// Start even when an instrument's calibration is overdue; recorded as a deviation.
     #[arg(long)]
     pub allow_expired: bool,
+    /// The catalog that indexes the run: `sqlite:PATH` or `postgres://user@host/db`, or
+    /// `off` (default: $GYROCAL_CATALOG, else the station file's `catalog`, else a SQLite
+    /// file in the user's data directory). The run directory stays the source of truth: a
+    /// catalog that fails never stops or slows the run (`gyrocal catalog import DIR`
+    /// catches up).
+    #[arg(long, value_name = "URL")]
+    pub catalog: Option<String>,
     /// Print exactly one JSON document on stdout at the end (status, exit code, where the
     /// table was left, steps, timing, the fit's headline, the run directory, the resume
     /// command); the human text goes to stderr.
@@ -197,10 +204,12 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
     }
     // the station before any instrument is touched: an overdue calibration refuses the run
     let (station, deviations) = station_for_run(args, plan.simulation().seed)?;
+    let catalog = catalog_url(args, station.as_ref())?;
     let records = Records {
         dut,
         station,
         deviations,
+        catalog,
     };
     // what `check` warns about, said again before the instruments move
     for w in crate::cmd::check::model_warnings(&plan, &plan_path) {
@@ -252,6 +261,53 @@ struct Records {
     station: Option<gyrocal_run::station::Station>,
     /// (kind, text) of each deviation to record when the run directory is open.
     deviations: PendingDeviations,
+    /// Where the run is indexed (`None`: not at all).
+    catalog: Option<gyrocal_catalog::CatalogUrl>,
+}
+
+/// The catalog writer of this process's run and the run directory it indexes: set when the
+/// run directory is open, told of every step by the progress view, closed at the end. One
+/// run per process, so one slot.
+static CATALOG: std::sync::Mutex<Option<(gyrocal_catalog::CatalogWriter, PathBuf)>> =
+    std::sync::Mutex::new(None);
+
+/// Tells the catalog writer (if any) about the run; never blocks on the catalog.
+fn catalog_note(f: impl FnOnce(&gyrocal_catalog::CatalogWriter, &Path)) {
+    if let Ok(slot) = CATALOG.lock()
+        && let Some((w, dir)) = slot.as_ref()
+    {
+        f(w, dir);
+    }
+}
+
+/// The catalog for this run: `--catalog`, `$GYROCAL_CATALOG`, the station's `catalog`, the
+/// default SQLite file; `off` (or `none`) in the flag or the variable turns it off. A bad
+/// `--catalog` is bad input; any other catalog trouble is a warning (the run goes on).
+fn catalog_url(
+    args: &RunArgs,
+    station: Option<&gyrocal_run::station::Station>,
+) -> anyhow::Result<Option<gyrocal_catalog::CatalogUrl>> {
+    let off = |s: &str| matches!(s.trim(), "off" | "none");
+    if let Some(flag) = &args.catalog {
+        if off(flag) {
+            return Ok(None);
+        }
+        return gyrocal_catalog::CatalogUrl::parse(flag)
+            .map(Some)
+            .map_err(|e| BadInput(format!("--catalog: {e}")).into());
+    }
+    if std::env::var(gyrocal_catalog::CATALOG_ENV).is_ok_and(|v| off(&v)) {
+        return Ok(None);
+    }
+    match gyrocal_catalog::resolve(None, station.and_then(|s| s.catalog.as_deref())) {
+        Ok(url) => Ok(Some(url)),
+        Err(e) => {
+            say!(
+                "gyrocal: warning: catalog: {e}: the run is not indexed (`gyrocal catalog import DIR` later)"
+            );
+            Ok(None)
+        }
+    }
 }
 
 /// The gyro under test: the plan's `[dut]`, overridden by `--dut-serial`/`--dut-model`. A new
@@ -343,6 +399,14 @@ fn open_run_dir(
     for (kind, text) in &records.deviations {
         run.add_deviation(kind, text)
             .map_err(|e| anyhow::anyhow!("{}: recording a deviation: {e}", dir.display()))?;
+    }
+    if let Some(url) = records.catalog {
+        tracing::info!(catalog = %url, "indexing the run");
+        let writer = gyrocal_catalog::CatalogWriter::spawn(url);
+        writer.register(&dir);
+        if let Ok(mut slot) = CATALOG.lock() {
+            *slot = Some((writer, dir.clone()));
+        }
     }
     Ok((dir, run))
 }
@@ -786,7 +850,12 @@ async fn show_progress(mut rx: mpsc::UnboundedReceiver<Event>) {
     loop {
         tokio::select! {
             e = rx.recv() => match e {
-                Some(e) => view.event(e),
+                Some(e) => {
+                    if matches!(e, Event::StepDone(_)) {
+                        catalog_note(|w, dir| w.step_done(dir));
+                    }
+                    view.event(e)
+                }
                 None => break,
             },
             _ = tick.tick(), if tty => view.redraw(),
@@ -1082,9 +1151,32 @@ fn finish(
         Status::Complete => None,
         _ => resume,
     });
-    let code = finish_human(args, dir, summary, &mut run, signal, &human, doc)?;
+    let code = finish_human(args, dir, summary, &mut run, signal, &human, doc);
+    catalog_close(dir, doc);
+    let code = code?;
     doc["exit_code"] = serde_json::json!(code);
     Ok(code)
+}
+
+/// How long the end of a run waits for the catalog to take the run's last state.
+const CATALOG_CLOSE_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// Gives the catalog the run's final state and waits (bounded) for it; says so when the
+/// catalog could not be updated: the run directory has everything, an import catches up.
+fn catalog_close(dir: &Path, doc: &mut serde_json::Value) {
+    let Some((writer, _)) = CATALOG.lock().ok().and_then(|mut slot| slot.take()) else {
+        return;
+    };
+    writer.finished(dir);
+    let url = writer.url().to_string();
+    let updated = writer.close(CATALOG_CLOSE_TIMEOUT);
+    doc["catalog"] = serde_json::json!({ "url": url, "updated": updated });
+    if !updated {
+        say!(
+            "gyrocal: warning: the catalog {url} could not be updated (see run.log); the run directory is complete: `gyrocal catalog import {}` brings the catalog up to date",
+            dir.display()
+        );
+    }
 }
 
 /// The human side of [`finish`]: the closing lines, the fit and the report.

@@ -11,7 +11,8 @@ pub fn gyrocal() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_gyrocal"));
     c.env_remove("RUST_LOG")
         .env_remove("GYROCAL_STATION")
-        .env_remove("GYROCAL_CATALOG")
+        // no catalog unless a test names one (never the user's own)
+        .env("GYROCAL_CATALOG", "off")
         // no default station file from the user's config directory
         .env(
             "XDG_CONFIG_HOME",
