@@ -511,6 +511,7 @@ fn decide(rule: Rule, quantity: Quantity, l: &Limits, m: Measured) -> (Verdict, 
             Some(format!("not measured: the value is not finite ({v})")),
         );
     }
+    let vs = short(v, 7);
     match rule {
         Rule::Simple => {
             if let Some(min) = l.min
@@ -518,7 +519,7 @@ fn decide(rule: Rule, quantity: Quantity, l: &Limits, m: Measured) -> (Verdict, 
             {
                 return (
                     Verdict::Fail,
-                    Some(format!("{v} {unit} is below min {min}")),
+                    Some(format!("{vs} {unit} is below min {min}")),
                 );
             }
             if let Some(max) = l.max
@@ -526,7 +527,7 @@ fn decide(rule: Rule, quantity: Quantity, l: &Limits, m: Measured) -> (Verdict, 
             {
                 return (
                     Verdict::Fail,
-                    Some(format!("{v} {unit} is above max {max}")),
+                    Some(format!("{vs} {unit} is above max {max}")),
                 );
             }
             if let Some(mmin) = l.marginal_min
@@ -534,7 +535,7 @@ fn decide(rule: Rule, quantity: Quantity, l: &Limits, m: Measured) -> (Verdict, 
             {
                 return (
                     Verdict::Marginal,
-                    Some(format!("{v} {unit} is below marginal_min {mmin}")),
+                    Some(format!("{vs} {unit} is below marginal_min {mmin}")),
                 );
             }
             if let Some(mmax) = l.marginal_max
@@ -542,7 +543,7 @@ fn decide(rule: Rule, quantity: Quantity, l: &Limits, m: Measured) -> (Verdict, 
             {
                 return (
                     Verdict::Marginal,
-                    Some(format!("{v} {unit} is above marginal_max {mmax}")),
+                    Some(format!("{vs} {unit} is above marginal_max {mmax}")),
                 );
             }
             (Verdict::Pass, None)
@@ -570,7 +571,7 @@ fn decide(rule: Rule, quantity: Quantity, l: &Limits, m: Measured) -> (Verdict, 
                 }
             };
             let (lo, hi) = (v - u, v + u);
-            let interval = format!("{v} ± {u} {unit}");
+            let interval = format!("{vs} ± {} {unit}", short(u, 3));
             if let Some(max) = l.max
                 && lo > max
             {
@@ -626,6 +627,15 @@ fn decide(rule: Rule, quantity: Quantity, l: &Limits, m: Measured) -> (Verdict, 
             (Verdict::Pass, None)
         }
     }
+}
+
+/// `v` rounded to `digits` significant digits, written in the shortest form that reads back
+/// as that rounded value (`931.3412`, not `931.3412055009304`): for the reasons people read.
+fn short(v: f64, digits: usize) -> String {
+    let rounded: f64 = format!("{v:.*e}", digits.saturating_sub(1))
+        .parse()
+        .unwrap_or(v);
+    format!("{rounded}")
 }
 
 #[cfg(test)]

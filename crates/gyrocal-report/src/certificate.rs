@@ -486,11 +486,12 @@ pub(crate) fn acceptance_table(html: &mut String, acceptance: Option<&Acceptance
             Some(v) => value_and_u(v, c.expanded_uncertainty),
             None => ("not measured".to_string(), "—".to_string()),
         };
+        // limits as the specification wrote them (shortest form: 0.35, not 0.3500000)
         let range = |lo: Option<f64>, hi: Option<f64>| match (lo, hi) {
             (None, None) => "—".to_string(),
-            (Some(a), None) => format!("≥ {}", significant(a, 7)),
-            (None, Some(b)) => format!("≤ {}", significant(b, 7)),
-            (Some(a), Some(b)) => format!("{} to {}", significant(a, 7), significant(b, 7)),
+            (Some(a), None) => format!("≥ {a}"),
+            (None, Some(b)) => format!("≤ {b}"),
+            (Some(a), Some(b)) => format!("{a} to {b}"),
         };
         let reason = c.reason.as_deref().map_or_else(String::new, |r| {
             format!("<br><span class=\"note\">{}</span>", esc(r))
@@ -539,7 +540,7 @@ pub(crate) fn results(html: &mut String, a: &Analysis) {
         value("scale_factor", Some(m.scale_factor)),
         expanded("scale_factor"),
         "V/(°/s)",
-        "least-squares line D = K·ω + K0".into(),
+        "line D = K·ω + K0".into(),
     );
     row(
         "bias_v",
@@ -547,7 +548,7 @@ pub(crate) fn results(html: &mut String, a: &Analysis) {
         value("bias_v", Some(m.bias_volts)),
         expanded("bias_v"),
         "V",
-        "intercept of the same line".into(),
+        "intercept of that line".into(),
     );
     row(
         "bias_dph",
@@ -555,7 +556,7 @@ pub(crate) fn results(html: &mut String, a: &Analysis) {
         value("bias_dph", Some(m.bias_dph)),
         expanded("bias_dph"),
         "°/h",
-        "K0/K × 3600, includes the vertical Earth rate".into(),
+        "K0/K, incl. the Earth rate".into(),
     );
     row(
         "k_pos",
@@ -563,7 +564,7 @@ pub(crate) fn results(html: &mut String, a: &Analysis) {
         value("k_pos", m.scale_factor_positive),
         expanded("k_pos"),
         "V/(°/s)",
-        "line of the ω ≥ 0 points (GJB)".into(),
+        "ω ≥ 0 line (GJB)".into(),
     );
     row(
         "k_neg",
@@ -571,7 +572,7 @@ pub(crate) fn results(html: &mut String, a: &Analysis) {
         value("k_neg", m.scale_factor_negative),
         expanded("k_neg"),
         "V/(°/s)",
-        "line of the ω ≤ 0 points (GJB)".into(),
+        "ω ≤ 0 line (GJB)".into(),
     );
     let metric_u = |key: &str| {
         unc.and_then(|u| u.metrics.entries.iter().find(|e| e.metric == key))
@@ -583,7 +584,7 @@ pub(crate) fn results(html: &mut String, a: &Analysis) {
         Some(m.nonlinearity_ppm),
         metric_u("nonlinearity_ppm"),
         "ppm",
-        "max |deviation from the line| / max |output|".into(),
+        "max |residual| / max |output|".into(),
     );
     match &m.asymmetry_common_k2 {
         Some(c) => row(
@@ -592,7 +593,7 @@ pub(crate) fn results(html: &mut String, a: &Analysis) {
             Some(c.asymmetry_ppm),
             Some(2.0 * c.asymmetry_std_error_ppm),
             "ppm",
-            "(K+ − K−)/mean, from one fit K0 + K+·ω⁺ + K−·ω⁻ + K2·ω²: not biased by the even-order term".into(),
+            "one fit with K2: unbiased".into(),
         ),
         None => row(
             "asymmetry_common_k2",
@@ -609,7 +610,7 @@ pub(crate) fn results(html: &mut String, a: &Analysis) {
         m.asymmetry_ppm,
         metric_u("asymmetry_ppm"),
         "ppm",
-        "|K+ − K−|/mean of two separate lines: absorbs any K2·ω² term (see Summary)".into(),
+        "two lines: absorbs K2·ω²".into(),
     );
     let quad = a.fit(Method::LeastSquares, Model::Quadratic);
     row(
@@ -618,7 +619,7 @@ pub(crate) fn results(html: &mut String, a: &Analysis) {
         quad.and_then(|f| f.coefficients.k2),
         quad.and_then(|f| f.std_errors.k2).map(|s| 2.0 * s),
         "V/(°/s)²",
-        "quadratic least-squares fit; U = 2 × its standard error".into(),
+        "quadratic fit; U = 2σ".into(),
     );
     if let Some(r) = m.repeatability_ppm {
         row(

@@ -42,6 +42,8 @@ code { font-size: 0.9em; word-break: break-all; }
   th { background: #fff; }
   #conditions, #uncertainty, #fit { break-before: page; }
   .verdict { background: #fff; border-width: 3px; }
+  table.cert td, table.cert th, table.results td { padding: 0.12rem 0.45rem; }
+  h1 { margin-top: 0; }
   .signatures { break-inside: avoid; }
 }
 table.cert th { width: 11rem; background: #f7f7f7; }
@@ -56,6 +58,10 @@ table.signatures td { height: 2.2rem; min-width: 12rem; }
 td.v-fail { color: #b00020; }
 td.v-pass { color: #1b6e20; }
 caption { text-align: left; font-weight: 600; padding: 0.2rem 0; }
+table.results td.note { font-size: 0.85em; }
+table.budget { font-size: 0.85em; width: 100%; }
+table.budget td:first-child { min-width: 16rem; }
+#instruments-table td { overflow-wrap: anywhere; }
 .end { text-align: center; margin-top: 2rem; font-weight: 600; letter-spacing: 0.05em; }
 "#;
 

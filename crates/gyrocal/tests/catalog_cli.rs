@@ -29,9 +29,18 @@ fn ok(out: &Output) -> String {
     stdout
 }
 
+/// A simulated calibration that is not indexed by the run itself (the tests import it).
 fn calibrate(data_home: &Path, dir: &Path, serial: &str) {
     ok(&gyrocal(data_home)
-        .args(["run", "--simulate", "--dut-serial", serial, "--out"])
+        .args([
+            "run",
+            "--simulate",
+            "--catalog",
+            "off",
+            "--dut-serial",
+            serial,
+            "--out",
+        ])
         .arg(dir)
         .arg(config("quick.toml"))
         .output()
@@ -177,6 +186,27 @@ fn runs_and_history_on_postgres() {
     let tag = format!("-{}", std::process::id());
     exercise(&data_home, tmp.path(), &["--catalog", &url], &tag);
     assert!(!data_home.join("gyrocal/catalog.sqlite").exists());
+    // a run indexes itself in the lab's PostgreSQL as it goes
+    let serial = format!("0999{tag}");
+    let doc = json(
+        &gyrocal(&data_home)
+            .args(["run", "--simulate", "--json", "--dut-serial", &serial])
+            .args(["--catalog", &url, "--out"])
+            .arg(tmp.path().join("live"))
+            .arg(config("quick.toml"))
+            .output()
+            .unwrap(),
+    );
+    assert_eq!(doc["catalog"]["updated"], true, "{doc:#}");
+    let list = json(
+        &gyrocal(&data_home)
+            .args(["runs", "--json", "--catalog", &url, "--serial", &serial])
+            .output()
+            .unwrap(),
+    );
+    let list = list.as_array().unwrap();
+    assert_eq!(list.len(), 1, "{list:?}");
+    assert_eq!(list[0]["status"], "complete");
 }
 
 #[test]
