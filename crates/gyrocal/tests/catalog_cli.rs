@@ -286,3 +286,202 @@ fn a_run_indexes_itself_and_a_dead_catalog_never_stops_it() {
     );
     assert_eq!(list.as_array().unwrap().len(), 2, "{list}");
 }
+
+/// Starts `n` simulated calibrations at once, each indexing itself in `url`; waits for all.
+fn concurrent_runs(data_home: &Path, root: &Path, url: &str, serials: &[String]) {
+    let children: Vec<_> = serials
+        .iter()
+        .map(|s| {
+            gyrocal(data_home)
+                .args(["run", "--simulate", "--json", "--dut-serial", s])
+                .args(["--catalog", url, "--out"])
+                .arg(root.join(s))
+                .arg(config("quick.toml"))
+                .stdout(std::process::Stdio::piped())
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .unwrap()
+        })
+        .collect();
+    for c in children {
+        let doc = json(&c.wait_with_output().unwrap());
+        assert_eq!(doc["catalog"]["updated"], true, "{doc:#}");
+    }
+    for s in serials {
+        let list = json(
+            &gyrocal(data_home)
+                .args(["runs", "--json", "--catalog", url, "--serial", s])
+                .output()
+                .unwrap(),
+        );
+        let list = list.as_array().unwrap();
+        assert_eq!(
+            list.len(),
+            1,
+            "one row for {s}, none lost or doubled: {list:?}"
+        );
+        assert_eq!(list[0]["status"], "complete");
+    }
+}
+
+#[test]
+fn two_gyrocal_processes_index_one_sqlite_catalog() {
+    let tmp = tempfile::tempdir().unwrap();
+    let url = format!("sqlite:{}", tmp.path().join("shared.sqlite").display());
+    let serials: Vec<String> = (1..=2).map(|i| format!("SQ-{i}")).collect();
+    concurrent_runs(&tmp.path().join("data"), tmp.path(), &url, &serials);
+    let all = json(
+        &gyrocal(&tmp.path().join("data"))
+            .args(["runs", "--json", "--catalog", &url])
+            .output()
+            .unwrap(),
+    );
+    assert_eq!(all.as_array().unwrap().len(), 2, "{all}");
+}
+
+#[test]
+fn four_gyrocal_processes_index_one_postgres_catalog() {
+    let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
+        eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL test skipped");
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let serials: Vec<String> = (1..=4)
+        .map(|i| format!("PG-{i}-{}", std::process::id()))
+        .collect();
+    concurrent_runs(&tmp.path().join("data"), tmp.path(), &url, &serials);
+}
+
+/// A TCP forwarder standing for the catalog server's network path: `kill` cuts every
+/// connection and stops listening, as a stopped server would.
+struct Proxy {
+    port: u16,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    conns: std::sync::Arc<std::sync::Mutex<Vec<std::net::TcpStream>>>,
+}
+
+impl Proxy {
+    fn to(target: String) -> Proxy {
+        use std::sync::atomic::Ordering;
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        listener.set_nonblocking(true).unwrap();
+        let port = listener.local_addr().unwrap().port();
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let conns = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let (s, c) = (stop.clone(), conns.clone());
+        std::thread::spawn(move || {
+            while !s.load(Ordering::SeqCst) {
+                match listener.accept() {
+                    Ok((client, _)) => {
+                        client.set_nonblocking(false).unwrap();
+                        let Ok(server) = std::net::TcpStream::connect(&target) else {
+                            continue;
+                        };
+                        c.lock().unwrap().push(client.try_clone().unwrap());
+                        c.lock().unwrap().push(server.try_clone().unwrap());
+                        for (mut from, mut to) in [
+                            (client.try_clone().unwrap(), server.try_clone().unwrap()),
+                            (server, client),
+                        ] {
+                            std::thread::spawn(move || {
+                                let _ = std::io::copy(&mut from, &mut to);
+                                let _ = to.shutdown(std::net::Shutdown::Both);
+                            });
+                        }
+                    }
+                    Err(_) => std::thread::sleep(std::time::Duration::from_millis(5)),
+                }
+            }
+            // dropping the listener: new connections are refused
+        });
+        Proxy { port, stop, conns }
+    }
+
+    fn kill(&self) {
+        self.stop.store(true, std::sync::atomic::Ordering::SeqCst);
+        for c in self.conns.lock().unwrap().drain(..) {
+            let _ = c.shutdown(std::net::Shutdown::Both);
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
+#[test]
+fn a_catalog_killed_during_a_run_lets_it_complete_and_an_import_catches_up() {
+    let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
+        eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL test skipped");
+        return;
+    };
+    // postgres://user@HOST:PORT/db -> the same through the proxy
+    let (head, rest) = url.split_once('@').unwrap();
+    let (hostport, db) = rest.split_once('/').unwrap();
+    let proxy = Proxy::to(hostport.to_string());
+    let via = format!("{head}@127.0.0.1:{}/{db}", proxy.port);
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    let serial = format!("KILL-{}", std::process::id());
+    let dir = tmp.path().join("run");
+    // paced, so the run lasts a few seconds of wall time
+    let child = gyrocal(&data)
+        .args(["run", "--simulate", "--sim-time-scale", "40", "--json"])
+        .args(["--dut-serial", &serial, "--catalog", &via, "--out"])
+        .arg(&dir)
+        .arg(config("quick.toml"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // wait until the catalog has the run (registered and updated as it goes)
+    let t0 = std::time::Instant::now();
+    let seen_running = loop {
+        let list = json(
+            &gyrocal(&data)
+                .args(["runs", "--json", "--catalog", &url, "--serial", &serial])
+                .output()
+                .unwrap(),
+        );
+        if let Some(r) = list.as_array().and_then(|l| l.first()) {
+            break r["status"].clone();
+        }
+        assert!(
+            t0.elapsed() < std::time::Duration::from_secs(30),
+            "never indexed"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    };
+    assert_eq!(seen_running, "running");
+    proxy.kill();
+    let out = child.wait_with_output().unwrap();
+    let doc = json(&out);
+    assert_eq!(
+        doc["status"], "complete",
+        "the run completes without its catalog"
+    );
+    assert_eq!(doc["catalog"]["updated"], false, "{doc:#}");
+    let list = json(
+        &gyrocal(&data)
+            .args(["runs", "--json", "--catalog", &url, "--serial", &serial])
+            .output()
+            .unwrap(),
+    );
+    assert_eq!(
+        list[0]["status"], "running",
+        "the catalog missed the end: {list}"
+    );
+    // the run directory is the source of truth: an import brings the row up to date
+    ok(&gyrocal(&data)
+        .args(["catalog", "import", "--catalog", &url])
+        .arg(&dir)
+        .output()
+        .unwrap());
+    let list = json(
+        &gyrocal(&data)
+            .args(["runs", "--json", "--catalog", &url, "--serial", &serial])
+            .output()
+            .unwrap(),
+    );
+    let list = list.as_array().unwrap();
+    assert_eq!(list.len(), 1, "{list:?}");
+    assert_eq!(list[0]["status"], "complete");
+    assert!(list[0]["results"]["scale_factor"].as_f64().unwrap() > 0.0);
+}

@@ -59,7 +59,17 @@ pub fn user_error(e: CatalogError) -> anyhow::Error {
 
 /// A runtime and the open catalog named by `opt`.
 pub fn open(opt: &CatalogOpt) -> anyhow::Result<(tokio::runtime::Runtime, Catalog)> {
-    let url = Catalog::resolve(opt.catalog.as_deref(), None).map_err(user_error)?;
+    // the station file's `catalog` (from $GYROCAL_STATION or the default file) comes after
+    // --catalog and $GYROCAL_CATALOG; a station file that cannot be read is said, not fatal
+    let station_catalog = match gyrocal_run::station::Station::resolve(None) {
+        Ok(found) => found.and_then(|(_, s)| s.catalog),
+        Err(e) => {
+            eprintln!("gyrocal: warning: station: {e} (its catalog setting is not used)");
+            None
+        }
+    };
+    let url =
+        Catalog::resolve(opt.catalog.as_deref(), station_catalog.as_deref()).map_err(user_error)?;
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()?;
