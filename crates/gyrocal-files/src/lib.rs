@@ -26,7 +26,7 @@ mod time;
 
 pub use plan::{
     Acquire, Acquisition, DmmModel, DmmSettings, Framing, Location, Plan, PlanDoc, PlanDut,
-    PlanError, PlanErrorKind, Port, Simulation, Step, TableDialect, TableSettings,
+    PlanError, PlanErrorKind, PlanKind, Port, Simulation, Step, TableDialect, TableSettings,
     acceptance_from_toml_str, load_acceptance,
 };
 pub use rundir::{

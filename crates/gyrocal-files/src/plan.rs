@@ -366,6 +366,7 @@ struct RawLimits {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawPlan {
+    kind: Option<S<String>>,
     name: Option<S<String>>,
     rates_dps: S<Vec<S<f64>>>,
     samples_per_rate: S<RawInt>,
@@ -558,6 +559,7 @@ const SCHEMA: &[SectionSchema] = &[
         "plan",
         true,
         &[
+            ("kind", Kind::Text, false),
             ("name", Kind::Text, false),
             ("rates_dps", Kind::Numbers, true),
             ("samples_per_rate", Kind::Int, true),
@@ -1090,10 +1092,47 @@ impl From<PlanDut> for crate::rundir::Dut {
     }
 }
 
+fn default_kind() -> String {
+    PlanKind::ScaleFactor.as_str().to_string()
+}
+
+fn is_scale_factor(kind: &str) -> bool {
+    kind == PlanKind::ScaleFactor.as_str()
+}
+
+/// What a plan measures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PlanKind {
+    /// A sweep of rates for the scale factor (the paper's method).
+    #[default]
+    ScaleFactor,
+    /// A static record at zero rate (IEEE 952 §6.6 drift test) in durable segments: every
+    /// rate is 0, `samples_per_rate` readings make one segment (one step) and `repeat`
+    /// segments the record; analysed by Allan deviation instead of a line.
+    Drift,
+}
+
+impl PlanKind {
+    /// All kinds.
+    pub const ALL: [PlanKind; 2] = [PlanKind::ScaleFactor, PlanKind::Drift];
+
+    /// `scale_factor` or `drift`, as written in a plan.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            PlanKind::ScaleFactor => "scale_factor",
+            PlanKind::Drift => "drift",
+        }
+    }
+}
+
 /// `[plan]` as parsed.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PlanSectionDoc {
+    /// What the plan measures: `scale_factor` (absent in documents of plans before drift
+    /// plans existed, and never written for one, so their hashes stay) or `drift`.
+    #[serde(default = "default_kind", skip_serializing_if = "is_scale_factor")]
+    pub kind: String,
     /// Free-text name.
     pub name: String,
     /// Rates in the order applied, °/s.
@@ -1438,6 +1477,7 @@ impl Default for Simulation {
 /// [`Plan::from_doc`], so its invariants hold; serialises (serde) as its [`PlanDoc`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct Plan {
+    kind: PlanKind,
     name: String,
     rates_dps: Vec<f64>,
     samples_per_rate: u32,
@@ -1576,6 +1616,7 @@ impl Plan {
     pub fn to_doc(&self) -> PlanDoc {
         PlanDoc {
             plan: PlanSectionDoc {
+                kind: self.kind.as_str().to_string(),
                 name: self.name.clone(),
                 rates_dps: self.rates_dps.clone(),
                 samples_per_rate: self.samples_per_rate.into(),
@@ -1664,6 +1705,11 @@ impl Plan {
     pub fn name(&self) -> &str {
         &self.name
     }
+    /// What the plan measures.
+    pub fn kind(&self) -> PlanKind {
+        self.kind
+    }
+
     /// Rates of one pass, in the order applied, °/s.
     pub fn rates_dps(&self) -> &[f64] {
         &self.rates_dps
@@ -1838,6 +1884,7 @@ fn raw_to_doc(raw: RawFile, sp: &mut Spans) -> Result<PlanDoc, (&'static str, St
     let t = raw.table;
     let m = raw.dmm;
     let plan = PlanSectionDoc {
+        kind: sp.opt("plan.kind", p.kind, default_kind()),
         name: sp.opt("plan.name", p.name, String::new()),
         rates_dps,
         samples_per_rate: sp.int("plan.samples_per_rate", Some(p.samples_per_rate), 0)?,
@@ -2165,10 +2212,32 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
         }
         rates.push(if r == 0.0 { 0.0 } else { r }); // -0 is 0
     }
+    let kind = PlanKind::ALL
+        .into_iter()
+        .find(|k| k.as_str() == p.kind.trim())
+        .ok_or_else(|| {
+            cx.err(
+                "plan.kind",
+                format!(
+                    "unknown kind {:?}: write \"scale_factor\" (a sweep of rates) or \"drift\" (a static record at zero rate)",
+                    p.kind
+                ),
+            )
+        })?;
     let mut distinct = rates.clone();
     distinct.sort_by(f64::total_cmp);
     distinct.dedup();
-    if distinct.len() < 2 {
+    if kind == PlanKind::Drift {
+        if distinct != [0.0] {
+            return Err(cx.err(
+                "plan.rates_dps",
+                format!(
+                    "a drift plan records at rest: write rates_dps = [0] (got {:?})",
+                    p.rates_dps
+                ),
+            ));
+        }
+    } else if distinct.len() < 2 {
         return Err(cx.err(
             "plan.rates_dps",
             format!(
@@ -2287,6 +2356,7 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
     }
 
     Ok(Plan {
+        kind,
         name: p.name,
         rates_dps: rates,
         samples_per_rate,

@@ -1328,6 +1328,19 @@ impl RunDir {
         );
         // the manifest is rewritten in this version's format (steps.csv was upgraded above)
         manifest.format_version = FORMAT_VERSION;
+        // The run clock goes on from the last time on disk: the manifest's `elapsed_s`, or
+        // the end of the last finished step when the process died after fsyncing that step
+        // but before rewriting the manifest (else the resumed readings' t_s would run back
+        // into the kept ones, and a drift record would overlap itself).
+        let last_step_end = records.iter().map(|r| r.t_end_s).fold(0.0_f64, f64::max);
+        if last_step_end > manifest.elapsed_s {
+            tracing::info!(
+                manifest_elapsed_s = manifest.elapsed_s,
+                last_step_end_s = last_step_end,
+                "the run clock resumes from the last finished step"
+            );
+            manifest.elapsed_s = last_step_end;
+        }
         let clock = ClockAnchor::now(manifest.elapsed_s);
         let Some(lock) = lock.take() else {
             return Err(RunError::Protocol {

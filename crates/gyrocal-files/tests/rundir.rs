@@ -726,3 +726,22 @@ fn a_manifest_fit_this_version_cannot_read_leaves_the_run_readable() {
     assert!(data.manifest.legacy_fit.is_none());
     assert_eq!(data.steps.len(), 1);
 }
+
+#[test]
+fn the_run_clock_resumes_after_the_last_finished_step_even_when_the_manifest_lags() {
+    // A kill between fsyncing a step's row and rewriting the manifest leaves the manifest's
+    // elapsed_s behind the step's end: the resumed clock must not run back into kept data.
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let mut rd = RunDir::create(&dir, &plan(), meta()).unwrap();
+    run_step(&mut rd, 0, true);
+    run_step(&mut rd, 1, true);
+    rd.set_elapsed(5.0).unwrap(); // the manifest as if written before step 1 ended (10.3 s)
+    drop(rd);
+    let rd = RunDir::open_for_resume(&dir, &plan()).unwrap();
+    assert!(
+        rd.manifest().elapsed_s >= 10.3,
+        "resumed clock {} s is before the end of the last kept step (10.3 s)",
+        rd.manifest().elapsed_s
+    );
+}

@@ -15,9 +15,9 @@ pub mod sequencer;
 
 pub use gyrocal_files::{
     Acquire, Acquisition, DmmSettings, Dut, FitRunError, FitSummary, Framing, Instruments,
-    Location, Manifest, Plan, PlanDoc, PlanError, Port, Resume, Retry, RunContext, RunData, RunDir,
-    RunError, RunMeta, Sample, SampleRow, Simulation, Status, Step, StepRecord, TableDialect,
-    TableSettings, Timing, dataset_from_steps, fit_run, load, load_fit, load_samples,
+    Location, Manifest, Plan, PlanDoc, PlanError, PlanKind, Port, Resume, Retry, RunContext,
+    RunData, RunDir, RunError, RunMeta, Sample, SampleRow, Simulation, Status, Step, StepRecord,
+    TableDialect, TableSettings, Timing, dataset_from_steps, fit_run, load, load_fit, load_samples,
     parse_rfc3339_utc, plan, rfc3339_utc, rundir, station,
 };
 pub use sequencer::{

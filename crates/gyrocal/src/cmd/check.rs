@@ -139,6 +139,9 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
 
 /// One line per default model the plan's schedule cannot support: the fit will skip it.
 pub fn model_warnings(plan: &Plan, path: &std::path::Path) -> Vec<String> {
+    if plan.kind() == gyrocal_run::PlanKind::Drift {
+        return Vec::new(); // a drift record is analysed by Allan deviation, not fitted
+    }
     let rates: Vec<f64> = plan.schedule().iter().map(|s| s.rate_dps).collect();
     let mut distinct = rates.clone();
     distinct.sort_by(f64::total_cmp);

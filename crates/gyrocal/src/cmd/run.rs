@@ -1158,6 +1158,23 @@ fn finish(
     Ok(code)
 }
 
+/// The end of a complete drift run: the record is analysed by Allan deviation, not fitted.
+fn finish_drift(
+    args: &RunArgs,
+    dir: &Path,
+    run: &mut RunDir,
+    human: &dyn Fn(String),
+    doc: &mut serde_json::Value,
+) -> anyhow::Result<u8> {
+    let _ = (args, run, doc);
+    human(format!(
+        "drift record complete: analyse it with `gyrocal allan {}` (--scale-factor K for °/h)",
+        dir.display()
+    ));
+    human(format!("run directory: {}", dir.display()));
+    Ok(0)
+}
+
 /// How long the end of a run waits for the catalog to take the run's last state.
 const CATALOG_CLOSE_TIMEOUT: Duration = Duration::from_secs(5);
 
@@ -1220,6 +1237,9 @@ fn finish_human(
             );
             return Ok(1);
         }
+    }
+    if run.manifest().plan.kind() == gyrocal_run::PlanKind::Drift {
+        return finish_drift(args, dir, run, human, doc);
     }
     let analysis = fit_run(run, &gyrocal_fit::Options::default())
         .with_context(|| format!("fitting {}", dir.display()))?;

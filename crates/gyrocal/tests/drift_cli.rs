@@ -1,0 +1,161 @@
+//! Drift plans (`[plan] kind = "drift"`) as a lab runs them: a static record at rest in
+//! durable segments, killed and resumed, ending with the table at rest.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a panic is a failed test
+
+mod common;
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use common::{config, gyrocal, json};
+
+/// configs/drift.toml, shortened to `segments` segments of `readings` readings.
+fn short_drift(dir: &Path, segments: u32, readings: u32) -> std::path::PathBuf {
+    let text = std::fs::read_to_string(config("drift.toml"))
+        .unwrap()
+        .replace(
+            "samples_per_rate = 3000",
+            &format!("samples_per_rate = {readings}"),
+        )
+        .replace("repeat = 167", &format!("repeat = {segments}"));
+    let path = dir.join("drift.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn segments_done(dir: &Path) -> usize {
+    std::fs::read_to_string(dir.join("steps.csv"))
+        .map(|s| s.lines().skip(1).filter(|l| !l.trim().is_empty()).count())
+        .unwrap_or(0)
+}
+
+/// `t_s` of every reading, in file order.
+fn times(dir: &Path) -> Vec<f64> {
+    let mut r = csv::Reader::from_path(dir.join("samples.csv")).unwrap();
+    let i = r
+        .headers()
+        .unwrap()
+        .iter()
+        .position(|c| c == "t_s")
+        .unwrap();
+    r.records()
+        .map(|rec| rec.unwrap()[i].parse().unwrap())
+        .collect()
+}
+
+#[test]
+fn a_drift_plan_is_a_record_at_rest_not_a_sweep() {
+    let tmp = tempfile::tempdir().unwrap();
+    // every rate must be 0
+    let bad = tmp.path().join("bad.toml");
+    std::fs::write(
+        &bad,
+        std::fs::read_to_string(config("drift.toml"))
+            .unwrap()
+            .replace("rates_dps = [0]", "rates_dps = [0, 5]"),
+    )
+    .unwrap();
+    let o = gyrocal().arg("check").arg(&bad).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("rates_dps") && err.contains("drift"), "{err}");
+    // an unknown kind is named with the two there are
+    std::fs::write(
+        &bad,
+        std::fs::read_to_string(config("drift.toml"))
+            .unwrap()
+            .replace("kind = \"drift\"", "kind = \"drfit\""),
+    )
+    .unwrap();
+    let o = gyrocal().arg("check").arg(&bad).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("plan.kind") || err.contains("kind"), "{err}");
+    assert!(
+        err.contains("scale_factor") && err.contains("drift"),
+        "{err}"
+    );
+    // the full 3-hour plan is estimated at about 3 h
+    let o = gyrocal()
+        .args(["check", "--json"])
+        .arg(config("drift.toml"))
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let s = doc["estimate"]["total_s"]
+        .as_f64()
+        .or_else(|| doc["estimated_s"].as_f64())
+        .or_else(|| doc["duration_s"].as_f64());
+    if let Some(s) = s {
+        assert!((3.0 * 3600.0..3.3 * 3600.0).contains(&s), "{s} s");
+    }
+}
+
+#[test]
+fn a_killed_drift_record_resumes_with_a_gap_and_the_table_at_rest() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = short_drift(tmp.path(), 16, 300);
+    let out = tmp.path().join("run");
+    // paced so the kill lands part-way (16 × 300 readings ≈ 100 s of run clock)
+    let mut child = gyrocal()
+        .arg("run")
+        .arg(&plan)
+        .args(["--simulate", "--sim-time-scale", "100", "--out"])
+        .arg(&out)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let t0 = Instant::now();
+    while segments_done(&out) < 4 {
+        assert!(t0.elapsed() < Duration::from_secs(60), "no progress");
+        if child.try_wait().unwrap().is_some() {
+            panic!("the run ended before it was killed");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.kill().unwrap(); // SIGKILL: no chance to clean up
+    child.wait().unwrap();
+    let kept = segments_done(&out);
+    assert!((4..16).contains(&kept), "{kept} segments kept");
+
+    let o = gyrocal()
+        .args(["run", "--simulate", "--json", "--resume"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{stderr}");
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(doc["status"], "complete");
+    assert_eq!(doc["table"]["at_rest"], true, "{doc:#}");
+    let m = json(&out, "manifest.json");
+    assert_eq!(m["resumes"].as_array().unwrap().len(), 1);
+    // every finished segment is there once; the interruption is a gap in t_s
+    assert_eq!(segments_done(&out), 16);
+    let t = times(&out);
+    assert_eq!(t.len(), 16 * 300, "no reading lost or doubled");
+    let dts: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    let mut sorted = dts.clone();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[sorted.len() / 2];
+    let back: Vec<(usize, f64, f64)> = t
+        .windows(2)
+        .enumerate()
+        .filter(|(_, w)| w[1] <= w[0])
+        .map(|(i, w)| (i, w[0], w[1]))
+        .collect();
+    assert!(
+        back.is_empty(),
+        "time runs forward across the resume: {back:?}"
+    );
+    let gaps = dts.iter().filter(|d| **d > 10.0 * median).count();
+    assert!(
+        gaps >= 1,
+        "the resume shows as a gap (median interval {median} s)"
+    );
+    // no scale-factor fit for a record at rest
+    assert!(!out.join("fit.json").exists());
+}
