@@ -13,6 +13,7 @@
 //! | `bias_walk` | `gyro.bias_random_walk` |
 //! | `latitude_deg` | `gyro.latitude_deg` (vertical Earth rate on) |
 //! | `rate_noise_dps`, `ripple_dps` | `table.rate_noise_std`, `table.ripple_amplitude` |
+//! | `arw_deg_rt_h`, `bias_instability_dph`, `rrw_dph_rt_h`, `quantization_arcsec`, `warmup_dph`, `warmup_tau_s` | the same `gyro` fields (rate noise in °/h through the scale factor; see [`crate::gyro`]) |
 //!
 //! The gyro's own white noise is switched off, so `noise_v` alone sets the reading scatter
 //! and a plan reads as what it means.
@@ -41,6 +42,12 @@ pub fn bench_config(plan: &Plan) -> BenchConfig {
     b.gyro.bias_random_walk = s.bias_walk;
     b.gyro.latitude_deg = s.latitude_deg;
     b.gyro.earth_rate = true;
+    b.gyro.arw_deg_rt_h = s.arw_deg_rt_h;
+    b.gyro.bias_instability_dph = s.bias_instability_dph;
+    b.gyro.rrw_dph_rt_h = s.rrw_dph_rt_h;
+    b.gyro.quantization_arcsec = s.quantization_arcsec;
+    b.gyro.warmup_dph = s.warmup_dph;
+    b.gyro.warmup_tau_s = s.warmup_tau_s;
     // the plan's dialect is the wire the simulated table speaks (the Aerosmith wire with the
     // defaults the driver assumes)
     b.table_wire = match plan.table().dialect {

@@ -416,6 +416,12 @@ struct RawSimulation {
     latitude_deg: Option<S<f64>>,
     rate_noise_dps: Option<S<f64>>,
     ripple_dps: Option<S<f64>>,
+    arw_deg_rt_h: Option<S<f64>>,
+    bias_instability_dph: Option<S<f64>>,
+    rrw_dph_rt_h: Option<S<f64>>,
+    quantization_arcsec: Option<S<f64>>,
+    warmup_dph: Option<S<f64>>,
+    warmup_tau_s: Option<S<f64>>,
 }
 
 /// An integer key as written. Any TOML value is accepted at this stage, so that whatever was
@@ -612,6 +618,12 @@ const SCHEMA: &[SectionSchema] = &[
             ("latitude_deg", Kind::Number, false),
             ("rate_noise_dps", Kind::Number, false),
             ("ripple_dps", Kind::Number, false),
+            ("arw_deg_rt_h", Kind::Number, false),
+            ("bias_instability_dph", Kind::Number, false),
+            ("rrw_dph_rt_h", Kind::Number, false),
+            ("quantization_arcsec", Kind::Number, false),
+            ("warmup_dph", Kind::Number, false),
+            ("warmup_tau_s", Kind::Number, false),
         ],
     ),
     (
@@ -1453,6 +1465,51 @@ pub struct Simulation {
     pub rate_noise_dps: f64,
     /// Table once-per-revolution rate ripple amplitude, °/s (default 0.0005, ≥ 0).
     pub ripple_dps: f64,
+    /// The gyro's angle random walk N (white rate noise), °/√h: an Allan deviation of the
+    /// rate reads 60·N °/h at τ = 1 s (default 0 = off, 0 to 100). The rate-noise keys are
+    /// left out of the serialised form (and so of the hash) when at their default, so an
+    /// older plan's hash is what it was before they existed.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub arw_deg_rt_h: f64,
+    /// The gyro's bias instability B (flicker rate noise), °/h: the Allan deviation's floor is
+    /// 0.664·B (default 0 = off, 0 to 1000).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub bias_instability_dph: f64,
+    /// The gyro's rate random walk K, °/h/√h: the Allan deviation reads K/60 °/h at τ = 3 s
+    /// (default 0 = off, 0 to 1000).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub rrw_dph_rt_h: f64,
+    /// The step of the gyro's quantized output angle, arcsec (IEEE 952's Q = step/√12;
+    /// default 0 = off, 0 to 3600).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub quantization_arcsec: f64,
+    /// Warm-up transient: the gyro's bias starts off by this much and decays with
+    /// `warmup_tau_s`, °/h (default 0 = off, 0 to 36000).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub warmup_dph: f64,
+    /// Time constant of the warm-up transient, s (default 600, > 0 and at most 86400).
+    #[serde(
+        default = "default_warmup_tau_s",
+        skip_serializing_if = "is_default_warmup_tau_s"
+    )]
+    pub warmup_tau_s: f64,
+}
+
+/// `[simulation] warmup_tau_s` when the plan does not say, s.
+const DEFAULT_WARMUP_TAU_S: f64 = 600.0;
+
+fn default_warmup_tau_s() -> f64 {
+    DEFAULT_WARMUP_TAU_S
+}
+
+#[allow(clippy::trivially_copy_pass_by_ref)] // serde's skip_serializing_if passes a &f64
+fn is_default_warmup_tau_s(v: &f64) -> bool {
+    *v == DEFAULT_WARMUP_TAU_S
+}
+
+#[allow(clippy::trivially_copy_pass_by_ref)] // serde's skip_serializing_if passes a &f64
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 impl Default for Simulation {
@@ -1469,6 +1526,12 @@ impl Default for Simulation {
             latitude_deg: 0.0,
             rate_noise_dps: 0.0002,
             ripple_dps: 0.0005,
+            arw_deg_rt_h: 0.0,
+            bias_instability_dph: 0.0,
+            rrw_dph_rt_h: 0.0,
+            quantization_arcsec: 0.0,
+            warmup_dph: 0.0,
+            warmup_tau_s: DEFAULT_WARMUP_TAU_S,
         }
     }
 }
@@ -1939,6 +2002,20 @@ fn raw_to_doc(raw: RawFile, sp: &mut Spans) -> Result<PlanDoc, (&'static str, St
                 d.rate_noise_dps,
             ),
             ripple_dps: sp.opt("simulation.ripple_dps", s.ripple_dps, d.ripple_dps),
+            arw_deg_rt_h: sp.opt("simulation.arw_deg_rt_h", s.arw_deg_rt_h, d.arw_deg_rt_h),
+            bias_instability_dph: sp.opt(
+                "simulation.bias_instability_dph",
+                s.bias_instability_dph,
+                d.bias_instability_dph,
+            ),
+            rrw_dph_rt_h: sp.opt("simulation.rrw_dph_rt_h", s.rrw_dph_rt_h, d.rrw_dph_rt_h),
+            quantization_arcsec: sp.opt(
+                "simulation.quantization_arcsec",
+                s.quantization_arcsec,
+                d.quantization_arcsec,
+            ),
+            warmup_dph: sp.opt("simulation.warmup_dph", s.warmup_dph, d.warmup_dph),
+            warmup_tau_s: sp.opt("simulation.warmup_tau_s", s.warmup_tau_s, d.warmup_tau_s),
         },
     };
     let dut = raw.dut.map(|d| PlanDut {
@@ -2334,6 +2411,36 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
         return Err(cx.err(
             "simulation.latitude_deg",
             format!("must be within ±90 (got {lat})"),
+        ));
+    }
+    // the gyro's rate-noise terms: finite, ≥ 0 (0 = off), below a bound no gyro comes near
+    for (key, v, max, unit) in [
+        ("simulation.arw_deg_rt_h", s.arw_deg_rt_h, 100.0, "°/√h"),
+        (
+            "simulation.bias_instability_dph",
+            s.bias_instability_dph,
+            1000.0,
+            "°/h",
+        ),
+        ("simulation.rrw_dph_rt_h", s.rrw_dph_rt_h, 1000.0, "°/h/√h"),
+        (
+            "simulation.quantization_arcsec",
+            s.quantization_arcsec,
+            3600.0,
+            "arcsec",
+        ),
+        ("simulation.warmup_dph", s.warmup_dph, 36000.0, "°/h"),
+    ] {
+        let v = cx.finite(key, v)?;
+        if !(0.0..=max).contains(&v) {
+            return Err(cx.err(key, format!("must be from 0 to {max} {unit} (got {v})")));
+        }
+    }
+    let tau = cx.finite("simulation.warmup_tau_s", s.warmup_tau_s)?;
+    if !(tau > 0.0 && tau <= 86400.0) {
+        return Err(cx.err(
+            "simulation.warmup_tau_s",
+            format!("must be > 0 and at most 86400 s (got {tau})"),
         ));
     }
 
