@@ -104,7 +104,8 @@ pub struct AllanOptions {
     pub estimator: Estimator,
     /// The τ set (default octave).
     pub taus: TauSet,
-    /// Sample interval, s; required without a time column, else it overrides the median.
+    /// Sample interval, s; required without a time column, else it replaces the median interval
+    /// (the time column still decides the gaps).
     pub tau0_s: Option<f64>,
     /// The value column (default: `volts`, `value` or `rate_dph`).
     pub column: Option<String>,
@@ -578,7 +579,7 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
         let line = rec.position().map_or(0, csv::Position::line);
         let v = number(&file, line, &cols.value_name, rec.get(cols.value))?;
         let t = match &cols.time {
-            Some((ti, tname)) if opts.tau0_s.is_none() => number(&file, line, tname, rec.get(*ti))?,
+            Some((ti, tname)) => number(&file, line, tname, rec.get(*ti))?,
             _ => values.len() as f64 * tau0,
         };
         if let Some(ri) = rate_col
@@ -732,11 +733,7 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
         input: path.to_path_buf(),
         file,
         value_column: cols.value_name,
-        time_column: if opts.tau0_s.is_none() {
-            cols.time.map(|t| t.1)
-        } else {
-            None
-        },
+        time_column: cols.time.map(|t| t.1),
         unit,
         scale_factor,
         rows,
