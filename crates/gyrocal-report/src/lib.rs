@@ -32,6 +32,7 @@
 
 #![deny(missing_docs)]
 
+pub mod allan;
 mod certificate;
 mod html;
 mod input;
@@ -89,6 +90,17 @@ pub enum ReportError {
         /// The path given.
         path: PathBuf,
     },
+    /// A data file for an Allan analysis is missing, garbled or unusable (names the line when one
+    /// is at fault).
+    #[error("{}{}: {message}", path.display(), line.map(|l| format!(": line {l}")).unwrap_or_default())]
+    Data {
+        /// The file (or the path given).
+        path: PathBuf,
+        /// 1-based line, when one line is at fault.
+        line: Option<u64>,
+        /// What is wrong.
+        message: String,
+    },
     /// No input was given.
     #[error("nothing to report: give at least one run directory or steps CSV")]
     NoInput,
@@ -112,6 +124,7 @@ impl ReportError {
             | ReportError::FitDocument { .. }
             | ReportError::NotFound { .. }
             | ReportError::NotAFile { .. }
+            | ReportError::Data { .. }
             | ReportError::NoInput => true,
             ReportError::Io { action, .. } => *action == "read",
             ReportError::Plot { .. } => false,
@@ -236,4 +249,31 @@ pub fn write_run_report(run_dir: &Path) -> Result<PathBuf, ReportError> {
     report.write(&path)?;
     tracing::info!(path = %path.display(), plots = report.svgs.len(), "report written");
     Ok(path)
+}
+
+/// File name of the Allan analysis document in a run directory.
+pub const ALLAN_JSON: &str = "allan.json";
+/// File name of the Allan page in a run directory.
+pub const ALLAN_HTML: &str = "allan.html";
+
+/// The call for the end of a drift run: analyses `run_dir` ([`allan::analyse_input`]) and writes
+/// `run_dir/allan.json` (the [`allan::AllanDocument`], as `gyrocal allan --json` prints it) and
+/// `run_dir/allan.html` ([`allan::render_allan`]), each atomically. Returns the document and the
+/// paths written (JSON first).
+pub fn write_run_allan(
+    run_dir: &Path,
+    opts: &allan::AllanOptions,
+) -> Result<(allan::AllanDocument, Vec<PathBuf>), ReportError> {
+    let _span = tracing::info_span!("allan", dir = %run_dir.display()).entered();
+    let doc = allan::analyse_input(run_dir, opts)?;
+    let json = serde_json::to_string_pretty(&doc).map_err(|e| ReportError::Plot {
+        name: ALLAN_JSON.into(),
+        message: e.to_string(),
+    })?;
+    let html = allan::render_allan(&doc)?;
+    let (jp, hp) = (run_dir.join(ALLAN_JSON), run_dir.join(ALLAN_HTML));
+    write_atomic(&jp, json.as_bytes())?;
+    write_atomic(&hp, html.as_bytes())?;
+    tracing::info!(json = %jp.display(), html = %hp.display(), "allan analysis written");
+    Ok((doc, vec![jp, hp]))
 }

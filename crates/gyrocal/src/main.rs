@@ -46,6 +46,9 @@ enum Command {
     History(cmd::history::HistoryArgs),
     /// Fill the calibration catalog from run directories (import, rebuild).
     Catalog(cmd::catalog::CatalogArgs),
+    /// Allan deviation, noise terms, bias stability and warm-up of a drift record (run
+    /// directory or CSV).
+    Allan(Box<cmd::allan::AllanArgs>),
     /// Print the shell completion script for SHELL (bash, zsh, fish, elvish, powershell).
     Completions(cmd::completions::CompletionsArgs),
     /// Print the man page (roff), or write one page per subcommand into a directory.
@@ -102,6 +105,7 @@ fn main() -> ExitCode {
         Command::Runs(args) => cmd::runs::run(&args),
         Command::History(args) => cmd::history::run(&args),
         Command::Catalog(args) => cmd::catalog::run(&args),
+        Command::Allan(args) => cmd::allan::run(&args),
         Command::Completions(args) => cmd::completions::completions(&args).map(|()| 0),
         Command::Man(args) => cmd::completions::man(&args).map(|()| 0),
     };

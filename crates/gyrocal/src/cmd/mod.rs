@@ -1,5 +1,6 @@
 //! One module per subcommand.
 
+pub mod allan;
 pub mod catalog;
 pub mod check;
 pub mod completions;
