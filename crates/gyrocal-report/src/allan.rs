@@ -111,7 +111,18 @@ pub struct AllanOptions {
     pub column: Option<String>,
     /// The warm-up criterion.
     pub warmup: WarmupOptions,
+    /// Gaps up to this long, s, are dead time, not breaks: the readings on both sides are
+    /// analysed as one record (the dead time, reported, slightly biases σ at τ near the
+    /// segment length for non-white noise). `None`: [`DRIFT_SEGMENT_JOIN_S`] for a drift run
+    /// directory (its segments are separated by the table's at-rate check and the meter's
+    /// re-arming), no joining otherwise.
+    pub join_gaps_below_s: Option<f64>,
 }
+
+/// How long a gap between a drift run's segments may be and still be joined as dead time,
+/// s: the at-rate stability window, the settle and the meter's re-arming between segments
+/// take a few seconds; a longer gap is a real interruption and splits the record.
+pub const DRIFT_SEGMENT_JOIN_S: f64 = 10.0;
 
 /// The scale factor used and where it came from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -456,6 +467,14 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
     } else {
         path.to_path_buf()
     };
+    let join_below = opts.join_gaps_below_s.or_else(|| {
+        let drift = is_run
+            && gyrocal_files::load(path)
+                .is_ok_and(|r| r.manifest.plan.kind() == gyrocal_files::PlanKind::Drift);
+        drift.then_some(DRIFT_SEGMENT_JOIN_S)
+    });
+    let mut joined_gaps = 0usize;
+    let mut dead_time_s = 0.0_f64;
     if let Some(k) = opts.scale_factor
         && (!k.is_finite() || k == 0.0)
     {
@@ -603,7 +622,13 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
                     ));
                 }
                 if dt > GAP_FACTOR * tau0 {
-                    true
+                    if join_below.is_some_and(|j| dt <= j) {
+                        joined_gaps += 1;
+                        dead_time_s += dt - tau0;
+                        false
+                    } else {
+                        true
+                    }
                 } else {
                     if (dt - tau0).abs() > IRREGULAR_FRACTION * tau0 {
                         irregular += 1;
@@ -633,6 +658,14 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
     drop(rdr);
     if values.is_empty() {
         return Err(data_err(&file, None, "no samples (only a header?)"));
+    }
+    if joined_gaps > 0 {
+        notes.push(format!(
+            "{joined_gaps} gap(s) of at most {} s joined as dead time ({} s in all, {:.2} % of the record): the readings on both sides are analysed as one record",
+            fmt_g(join_below.unwrap_or(0.0)),
+            fmt_g(dead_time_s),
+            100.0 * dead_time_s / (values.len() as f64 * tau0 + dead_time_s).max(f64::MIN_POSITIVE)
+        ));
     }
     if overloads > 0 {
         notes.push(format!(

@@ -154,3 +154,53 @@ fn a_killed_drift_record_resumes_with_a_gap_and_the_table_at_rest() {
     // no scale-factor fit for a record at rest
     assert!(!out.join("fit.json").exists());
 }
+
+#[test]
+fn a_three_hour_simulated_drift_run_survives_a_kill_and_its_allan_analysis_finds_the_gyro() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("run");
+    // the whole 3-hour plan in virtual time, killed part-way at full speed
+    let mut child = gyrocal()
+        .arg("run")
+        .arg(config("drift.toml"))
+        .args(["--simulate", "--out"])
+        .arg(&out)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let t0 = Instant::now();
+    while segments_done(&out) < 40 {
+        assert!(t0.elapsed() < Duration::from_secs(120), "no progress");
+        if child.try_wait().unwrap().is_some() {
+            panic!("the run ended before it was killed");
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(segments_done(&out) < 167, "killed part-way");
+    let o = gyrocal()
+        .args(["run", "--simulate", "--json", "--resume"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{stderr}");
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(doc["status"], "complete");
+    assert_eq!(doc["table"]["at_rest"], true);
+    assert!(t0.elapsed() < Duration::from_secs(90), "seconds, not hours");
+    // the run wrote its Allan analysis; the record is analysed whole (segments joined)
+    assert!(out.join("allan.html").is_file());
+    let a = json(&out, "allan.json");
+    assert_eq!(a["unit"], "deg/h", "{}", a["unit"]);
+    let analysed = a["analysed"]["samples"].as_u64().unwrap();
+    assert!(analysed > 400_000, "{analysed} samples analysed of 501000");
+    // configs/drift.toml's gyro: ARW 0.02 °/√h, bias instability 1 °/h
+    let nt = &a["noise_terms"];
+    let arw = nt["angle_random_walk"]["value"]["value"].as_f64().unwrap();
+    assert!((arw - 0.02).abs() < 0.1 * 0.02, "ARW {arw} °/√h, set 0.02");
+    let b = nt["bias_instability"]["value"]["value"].as_f64().unwrap();
+    assert!((b - 1.0).abs() < 0.2, "bias instability {b} °/h, set 1");
+}

@@ -136,6 +136,10 @@ pub struct AllanArgs {
     /// The warm-up ends here at the latest, s.
     #[arg(long, value_name = "S", value_parser = non_negative)]
     pub warmup_max: Option<f64>,
+    /// Join gaps up to S seconds as dead time instead of splitting the record there (default
+    /// for a drift run directory: 10 s, the pause between its segments; else 0).
+    #[arg(long, value_name = "S", value_parser = non_negative)]
+    pub join_gaps_below: Option<f64>,
 }
 
 /// Input problems exit with 2, others with 1.
@@ -160,6 +164,7 @@ pub fn run(args: &AllanArgs) -> anyhow::Result<u8> {
             tolerance: args.warmup_tolerance,
             max_s: args.warmup_max,
         },
+        join_gaps_below_s: args.join_gaps_below,
     };
     let doc = analyse_input(&args.input, &opts).map_err(classify)?;
     if let Some(out) = &args.out {

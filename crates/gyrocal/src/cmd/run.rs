@@ -1166,11 +1166,51 @@ fn finish_drift(
     human: &dyn Fn(String),
     doc: &mut serde_json::Value,
 ) -> anyhow::Result<u8> {
-    let _ = (args, run, doc);
-    human(format!(
-        "drift record complete: analyse it with `gyrocal allan {}` (--scale-factor K for °/h)",
-        dir.display()
-    ));
+    // a simulated gyro's scale factor is known; a real one's comes from its calibration
+    let m = run.manifest();
+    let scale_factor = m.simulated.then(|| m.plan.simulation().scale_factor);
+    let opts = gyrocal_report::allan::AllanOptions {
+        scale_factor,
+        ..Default::default()
+    };
+    if args.no_report {
+        human(format!(
+            "drift record complete: analyse it with `gyrocal allan {}` (--scale-factor K for °/h)",
+            dir.display()
+        ));
+    } else {
+        match gyrocal_report::write_run_allan(dir, &opts) {
+            Ok((a, files)) => {
+                doc["allan"] = serde_json::json!({
+                    "files": files,
+                    "unit": a.unit,
+                    "noise_terms": a.noise_terms,
+                    "bias": a.bias,
+                    "warmup": a.warmup,
+                });
+                human(format!(
+                    "drift record complete: Allan analysis in {}{}",
+                    files
+                        .iter()
+                        .map(|f| f.display().to_string())
+                        .collect::<Vec<_>>()
+                        .join(" and "),
+                    match scale_factor {
+                        Some(k) =>
+                            format!(" (the simulated gyro's K = {k} V/(°/s) converts to °/h)"),
+                        None => format!(
+                            " (in volts: `gyrocal allan {} --scale-factor K` for °/h)",
+                            dir.display()
+                        ),
+                    }
+                ));
+            }
+            Err(e) => say!(
+                "gyrocal: warning: no Allan analysis: {e} (the record is complete: `gyrocal allan {}`)",
+                dir.display()
+            ),
+        }
+    }
     human(format!("run directory: {}", dir.display()));
     Ok(0)
 }
