@@ -1039,70 +1039,12 @@ pub struct PlanDoc {
     pub acceptance: Option<AcceptanceSpec>,
 }
 
-/// `[dut]`: the gyro under test, when the plan names it (a plan written for one gyro). Every
-/// key is optional text; the command line overrides each key it gives (see
-/// [`crate::rundir::Dut::overridden_by`]). Left out of the plan's hash: one plan serves many
-/// gyros, and naming the gyro does not change the measurement.
-#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct PlanDut {
-    /// Serial number.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub serial: Option<String>,
-    /// Model.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub model: Option<String>,
-    /// Manufacturer.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub manufacturer: Option<String>,
-    /// Condition as received (ISO/IEC 17025 §7.8.2.1 g), e.g. "new, no visible damage".
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub condition: Option<String>,
-    /// Free text.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub notes: Option<String>,
-}
-
-impl PlanDut {
-    /// Whether no key is set.
-    pub fn is_empty(&self) -> bool {
-        self.fields().iter().all(|(_, v)| v.is_none())
-    }
-
-    /// `(key, value)` of every key, in file order.
-    fn fields(&self) -> [(&'static str, &Option<String>); 5] {
-        [
-            ("serial", &self.serial),
-            ("model", &self.model),
-            ("manufacturer", &self.manufacturer),
-            ("condition", &self.condition),
-            ("notes", &self.notes),
-        ]
-    }
-
-    /// The run directory's record of the gyro.
-    pub fn to_dut(&self) -> crate::rundir::Dut {
-        crate::rundir::Dut {
-            serial: self.serial.clone(),
-            model: self.model.clone(),
-            manufacturer: self.manufacturer.clone(),
-            condition: self.condition.clone(),
-            notes: self.notes.clone(),
-        }
-    }
-}
-
-impl From<PlanDut> for crate::rundir::Dut {
-    fn from(d: PlanDut) -> Self {
-        crate::rundir::Dut {
-            serial: d.serial,
-            model: d.model,
-            manufacturer: d.manufacturer,
-            condition: d.condition,
-            notes: d.notes,
-        }
-    }
-}
+/// `[dut]`: the gyro under test, when the plan names it (a plan written for one gyro): the
+/// run directory's own record ([`crate::rundir::Dut`]), every key optional text; the command
+/// line overrides each key it gives ([`crate::rundir::Dut::overridden_by`]). Left out of the
+/// plan's hash: one plan serves many gyros, and naming the gyro does not change the
+/// measurement.
+pub type PlanDut = crate::rundir::Dut;
 
 fn default_kind() -> String {
     PlanKind::ScaleFactor.as_str().to_string()

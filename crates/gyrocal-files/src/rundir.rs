@@ -543,7 +543,7 @@ pub struct RunMeta {
 
 /// The gyro under test. Not part of the plan (one plan serves many gyros): the operator names
 /// it per run; a resume refuses another serial.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Dut {
     /// Serial number.
@@ -564,6 +564,17 @@ pub struct Dut {
 }
 
 impl Dut {
+    /// `(key, value)` of every key, in the order a plan's `[dut]` lists them.
+    pub(crate) fn fields(&self) -> [(&'static str, &Option<String>); 5] {
+        [
+            ("serial", &self.serial),
+            ("model", &self.model),
+            ("manufacturer", &self.manufacturer),
+            ("condition", &self.condition),
+            ("notes", &self.notes),
+        ]
+    }
+
     /// Whether nothing is known about the gyro.
     pub fn is_empty(&self) -> bool {
         self.serial.is_none()

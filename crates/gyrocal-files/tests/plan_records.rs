@@ -63,7 +63,7 @@ fn dut_and_acceptance_parse() {
     assert_eq!(dut.manufacturer.as_deref(), Some("Example Gyro Works"));
     assert_eq!(dut.condition.as_deref(), Some("new, no visible damage"));
     assert_eq!(dut.notes.as_deref(), Some("two lines\nof notes"));
-    assert_eq!(dut.to_dut().serial.as_deref(), Some("HRG-0042"));
+    assert_eq!(dut.serial.as_deref(), Some("HRG-0042"));
     let a = plan.acceptance().unwrap();
     assert_eq!(a.rule, Rule::Guarded);
     assert_eq!(a.limits.len(), 2);

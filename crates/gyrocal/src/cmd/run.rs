@@ -314,15 +314,7 @@ fn catalog_url(
 /// simulated run without a serial gets the simulated gyro's (`SIM-GYRO-<seed>`), so its
 /// certificate is complete; a resume keeps what the run recorded.
 fn dut_for_run(args: &RunArgs, plan: &Plan) -> Option<gyrocal_run::Dut> {
-    let from_plan = plan
-        .dut()
-        .map_or_else(gyrocal_run::Dut::default, |d| gyrocal_run::Dut {
-            serial: d.serial.clone(),
-            model: d.model.clone(),
-            manufacturer: d.manufacturer.clone(),
-            condition: d.condition.clone(),
-            notes: d.notes.clone(),
-        });
+    let from_plan = plan.dut().cloned().unwrap_or_default();
     let mut dut = from_plan.overridden_by(gyrocal_run::Dut {
         serial: args.dut_serial.clone(),
         model: args.dut_model.clone(),
