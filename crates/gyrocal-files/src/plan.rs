@@ -107,6 +107,25 @@ pub struct Location {
     pub column: Option<u32>,
 }
 
+impl Location {
+    /// The place of byte `offset` of `src`, the text of `file` (line and column 1-based;
+    /// without an offset, the file alone).
+    pub(crate) fn in_text(file: &Path, src: &str, offset: Option<usize>) -> Location {
+        let (line, column) = match offset {
+            Some(o) => {
+                let (l, c) = line_col(src, o);
+                (Some(l), Some(c))
+            }
+            None => (None, None),
+        };
+        Location {
+            file: file.to_path_buf(),
+            line,
+            column,
+        }
+    }
+}
+
 impl fmt::Display for Location {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}", self.file.display())?;
@@ -1563,20 +1582,7 @@ impl Plan {
 
     /// Parses and validates plan text; `origin` is the file name used in errors.
     pub fn from_toml_str(src: &str, origin: &Path) -> Result<Plan, PlanError> {
-        let location = |offset: Option<usize>| {
-            let (line, column) = match offset {
-                Some(o) => {
-                    let (l, c) = line_col(src, o);
-                    (Some(l), Some(c))
-                }
-                None => (None, None),
-            };
-            Location {
-                file: origin.to_path_buf(),
-                line,
-                column,
-            }
-        };
+        let location = |offset: Option<usize>| Location::in_text(origin, src, offset);
         let syntax = |e: toml::de::Error| {
             let offset = e.span().map(|span| span.start);
             PlanError::Syntax {
@@ -1802,20 +1808,7 @@ pub fn load_acceptance(path: &Path) -> Result<AcceptanceSpec, PlanError> {
 /// Parses and validates the text of a standalone acceptance file (see [`load_acceptance`]);
 /// `document` is the file name used in errors.
 pub fn acceptance_from_toml_str(src: &str, document: &Path) -> Result<AcceptanceSpec, PlanError> {
-    let location = |offset: Option<usize>| {
-        let (line, column) = match offset {
-            Some(o) => {
-                let (l, c) = line_col(src, o);
-                (Some(l), Some(c))
-            }
-            None => (None, None),
-        };
-        Location {
-            file: document.to_path_buf(),
-            line,
-            column,
-        }
-    };
+    let location = |offset: Option<usize>| Location::in_text(document, src, offset);
     let syntax = |e: toml::de::Error| {
         let offset = e.span().map(|span| span.start);
         PlanError::Syntax {

@@ -55,7 +55,7 @@ use jiff::civil::Date;
 use serde::{Deserialize, Serialize};
 use toml::de::{DeTable, DeValue};
 
-use crate::plan::{Location, ReadFailure, and_list, closest, line_col, read_capped_text};
+use crate::plan::{Location, ReadFailure, and_list, closest, read_capped_text};
 
 /// The environment variable naming the station file (after `--station`, before the default
 /// path).
@@ -745,20 +745,7 @@ impl Station {
 
     /// Parses and validates station text; `name` is the file name used in errors.
     pub fn from_toml_str(src: &str, name: &Path) -> Result<Station, StationError> {
-        let location = |offset: Option<usize>| {
-            let (line, column) = match offset {
-                Some(o) => {
-                    let (l, c) = line_col(src, o);
-                    (Some(l), Some(c))
-                }
-                None => (None, None),
-            };
-            Location {
-                file: name.to_path_buf(),
-                line,
-                column,
-            }
-        };
+        let location = |offset: Option<usize>| Location::in_text(name, src, offset);
         let root = DeTable::parse(src).map_err(|e| StationError::Syntax {
             location: location(e.span().map(|s: Range<usize>| s.start)),
             message: e.message().trim().to_string(),
