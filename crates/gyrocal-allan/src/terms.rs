@@ -16,7 +16,9 @@
 //!
 //! Uncertainties are standard (1σ) uncertainties: for slope reads the relative uncertainty of the
 //! curve point nearest the read τ, 1/√(2·edf) (conservative: the other points of the region are
-//! correlated with it and add little); for the bias instability half the width of the 68 % interval of σ_min; for the
+//! correlated with it and add little), combined with the spread of the region's points about
+//! the line of that slope (the region is never a pure term: a neighbouring term or the
+//! sampling at the shortest τ bends it, which 1/√(2·edf) alone would hide); for the bias instability half the width of the 68 % interval of σ_min; for the
 //! fit from the covariance of the weighted least squares, inflated by the reduced χ² when above 1.
 
 use crate::curve::Curve;
@@ -281,8 +283,8 @@ fn slope_read(pts: &[(f64, f64, f64)], term: Term) -> Option<SlopeRead> {
     let logc = run.iter().map(|p| p.1.ln() - s * p.0.ln()).sum::<f64>() / run.len() as f64;
     let tau_r = term.read_tau_s();
     let sigma_r = (logc + s * tau_r.ln()).exp();
-    // conservative: the relative uncertainty of the single point nearest the read τ
-    // (octave points overlap, so their information does not simply add)
+    // statistical part, conservative: the relative uncertainty of the single point nearest
+    // the read τ (octave points overlap, so their information does not simply add)
     let near = run
         .iter()
         .min_by(|a, b| {
@@ -292,7 +294,22 @@ fn slope_read(pts: &[(f64, f64, f64)], term: Term) -> Option<SlopeRead> {
                 .total_cmp(&(b.0 / tau_r).ln().abs())
         })
         .map_or(1.0, |p| p.2);
-    let rel_u = (1.0 / (2.0 * near)).sqrt();
+    let rel_stat = (1.0 / (2.0 * near)).sqrt();
+    // and how far the points of the run disagree with one line of that slope (another term
+    // bending the curve, the sampling at the shortest τ): the spread of their log intercepts,
+    // a relative uncertainty, not divided by √n as the octave points are not independent
+    let rel_spread = if run.len() >= 3 {
+        let k = run.len() as f64;
+        let var = run
+            .iter()
+            .map(|p| (p.1.ln() - s * p.0.ln() - logc).powi(2))
+            .sum::<f64>()
+            / (k - 1.0);
+        var.sqrt()
+    } else {
+        0.0
+    };
+    let rel_u = rel_stat.hypot(rel_spread);
     let value = sigma_r * term.unit_factor();
     let lo = run[0].0;
     let hi = run[run.len() - 1].0;
