@@ -105,9 +105,13 @@ pub(crate) fn nnls(
     b: &[f64],
     w: &[f64],
     ncols: usize,
+    allowed: u32,
 ) -> Option<(Vec<usize>, Solution)> {
     let mut best: Option<(Vec<usize>, Solution)> = None;
     for mask in 1u32..(1 << ncols) {
+        if mask & !allowed != 0 {
+            continue; // a column the caller leaves out
+        }
         let cols: Vec<usize> = (0..ncols).filter(|j| mask & (1 << j) != 0).collect();
         if cols.len() > b.len() {
             continue;

@@ -19,7 +19,9 @@
 //! correlated with it and add little), combined with the spread of the region's points about
 //! the line of that slope (the region is never a pure term: a neighbouring term or the
 //! sampling at the shortest τ bends it, which 1/√(2·edf) alone would hide); for the bias instability half the width of the 68 % interval of σ_min; for the
-//! fit from the covariance of the weighted least squares, inflated by the reduced χ² when above 1.
+//! fit from the covariance of the weighted least squares (weights 1/(σ⁴(2/edf + 0.1²)): the
+//! statistics and a 10 % allowance for the model itself), inflated by the reduced χ² when above
+//! 1; a rate ramp is fitted only where the curve shows its +1 slope.
 
 use crate::curve::Curve;
 use crate::error::{Error, Result};
@@ -326,6 +328,27 @@ fn slope_read(pts: &[(f64, f64, f64)], term: Term) -> Option<SlopeRead> {
 /// taken from the model after a first pass (iteratively reweighted, 3 passes). `None` with fewer
 /// than two usable points.
 pub fn fit_model(points: &[(f64, f64, f64)]) -> Option<ModelFit> {
+    fit_model_terms(points, &Term::ALL)
+}
+
+/// Relative standard uncertainty of σ² allowed for the five-term model itself, beside the
+/// statistical 2/edf: no gyro follows the model exactly (a flicker floor is approximate, terms
+/// overlap), and without it the shortest τ, with edf in the thousands, would decide the fit
+/// alone and hold every long-τ term at zero.
+pub const MODEL_RELATIVE_UNCERTAINTY: f64 = 0.1;
+
+/// The weight of a point with `edf` and model (or measured) variance `var` = σ².
+fn weight(edf: f64, var: f64) -> f64 {
+    1.0 / (var * var * (2.0 / edf + MODEL_RELATIVE_UNCERTAINTY * MODEL_RELATIVE_UNCERTAINTY))
+}
+
+/// [`fit_model`] with only the terms in `terms` free (the others held at zero).
+pub fn fit_model_terms(points: &[(f64, f64, f64)], terms: &[Term]) -> Option<ModelFit> {
+    let allowed: u32 = Term::ALL
+        .iter()
+        .enumerate()
+        .filter(|(_, t)| terms.contains(t))
+        .fold(0, |m, (j, _)| m | (1 << j));
     let pts: Vec<&(f64, f64, f64)> = points
         .iter()
         .filter(|p| {
@@ -345,13 +368,10 @@ pub fn fit_model(points: &[(f64, f64, f64)]) -> Option<ModelFit> {
         .map(|p| Term::ALL.iter().map(|t| t.basis(p.0)).collect())
         .collect();
     let b: Vec<f64> = pts.iter().map(|p| p.1 * p.1).collect();
-    let mut w: Vec<f64> = pts
-        .iter()
-        .map(|p| p.2 / (2.0 * (p.1 * p.1).powi(2)))
-        .collect();
+    let mut w: Vec<f64> = pts.iter().map(|p| weight(p.2, p.1 * p.1)).collect();
     let mut result = None;
     for _ in 0..3 {
-        let (cols, sol) = nnls(&a, &b, &w, 5)?;
+        let (cols, sol) = nnls(&a, &b, &w, 5, allowed)?;
         let mut c = [0.0; 5];
         for (k, &j) in cols.iter().enumerate() {
             c[j] = sol.coef[k];
@@ -359,7 +379,7 @@ pub fn fit_model(points: &[(f64, f64, f64)]) -> Option<ModelFit> {
         for (i, p) in pts.iter().enumerate() {
             let model: f64 = (0..5).map(|j| c[j] * a[i][j]).sum();
             let v = if model > 0.0 { model } else { p.1 * p.1 };
-            w[i] = p.2 / (2.0 * v * v);
+            w[i] = weight(p.2, v);
         }
         result = Some((cols, sol, c));
     }
@@ -483,7 +503,17 @@ pub fn noise_terms(curve: &Curve) -> NoiseTerms {
                 flat,
             }
         });
-    let fit = fit_model(&pts);
+    // a rate ramp is fitted only where the curve shows its +1 slope: otherwise the few long-τ
+    // points, with their wide intervals, let it stand in for the rate random walk
+    let fit = if rate_ramp.is_some() {
+        fit_model(&pts)
+    } else {
+        let terms: Vec<Term> = Term::ALL
+            .into_iter()
+            .filter(|t| *t != Term::RateRamp)
+            .collect();
+        fit_model_terms(&pts, &terms)
+    };
     if fit.is_none() {
         notes.push("five-term fit: fewer than two usable points".into());
     }

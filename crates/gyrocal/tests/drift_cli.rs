@@ -197,9 +197,29 @@ fn a_three_hour_simulated_drift_run_survives_a_kill_and_its_allan_analysis_finds
     assert_eq!(a["unit"], "deg/h", "{}", a["unit"]);
     let analysed = a["analysed"]["samples"].as_u64().unwrap();
     assert!(analysed > 400_000, "{analysed} samples analysed of 501000");
-    // configs/drift.toml's gyro: ARW 0.02 °/√h, bias instability 1 °/h, each found within
-    // its 95 % interval (k = 1.96 on the stated standard uncertainty)
+    // configs/drift.toml's gyro: ARW 0.02 °/√h, bias instability 1 °/h, RRW 3 °/h/√h: the
+    // five-term fit finds each within its 95 % interval (k = 1.96 on its standard uncertainty)
     let nt = &a["noise_terms"];
+    let fitted = nt["fit"]["terms"].as_array().expect("a five-term fit");
+    for (term, set) in [
+        ("angle_random_walk", 0.02),
+        ("bias_instability", 1.0),
+        ("rate_random_walk", 3.0),
+    ] {
+        let q = &fitted
+            .iter()
+            .find(|t| t["term"] == term)
+            .unwrap_or_else(|| panic!("{term} fitted"))["value"];
+        let (v, u) = (
+            q["value"].as_f64().unwrap(),
+            q["uncertainty"].as_f64().unwrap(),
+        );
+        assert!(
+            (v - set).abs() <= 1.96 * u && u < 0.3 * set,
+            "fit {term}: {v} ± {u} (1σ), set {set}"
+        );
+    }
+    // and the slope reads where the curve has a region of the term's slope
     for (term, set) in [("angle_random_walk", 0.02), ("bias_instability", 1.0)] {
         let q = &nt[term]["value"];
         let (v, u) = (
