@@ -117,6 +117,58 @@ pub struct AllanOptions {
     /// directory (its segments are separated by the table's at-rate check and the meter's
     /// re-arming), no joining otherwise.
     pub join_gaps_below_s: Option<f64>,
+    /// Where the input axis points and the latitude, to remove the Earth's rate from the bias.
+    pub earth: Option<(Axis, f64)>,
+}
+
+/// Earth's rotation rate, °/h.
+pub const EARTH_RATE_DPH: f64 = 15.041;
+
+/// Where a gyro's input axis points on the bench.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Axis {
+    /// Local vertical, up: senses Ω·sin(latitude).
+    Up,
+    /// Down: −Ω·sin(latitude).
+    Down,
+    /// Horizontal, north: Ω·cos(latitude).
+    North,
+    /// Horizontal, south: −Ω·cos(latitude).
+    South,
+    /// Horizontal, east: no Earth rate.
+    East,
+    /// Horizontal, west: no Earth rate.
+    West,
+}
+
+impl Axis {
+    /// The Earth-rate component along the axis at `latitude_deg`, °/h.
+    pub fn earth_rate_dph(self, latitude_deg: f64) -> f64 {
+        let phi = latitude_deg.to_radians();
+        match self {
+            Axis::Up => EARTH_RATE_DPH * phi.sin(),
+            Axis::Down => -EARTH_RATE_DPH * phi.sin(),
+            Axis::North => EARTH_RATE_DPH * phi.cos(),
+            Axis::South => -EARTH_RATE_DPH * phi.cos(),
+            Axis::East | Axis::West => 0.0,
+        }
+    }
+}
+
+/// The bias with the Earth rate removed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EarthRateRemoved {
+    /// Input axis direction.
+    pub axis: Axis,
+    /// Latitude, degrees (north positive).
+    pub latitude_deg: f64,
+    /// Earth-rate component along the axis, °/h.
+    pub component_dph: f64,
+    /// The measured mean rate, °/h.
+    pub bias_measured_dph: f64,
+    /// The gyro's own bias: measured minus the component, °/h.
+    pub bias_dph: f64,
 }
 
 /// How long a gap between a drift run's segments may be and still be joined as dead time,
@@ -220,6 +272,10 @@ pub struct AllanDocument {
     pub noise_terms: Option<NoiseTerms>,
     /// Bias and GJB bias stability over 10 s and 100 s, in [`AllanDocument::unit`].
     pub bias: BiasFigures,
+    /// The bias with the Earth's rate along the input axis removed, when the axis and the
+    /// latitude were given and the record is a rate in °/h.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub earth_rate: Option<EarthRateRemoved>,
     /// What the reader must be told (gaps, irregular sampling, skipped rows, units, warm-up).
     pub notes: Vec<String>,
 }
@@ -524,7 +580,20 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
                     source: path.join(FIT_JSON).display().to_string(),
                 })
             }
-            Ok(None) => None,
+            // a simulated run's gyro has a known K: the plan's [simulation] scale_factor
+            Ok(None) => match gyrocal_files::load(path) {
+                Ok(run) if run.manifest.simulated => {
+                    let k = run.manifest.plan.simulation().scale_factor;
+                    notes.push(format!(
+                        "scale factor K = {k} V/(°/s): the simulated gyro's ([simulation] scale_factor); --scale-factor overrides it"
+                    ));
+                    Some(ScaleFactorUsed {
+                        v_per_dps: k,
+                        source: "the simulated gyro ([simulation] scale_factor)".into(),
+                    })
+                }
+                _ => None,
+            },
             Err(e) => {
                 notes.push(format!("no scale factor from fit.json: {e}"));
                 None
@@ -762,6 +831,26 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
         None
     };
     let bias = bias_figures(&rec, &unit);
+    let earth_rate = match opts.earth {
+        Some((axis, latitude_deg)) if is_rate => {
+            let component_dph = axis.earth_rate_dph(latitude_deg);
+            Some(EarthRateRemoved {
+                axis,
+                latitude_deg,
+                component_dph,
+                bias_measured_dph: bias.bias.value,
+                bias_dph: bias.bias.value - component_dph,
+            })
+        }
+        Some(_) => {
+            notes.push(
+                "the Earth rate is not removed: the record is not a rate in °/h (give --scale-factor)"
+                    .to_string(),
+            );
+            None
+        }
+        None => None,
+    };
     Ok(AllanDocument {
         input: path.to_path_buf(),
         file,
@@ -781,6 +870,7 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
         curve,
         noise_terms,
         bias,
+        earth_rate,
         notes,
     })
 }
@@ -1344,6 +1434,16 @@ pub fn render_allan(doc: &AllanDocument) -> Result<String, ReportError> {
         "<tr><th>bias (mean)</th><td class=\"num\">{}</td></tr>",
         q(&doc.bias.bias)
     );
+    if let Some(e) = &doc.earth_rate {
+        let _ = writeln!(
+            h,
+            "<tr><th>bias without the Earth rate</th><td class=\"num\" id=\"bias-earth-removed\">{} deg/h (Earth rate along the {:?} axis at latitude {}°: {} deg/h removed)</td></tr>",
+            fmt_num(e.bias_dph),
+            e.axis,
+            fmt_g(e.latitude_deg),
+            fmt_num(e.component_dph)
+        );
+    }
     for (label, st) in [
         ("bias stability, 10 s", &doc.bias.stability_10s),
         ("bias stability, 100 s", &doc.bias.stability_100s),

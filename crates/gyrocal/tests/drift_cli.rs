@@ -219,6 +219,29 @@ fn a_three_hour_simulated_drift_run_survives_a_kill_and_its_allan_analysis_finds
             "fit {term}: {v} ± {u} (1σ), set {set}"
         );
     }
+    // the Earth rate along the vertical axis at 45° N is removed from the bias: what is left
+    // is the simulated gyro's own bias, K0/K = 0.0088/0.3612 × 3600 = 87.7 °/h (its bias
+    // instability and rate random walk move the mean of one record by a few °/h)
+    let o = gyrocal()
+        .arg("allan")
+        .arg(&out)
+        .args(["--json", "--axis", "up", "--latitude", "45"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let e: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let e = &e["earth_rate"];
+    let component = e["component_dph"].as_f64().unwrap();
+    assert!((component - 15.041 * 45f64.to_radians().sin()).abs() < 1e-9);
+    let (measured, own) = (
+        e["bias_measured_dph"].as_f64().unwrap(),
+        e["bias_dph"].as_f64().unwrap(),
+    );
+    let truth = 0.0088 / 0.3612 * 3600.0;
+    assert!(
+        (own - truth).abs() < 5.0 && (own - truth).abs() < (measured - truth).abs(),
+        "bias {measured} °/h measured, {own} °/h without the Earth rate, gyro's own {truth}"
+    );
     // and the slope reads where the curve has a region of the term's slope
     for (term, set) in [("angle_random_walk", 0.02), ("bias_instability", 1.0)] {
         let q = &nt[term]["value"];

@@ -140,6 +140,37 @@ pub struct AllanArgs {
     /// for a drift run directory: 10 s, the pause between its segments; else 0).
     #[arg(long, value_name = "S", value_parser = non_negative)]
     pub join_gaps_below: Option<f64>,
+    /// Where the gyro's input axis points (up, down, north, south, east, west): with
+    /// --latitude, the Earth's rate along it is removed from the reported bias.
+    #[arg(long, value_name = "DIR", requires = "latitude", value_parser = parse_axis)]
+    pub axis: Option<gyrocal_report::allan::Axis>,
+    /// The bench's latitude, degrees north (negative south), for --axis.
+    #[arg(long, value_name = "DEG", requires = "axis", allow_hyphen_values = true, value_parser = latitude)]
+    pub latitude: Option<f64>,
+}
+
+fn parse_axis(s: &str) -> Result<gyrocal_report::allan::Axis, String> {
+    use gyrocal_report::allan::Axis;
+    match s.trim().to_ascii_lowercase().as_str() {
+        "up" => Ok(Axis::Up),
+        "down" => Ok(Axis::Down),
+        "north" => Ok(Axis::North),
+        "south" => Ok(Axis::South),
+        "east" => Ok(Axis::East),
+        "west" => Ok(Axis::West),
+        other => Err(format!(
+            "{other:?}: write up, down, north, south, east or west"
+        )),
+    }
+}
+
+fn latitude(s: &str) -> Result<f64, String> {
+    let v: f64 = s.trim().parse().map_err(|e| format!("{s:?}: {e}"))?;
+    if (-90.0..=90.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{v} is not a latitude (-90 to 90 degrees)"))
+    }
 }
 
 /// Input problems exit with 2, others with 1.
@@ -165,6 +196,7 @@ pub fn run(args: &AllanArgs) -> anyhow::Result<u8> {
             max_s: args.warmup_max,
         },
         join_gaps_below_s: args.join_gaps_below,
+        earth: args.axis.zip(args.latitude),
     };
     let doc = analyse_input(&args.input, &opts).map_err(classify)?;
     if let Some(out) = &args.out {
@@ -305,6 +337,16 @@ fn text(doc: &AllanDocument) -> String {
         fmt_num(b.bias.value),
         fmt_num(b.bias.uncertainty)
     );
+    if let Some(e) = &doc.earth_rate {
+        let _ = writeln!(
+            s,
+            "bias without the Earth rate: {} deg/h (along the {:?} axis at latitude {}°: {} deg/h removed)",
+            fmt_num(e.bias_dph),
+            e.axis,
+            e.latitude_deg,
+            fmt_num(e.component_dph)
+        );
+    }
     for (label, st) in [("10 s", &b.stability_10s), ("100 s", &b.stability_100s)] {
         match st {
             Some(x) => {
