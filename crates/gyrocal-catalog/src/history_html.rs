@@ -2,6 +2,7 @@
 //! uncertainties, the day-to-day repeatability, and a trend plot (SVG, plotters) per quantity
 //! with its acceptance limits and control band.
 
+use gyrocal_files::num::{significant, value_and_u};
 use std::fmt::Write as _;
 
 use plotters::prelude::*;
@@ -21,15 +22,16 @@ fn esc(s: &str) -> String {
 }
 
 fn num(v: Option<f64>) -> String {
-    match v {
-        Some(x) => format!("{x:.6e}"),
-        None => "—".to_string(),
-    }
+    v.map_or_else(|| "—".to_string(), |x| significant(x, 7))
 }
 
+/// A value ± its expanded uncertainty, rounded as on the certificate.
 fn with_u(v: Option<f64>, u: Option<f64>) -> String {
     match (v, u) {
-        (Some(v), Some(u)) => format!("{v:.7e} ± {u:.2e}"),
+        (Some(v), Some(u)) => {
+            let (v, u) = value_and_u(v, Some(u));
+            format!("{v} ± {u}")
+        }
         (v, _) => num(v),
     }
 }
@@ -109,10 +111,10 @@ pub fn render(h: &History) -> String {
         if let Some(b) = &t.band {
             let _ = write!(
                 out,
-                "<p>Control band (mean ± 3σ of the {} earlier calibrations): {:.6e} .. {:.6e}{}</p>",
+                "<p>Control band (mean ± 3σ of the {} earlier calibrations): {} .. {}{}</p>",
                 b.n,
-                b.low,
-                b.high,
+                significant(b.low, 7),
+                significant(b.high, 7),
                 if t.latest_outside_band {
                     " <span class=\"warn\">the latest is outside</span>"
                 } else {

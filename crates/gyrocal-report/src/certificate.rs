@@ -11,6 +11,7 @@
 
 use std::fmt::Write as _;
 
+use gyrocal_files::num::{significant, value_and_u};
 use gyrocal_files::{Manifest, Plan};
 use gyrocal_fit::acceptance::{Acceptance, Quantity, Verdict};
 use gyrocal_fit::{Analysis, Method, Model};
@@ -374,44 +375,6 @@ pub(crate) fn deviations(html: &mut String, input: &Input, m: &Manifest) {
             items.join("</li>\n<li>")
         );
     }
-}
-
-/// A value and its expanded uncertainty as a certificate prints them: U to two significant
-/// digits, the value to one digit more than U's last (GUM 7.2.6 rounds to U's digits; the
-/// extra digit keeps the rounding error well under U). Small or huge values in exponent form.
-pub(crate) fn value_and_u(v: f64, u: Option<f64>) -> (String, String) {
-    let Some(u) = u.filter(|u| u.is_finite() && *u > 0.0) else {
-        return (significant(v, 7), "—".to_string());
-    };
-    let eu = u.log10().floor() as i32;
-    let av = v.abs();
-    if av != 0.0 && !(1e-3..1e6).contains(&av) {
-        let ev = av.log10().floor() as i32;
-        let digits = (ev - eu + 2).clamp(1, 15) as usize;
-        return (format!("{v:.digits$e}"), format!("{u:.1e}"));
-    }
-    let decimals = (2 - eu).clamp(0, 15) as usize;
-    let u_decimals = (1 - eu).clamp(0, 15) as usize;
-    (format!("{v:.decimals$}"), format!("{u:.u_decimals$}"))
-}
-
-/// `v` to `n` significant digits (exponent form outside 1e-3..1e6).
-pub(crate) fn significant(v: f64, n: i32) -> String {
-    if !v.is_finite() {
-        return "—".to_string();
-    }
-    let av = v.abs();
-    if av != 0.0 && !(1e-3..1e6).contains(&av) {
-        let digits = (n - 1).clamp(0, 15) as usize;
-        return format!("{v:.digits$e}");
-    }
-    let e = if av == 0.0 {
-        0
-    } else {
-        av.log10().floor() as i32
-    };
-    let decimals = (n - 1 - e).clamp(0, 15) as usize;
-    format!("{v:.decimals$}")
 }
 
 /// The verdict box of the first page: the run's verdict, the quantities that make it, and the

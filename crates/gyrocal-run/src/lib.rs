@@ -18,7 +18,7 @@ pub use gyrocal_files::{
     Location, Manifest, Plan, PlanDoc, PlanError, PlanKind, Port, Resume, Retry, RunContext,
     RunData, RunDir, RunError, RunMeta, Sample, SampleRow, Simulation, Status, Step, StepRecord,
     TableDialect, TableSettings, Timing, dataset_from_steps, fit_run, load, load_fit, load_samples,
-    parse_rfc3339_utc, plan, rfc3339_utc, rundir, station,
+    num, parse_rfc3339_utc, plan, rfc3339_utc, rundir, station,
 };
 pub use sequencer::{
     Event, Phase, RunSummary, SequenceError, Sequencer, SequencerOptions, StopRequest, TableRest,

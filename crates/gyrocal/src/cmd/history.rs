@@ -27,10 +27,14 @@ pub struct HistoryArgs {
     catalog: CatalogOpt,
 }
 
+/// A value ± its expanded uncertainty, rounded as on the certificate.
 fn sci(v: Option<f64>, u: Option<f64>) -> String {
     match (v, u) {
-        (Some(v), Some(u)) => format!("{v:.7} ± {u:.1e}"),
-        (Some(v), None) => format!("{v:.7}"),
+        (Some(v), Some(u)) => {
+            let (v, u) = gyrocal_run::num::value_and_u(v, Some(u));
+            format!("{v} ± {u}")
+        }
+        (Some(v), None) => gyrocal_run::num::significant(v, 7),
         _ => "—".to_string(),
     }
 }
