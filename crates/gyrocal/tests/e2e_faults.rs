@@ -228,8 +228,19 @@ impl Run {
     /// `gyrocal run PLAN --dmm-port .. --table-port .. --no-report` plus `args`
     /// (`--out DIR` or `--resume DIR`), with `RUST_LOG` set to `log` when given.
     fn start(plan: &Path, sim: &Sim, args: &[&str], log: Option<&str>) -> Run {
+        Run::start_cataloged(plan, sim, args, log, "off")
+    }
+
+    /// [`Run::start`] indexing the run in `catalog` (`GYROCAL_CATALOG`; `off`: none).
+    fn start_cataloged(
+        plan: &Path,
+        sim: &Sim,
+        args: &[&str],
+        log: Option<&str>,
+        catalog: &str,
+    ) -> Run {
         let mut cmd = Command::new(BIN);
-        cmd.env_remove("RUST_LOG").env("GYROCAL_CATALOG", "off");
+        cmd.env_remove("RUST_LOG").env("GYROCAL_CATALOG", catalog);
         if let Some(l) = log {
             cmd.env("RUST_LOG", l);
         }
@@ -978,10 +989,20 @@ fn e2e_sigkill_records_nothing_incomplete_and_resumes_with_the_table_turning() {
 /// stopped by `sig` while the meter reads at rate. Returns the run's end, the simulator and
 /// the run directory (in `tmp`).
 fn stopped_at_speed(tmp: &Path, sig: Signal, second: Option<Signal>) -> (Ended, Sim, PathBuf) {
+    stopped_at_speed_cataloged(tmp, sig, second, "off")
+}
+
+/// [`stopped_at_speed`] with the run indexed in `catalog`.
+fn stopped_at_speed_cataloged(
+    tmp: &Path,
+    sig: Signal,
+    second: Option<Signal>,
+    catalog: &str,
+) -> (Ended, Sim, PathBuf) {
     let plan = write_plan_with(tmp, &[0.0, 10.0], 5.0);
     let dir = tmp.join("run");
     let sim = Sim::start_scaled(&plan, &[], "4");
-    let run = Run::start(&plan, &sim, &out_args(&dir), Some(ACQ_LOG));
+    let run = Run::start_cataloged(&plan, &sim, &out_args(&dir), Some(ACQ_LOG), catalog);
     wait_acquisition(&run, 2);
     std::thread::sleep(Duration::from_millis(100));
     run.guard.signal(sig);
@@ -1029,6 +1050,82 @@ fn stop_signal_waits_for_rest(sig: Signal, code: i32) {
     assert_eq!(
         last["table"]["interlock_closed"], true,
         "a controlled stop only: {last}"
+    );
+}
+
+/// A stop at speed with the run indexed in a catalog: the catalog's writer and its bounded
+/// wait at the end come after the table is at rest, and never stand in its way.
+fn stop_at_speed_with_a_catalog(catalog: &str) -> (Ended, tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::tempdir().unwrap();
+    let (end, sim, dir) = stopped_at_speed_cataloged(tmp.path(), Signal::SIGINT, None, catalog);
+    let (mode, rate) = probe_table(sim.table());
+    assert_eq!(end.code, Some(130), "{end:?}");
+    assert_eq!(mode, "OFF");
+    assert!(
+        rate.abs() < 0.05,
+        "gyrocal exited with the table at {rate} °/s"
+    );
+    assert!(end.stderr.contains("table at rest"), "{}", end.stderr);
+    assert_eq!(manifest(&dir)["status"], "aborted");
+    let last = sim.finish();
+    assert_table_parked(&last);
+    (end, tmp, dir)
+}
+
+#[test]
+fn e2e_sigint_with_a_catalog_stops_the_table_and_the_catalog_has_the_abort() {
+    let db = tempfile::tempdir().unwrap();
+    let url = format!("sqlite:{}", db.path().join("lab.sqlite").display());
+    let (end, _tmp, dir) = stop_at_speed_with_a_catalog(&url);
+    assert!(
+        !end.stderr.contains("could not be updated"),
+        "{}",
+        end.stderr
+    );
+    let out = Command::new(BIN)
+        .env_remove("RUST_LOG")
+        .args(["runs", "--json", "--catalog", &url])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let runs: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let row = &runs[0];
+    assert_eq!(row["status"], "aborted", "{runs}");
+    assert_eq!(
+        row["directory"],
+        std::fs::canonicalize(&dir).unwrap().display().to_string()
+    );
+}
+
+#[test]
+fn e2e_sigint_with_an_unreachable_catalog_stops_the_table_and_says_the_catalog_missed_it() {
+    // nothing listens on port 1: the catalog cannot be reached at any point of the run
+    let (end, _tmp, dir) = stop_at_speed_with_a_catalog("postgres://gyrocal@127.0.0.1:1/nowhere");
+    let warning = end
+        .stderr
+        .lines()
+        .find(|l| l.contains("could not be updated"))
+        .unwrap_or_else(|| {
+            panic!(
+                "no catalog warning:
+{}",
+                end.stderr
+            )
+        });
+    assert!(
+        warning.contains("gyrocal catalog import") && warning.contains(dir.to_str().unwrap()),
+        "{warning}"
+    );
+    // the operator reads about the table before the catalog
+    let at_rest = end.stderr.find("table at rest").unwrap();
+    assert!(
+        at_rest < end.stderr.find(warning).unwrap(),
+        "{}",
+        end.stderr
     );
 }
 
