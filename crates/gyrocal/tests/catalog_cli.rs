@@ -266,6 +266,7 @@ fn a_run_indexes_itself_and_a_dead_catalog_never_stops_it() {
     let doc = json(&out);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(doc["status"], "complete");
+    assert_eq!(doc["table"]["at_rest"], true, "{doc:#}");
     assert_eq!(doc["catalog"]["updated"], false);
     assert!(stderr.contains("gyrocal catalog import"), "{stderr}");
     assert!(
@@ -457,6 +458,7 @@ fn a_catalog_killed_during_a_run_lets_it_complete_and_an_import_catches_up() {
         doc["status"], "complete",
         "the run completes without its catalog"
     );
+    assert_eq!(doc["table"]["at_rest"], true, "{doc:#}");
     assert_eq!(doc["catalog"]["updated"], false, "{doc:#}");
     let list = json(
         &gyrocal(&data)
