@@ -31,7 +31,7 @@ pub struct RunRow {
     pub plan_name: String,
     /// The plan's SHA-256.
     pub plan_hash: String,
-    /// What was calibrated: [`KIND_SCALE_FACTOR`].
+    /// What the run measured: the plan's kind ([`KIND_SCALE_FACTOR`] or `drift`).
     pub kind: String,
     /// The gyro's serial number.
     pub dut_serial: Option<String>,
@@ -286,7 +286,7 @@ pub fn read_run(dir: &Path, host: Option<&str>) -> Result<RunRecord, CatalogErro
         station_id: s(&station, "id"),
         plan_name: m.plan.name().to_string(),
         plan_hash: m.plan_hash.clone(),
-        kind: KIND_SCALE_FACTOR.to_string(),
+        kind: m.plan.kind().as_str().to_string(),
         dut_serial: m.dut.as_ref().and_then(|d| d.serial.clone()),
         dut_model: m.dut.as_ref().and_then(|d| d.model.clone()),
         operator: m.context.as_ref().and_then(|c| c.operator.clone()),

@@ -124,7 +124,7 @@ pub fn fit_run(
 /// classes (the statistical part alone without a station) and the verdict against the plan's
 /// `[acceptance]` limits.
 pub fn attach_records(analysis: &mut gyrocal_fit::Analysis, m: &Manifest) {
-    let (inputs, missing) = uncertainty_inputs(m, analysis);
+    let (inputs, missing) = uncertainty_inputs(m);
     analysis.attach_uncertainty(&inputs);
     if let Some(u) = &mut analysis.uncertainty {
         u.not_included.extend(missing);
@@ -144,7 +144,6 @@ fn meter_range(m: &Manifest) -> f64 {
 /// it leaves out (in words, for the budget's "not included").
 pub fn uncertainty_inputs(
     m: &Manifest,
-    _analysis: &gyrocal_fit::Analysis,
 ) -> (gyrocal_fit::uncertainty::UncertaintyInputs, Vec<String>) {
     use gyrocal_fit::uncertainty::{MeterAccuracy, TableRateAccuracy, UncertaintyInputs};
     let mut inputs = UncertaintyInputs::default();

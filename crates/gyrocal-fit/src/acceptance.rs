@@ -461,6 +461,16 @@ pub struct Acceptance {
     pub checks: Vec<Check>,
 }
 
+impl Acceptance {
+    /// The checks that make the verdict: those with the run's (worst) verdict, none when it
+    /// passes.
+    pub fn deciding(&self) -> impl Iterator<Item = &Check> {
+        self.checks
+            .iter()
+            .filter(move |c| c.verdict == self.verdict && c.verdict != Verdict::Pass)
+    }
+}
+
 /// Checks every quantity `spec` limits against `measured(quantity)`. `None` when the
 /// specification limits nothing (no checks, no verdict).
 pub fn evaluate(

@@ -93,6 +93,21 @@ pub struct NestedTest {
     pub note: Option<String>,
 }
 
+impl std::fmt::Display for NestedTest {
+    /// `linear → quadratic: F = 15668.000, p = 0.000` (`—` where there is no F or p).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let or_dash = |v: Option<f64>| v.map_or_else(|| "—".to_string(), |v| format!("{v:.3}"));
+        write!(
+            f,
+            "{} → {}: F = {}, p = {}",
+            self.reduced,
+            self.full,
+            or_dash(self.f),
+            or_dash(self.p_value)
+        )
+    }
+}
+
 /// Chooses among the least-squares polynomial fits in `fits` (others are ignored) by nested
 /// F-tests at [`MODEL_SELECTION_LEVEL`]. `points` is N; `rounding_floor` is the (weighted)
 /// SSE below which a fit counts as exact (rounding noise), in the unit of the fits' SSE

@@ -523,11 +523,17 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
     } else {
         path.to_path_buf()
     };
+    // a run directory's manifest, read once: its plan's kind and its simulated gyro
+    let manifest = if is_run {
+        gyrocal_files::load(path).ok().map(|r| r.manifest)
+    } else {
+        None
+    };
     let join_below = opts.join_gaps_below_s.or_else(|| {
-        let drift = is_run
-            && gyrocal_files::load(path)
-                .is_ok_and(|r| r.manifest.plan.kind() == gyrocal_files::PlanKind::Drift);
-        drift.then_some(DRIFT_SEGMENT_JOIN_S)
+        manifest
+            .as_ref()
+            .is_some_and(|m| m.plan.kind() == gyrocal_files::PlanKind::Drift)
+            .then_some(DRIFT_SEGMENT_JOIN_S)
     });
     let mut joined_gaps = 0usize;
     let mut dead_time_s = 0.0_f64;
@@ -581,9 +587,9 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
                 })
             }
             // a simulated run's gyro has a known K: the plan's [simulation] scale_factor
-            Ok(None) => match gyrocal_files::load(path) {
-                Ok(run) if run.manifest.simulated => {
-                    let k = run.manifest.plan.simulation().scale_factor;
+            Ok(None) => match &manifest {
+                Some(m) if m.simulated => {
+                    let k = m.plan.simulation().scale_factor;
                     notes.push(format!(
                         "scale factor K = {k} V/(°/s): the simulated gyro's ([simulation] scale_factor); --scale-factor overrides it"
                     ));

@@ -385,9 +385,7 @@ pub(crate) fn verdict_box(html: &mut String, acceptance: Option<&Acceptance>, so
         return;
     };
     let deciding: Vec<String> = acc
-        .checks
-        .iter()
-        .filter(|c| c.verdict == acc.verdict && c.verdict != Verdict::Pass)
+        .deciding()
         .map(|c| {
             let mut t = format!("<strong>{}</strong>", esc(quantity_label(c.quantity)));
             if let Some(r) = &c.reason {

@@ -668,19 +668,7 @@ fn summary(html: &mut String, a: &Analysis, sfx: &str, input: &Input) {
         a.model_selection.as_ref().map_or_else(
             || "chosen by an earlier gyrocal (smallest residual standard error)".to_string(),
             |sel| {
-                let tests: Vec<String> = sel
-                    .tests
-                    .iter()
-                    .map(|t| {
-                        format!(
-                            "{} → {}: F = {}, p = {}",
-                            t.reduced,
-                            t.full,
-                            t.f.map_or_else(|| "—".into(), |f| format!("{f:.3}")),
-                            t.p_value.map_or_else(|| "—".into(), |p| format!("{p:.3}"))
-                        )
-                    })
-                    .collect();
+                let tests: Vec<String> = sel.tests.iter().map(ToString::to_string).collect();
                 format!(
                     "the simplest model whose added terms are significant ({}, level {}): {}",
                     esc(&sel.method),

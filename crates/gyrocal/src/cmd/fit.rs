@@ -402,16 +402,7 @@ pub(crate) fn human(out: &mut String, a: &Analysis) {
                 let tests: Vec<String> = sel
                     .tests
                     .iter()
-                    .map(|t| {
-                        format!(
-                            "{}→{}: F = {}, p = {}{}",
-                            t.reduced,
-                            t.full,
-                            t.f.map_or_else(|| "—".into(), |f| format!("{f:.3}")),
-                            t.p_value.map_or_else(|| "—".into(), |p| format!("{p:.3}")),
-                            if t.significant { " significant" } else { "" }
-                        )
-                    })
+                    .map(|t| format!("{t}{}", if t.significant { " significant" } else { "" }))
                     .collect();
                 format!(
                     "the simplest model whose added terms are significant, {} at level {}: {}",
@@ -575,12 +566,7 @@ pub(crate) fn human(out: &mut String, a: &Analysis) {
 /// "verdict: FAIL (simple rule): nonlinearity_ppm" — the run's verdict and the quantities
 /// that make it.
 pub fn verdict_line(acc: &gyrocal_fit::acceptance::Acceptance) -> String {
-    let deciding: Vec<&str> = acc
-        .checks
-        .iter()
-        .filter(|c| c.verdict == acc.verdict && c.verdict != gyrocal_fit::acceptance::Verdict::Pass)
-        .map(|c| c.quantity.name())
-        .collect();
+    let deciding: Vec<&str> = acc.deciding().map(|c| c.quantity.name()).collect();
     format!(
         "verdict: {} ({} rule){}",
         acc.verdict.label(),

@@ -1154,28 +1154,23 @@ fn finish(
 fn finish_drift(
     args: &RunArgs,
     dir: &Path,
-    run: &mut RunDir,
     human: &dyn Fn(String),
     doc: &mut serde_json::Value,
 ) -> anyhow::Result<u8> {
-    // a simulated gyro's scale factor is known; a real one's comes from its calibration
-    let m = run.manifest();
-    let scale_factor = m.simulated.then(|| m.plan.simulation().scale_factor);
-    let opts = gyrocal_report::allan::AllanOptions {
-        scale_factor,
-        ..Default::default()
-    };
     if args.no_report {
         human(format!(
             "drift record complete: analyse it with `gyrocal allan {}` (--scale-factor K for °/h)",
             dir.display()
         ));
     } else {
-        match gyrocal_report::write_run_allan(dir, &opts) {
+        // the analysis finds the scale factor itself (the run's fit.json, or the simulated
+        // gyro's); without one the record stays in volts
+        match gyrocal_report::write_run_allan(dir, &Default::default()) {
             Ok((a, files)) => {
                 doc["allan"] = serde_json::json!({
                     "files": files,
                     "unit": a.unit,
+                    "scale_factor": a.scale_factor,
                     "noise_terms": a.noise_terms,
                     "bias": a.bias,
                     "warmup": a.warmup,
@@ -1187,9 +1182,11 @@ fn finish_drift(
                         .map(|f| f.display().to_string())
                         .collect::<Vec<_>>()
                         .join(" and "),
-                    match scale_factor {
-                        Some(k) =>
-                            format!(" (the simulated gyro's K = {k} V/(°/s) converts to °/h)"),
+                    match &a.scale_factor {
+                        Some(k) => format!(
+                            " (K = {} V/(°/s), {}, converts to °/h)",
+                            k.v_per_dps, k.source
+                        ),
                         None => format!(
                             " (in volts: `gyrocal allan {} --scale-factor K` for °/h)",
                             dir.display()
@@ -1271,7 +1268,7 @@ fn finish_human(
         }
     }
     if run.manifest().plan.kind() == gyrocal_run::PlanKind::Drift {
-        return finish_drift(args, dir, run, human, doc);
+        return finish_drift(args, dir, human, doc);
     }
     let analysis = fit_run(run, &gyrocal_fit::Options::default())
         .with_context(|| format!("fitting {}", dir.display()))?;
