@@ -43,6 +43,7 @@ mod streaming;
 mod sum;
 mod taus;
 mod terms;
+pub mod warmup;
 
 pub use curve::{Curve, MIN_SAMPLES, Point, RawPoint, compute, compute_record, deviations};
 pub use error::{Error, ErrorKind, Result};
@@ -56,3 +57,4 @@ pub use terms::{
     Quantity, SLOPE_TOLERANCE, SlopeRead, Term, bias_figures, bias_stability, fit_model,
     noise_terms,
 };
+pub use warmup::{WarmupDetector, WarmupEnd};

@@ -331,6 +331,24 @@ struct RawFile {
     simulation: Option<RawSimulation>,
     dut: Option<RawDut>,
     acceptance: Option<RawAcceptance>,
+    drift: Option<RawDrift>,
+    warmup: Option<RawWarmup>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDrift {
+    table: Option<S<String>>,
+    axis: Option<S<String>>,
+    latitude_deg: Option<S<f64>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawWarmup {
+    window_s: Option<S<f64>>,
+    tolerance_v: Option<S<f64>>,
+    max_s: Option<S<f64>>,
 }
 
 #[derive(Deserialize)]
@@ -657,6 +675,24 @@ const SCHEMA: &[SectionSchema] = &[
         ],
     ),
     ("acceptance", false, ACCEPTANCE_KEYS),
+    (
+        "drift",
+        false,
+        &[
+            ("table", Kind::Text, false),
+            ("axis", Kind::Text, false),
+            ("latitude_deg", Kind::Number, false),
+        ],
+    ),
+    (
+        "warmup",
+        false,
+        &[
+            ("window_s", Kind::Number, false),
+            ("tolerance_v", Kind::Number, false),
+            ("max_s", Kind::Number, false),
+        ],
+    ),
 ];
 
 /// The keys of `[acceptance]` (and of a standalone acceptance file): the decision rule and a
@@ -1056,6 +1092,160 @@ pub struct PlanDoc {
     /// `[acceptance]` (absent: no specification). Not part of the hash.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub acceptance: Option<AcceptanceSpec>,
+    /// `[drift]` (a drift plan's table role and bench orientation; absent: the defaults).
+    /// Part of the hash; absent from the documents of plans that have none, so their hashes
+    /// stay what they were.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub drift: Option<DriftDoc>,
+    /// `[warmup]` (absent: no warm-up). Part of the hash.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub warmup: Option<WarmupDoc>,
+}
+
+/// `[drift]` as parsed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DriftDoc {
+    /// The table's role: `hold` or `servo_off`.
+    pub table: String,
+    /// Where the input axis points (`up`, `down`, `north`, `south`, `east`, `west`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub axis: Option<String>,
+    /// The bench's latitude, degrees north.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub latitude_deg: Option<f64>,
+}
+
+/// `[warmup]` as parsed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WarmupDoc {
+    /// Window of the rolling mean, s.
+    pub window_s: f64,
+    /// Largest change of consecutive window means that counts as settled, V (absent: 3 × the
+    /// white-noise σ of a window mean, estimated from the readings so far).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tolerance_v: Option<f64>,
+    /// The warm-up ends here at the latest, s.
+    pub max_s: f64,
+}
+
+/// Default `[warmup] window_s`, s.
+pub const DEFAULT_WARMUP_WINDOW_S: f64 = 60.0;
+/// Default `[warmup] max_s`, s (IEEE 1431's HRG warm-up is tens of minutes).
+pub const DEFAULT_WARMUP_MAX_S: f64 = 3600.0;
+
+/// What the rate table does during a drift record (`[drift] table`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum TableRole {
+    /// Servo on, holding 0 °/s; every segment is checked against the hold tolerance like a
+    /// step of a sweep (the default: a table with its servo on is stiff against the gyro's
+    /// cables and the floor).
+    #[default]
+    Hold,
+    /// Stopped with the servo off (mode OFF) for the whole record: no servo jitter on the
+    /// input axis; the table's rate is still sampled, and a segment during which it moved
+    /// more than the hold tolerance, or left OFF, is not recorded.
+    ServoOff,
+}
+
+impl TableRole {
+    /// All roles.
+    pub const ALL: [TableRole; 2] = [TableRole::Hold, TableRole::ServoOff];
+
+    /// As written in a plan.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            TableRole::Hold => "hold",
+            TableRole::ServoOff => "servo_off",
+        }
+    }
+}
+
+/// Earth's rotation rate, °/h (15.041 °/h: one turn per sidereal day).
+pub const EARTH_RATE_DPH: f64 = 15.041;
+
+/// Where a gyro's input axis points on the bench.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Axis {
+    /// Local vertical, up: senses Ω·sin(latitude).
+    Up,
+    /// Down: −Ω·sin(latitude).
+    Down,
+    /// Horizontal, north: Ω·cos(latitude).
+    North,
+    /// Horizontal, south: −Ω·cos(latitude).
+    South,
+    /// Horizontal, east: no Earth rate.
+    East,
+    /// Horizontal, west: no Earth rate.
+    West,
+}
+
+impl Axis {
+    /// All directions.
+    pub const ALL: [Axis; 6] = [
+        Axis::Up,
+        Axis::Down,
+        Axis::North,
+        Axis::South,
+        Axis::East,
+        Axis::West,
+    ];
+
+    /// As written in a plan and on the command line.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Axis::Up => "up",
+            Axis::Down => "down",
+            Axis::North => "north",
+            Axis::South => "south",
+            Axis::East => "east",
+            Axis::West => "west",
+        }
+    }
+
+    /// The direction named `s` (ASCII case ignored).
+    pub fn from_name(s: &str) -> Option<Axis> {
+        Axis::ALL
+            .into_iter()
+            .find(|a| a.as_str().eq_ignore_ascii_case(s.trim()))
+    }
+
+    /// The Earth-rate component along the axis at `latitude_deg`, °/h.
+    pub fn earth_rate_dph(self, latitude_deg: f64) -> f64 {
+        let phi = latitude_deg.to_radians();
+        match self {
+            Axis::Up => EARTH_RATE_DPH * phi.sin(),
+            Axis::Down => -EARTH_RATE_DPH * phi.sin(),
+            Axis::North => EARTH_RATE_DPH * phi.cos(),
+            Axis::South => -EARTH_RATE_DPH * phi.cos(),
+            Axis::East | Axis::West => 0.0,
+        }
+    }
+}
+
+/// The validated `[drift]` section (defaults when the plan has none).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct DriftSettings {
+    /// What the table does during the record.
+    pub table: TableRole,
+    /// The input axis and the latitude, when given (both or neither): the Earth's rate along
+    /// the axis is removed from the bias in the run's Allan analysis.
+    pub earth: Option<(Axis, f64)>,
+}
+
+/// The validated `[warmup]` section.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WarmupSettings {
+    /// Window of the rolling mean.
+    pub window: Duration,
+    /// Largest change of consecutive window means that counts as settled, V; `None`: 3 × the
+    /// white-noise σ of a window mean.
+    pub tolerance_v: Option<f64>,
+    /// The warm-up ends here at the latest.
+    pub max: Duration,
 }
 
 /// `[dut]`: the gyro under test, when the plan names it (a plan written for one gyro): the
@@ -1513,6 +1703,8 @@ pub struct Plan {
     simulation: Simulation,
     dut: Option<PlanDut>,
     acceptance: Option<AcceptanceSpec>,
+    drift: Option<DriftSettings>,
+    warmup: Option<WarmupSettings>,
 }
 
 /// What a step acquires.
@@ -1659,6 +1851,16 @@ impl Plan {
             simulation: self.simulation.clone(),
             dut: self.dut.clone(),
             acceptance: self.acceptance.clone(),
+            drift: self.drift.map(|d| DriftDoc {
+                table: d.table.as_str().into(),
+                axis: d.earth.map(|(a, _)| a.as_str().into()),
+                latitude_deg: d.earth.map(|(_, l)| l),
+            }),
+            warmup: self.warmup.map(|w| WarmupDoc {
+                window_s: w.window.as_secs_f64(),
+                tolerance_v: w.tolerance_v,
+                max_s: w.max.as_secs_f64(),
+            }),
         }
     }
 
@@ -1748,6 +1950,15 @@ impl Plan {
     /// `[dmm]`.
     pub fn dmm(&self) -> &DmmSettings {
         &self.dmm
+    }
+    /// `[drift]`: the table's role and the bench's orientation (the defaults when the plan
+    /// has no `[drift]`; only a drift plan may have one).
+    pub fn drift(&self) -> DriftSettings {
+        self.drift.unwrap_or_default()
+    }
+    /// `[warmup]`, when the plan asks for a warm-up.
+    pub fn warmup(&self) -> Option<&WarmupSettings> {
+        self.warmup.as_ref()
     }
     /// `[simulation]`.
     pub fn simulation(&self) -> &Simulation {
@@ -1964,6 +2175,16 @@ fn raw_to_doc(raw: RawFile, sp: &mut Spans) -> Result<PlanDoc, (&'static str, St
         None => None,
         Some(a) => Some(raw_acceptance(a, sp)?),
     };
+    let drift = raw.drift.map(|d| DriftDoc {
+        table: sp.opt("drift.table", d.table, TableRole::Hold.as_str().into()),
+        axis: d.axis.map(|v| sp.take("drift.axis", v)),
+        latitude_deg: d.latitude_deg.map(|v| sp.take("drift.latitude_deg", v)),
+    });
+    let warmup = raw.warmup.map(|w| WarmupDoc {
+        window_s: sp.opt("warmup.window_s", w.window_s, DEFAULT_WARMUP_WINDOW_S),
+        tolerance_v: w.tolerance_v.map(|v| sp.take("warmup.tolerance_v", v)),
+        max_s: sp.opt("warmup.max_s", w.max_s, DEFAULT_WARMUP_MAX_S),
+    });
     Ok(PlanDoc {
         plan,
         table,
@@ -1971,6 +2192,8 @@ fn raw_to_doc(raw: RawFile, sp: &mut Spans) -> Result<PlanDoc, (&'static str, St
         simulation,
         dut,
         acceptance,
+        drift,
+        warmup,
     })
 }
 
@@ -2098,6 +2321,93 @@ impl Ctx<'_> {
     }
 }
 
+fn validate_drift(d: &DriftDoc, cx: &Ctx<'_>) -> Result<DriftSettings, PlanError> {
+    let table = TableRole::ALL
+        .into_iter()
+        .find(|r| r.as_str() == d.table.trim())
+        .ok_or_else(|| {
+            cx.err(
+                "drift.table",
+                format!(
+                    "= {:?} is not a table role: write \"hold\" (servo on at 0 °/s) or \"servo_off\" (stopped, servo off)",
+                    d.table
+                ),
+            )
+        })?;
+    let axis = match &d.axis {
+        None => None,
+        Some(a) => Some(Axis::from_name(a).ok_or_else(|| {
+            cx.err(
+                "drift.axis",
+                format!(
+                    "= {a:?} is not a direction: write \"up\", \"down\", \"north\", \"south\", \"east\" or \"west\""
+                ),
+            )
+        })?),
+    };
+    let latitude = match d.latitude_deg {
+        None => None,
+        Some(l) => {
+            let l = cx.finite("drift.latitude_deg", l)?;
+            if !(-90.0..=90.0).contains(&l) {
+                return Err(cx.err(
+                    "drift.latitude_deg",
+                    format!("must be from -90 to 90 degrees (got {l})"),
+                ));
+            }
+            Some(l)
+        }
+    };
+    let earth = match (axis, latitude) {
+        (Some(a), Some(l)) => Some((a, l)),
+        (None, None) => None,
+        (Some(_), None) => {
+            return Err(cx.err(
+                "drift.axis",
+                "needs latitude_deg too: the Earth's rate along the axis depends on it".into(),
+            ));
+        }
+        (None, Some(_)) => {
+            return Err(cx.err(
+                "drift.latitude_deg",
+                "needs axis too: the Earth's rate seen depends on where the input axis points"
+                    .into(),
+            ));
+        }
+    };
+    Ok(DriftSettings { table, earth })
+}
+
+fn validate_warmup(w: &WarmupDoc, cx: &Ctx<'_>) -> Result<WarmupSettings, PlanError> {
+    let window = cx.duration("warmup.window_s", w.window_s, true)?;
+    let max = cx.duration("warmup.max_s", w.max_s, true)?;
+    if max < window * 2 {
+        return Err(cx.err(
+            "warmup.max_s",
+            format!(
+                "= {} s is shorter than two windows ({} s): the criterion compares consecutive window means",
+                w.max_s,
+                2.0 * w.window_s
+            ),
+        ));
+    }
+    let tolerance_v = match w.tolerance_v {
+        None => None,
+        Some(t) => {
+            let t = cx.finite("warmup.tolerance_v", t)?;
+            if t <= 0.0 {
+                return Err(cx.err("warmup.tolerance_v", format!("must be > 0 V (got {t})")));
+            }
+            Some(t)
+        }
+    };
+    Ok(WarmupSettings {
+        window,
+        tolerance_v,
+        max,
+    })
+}
+
 fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
     let PlanDoc {
         plan: p,
@@ -2106,6 +2416,8 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
         simulation: s,
         dut,
         acceptance,
+        drift,
+        warmup,
     } = doc;
 
     // [table] first: the rates are checked against its limits.
@@ -2397,7 +2709,28 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
         validate_acceptance(a, cx)?;
     }
 
+    // [drift]: a drift plan's only
+    let drift = match drift {
+        None => None,
+        Some(_) if kind != PlanKind::Drift => {
+            return Err(cx.err(
+                "drift.table",
+                "[drift] belongs to a drift plan: add kind = \"drift\" to [plan], or remove [drift]"
+                    .into(),
+            ));
+        }
+        Some(d) => Some(validate_drift(&d, cx)?),
+    };
+
+    // [warmup]
+    let warmup = match warmup {
+        None => None,
+        Some(w) => Some(validate_warmup(&w, cx)?),
+    };
+
     Ok(Plan {
+        drift,
+        warmup,
         kind,
         name: p.name,
         rates_dps: rates,

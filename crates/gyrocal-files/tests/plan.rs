@@ -614,7 +614,7 @@ fn a_misspelt_section_or_key_gets_a_suggestion() {
     assert!(!e.to_string().contains("[plan] unknown"), "{e}");
     assert!(
         e.to_string().ends_with(
-            "(the sections are [plan], [table], [dmm], [simulation], [dut] and [acceptance])"
+            "(the sections are [plan], [table], [dmm], [simulation], [dut], [acceptance], [drift] and [warmup])"
         ),
         "{e}"
     );
@@ -739,4 +739,69 @@ fn timeout_not_above_the_window_is_one_sentence_naming_both_keys() {
          at_rate_timeout_s = 60 (the default) (the rate must hold for the window before the \
          timeout ends): lower stability_window_s or raise at_rate_timeout_s"
     );
+}
+
+const DRIFT: &str = r#"[plan]
+kind = "drift"
+rates_dps = [0]
+samples_per_rate = 100
+[table]
+port = "/dev/ttyUSB1"
+max_rate_dps = 20
+acceleration_dps2 = 10
+[dmm]
+port = "/dev/ttyUSB0"
+"#;
+
+#[test]
+fn drift_section_gives_the_table_role_and_the_bench_orientation() {
+    use gyrocal_files::plan::{Axis, TableRole};
+    let plain = parse(DRIFT).unwrap();
+    assert_eq!(plain.drift().table, TableRole::Hold);
+    assert_eq!(plain.drift().earth, None);
+    let text =
+        format!("{DRIFT}[drift]\ntable = \"servo_off\"\naxis = \"north\"\nlatitude_deg = 45.5\n");
+    let p = parse(&text).unwrap();
+    assert_eq!(p.drift().table, TableRole::ServoOff);
+    assert_eq!(p.drift().earth, Some((Axis::North, 45.5)));
+    // the section is part of the method: the hash changes; a manifest's copy reads back
+    assert_ne!(p.hash(), plain.hash());
+    let back = Plan::from_doc(p.to_doc(), Path::new("manifest.json")).unwrap();
+    assert_eq!(back, p);
+    assert_eq!(back.hash(), p.hash());
+}
+
+#[test]
+fn drift_section_errors_name_the_line_and_key() {
+    let with =
+        |extra: &str| parse(&format!("{DRIFT}[drift]\n{extra}")).expect_err("must be refused");
+    let e = with("table = \"spinning\"\n");
+    assert_at(&e, 12, "table");
+    assert!(e.to_string().contains("servo_off"), "{e}");
+    let e = with("axis = \"sideways\"\nlatitude_deg = 45\n");
+    assert_at(&e, 12, "axis");
+    let e = with("axis = \"up\"\n");
+    assert!(e.to_string().contains("latitude_deg"), "{e}");
+    let e = with("axis = \"up\"\nlatitude_deg = 91\n");
+    assert_at(&e, 13, "latitude_deg");
+    // a sweep has no [drift]
+    let e = parse(&format!("{GOOD}[drift]\ntable = \"hold\"\n")).expect_err("refused");
+    assert!(e.to_string().contains("drift plan"), "{e}");
+}
+
+#[test]
+fn warmup_section_has_defaults_and_checked_bounds() {
+    let p = parse(&format!("{GOOD}[warmup]\n")).unwrap();
+    let w = p.warmup().expect("warm-up on");
+    assert_eq!(w.window, Duration::from_secs(60));
+    assert_eq!(w.max, Duration::from_secs(3600));
+    assert_eq!(w.tolerance_v, None);
+    assert_ne!(p.hash(), parse(GOOD).unwrap().hash());
+    assert!(parse(GOOD).unwrap().warmup().is_none());
+    let e = parse(&format!("{GOOD}[warmup]\nwindow_s = 60\nmax_s = 100\n")).expect_err("refused");
+    assert_at(&e, 13, "max_s");
+    let e = parse(&format!("{GOOD}[warmup]\ntolerance_v = -1e-5\n")).expect_err("refused");
+    assert_at(&e, 12, "tolerance_v");
+    let e = parse(&format!("{GOOD}[warmup]\nwindow_s = 0\n")).expect_err("refused");
+    assert_at(&e, 12, "window_s");
 }

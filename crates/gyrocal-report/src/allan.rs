@@ -118,43 +118,12 @@ pub struct AllanOptions {
     /// re-arming), no joining otherwise.
     pub join_gaps_below_s: Option<f64>,
     /// Where the input axis points and the latitude, to remove the Earth's rate from the bias.
+    /// `None`: a run directory's plan (`[drift] axis`, `latitude_deg`), if it has them.
     pub earth: Option<(Axis, f64)>,
 }
 
-/// Earth's rotation rate, °/h.
-pub const EARTH_RATE_DPH: f64 = 15.041;
-
-/// Where a gyro's input axis points on the bench.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Axis {
-    /// Local vertical, up: senses Ω·sin(latitude).
-    Up,
-    /// Down: −Ω·sin(latitude).
-    Down,
-    /// Horizontal, north: Ω·cos(latitude).
-    North,
-    /// Horizontal, south: −Ω·cos(latitude).
-    South,
-    /// Horizontal, east: no Earth rate.
-    East,
-    /// Horizontal, west: no Earth rate.
-    West,
-}
-
-impl Axis {
-    /// The Earth-rate component along the axis at `latitude_deg`, °/h.
-    pub fn earth_rate_dph(self, latitude_deg: f64) -> f64 {
-        let phi = latitude_deg.to_radians();
-        match self {
-            Axis::Up => EARTH_RATE_DPH * phi.sin(),
-            Axis::Down => -EARTH_RATE_DPH * phi.sin(),
-            Axis::North => EARTH_RATE_DPH * phi.cos(),
-            Axis::South => -EARTH_RATE_DPH * phi.cos(),
-            Axis::East | Axis::West => 0.0,
-        }
-    }
-}
+/// Where a gyro's input axis points, and Earth's rotation rate: the plan's (`[drift] axis`).
+pub use gyrocal_files::plan::{Axis, EARTH_RATE_DPH};
 
 /// The bias with the Earth rate removed.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -837,7 +806,11 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
         None
     };
     let bias = bias_figures(&rec, &unit);
-    let earth_rate = match opts.earth {
+    // the option, else the run's plan (`[drift] axis` and `latitude_deg`)
+    let earth = opts
+        .earth
+        .or_else(|| manifest.as_ref().and_then(|m| m.plan.drift().earth));
+    let earth_rate = match earth {
         Some((axis, latitude_deg)) if is_rate => {
             let component_dph = axis.earth_rate_dph(latitude_deg);
             Some(EarthRateRemoved {
