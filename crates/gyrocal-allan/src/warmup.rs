@@ -207,14 +207,15 @@ impl WarmupDetector {
 
     fn keep_mean(&mut self, first: u64, mean: f64) {
         let k = first / self.window;
-        if k % self.stride == 0 {
+        if k.is_multiple_of(self.stride) {
             self.means.push((first, mean));
         }
         if self.means.len() > self.max_points {
             self.stride *= 2;
             let stride = self.stride;
             let window = self.window;
-            self.means.retain(|(i, _)| (i / window) % stride == 0);
+            self.means
+                .retain(|(i, _)| (i / window).is_multiple_of(stride));
         }
     }
 }

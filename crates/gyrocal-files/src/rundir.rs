@@ -749,6 +749,41 @@ pub fn verify(dir: &Path) -> Result<Vec<FileCheck>, RunError> {
         .collect())
 }
 
+/// The warm-up (IEEE 1431 §12.6) as a run found it online: consecutive window means of the
+/// readings at rest, complete when two agree within the tolerance (or at the maximum). Before a
+/// scale-factor sweep its readings are not kept (only the window means, here); in a drift run
+/// they are the start of the record, and the Allan analysis cuts them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WarmupRecord {
+    /// `before_sweep` (a phase of its own before the first step) or `in_record` (the first
+    /// segments of a drift record).
+    pub mode: String,
+    /// Window of the rolling mean, s.
+    pub window_s: f64,
+    /// The tolerance in force, V (`None` until it could be estimated).
+    pub tolerance_v: Option<f64>,
+    /// Where the tolerance came from: `plan` or the white-noise estimate.
+    pub tolerance_source: String,
+    /// The maximum, s.
+    pub max_s: f64,
+    /// Run-clock time of the warm-up's first reading, s.
+    pub started_s: f64,
+    /// The warm-up is over.
+    pub complete: bool,
+    /// Warm-up time, s from `started_s` (when complete).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time_s: Option<f64>,
+    /// `criterion` or `max` (when complete).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ended_by: Option<String>,
+    /// The change between the last two window means, V.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub last_change_v: Option<f64>,
+    /// Window means `[run-clock time of the window's middle, s; mean, V]`, thinned to a few
+    /// hundred points.
+    pub means: Vec<[f64; 2]>,
+}
+
 /// `manifest.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -825,6 +860,9 @@ pub struct Manifest {
     /// The fit's reference and headline figures, when fitted; the fit is in `fit.json`.
     #[serde(default)]
     pub fit_summary: Option<FitSummary>,
+    /// The warm-up as the run found it while recording (plans with `[warmup]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub warmup: Option<WarmupRecord>,
     /// SHA-256 (lower-case hex) of the data files as they were when the run completed
     /// (`samples.csv`, `steps.csv`; `fit.json`'s is in `fit_summary`), so a file edited
     /// afterwards is found (`gyrocal verify`). Empty until the run completes, and in runs of
@@ -856,7 +894,15 @@ mod manifest_plan {
     use crate::plan::{Plan, PlanDoc};
 
     /// The sections that stay sections; every other key belongs to `[plan]`.
-    const SECTIONS: [&str; 5] = ["table", "dmm", "simulation", "dut", "acceptance"];
+    const SECTIONS: [&str; 7] = [
+        "table",
+        "dmm",
+        "simulation",
+        "dut",
+        "acceptance",
+        "drift",
+        "warmup",
+    ];
 
     pub(super) fn serialize<S: Serializer>(plan: &Plan, s: S) -> Result<S::Ok, S::Error> {
         let doc = serde_json::to_value(plan.to_doc()).map_err(S::Error::custom)?;
@@ -1227,6 +1273,7 @@ impl RunDir {
             retries: Vec::new(),
             timing: None,
             fit_summary: None,
+            warmup: None,
             acceptance: None,
             legacy_fit: None,
         };
@@ -1630,6 +1677,12 @@ impl RunDir {
     /// Sets the instruments' identities.
     pub fn set_instruments(&mut self, instruments: Instruments) -> Result<(), RunError> {
         self.manifest.instruments = instruments;
+        self.write_manifest()
+    }
+
+    /// Records the warm-up's state (written at every window, so a crash keeps the curve).
+    pub fn set_warmup(&mut self, warmup: WarmupRecord) -> Result<(), RunError> {
+        self.manifest.warmup = Some(warmup);
         self.write_manifest()
     }
 

@@ -504,6 +504,16 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
             .is_some_and(|m| m.plan.kind() == gyrocal_files::PlanKind::Drift)
             .then_some(DRIFT_SEGMENT_JOIN_S)
     });
+    // a run that watched its warm-up (`[warmup]`): the same criterion, with the tolerance it
+    // used, unless the options ask for another
+    let warmup_opts = match manifest.as_ref().and_then(|m| m.warmup.as_ref()) {
+        Some(w) if opts.warmup == WarmupOptions::default() => WarmupOptions {
+            window_s: w.window_s,
+            tolerance: w.tolerance_v,
+            max_s: Some(w.max_s),
+        },
+        _ => opts.warmup.clone(),
+    };
     let mut joined_gaps = 0usize;
     let mut dead_time_s = 0.0_f64;
     if let Some(k) = opts.scale_factor
@@ -762,7 +772,7 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
         tau0,
         segments[si].t_s.0,
         factor,
-        &opts.warmup,
+        &warmup_opts,
         &mut notes,
     );
     let warmup_samples = warmup.as_ref().map_or(0, |w| {

@@ -2,6 +2,8 @@
 //!
 //! - [`estimate`]: the plan's duration from the instruments' timing models, and the physical
 //!   bound a run's elapsed time is judged against (`gyrocal check` prints it).
+//! - [`monitor`]: what the run watches in its readings: the warm-up, and a drift record's
+//!   running Allan deviation.
 //! - [`sequencer`]: the run itself. Generic over the multimeter's transport and the
 //!   [`gyrocal_table::RateTable`], so the same code drives real instruments and the simulated
 //!   bench, in real or virtual time.
@@ -11,6 +13,7 @@
 //! re-exported here so a run's code reads as one crate.
 
 pub mod estimate;
+pub mod monitor;
 pub mod sequencer;
 
 pub use gyrocal_files::{

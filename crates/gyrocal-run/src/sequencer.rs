@@ -28,9 +28,11 @@ use tokio::time::Instant;
 use tracing::Instrument as _;
 
 use crate::estimate::{self, Estimate};
-use crate::plan::{Plan, Step};
+use crate::monitor::{self, AdevWatch, WarmupWatch};
+use crate::plan::{Plan, PlanKind, Step, TableRole};
 use crate::rundir::{
     Instruments, Retry, RunDir, RunError, Sample, Status, StepRecord, Timing as RunTiming,
+    WarmupRecord,
 };
 
 /// What the operator (or a signal) asked for. The `&'static str` names who asked (`"SIGINT"`,
@@ -167,6 +169,20 @@ pub enum Event {
     },
     /// A step was recorded.
     StepDone(StepRecord),
+    /// The warm-up's state after a chunk of readings (also written to the manifest).
+    Warmup(WarmupRecord),
+    /// A segment of a drift record was recorded: the record so far and its running overlapping
+    /// Allan deviation at octave τ near 1, 10 and 100 s (in volts; this session's readings).
+    Drift {
+        /// 1-based number of the segment just recorded.
+        segment: usize,
+        /// Segments in the plan.
+        of: usize,
+        /// Readings in this session's record so far.
+        readings: u64,
+        /// `(τ, σ)`, s and V.
+        adev_v: Vec<(f64, f64)>,
+    },
     /// A recovery was needed (logged in the manifest too).
     Retry(Retry),
     /// The run is ending: the table was sent a stop and gyrocal waits until it is at rest.
@@ -373,6 +389,12 @@ pub struct Sequencer<M: Multimeter, T: RateTable> {
     moved: bool,
     /// Steps whose readings the meter lost before they were fetched, to measure again.
     lost: Vec<Step>,
+    /// The warm-up being watched (a drift record's first segments; see [`crate::monitor`]).
+    warmup: Option<WarmupWatch>,
+    /// A drift record's running Allan deviation.
+    adev: Option<AdevWatch>,
+    /// Readings of the drift record in this session.
+    drift_readings: u64,
 }
 
 impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
@@ -394,6 +416,9 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
             table_reached: false,
             moved: false,
             lost: Vec::new(),
+            warmup: None,
+            adev: None,
+            drift_readings: 0,
         }
     }
 
@@ -737,7 +762,19 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
         };
         let reading_time = timing.reading_time();
         let acquisition = timing.acquisition();
-        self.table.enable().await?;
+        if self.servo_off() {
+            // a drift record with the servo off: the table is brought to rest (mode OFF) and
+            // left there; it is never enabled
+            self.table.stop().await?;
+            let deadline = self.table.stop_deadline(self.plan.table().max_rate_dps);
+            let rest = self.table.wait_stopped(deadline).await?;
+            tracing::info!(
+                rate_dps = rest.rate_dps,
+                "table at rest, servo off, for the drift record"
+            );
+        } else {
+            self.table.enable().await?;
+        }
 
         let steps = self.run.remaining_steps();
         let est: Estimate = estimate::estimate(&self.plan, &steps, 0.0, timing.as_ref());
@@ -774,6 +811,7 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
             dwell,
             reading_time,
         };
+        self.start_warmup(&ctx).await?;
         let schedule_len = self.plan.schedule().len();
         let mut pending: Option<PendingFetch<M::Pending>> = None;
         // A step the table did not hold is measured again at once; the queue makes that (and
@@ -866,6 +904,36 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
         ctx: &StepContext,
     ) -> Result<StepOutcome<PendingFetch<M::Pending>>, SequenceError> {
         let at_rate;
+        if self.servo_off() {
+            // nothing to demand: the table is at rest with its servo off
+            at_rate = Instant::now();
+            if let Some(p) = pending {
+                self.emit(Event::Phase {
+                    step: p.step.index,
+                    phase: Phase::Fetching,
+                });
+                let dmm = self.dmm_mut()?;
+                match dmm.collect(p.pending).await {
+                    Ok(acq) => self.record_acquired(&p.step, acq, p.stats, p.t_start, p.t_end)?,
+                    Err(e) => {
+                        let e = dmm_error(e);
+                        if !readings_lost(&e) {
+                            return Err(e);
+                        }
+                        self.log_retry(
+                            Some(p.step.index),
+                            "dmm",
+                            format!(
+                                "{e}; step {} is measured again after this one",
+                                p.step.index + 1
+                            ),
+                        )?;
+                        self.lost.push(p.step);
+                    }
+                }
+            }
+            return self.acquire_step(step, at_rate, last, ctx).await;
+        }
         self.moved = true;
         self.table.set_rate(step.rate_dps, ctx.accel).await?;
         self.emit(Event::Phase {
@@ -933,6 +1001,18 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
                 .await?
                 .at_rate_since;
         }
+        self.acquire_step(step, at_rate, last, ctx).await
+    }
+
+    /// The rest of a step once the table is at its rate (since `at_rate`): dwell, acquire
+    /// while watching the table, check the hold, record (or hand the readings back pending).
+    async fn acquire_step(
+        &mut self,
+        step: &Step,
+        at_rate: Instant,
+        last: bool,
+        ctx: &StepContext,
+    ) -> Result<StepOutcome<PendingFetch<M::Pending>>, SequenceError> {
         // the settling dwell counts from the first sample of the stability window: the
         // table has held the rate since then
         let dwell_end = at_rate + ctx.dwell;
@@ -1008,12 +1088,17 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
         *stats = merge_stats(&[*stats, RateStats::from_samples(&[end])]);
         let status = self.table.status().await?;
         let demand = step.rate_dps;
-        if status.mode != TableMode::Rate {
+        let (expected, name) = if self.servo_off() {
+            (TableMode::Off, "OFF (servo off)")
+        } else {
+            (TableMode::Rate, "RATE")
+        };
+        if status.mode != expected {
             return Err(SequenceError::NotHeld {
                 step: step.index,
                 rate_dps: demand,
                 detail: format!(
-                    "the table left RATE mode during the acquisition (now {:?}, measured {end:+.6} °/s)",
+                    "the table left {name} mode during the acquisition (now {:?}, measured {end:+.6} °/s)",
                     status.mode
                 ),
             });
@@ -1161,6 +1246,117 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
         self.run.set_elapsed(elapsed)?;
         self.recorded += 1;
         self.emit(Event::StepDone(rec));
+        if self.plan.kind() == PlanKind::Drift {
+            self.watch_record(step, &volts, t_start, t_end)?;
+        }
+        Ok(())
+    }
+
+    /// A drift record with `[drift] table = "servo_off"`.
+    fn servo_off(&self) -> bool {
+        self.plan.kind() == PlanKind::Drift && self.plan.drift().table == TableRole::ServoOff
+    }
+
+    /// The warm-up of this session, when the plan has one and no earlier session completed
+    /// it: before a sweep, a phase of its own at 0 °/s now; in a drift record, watched in the
+    /// record's first segments (see [`Sequencer::watch_record`]).
+    async fn start_warmup(&mut self, ctx: &StepContext) -> Result<(), SequenceError> {
+        let Some(settings) = self.plan.warmup().copied() else {
+            return Ok(());
+        };
+        if let Some(done) = self.run.manifest().warmup.as_ref().filter(|w| w.complete) {
+            tracing::info!(
+                time_s = done.time_s,
+                "warm-up completed in an earlier session: not repeated"
+            );
+            return Ok(());
+        }
+        let period = ctx.reading_time.as_secs_f64();
+        if self.plan.kind() == PlanKind::Drift {
+            self.warmup = Some(WarmupWatch::new(
+                &settings,
+                period,
+                self.now_s(),
+                monitor::WARMUP_IN_RECORD,
+            ));
+            return Ok(());
+        }
+        // before the sweep: the table holds 0 °/s while the readings settle
+        self.moved = true;
+        self.table.set_rate(0.0, ctx.accel).await?;
+        let events = self.events.clone();
+        let mut observe = move |p| {
+            if let Some(tx) = &events {
+                let _ = tx.send(Event::Settle(p));
+            }
+        };
+        self.table
+            .wait_at_rate_observed(&ctx.criteria, &mut observe)
+            .await?;
+        let mut watch = WarmupWatch::new(
+            &settings,
+            period,
+            self.now_s(),
+            monitor::WARMUP_BEFORE_SWEEP,
+        );
+        tracing::info!(window = watch.window(), "warm-up before the sweep");
+        self.run.set_warmup(watch.record().clone())?;
+        self.emit(Event::Warmup(watch.record().clone()));
+        let n = usize::try_from(watch.window()).unwrap_or(usize::MAX);
+        let interval = self.options.sample_interval;
+        loop {
+            let t_start = self.now_s();
+            let Self { table, dmm, .. } = self;
+            let dmm = dmm.as_mut().ok_or_else(released)?;
+            let (measured, _stats) = table.record_while(interval, dmm.measure(n, false)).await?;
+            let acq = match measured.map_err(dmm_error)? {
+                Measured::Complete(acq) => acq,
+                Measured::Pending(p) => self.dmm_mut()?.collect(p).await.map_err(dmm_error)?,
+            };
+            let t_end = self.now_s();
+            for note in &acq.notes {
+                self.log_retry(None, "dmm", format!("warm-up: {note}"))?;
+            }
+            let volts: Vec<f64> = acq.readings.iter().filter_map(|r| r.volts()).collect();
+            let ended = watch.push(&volts, t_start, t_end);
+            self.run.set_warmup(watch.record().clone())?;
+            self.run.set_elapsed(t_end)?;
+            self.emit(Event::Warmup(watch.record().clone()));
+            if ended {
+                tracing::info!(time_s = watch.record().time_s, "warm-up complete");
+                return Ok(());
+            }
+        }
+    }
+
+    /// A drift segment's readings: the running deviation, and the warm-up while it lasts.
+    fn watch_record(
+        &mut self,
+        step: &Step,
+        volts: &[f64],
+        t_start: f64,
+        t_end: f64,
+    ) -> Result<(), SequenceError> {
+        let period = (t_end - t_start) / volts.len().max(1) as f64;
+        let adev = self.adev.get_or_insert_with(|| AdevWatch::new(period));
+        adev.push(volts);
+        let shown = adev.shown();
+        self.drift_readings += volts.len() as u64;
+        let readings = self.drift_readings;
+        if let Some(w) = self.warmup.as_mut()
+            && !w.is_complete()
+        {
+            w.push(volts, t_start, t_end);
+            let rec = w.record().clone();
+            self.run.set_warmup(rec.clone())?;
+            self.emit(Event::Warmup(rec));
+        }
+        self.emit(Event::Drift {
+            segment: step.index + 1,
+            of: self.plan.step_count(),
+            readings,
+            adev_v: shown,
+        });
         Ok(())
     }
 }

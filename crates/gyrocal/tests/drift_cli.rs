@@ -195,6 +195,8 @@ fn a_three_hour_simulated_drift_run_survives_a_kill_and_its_allan_analysis_finds
     assert!(out.join("allan.html").is_file());
     let a = json(&out, "allan.json");
     assert_eq!(a["unit"], "deg/h", "{}", a["unit"]);
+    // the plan's [drift] axis and latitude: the run's own analysis removes the Earth rate
+    assert_eq!(a["earth_rate"]["axis"], "up", "{}", a["earth_rate"]);
     let analysed = a["analysed"]["samples"].as_u64().unwrap();
     assert!(analysed > 400_000, "{analysed} samples analysed of 501000");
     // configs/drift.toml's gyro: ARW 0.02 °/√h, bias instability 1 °/h, RRW 3 °/h/√h: the
@@ -254,4 +256,121 @@ fn a_three_hour_simulated_drift_run_survives_a_kill_and_its_allan_analysis_finds
             "{term}: {v} ± {u} (1σ), set {set}"
         );
     }
+}
+
+/// configs/drift.toml shortened to 40 segments (≈ 44 min), with a gyro whose bias settles
+/// from 200 °/h over τ = 120 s, a warm-up criterion and the table's servo off.
+fn servo_off_drift(dir: &Path) -> std::path::PathBuf {
+    let path = short_drift(dir, 40, 3000);
+    // configs/drift.toml's [drift] already names the axis (up) and the latitude (45° N)
+    let mut text = std::fs::read_to_string(&path)
+        .unwrap()
+        .replace("table = \"hold\"", "table = \"servo_off\"");
+    text.push_str(
+        "warmup_dph = 200\nwarmup_tau_s = 120\n\n[warmup]\nwindow_s = 60\nmax_s = 1800\n",
+    );
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn a_drift_record_with_the_servo_off_finds_its_warm_up_while_it_records() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = servo_off_drift(tmp.path());
+    let out = tmp.path().join("run");
+    let o = gyrocal()
+        .arg("run")
+        .arg(&plan)
+        .args(["--simulate", "--json", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{stderr}");
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(doc["status"], "complete");
+    assert_eq!(doc["table"]["at_rest"], true, "{}", doc["table"]);
+    // the operator saw the warm-up end and the running deviation
+    assert!(stderr.contains("warm-up complete after"), "{stderr}");
+    assert!(stderr.contains("running ADEV at τ"), "{stderr}");
+    // the warm-up: 200 °/h decaying over 120 s is 0.02 V · e^(−t/120); consecutive 60 s means
+    // differ by 0.0079 V · e^(−t/120), below the readings' white-noise tolerance (≈ 4e-5 V)
+    // from t ≈ 630 s; the flicker noise of the settled gyro can delay it by a few windows
+    let w = &doc["warmup"];
+    assert_eq!(w["complete"], true, "{w}");
+    assert_eq!(w["mode"], "in_record");
+    assert_eq!(w["ended_by"], "criterion", "{w}");
+    let time = w["time_s"].as_f64().unwrap();
+    assert!((480.0..=1200.0).contains(&time), "warm-up {time} s");
+    // the servo was off: every segment's table rate is at rest, the table OFF at the end
+    let mut r = csv::Reader::from_path(out.join("steps.csv")).unwrap();
+    let col = r
+        .headers()
+        .unwrap()
+        .iter()
+        .position(|c| c == "rate_meas_max_dps")
+        .unwrap();
+    let mut rows = 0;
+    for rec in r.records() {
+        let v: f64 = rec.unwrap()[col].parse().unwrap();
+        assert!(v.abs() < 0.005, "table moved: {v} °/s");
+        rows += 1;
+    }
+    assert_eq!(rows, 40);
+    assert!(stderr.contains("mode OFF"), "{stderr}");
+    // the run's Allan analysis cuts the same warm-up (the criterion and tolerance the run
+    // used, applied to the whole record) and removes the Earth rate the plan's axis sees
+    let a = json(&out, "allan.json");
+    let cut = a["warmup"]["time_s"].as_f64().unwrap();
+    assert!((cut - time).abs() <= 61.0, "analysis {cut} s, run {time} s");
+    let e = &a["earth_rate"];
+    assert_eq!(e["axis"], "up");
+    let component = e["component_dph"].as_f64().unwrap();
+    assert!((component - 15.041 * 45f64.to_radians().sin()).abs() < 1e-9);
+    let truth = 0.0088 / 0.3612 * 3600.0;
+    let own = e["bias_dph"].as_f64().unwrap();
+    assert!(
+        (own - truth).abs() < 5.0,
+        "bias {own} °/h, gyro's own {truth}"
+    );
+}
+
+#[test]
+fn a_table_fault_during_a_servo_off_drift_record_ends_with_the_table_at_rest_and_resumes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = servo_off_drift(tmp.path());
+    let out = tmp.path().join("run");
+    let o = gyrocal()
+        .arg("run")
+        .arg(&plan)
+        .args([
+            "--simulate",
+            "--json",
+            "--sim-fault",
+            "table:fault@t=300s",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_ne!(o.status.code(), Some(0), "{stderr}");
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(doc["status"], "failed", "{doc}");
+    assert_eq!(doc["table"]["at_rest"], true, "{}", doc["table"]);
+    // the warm-up was not over: the resume watches it again, and the record completes
+    assert_eq!(doc["warmup"]["complete"], false, "{}", doc["warmup"]);
+    let done = segments_done(&out);
+    assert!((3..40).contains(&done), "{done} segments before the fault");
+    let o = gyrocal()
+        .args(["run", "--simulate", "--json", "--resume"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{stderr}");
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(doc["table"]["at_rest"], true);
+    assert_eq!(doc["warmup"]["complete"], true, "{}", doc["warmup"]);
+    assert_eq!(segments_done(&out), 40);
 }

@@ -226,6 +226,19 @@ fn json(
         "readings": est.steps.iter().map(|s| s.samples).sum::<u64>(),
         "estimated_s": est.total.as_secs_f64(),
         "bound_s": est.bound.as_secs_f64(),
+        "drift": (plan.kind() == gyrocal_run::PlanKind::Drift).then(|| {
+            let d = plan.drift();
+            serde_json::json!({
+                "table": d.table.as_str(),
+                "axis": d.earth.map(|(a, _)| a.as_str()),
+                "latitude_deg": d.earth.map(|(_, l)| l),
+            })
+        }),
+        "warmup": plan.warmup().map(|w| serde_json::json!({
+            "window_s": w.window.as_secs_f64(),
+            "tolerance_v": w.tolerance_v,
+            "max_s": w.max.as_secs_f64(),
+        })),
         "warnings": warnings,
     })
 }
@@ -303,5 +316,34 @@ fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
         "physical bound     {} (ramps at the acceleration limit + dwells + arming and reading time + unavoidable transfers)",
         hms(est.bound.as_secs_f64())
     );
+    if plan.kind() == gyrocal_run::PlanKind::Drift {
+        let d = plan.drift();
+        let _ = writeln!(
+            o,
+            "drift record: table {}{}",
+            match d.table {
+                gyrocal_run::plan::TableRole::Hold => "holding 0 °/s (servo on)",
+                gyrocal_run::plan::TableRole::ServoOff => "at rest, servo off",
+            },
+            d.earth.map_or(String::new(), |(a, l)| format!(
+                "; input axis {} at latitude {l}°: {:.3} °/h of Earth rate removed from the bias",
+                a.as_str(),
+                a.earth_rate_dph(l)
+            ))
+        );
+    }
+    if let Some(w) = plan.warmup() {
+        let _ = writeln!(
+            o,
+            "warm-up: {}, {} s windows, up to {} (not in the estimate)",
+            if plan.kind() == gyrocal_run::PlanKind::Drift {
+                "watched in the record's first segments"
+            } else {
+                "before the sweep, at 0 °/s"
+            },
+            w.window.as_secs_f64(),
+            hms(w.max.as_secs_f64())
+        );
+    }
     o
 }

@@ -871,6 +871,8 @@ struct Progress {
     /// ramp), with the readings received so far: on a stop, these are discarded.
     open: Vec<(usize, String, usize)>,
     phase: String,
+    /// The warm-up's end was said.
+    warmup_reported: bool,
 }
 
 impl Progress {
@@ -893,6 +895,7 @@ impl Progress {
             step: None,
             open: Vec::new(),
             phase: String::new(),
+            warmup_reported: false,
         }
     }
 
@@ -1006,6 +1009,56 @@ impl Progress {
                     r.overloads
                 ));
             }
+            Event::Warmup(w) => {
+                let tol = w
+                    .tolerance_v
+                    .map_or("not yet estimated".into(), |t| format!("{t:.1e} V"));
+                let change = w.last_change_v.map_or("-".into(), |c| format!("{c:.1e} V"));
+                if !w.complete {
+                    self.phase = format!(
+                        "warm-up: window means change {change} (settled below {tol}), at most {}",
+                        hms(w.max_s)
+                    );
+                    if self.tty {
+                        self.redraw();
+                    } else if w.mode == gyrocal_run::monitor::WARMUP_BEFORE_SWEEP {
+                        say!("  {}", self.phase);
+                    }
+                } else if !self.warmup_reported {
+                    self.warmup_reported = true;
+                    let time = hms(w.time_s.unwrap_or(0.0));
+                    self.line(if w.ended_by.as_deref() == Some("max") {
+                        format!(
+                            "warm-up ended at its maximum ({time}) WITHOUT settling: the last window means changed by {change} (settled below {tol})"
+                        )
+                    } else {
+                        format!(
+                            "warm-up complete after {time}: consecutive {:.1} s window means agree within {tol}",
+                            w.window_s
+                        )
+                    });
+                }
+            }
+            Event::Drift {
+                segment,
+                of,
+                readings,
+                adev_v,
+            } => {
+                let adev = adev_v
+                    .iter()
+                    .map(|(tau, s)| format!("{} s {s:.2e} V", significant3(*tau)))
+                    .collect::<Vec<_>>()
+                    .join(" · ");
+                self.line(format!(
+                    "  record: segment {segment}/{of}, {readings} readings this session{}",
+                    if adev.is_empty() {
+                        String::new()
+                    } else {
+                        format!("; running ADEV at τ {adev}")
+                    }
+                ));
+            }
             Event::Retry(r) => self.line(format!("  retry ({}): {}", r.instrument, r.message)),
             Event::Stopping {
                 from_dps,
@@ -1041,6 +1094,17 @@ impl Progress {
             }
             Event::Rest(rest) => self.line(rest_text(&rest)),
         }
+    }
+}
+
+/// A τ with three significant digits (`1.39`, `11.1`, `88.8`).
+fn significant3(v: f64) -> String {
+    if v >= 100.0 {
+        format!("{v:.0}")
+    } else if v >= 10.0 {
+        format!("{v:.1}")
+    } else {
+        format!("{v:.2}")
     }
 }
 
@@ -1139,6 +1203,8 @@ fn finish(
     doc["elapsed_s"] = serde_json::json!(summary.elapsed_s);
     doc["timing"] = serde_json::json!(summary.timing);
     doc["simulated"] = serde_json::json!(m.simulated);
+    // the warm-up as watched online (plans with [warmup])
+    doc["warmup"] = serde_json::json!(m.warmup);
     doc["resume_command"] = serde_json::json!(match summary.status {
         Status::Complete => None,
         _ => resume,
