@@ -1555,3 +1555,45 @@ fn e2e_a_measured_run_is_not_continued_on_a_simulator_and_the_table_ends_at_rest
     assert_eq!(last["table"]["demands_seen"], 0, "never moved: {last}");
     assert_eq!(last["table"]["stopped"], true, "{last}");
 }
+
+#[test]
+fn e2e_sigint_during_the_warm_up_stops_the_table_and_records_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_plan(tmp.path());
+    // a warm-up that cannot settle (tolerance far below the readings' noise) and lasts
+    // 60 sim s at most: the SIGINT lands in it
+    let mut text = std::fs::read_to_string(&plan).unwrap();
+    text.push_str("\n[warmup]\nwindow_s = 1\ntolerance_v = 1e-12\nmax_s = 60\n");
+    std::fs::write(&plan, text).unwrap();
+    let dir = tmp.path().join("run");
+    let sim = Sim::start_scaled(&plan, &[], "5");
+    let run = Run::start(&plan, &sim, &out_args(&dir), None);
+    // the warm-up has begun when the manifest holds its first window means
+    let t0 = std::time::Instant::now();
+    loop {
+        let m = std::fs::read_to_string(dir.join("manifest.json")).unwrap_or_default();
+        let v: Value = serde_json::from_str(&m).unwrap_or(Value::Null);
+        if v["warmup"]["means"]
+            .as_array()
+            .is_some_and(|a| a.len() >= 2)
+        {
+            break;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(60), "no warm-up seen");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    run.guard.signal(Signal::SIGINT);
+    let end = run.wait();
+    assert_eq!(end.code, Some(130), "{end:?}");
+    assert!(end.stderr.contains("table at rest"), "{}", end.stderr);
+    let m = manifest(&dir);
+    assert_eq!(m["status"], "aborted", "{m}");
+    assert_eq!(m["warmup"]["complete"], false, "{m}");
+    assert!(steps(&dir).is_empty(), "no step before the warm-up ends");
+    // the table was parked: ask it on its own port
+    let (mode, rate) = probe_table(sim.table());
+    assert!(mode == "OFF" || mode == "ABORT", "table mode {mode}");
+    assert!(rate.abs() < 0.05, "table still turning at {rate} °/s");
+    let last = sim.finish();
+    assert_table_parked(&last);
+}
