@@ -323,6 +323,31 @@ fn a_drift_record_with_the_servo_off_finds_its_warm_up_while_it_records() {
     let a = json(&out, "allan.json");
     let cut = a["warmup"]["time_s"].as_f64().unwrap();
     assert!((cut - time).abs() <= 61.0, "analysis {cut} s, run {time} s");
+    // `gyrocal report` on a drift run writes its Allan page, not a scale-factor certificate
+    std::fs::remove_file(out.join("allan.html")).unwrap();
+    let o = gyrocal()
+        .arg("report")
+        .arg(&out)
+        .args(["--json"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(r["kind"], "drift");
+    assert!(out.join("allan.html").is_file());
+    assert!(
+        !out.join("report.html").exists(),
+        "no line fitted to a record at rest"
+    );
+    let o = gyrocal()
+        .arg("report")
+        .arg(&out)
+        .args(["-o"])
+        .arg(tmp.path().join("x.html"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("gyrocal allan"));
     let e = &a["earth_rate"];
     assert_eq!(e["axis"], "up");
     let component = e["component_dph"].as_f64().unwrap();

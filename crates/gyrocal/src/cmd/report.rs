@@ -53,8 +53,50 @@ fn destination(args: &ReportArgs) -> Result<PathBuf, BadInput> {
     }
 }
 
+/// A run directory whose plan is a drift record (its report is the Allan page).
+fn is_drift_run(input: &std::path::Path) -> bool {
+    input.is_dir()
+        && gyrocal_run::load(input)
+            .is_ok_and(|r| r.manifest.plan.kind() == gyrocal_run::PlanKind::Drift)
+}
+
 /// Runs `gyrocal report`: prints the path of the HTML written.
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
+    if let Some(drift) = args.inputs.iter().find(|i| is_drift_run(i)) {
+        // a drift record has no line to fit: its report is the Allan analysis
+        if args.inputs.len() > 1 || args.out.is_some() || args.acceptance.is_some() {
+            return Err(BadInput(format!(
+                "{} is a drift record: its report is its Allan page, written alone into the run directory by `gyrocal report {0}` (or anywhere by `gyrocal allan {0} -o FILE`); --out, --acceptance and other inputs do not apply",
+                drift.display()
+            ))
+            .into());
+        }
+        let (_, files) =
+            gyrocal_report::write_run_allan(drift, &Default::default()).map_err(classify)?;
+        let page = files
+            .iter()
+            .find(|f| f.extension().is_some_and(|e| e == "html"))
+            .cloned()
+            .unwrap_or_else(|| drift.join("allan.html"));
+        if args.json {
+            println!(
+                "{:#}",
+                serde_json::json!({
+                    "report": page,
+                    "files": files,
+                    "inputs": args.inputs,
+                    "warnings": [],
+                    "kind": "drift",
+                })
+            );
+        } else {
+            println!(
+                "report: {} (a drift record: the Allan analysis)",
+                page.display()
+            );
+        }
+        return Ok(());
+    }
     let out = destination(args)?;
     let report = match &args.acceptance {
         None => render_many(&args.inputs).map_err(classify)?,
