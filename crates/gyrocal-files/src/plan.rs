@@ -326,7 +326,8 @@ type S<T> = Spanned<T>;
 #[serde(deny_unknown_fields)]
 struct RawFile {
     plan: RawPlan,
-    table: RawTable,
+    /// Absent only with `[drift] table = "none"` (the shape check says so otherwise).
+    table: Option<RawTable>,
     dmm: RawDmm,
     simulation: Option<RawSimulation>,
     dut: Option<RawDut>,
@@ -1031,7 +1032,21 @@ fn check_shape(root: &DeTable<'_>) -> Vec<Finding> {
         };
         check_keys(sname, keys, table, Some(name.span().start), &mut out);
     }
+    // a drift record on a bench without a table leaves [table] out
+    let no_table = root
+        .iter()
+        .find(|(k, _)| k.get_ref().as_ref() == "drift")
+        .and_then(|(_, v)| v.get_ref().as_table())
+        .and_then(|d| {
+            d.iter()
+                .find(|(k, _)| k.get_ref().as_ref() == "table")
+                .and_then(|(_, v)| v.get_ref().as_str().map(|s| s.trim() == "none"))
+        })
+        .unwrap_or(false);
     for &(sname, required, keys) in SCHEMA {
+        if sname == "table" && no_table {
+            continue;
+        }
         if required && !root.keys().any(|k| k.get_ref().as_ref() == sname) {
             let needed: Vec<&str> = keys.iter().filter(|k| k.2).map(|k| k.0).collect();
             out.push(Finding {
@@ -1081,7 +1096,8 @@ pub struct PlanDoc {
     /// `[plan]`
     pub plan: PlanSectionDoc,
     /// `[table]`
-    pub table: TableDoc,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub table: Option<TableDoc>,
     /// `[dmm]`
     pub dmm: DmmDoc,
     /// `[simulation]`
@@ -1147,17 +1163,21 @@ pub enum TableRole {
     /// input axis; the table's rate is still sampled, and a segment during which it moved
     /// more than the hold tolerance, or left OFF, is not recorded.
     ServoOff,
+    /// No table at all (a gyro on a bench or a fixture): nothing is opened, moved or sampled
+    /// on a table's port, and `[table]` may be left out.
+    None,
 }
 
 impl TableRole {
     /// All roles.
-    pub const ALL: [TableRole; 2] = [TableRole::Hold, TableRole::ServoOff];
+    pub const ALL: [TableRole; 3] = [TableRole::Hold, TableRole::ServoOff, TableRole::None];
 
     /// As written in a plan.
     pub fn as_str(self) -> &'static str {
         match self {
             TableRole::Hold => "hold",
             TableRole::ServoOff => "servo_off",
+            TableRole::None => "none",
         }
     }
 }
@@ -1308,6 +1328,23 @@ pub struct PlanSectionDoc {
     pub repeat: i64,
     /// Whole table turns to acquire over at each non-zero rate (0: off).
     pub whole_revolutions: i64,
+}
+
+impl TableDoc {
+    /// The settings a plan without `[table]` holds (a drift record with `[drift] table =
+    /// "none"`): never used to open or drive anything; the port names no device.
+    fn unused() -> TableDoc {
+        TableDoc {
+            dialect: "acl".into(),
+            port: "(no table)".into(),
+            baud: 9600,
+            max_rate_dps: 1.0,
+            acceleration_dps2: 1.0,
+            rate_tolerance_dps: 0.001,
+            stability_window_s: 2.0,
+            at_rate_timeout_s: 60.0,
+        }
+    }
 }
 
 /// `[table]` as parsed.
@@ -1705,6 +1742,9 @@ pub struct Plan {
     acceptance: Option<AcceptanceSpec>,
     drift: Option<DriftSettings>,
     warmup: Option<WarmupSettings>,
+    /// The file had a `[table]` section (without one, `[drift] table = "none"`: `table` holds
+    /// [`TableDoc::unused`]'s settings, which nothing reads).
+    table_given: bool,
 }
 
 /// What a step acquires.
@@ -1827,7 +1867,7 @@ impl Plan {
                 repeat: self.repeat.into(),
                 whole_revolutions: self.whole_revolutions.into(),
             },
-            table: TableDoc {
+            table: self.table_given.then(|| TableDoc {
                 dialect: self.table.dialect.as_str().into(),
                 port: self.table.port.to_string(),
                 baud: self.table.baud.into(),
@@ -1836,7 +1876,7 @@ impl Plan {
                 rate_tolerance_dps: self.table.rate_tolerance_dps,
                 stability_window_s: self.table.stability_window.as_secs_f64(),
                 at_rate_timeout_s: self.table.at_rate_timeout.as_secs_f64(),
-            },
+            }),
             dmm: DmmDoc {
                 model: self.dmm.model.as_str().into(),
                 port: self.dmm.port.to_string(),
@@ -1868,7 +1908,9 @@ impl Plan {
     /// it covers (everything but the two port fields, `[dut]` and `[acceptance]`).
     pub fn hash(&self) -> String {
         let mut doc = self.to_doc();
-        doc.table.port.clear();
+        if let Some(t) = doc.table.as_mut() {
+            t.port.clear();
+        }
         doc.dmm.port.clear();
         // one plan serves many gyros, and limits can be re-evaluated: neither is the method
         doc.dut = None;
@@ -1950,6 +1992,11 @@ impl Plan {
     /// `[dmm]`.
     pub fn dmm(&self) -> &DmmSettings {
         &self.dmm
+    }
+    /// Whether the run uses a rate table (every plan but a drift record with
+    /// `[drift] table = "none"`).
+    pub fn has_table(&self) -> bool {
+        self.drift().table != TableRole::None
     }
     /// `[drift]`: the table's role and the bench's orientation (the defaults when the plan
     /// has no `[drift]`; only a drift plan may have one).
@@ -2101,15 +2148,18 @@ fn raw_to_doc(raw: RawFile, sp: &mut Spans) -> Result<PlanDoc, (&'static str, St
         repeat: sp.int("plan.repeat", p.repeat, 1)?,
         whole_revolutions: sp.int("plan.whole_revolutions", p.whole_revolutions, 0)?,
     };
-    let table = TableDoc {
-        dialect: sp.opt("table.dialect", t.dialect, "acl".into()),
-        port: sp.take("table.port", t.port),
-        baud: sp.int("table.baud", t.baud, 9600)?,
-        max_rate_dps: sp.take("table.max_rate_dps", t.max_rate_dps),
-        acceleration_dps2: sp.take("table.acceleration_dps2", t.acceleration_dps2),
-        rate_tolerance_dps: sp.opt("table.rate_tolerance_dps", t.rate_tolerance_dps, 0.001),
-        stability_window_s: sp.opt("table.stability_window_s", t.stability_window_s, 2.0),
-        at_rate_timeout_s: sp.opt("table.at_rate_timeout_s", t.at_rate_timeout_s, 60.0),
+    let table = match t {
+        None => None,
+        Some(t) => Some(TableDoc {
+            dialect: sp.opt("table.dialect", t.dialect, "acl".into()),
+            port: sp.take("table.port", t.port),
+            baud: sp.int("table.baud", t.baud, 9600)?,
+            max_rate_dps: sp.take("table.max_rate_dps", t.max_rate_dps),
+            acceleration_dps2: sp.take("table.acceleration_dps2", t.acceleration_dps2),
+            rate_tolerance_dps: sp.opt("table.rate_tolerance_dps", t.rate_tolerance_dps, 0.001),
+            stability_window_s: sp.opt("table.stability_window_s", t.stability_window_s, 2.0),
+            at_rate_timeout_s: sp.opt("table.at_rate_timeout_s", t.at_rate_timeout_s, 60.0),
+        }),
     };
     let dmm = DmmDoc {
         model: sp.opt("dmm.model", m.model, default_model()),
@@ -2329,7 +2379,7 @@ fn validate_drift(d: &DriftDoc, cx: &Ctx<'_>) -> Result<DriftSettings, PlanError
             cx.err(
                 "drift.table",
                 format!(
-                    "= {:?} is not a table role: write \"hold\" (servo on at 0 °/s) or \"servo_off\" (stopped, servo off)",
+                    "= {:?} is not a table role: write \"hold\" (servo on at 0 °/s), \"servo_off\" (stopped, servo off) or \"none\" (no table)",
                     d.table
                 ),
             )
@@ -2411,7 +2461,7 @@ fn validate_warmup(w: &WarmupDoc, cx: &Ctx<'_>) -> Result<WarmupSettings, PlanEr
 fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
     let PlanDoc {
         plan: p,
-        table: t,
+        table: t_given,
         dmm: m,
         simulation: s,
         dut,
@@ -2420,7 +2470,23 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
         warmup,
     } = doc;
 
-    // [table] first: the rates are checked against its limits.
+    // [table] first: the rates are checked against its limits. A drift record without a
+    // table (`[drift] table = "none"`) may leave the section out.
+    let no_table = drift
+        .as_ref()
+        .is_some_and(|d| d.table.trim() == TableRole::None.as_str());
+    let table_given = t_given.is_some();
+    let t = match t_given {
+        Some(t) => t,
+        None if no_table => TableDoc::unused(),
+        None => {
+            return Err(cx.err(
+                "table.port",
+                "the section [table] is missing (required): add a line [table] followed by port, max_rate_dps, acceleration_dps2 (or, for a drift record on a bench without a table, [drift] table = \"none\")"
+                    .into(),
+            ));
+        }
+    };
     let dialect = match t.dialect.to_ascii_lowercase().as_str() {
         "acl" => TableDialect::Acl,
         "aerosmith" => TableDialect::Aerosmith,
@@ -2731,6 +2797,7 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
     Ok(Plan {
         drift,
         warmup,
+        table_given,
         kind,
         name: p.name,
         rates_dps: rates,

@@ -805,3 +805,35 @@ fn warmup_section_has_defaults_and_checked_bounds() {
     let e = parse(&format!("{GOOD}[warmup]\nwindow_s = 0\n")).expect_err("refused");
     assert_at(&e, 12, "window_s");
 }
+
+#[test]
+fn a_drift_record_without_a_table_may_leave_the_table_section_out() {
+    use gyrocal_files::plan::TableRole;
+    let no_table = DRIFT.replace(
+        "[table]\nport = \"/dev/ttyUSB1\"\nmax_rate_dps = 20\nacceleration_dps2 = 10\n",
+        "[drift]\ntable = \"none\"\n",
+    );
+    assert!(!no_table.contains("[table]"));
+    let p = parse(&no_table).unwrap();
+    assert_eq!(p.drift().table, TableRole::None);
+    assert!(!p.has_table());
+    // the manifest's copy has no [table] either, and reads back with the same hash
+    let doc = p.to_doc();
+    assert!(doc.table.is_none());
+    let back = Plan::from_doc(doc, Path::new("manifest.json")).unwrap();
+    assert_eq!(back.hash(), p.hash());
+    // without "none", [table] is still required, and the error says how to do without it
+    let e = parse(&no_table.replace("table = \"none\"", "table = \"hold\"")).unwrap_err();
+    assert!(e.to_string().contains("[table] is missing"), "{e}");
+    let e = parse(DRIFT.split("[table]").next().unwrap()).unwrap_err();
+    assert!(e.to_string().contains("[table] is missing"), "{e}");
+    // a sweep needs its table whatever [drift] says
+    let sweep = GOOD.replace(
+        "[table]\nport = \"/dev/ttyUSB1\"\nmax_rate_dps = 20\nacceleration_dps2 = 10\n",
+        "[drift]\ntable = \"none\"\n",
+    );
+    let e = parse(&sweep).unwrap_err();
+    assert!(e.to_string().contains("drift plan"), "{e}");
+    // and the plans that have a table keep their hashes: no [table] change when present
+    assert!(parse(GOOD).unwrap().has_table());
+}

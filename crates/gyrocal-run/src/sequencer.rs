@@ -81,12 +81,20 @@ pub enum TableRest {
         /// Why.
         reason: String,
     },
+    /// The plan has no table (`[drift] table = "none"`): nothing was opened or moved.
+    NoTable,
 }
 
 impl TableRest {
     /// True only when the table confirmed rest.
     pub fn is_at_rest(&self) -> bool {
         matches!(self, TableRest::AtRest { .. })
+    }
+
+    /// True when nothing can be left turning: the table confirmed rest, or the plan has none.
+    /// (The operator's "stop it by hand" applies to neither.)
+    pub fn nothing_turning(&self) -> bool {
+        matches!(self, TableRest::AtRest { .. } | TableRest::NoTable)
     }
 }
 
@@ -511,7 +519,7 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
         // The data are complete whatever the table does now; a table that did not confirm
         // rest is said in the manifest and by the caller, but does not void the calibration.
         let note = match &table {
-            TableRest::AtRest { .. } => None,
+            TableRest::AtRest { .. } | TableRest::NoTable => None,
             TableRest::NotConfirmed { reason } | TableRest::NeverReached { reason } => {
                 Some(format!(
                     "all steps recorded, but the table could NOT be confirmed at rest: {reason}"
@@ -606,6 +614,11 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
         stop: &mut watch::Receiver<StopRequest>,
         emergency_sent: bool,
     ) -> TableRest {
+        if !self.plan.has_table() {
+            tracing::info!("no rate table in this plan: nothing to bring to rest");
+            self.emit(Event::Rest(TableRest::NoTable));
+            return TableRest::NoTable;
+        }
         let limit = self.options.cleanup_timeout;
         let from = match tokio::time::timeout(limit, self.table.read_rate()).await {
             Ok(Ok(r)) => Some(r),
@@ -663,7 +676,7 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
             },
         };
         match &rest {
-            TableRest::AtRest { .. } => tracing::info!("table at rest"),
+            TableRest::AtRest { .. } | TableRest::NoTable => tracing::info!("table at rest"),
             TableRest::NotConfirmed { reason } | TableRest::NeverReached { reason } => {
                 tracing::error!(%reason, "the table could NOT be confirmed at rest: stop it by hand")
             }
@@ -762,7 +775,9 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
         };
         let reading_time = timing.reading_time();
         let acquisition = timing.acquisition();
-        if self.servo_off() {
+        if !self.plan.has_table() {
+            tracing::info!("no rate table in this plan: the record is taken without one");
+        } else if self.servo_off() {
             // a drift record with the servo off: the table is brought to rest (mode OFF) and
             // left there; it is never enabled
             self.table.stop().await?;
@@ -904,8 +919,8 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
         ctx: &StepContext,
     ) -> Result<StepOutcome<PendingFetch<M::Pending>>, SequenceError> {
         let at_rate;
-        if self.servo_off() {
-            // nothing to demand: the table is at rest with its servo off
+        if self.servo_off() || !self.plan.has_table() {
+            // nothing to demand: the table is at rest with its servo off, or there is none
             at_rate = Instant::now();
             if let Some(p) = pending {
                 self.emit(Event::Phase {
@@ -1048,7 +1063,9 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
                 self.log_retry(Some(step.index), "dmm", note.clone())?;
             }
         }
-        if let Some(why) = self.check_hold(step, &mut stats).await? {
+        if self.plan.has_table()
+            && let Some(why) = self.check_hold(step, &mut stats).await?
+        {
             return Ok(StepOutcome::Again {
                 instrument: "table",
                 detail: why,

@@ -64,6 +64,7 @@
 
 pub mod ask;
 mod error;
+mod none;
 mod stats;
 mod stop;
 mod table;
@@ -72,6 +73,7 @@ pub mod dialect;
 
 pub use dialect::Dialect;
 pub use error::{TableError, TableErrorKind};
+pub use none::{NO_TABLE, NoTable};
 pub use stats::{RateAccumulator, RateStats};
 pub use stop::{StopGuard, StopHandle, StopKind, StopPath};
 pub use table::{PolicyConfig, Table};

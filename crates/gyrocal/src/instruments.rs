@@ -141,8 +141,14 @@ pub trait WithInstruments {
 }
 
 /// Builds the plan's multimeter on `dmm_link` and its table on `table_link`, and hands both
-/// to `job`.
-pub async fn with_instruments<D, L, J>(plan: &Plan, dmm_link: D, table_link: L, job: J) -> J::Output
+/// to `job`. A plan without a table (`[drift] table = "none"`) gets
+/// [`gyrocal_table::NoTable`], whatever link is given: pass `None` for it (nothing is opened).
+pub async fn with_instruments<D, L, J>(
+    plan: &Plan,
+    dmm_link: D,
+    table_link: Option<L>,
+    job: J,
+) -> J::Output
 where
     D: Transport + 'static,
     L: Transport + 'static,
@@ -152,7 +158,7 @@ where
 }
 
 /// The meter arm: one per multimeter model family.
-async fn with_meter<D, L, J>(plan: &Plan, dmm_link: D, table_link: L, job: J) -> J::Output
+async fn with_meter<D, L, J>(plan: &Plan, dmm_link: D, table_link: Option<L>, job: J) -> J::Output
 where
     D: Transport + 'static,
     L: Transport + 'static,
@@ -177,12 +183,15 @@ where
 }
 
 /// The table arm: one per dialect.
-async fn with_table<M, L, J>(plan: &Plan, dmm: M, table_link: L, job: J) -> J::Output
+async fn with_table<M, L, J>(plan: &Plan, dmm: M, table_link: Option<L>, job: J) -> J::Output
 where
     M: Multimeter + 'static,
     L: Transport + 'static,
     J: WithInstruments,
 {
+    let Some(table_link) = table_link.filter(|_| plan.has_table()) else {
+        return job.call(dmm, gyrocal_table::NoTable::new()).await;
+    };
     let policy = gyrocal_table::PolicyConfig {
         limits: table_limits(plan),
         ..gyrocal_table::PolicyConfig::default()

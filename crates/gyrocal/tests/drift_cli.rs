@@ -399,3 +399,109 @@ fn a_table_fault_during_a_servo_off_drift_record_ends_with_the_table_at_rest_and
     assert_eq!(doc["warmup"]["complete"], true, "{}", doc["warmup"]);
     assert_eq!(segments_done(&out), 40);
 }
+
+/// configs/drift.toml on a bench without a table: `[drift] table = "none"`, no `[table]`.
+fn tableless_drift(dir: &Path, segments: u32) -> std::path::PathBuf {
+    let path = short_drift(dir, segments, 3000);
+    let text = std::fs::read_to_string(&path).unwrap();
+    let start = text.find("\n[table]").unwrap();
+    let end = text[start..].find("\n[dmm]").unwrap() + start;
+    let text = format!("{}{}", &text[..start], &text[end..])
+        .replace("table = \"hold\"", "table = \"none\"");
+    assert!(!text.lines().any(|l| l.trim() == "[table]"));
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn a_drift_record_on_a_bench_without_a_table_opens_no_table() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = tableless_drift(tmp.path(), 10);
+    let o = gyrocal().arg("check").arg(&plan).output().unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(text.contains("table: none"), "{text}");
+    let out = tmp.path().join("run");
+    let o = gyrocal()
+        .arg("run")
+        .arg(&plan)
+        .args(["--simulate", "--json", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{stderr}");
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(doc["status"], "complete");
+    assert_eq!(doc["table"]["none"], true, "{}", doc["table"]);
+    assert!(stderr.contains("no rate table in this plan"), "{stderr}");
+    assert!(
+        !stderr.contains("table at rest"),
+        "never claims a rest it did not see"
+    );
+    // no table rate was measured: the segments' table columns are empty, not 0
+    let mut r = csv::Reader::from_path(out.join("steps.csv")).unwrap();
+    let col = r
+        .headers()
+        .unwrap()
+        .iter()
+        .position(|c| c == "rate_meas_dps")
+        .unwrap();
+    let rows: Vec<_> = r.records().map(|x| x.unwrap()[col].to_string()).collect();
+    assert_eq!(rows.len(), 10);
+    assert!(rows.iter().all(String::is_empty), "{rows:?}");
+    // the record is analysed as any other
+    let a = json(&out, "allan.json");
+    assert_eq!(a["unit"], "deg/h");
+    assert_eq!(a["earth_rate"]["axis"], "up");
+    // on instruments only the meter is opened: a missing meter is the only thing named
+    let o = gyrocal()
+        .arg("run")
+        .arg(&plan)
+        .args(["--dmm-port", "/dev/gyrocal-no-such-meter", "--out"])
+        .arg(tmp.path().join("real"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_ne!(o.status.code(), Some(0), "{err}");
+    assert!(err.contains("gyrocal-no-such-meter"), "{err}");
+    assert!(!err.contains("rate table at"), "{err}");
+}
+
+#[test]
+fn a_meter_fault_in_a_record_without_a_table_fails_cleanly_and_resumes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = tableless_drift(tmp.path(), 10);
+    let out = tmp.path().join("run");
+    let o = gyrocal()
+        .arg("run")
+        .arg(&plan)
+        .args([
+            "--simulate",
+            "--json",
+            "--sim-fault",
+            "dmm:disconnect@reading10000",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_ne!(o.status.code(), Some(0), "{stderr}");
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(doc["status"], "failed", "{doc}");
+    assert_eq!(doc["table"]["none"], true);
+    assert_eq!(
+        segments_done(&out),
+        3,
+        "the segments before the fault are kept"
+    );
+    let o = gyrocal()
+        .args(["run", "--simulate", "--json", "--resume"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{stderr}");
+    assert_eq!(segments_done(&out), 10);
+}

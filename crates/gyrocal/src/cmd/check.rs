@@ -40,7 +40,9 @@ pub fn load_plan(path: &std::path::Path) -> anyhow::Result<Plan> {
     crate::instruments::check_meter(&plan)
         .map_err(|e| BadInput(format!("{}: {e}", path.display())))?;
     check_port(path, "dmm.port", &plan.dmm().port)?;
-    check_port(path, "table.port", &plan.table().port)?;
+    if plan.has_table() {
+        check_port(path, "table.port", &plan.table().port)?;
+    }
     Ok(plan)
 }
 
@@ -249,22 +251,29 @@ fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
     let t = plan.table();
     let _ = writeln!(o, "plan {} — {}", path.display(), plan.name());
     let _ = writeln!(o, "hash {}", plan.hash());
-    let _ = writeln!(
-        o,
-        "table: {}{} on {} (max {} °/s, {} °/s², tolerance {} °/s for {:.1} s, timeout {:.0} s)",
-        t.dialect.as_str(),
-        if t.dialect == gyrocal_run::TableDialect::Aerosmith {
-            " (experimental)"
-        } else {
-            ""
-        },
-        t.port,
-        t.max_rate_dps,
-        t.acceleration_dps2,
-        t.rate_tolerance_dps,
-        t.stability_window.as_secs_f64(),
-        t.at_rate_timeout.as_secs_f64()
-    );
+    if plan.has_table() {
+        let _ = writeln!(
+            o,
+            "table: {}{} on {} (max {} °/s, {} °/s², tolerance {} °/s for {:.1} s, timeout {:.0} s)",
+            t.dialect.as_str(),
+            if t.dialect == gyrocal_run::TableDialect::Aerosmith {
+                " (experimental)"
+            } else {
+                ""
+            },
+            t.port,
+            t.max_rate_dps,
+            t.acceleration_dps2,
+            t.rate_tolerance_dps,
+            t.stability_window.as_secs_f64(),
+            t.at_rate_timeout.as_secs_f64()
+        );
+    } else {
+        let _ = writeln!(
+            o,
+            "table: none ([drift] table = \"none\": no table is opened)"
+        );
+    }
     let _ = writeln!(
         o,
         "multimeter: {} at {} baud, range {} V, NPLC {}, autozero {}, {} Hz: {:.1} ms per reading, acquisition {} -> {}",
@@ -324,6 +333,7 @@ fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
             match d.table {
                 gyrocal_run::plan::TableRole::Hold => "holding 0 °/s (servo on)",
                 gyrocal_run::plan::TableRole::ServoOff => "at rest, servo off",
+                gyrocal_run::plan::TableRole::None => "none (no table is opened)",
             },
             d.earth.map_or(String::new(), |(a, l)| format!(
                 "; input axis {} at latitude {l}°: {:.3} °/h of Earth rate removed from the bias",

@@ -57,9 +57,15 @@ pub async fn probe(plan: &Plan) -> anyhow::Result<Found> {
         .await
         .with_context(|| format!("opening the multimeter at {}", d.port))?;
     let t = plan.table();
-    let table = gyrocal_link::open(&t.port.to_string(), &table_link_options(plan))
-        .await
-        .with_context(|| format!("opening the rate table at {}", t.port))?;
+    let table = if plan.has_table() {
+        Some(
+            gyrocal_link::open(&t.port.to_string(), &table_link_options(plan))
+                .await
+                .with_context(|| format!("opening the rate table at {}", t.port))?,
+        )
+    } else {
+        None
+    };
     crate::instruments::with_instruments(plan, dmm, table, Probe { plan: plan.clone() })
         .await
         .map_err(|e| anyhow::anyhow!(e))
@@ -84,6 +90,14 @@ impl crate::instruments::WithInstruments for Probe {
             Err(_) => return Err(silent("multimeter", &d.port, "no answer", &self.plan)),
         };
         let _ = tokio::time::timeout(PROBE_TIMEOUT, dmm.release()).await;
+        if !self.plan.has_table() {
+            return Ok(Found {
+                dmm: id.raw,
+                table: gyrocal_table::NO_TABLE.into(),
+                table_mode: "none".into(),
+                table_rate_dps: 0.0,
+            });
+        }
         let t = self.plan.table();
         let tid = match tokio::time::timeout(PROBE_TIMEOUT, table.connect()).await {
             Ok(Ok(id)) => id,

@@ -203,7 +203,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
         }
     }
     // the station before any instrument is touched: an overdue calibration refuses the run
-    let (station, deviations) = station_for_run(args, plan.simulation().seed)?;
+    let (station, deviations) = station_for_run(args, &plan, plan.simulation().seed)?;
     let catalog = catalog_url(args, station.as_ref())?;
     let records = Records {
         dut,
@@ -334,6 +334,7 @@ fn dut_for_run(args: &RunArgs, plan: &Plan) -> Option<gyrocal_run::Dut> {
 /// nothing is opened or created.
 fn station_for_run(
     args: &RunArgs,
+    plan: &Plan,
     sim_seed: u64,
 ) -> anyhow::Result<(Option<gyrocal_run::station::Station>, PendingDeviations)> {
     use gyrocal_run::station::Station;
@@ -350,7 +351,12 @@ fn station_for_run(
     };
     let mut deviations = Vec::new();
     if let Some(s) = &station {
-        let overdue = s.overdue(today);
+        // a plan without a table does not use the station's table: its calibration is moot
+        let overdue: Vec<_> = s
+            .overdue(today)
+            .into_iter()
+            .filter(|o| plan.has_table() || o.role != "table")
+            .collect();
         if !overdue.is_empty() {
             let list = overdue
                 .iter()
@@ -567,6 +573,7 @@ async fn execute(
 )> {
     if args.simulate {
         let cfg = gyrocal_sim::from_plan::bench_config(&plan);
+        let has_table = plan.has_table();
         if let Some(x) = args.sim_time_scale {
             tokio::spawn(pace(x));
         }
@@ -586,7 +593,8 @@ async fn execute(
                 let dmm = gyrocal_link::PrologixTransport::open(bench.dmm, options)
                     .await
                     .context("opening the simulated Prologix controller")?;
-                sequence(plan, dmm, bench.table, run).await?
+                let table = plan.has_table().then_some(bench.table);
+                sequence(plan, dmm, table, run).await?
             }
             // a Truevolt on its LAN socket: device clear reconnects to the simulated meter
             _ if plan.dmm().model.is_truevolt() => {
@@ -594,9 +602,13 @@ async fn execute(
                     anyhow::bail!("the simulated bench has no LAN meter for a Truevolt plan");
                 };
                 let dmm = gyrocal_link::SocketTransport::new(bench.dmm.boxed(), lan.connector());
-                sequence(plan, dmm, bench.table, run).await?
+                let table = plan.has_table().then_some(bench.table);
+                sequence(plan, dmm, table, run).await?
             }
-            _ => sequence(plan, bench.dmm, bench.table, run).await?,
+            _ => {
+                let table = plan.has_table().then_some(bench.table);
+                sequence(plan, bench.dmm, table, run).await?
+            }
         };
         // let the simulator take the last commands before it is dropped
         tokio::time::sleep(Duration::from_millis(50)).await;
@@ -610,16 +622,18 @@ async fn execute(
         schedule.stop();
         let t = &bench.handle.table;
         // what the simulated table itself says (the run's own account came from the driver)
-        say!(
-            "simulated table at the end: mode {:?}, demand {:+} °/s, {}",
-            t.mode(),
-            t.demanded_rate(),
-            if t.is_stopped() {
-                "at rest"
-            } else {
-                "NOT at rest"
-            }
-        );
+        if has_table {
+            say!(
+                "simulated table at the end: mode {:?}, demand {:+} °/s, {}",
+                t.mode(),
+                t.demanded_rate(),
+                if t.is_stopped() {
+                    "at rest"
+                } else {
+                    "NOT at rest"
+                }
+            );
+        }
         let state = serde_json::json!({
             "table": {
                 "mode": format!("{:?}", t.mode()),
@@ -644,12 +658,18 @@ async fn execute(
         .await
         .with_context(|| format!("opening the multimeter at {}", d.port))?;
         let t = plan.table();
-        let table = gyrocal_link::open(
-            &t.port.to_string(),
-            &crate::cmd::probe::table_link_options(&plan),
-        )
-        .await
-        .with_context(|| format!("opening the rate table at {}", t.port))?;
+        let table = if plan.has_table() {
+            Some(
+                gyrocal_link::open(
+                    &t.port.to_string(),
+                    &crate::cmd::probe::table_link_options(&plan),
+                )
+                .await
+                .with_context(|| format!("opening the rate table at {}", t.port))?,
+            )
+        } else {
+            None
+        };
         let (dir, run) = open_run_dir(args, &plan, records)?;
         let (summary, run, signal) = sequence(plan, dmm, table, run).await?;
         Ok((dir, summary, run, signal, None))
@@ -681,7 +701,7 @@ async fn pace(x: f64) {
 async fn sequence<D, T>(
     plan: Plan,
     dmm_link: D,
-    table_link: T,
+    table_link: Option<T>,
     run: RunDir,
 ) -> anyhow::Result<(RunSummary, RunDir, Option<StopSignal>)>
 where
@@ -1133,6 +1153,7 @@ fn rest_text(rest: &TableRest) -> String {
         TableRest::NeverReached { reason } => {
             format!("the table could NOT be confirmed at rest: {reason}; check it is not turning")
         }
+        TableRest::NoTable => "no rate table in this plan: nothing was moved".into(),
     }
 }
 
@@ -1191,6 +1212,8 @@ fn finish(
         TableRest::NotConfirmed { reason } | TableRest::NeverReached { reason } => {
             serde_json::json!({ "at_rest": false, "reason": reason })
         }
+        // nothing can be turning: at rest in the sense a script checks for
+        TableRest::NoTable => serde_json::json!({ "at_rest": true, "none": true }),
     };
     let m = run.manifest();
     doc["run_dir"] = serde_json::json!(dir);
@@ -1365,7 +1388,7 @@ fn finish_human(
         }
     }
     human(format!("run directory: {}", dir.display()));
-    if !summary.table.is_at_rest() {
+    if !summary.table.nothing_turning() {
         say!(
             "gyrocal: all steps recorded, but {}",
             rest_text(&summary.table)
