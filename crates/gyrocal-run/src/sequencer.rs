@@ -188,6 +188,8 @@ pub enum Event {
         of: usize,
         /// Readings in this session's record so far.
         readings: u64,
+        /// The run clock at the end of the segment, s (earlier sessions included).
+        elapsed_s: f64,
         /// `(τ, σ)`, s and V.
         adev_v: Vec<(f64, f64)>,
     },
@@ -1372,6 +1374,7 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
             segment: step.index + 1,
             of: self.plan.step_count(),
             readings,
+            elapsed_s: t_end,
             adev_v: shown,
         });
         Ok(())

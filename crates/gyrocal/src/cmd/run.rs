@@ -1063,6 +1063,7 @@ impl Progress {
                 segment,
                 of,
                 readings,
+                elapsed_s,
                 adev_v,
             } => {
                 let adev = adev_v
@@ -1070,8 +1071,12 @@ impl Progress {
                     .map(|(tau, s)| format!("{} s {s:.2e} V", significant3(*tau)))
                     .collect::<Vec<_>>()
                     .join(" · ");
+                let left = self.remaining().map_or(String::new(), |r| {
+                    format!(", about {} left", hms(r.as_secs_f64()))
+                });
                 self.line(format!(
-                    "  record: segment {segment}/{of}, {readings} readings this session{}",
+                    "  record: segment {segment}/{of} at {}{left}, {readings} readings this session{}",
+                    hms(elapsed_s),
                     if adev.is_empty() {
                         String::new()
                     } else {
