@@ -125,6 +125,74 @@ pub struct AllanOptions {
 /// Where a gyro's input axis points, and Earth's rotation rate: the plan's (`[drift] axis`).
 pub use gyrocal_files::plan::{Axis, EARTH_RATE_DPH};
 
+/// What a run directory's record is and whose: the head of the page, as on a certificate.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunHeader {
+    /// The plan's name.
+    pub plan_name: String,
+    /// The plan's hash.
+    pub plan_hash: String,
+    /// `complete`, `aborted`, `failed` or `running`.
+    pub status: String,
+    /// The record was taken on the simulated bench.
+    pub simulated: bool,
+    /// The gyro's serial number and model, when named.
+    pub dut_serial: Option<String>,
+    /// The gyro's model.
+    pub dut_model: Option<String>,
+    /// The station's id and lab.
+    pub station: Option<String>,
+    /// Who ran it.
+    pub operator: Option<String>,
+    /// When the record started and ended, UTC.
+    pub started_utc: String,
+    /// When it ended (absent while running).
+    pub ended_utc: Option<String>,
+    /// The multimeter's identity.
+    pub multimeter: Option<String>,
+    /// The table's identity, and its role during the record.
+    pub table: String,
+    /// Departures from the method (`kind: text`).
+    pub deviations: Vec<String>,
+}
+
+impl RunHeader {
+    fn of(m: &gyrocal_files::Manifest) -> RunHeader {
+        let d = m.plan.drift();
+        let role = match d.table {
+            gyrocal_files::plan::TableRole::Hold => "holding 0 °/s",
+            gyrocal_files::plan::TableRole::ServoOff => "at rest, servo off",
+            gyrocal_files::plan::TableRole::None => "none",
+        };
+        RunHeader {
+            plan_name: m.plan.name().to_string(),
+            plan_hash: m.plan_hash.clone(),
+            status: serde_json::to_value(m.status)
+                .ok()
+                .and_then(|v| v.as_str().map(str::to_string))
+                .unwrap_or_default(),
+            simulated: m.simulated,
+            dut_serial: m.dut.as_ref().and_then(|d| d.serial.clone()),
+            dut_model: m.dut.as_ref().and_then(|d| d.model.clone()),
+            station: m.station.as_ref().map(|s| format!("{} — {}", s.id, s.lab)),
+            operator: m.context.as_ref().and_then(|c| c.operator.clone()),
+            started_utc: m.started_utc.clone(),
+            ended_utc: m.ended_utc.clone(),
+            multimeter: m.instruments.dmm.clone(),
+            table: match (&m.instruments.table, d.table) {
+                (_, gyrocal_files::plan::TableRole::None) => "none (the plan has no table)".into(),
+                (Some(id), _) => format!("{id} ({role})"),
+                (None, _) => format!("({role})"),
+            },
+            deviations: m
+                .deviations
+                .iter()
+                .map(|x| format!("{}: {}", x.kind, x.text))
+                .collect(),
+        }
+    }
+}
+
 /// The bias with the Earth rate removed.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EarthRateRemoved {
@@ -245,6 +313,9 @@ pub struct AllanDocument {
     /// latitude were given and the record is a rate in °/h.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub earth_rate: Option<EarthRateRemoved>,
+    /// The run the record belongs to (a run directory's input; `None` for a CSV file).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub run: Option<RunHeader>,
     /// What the reader must be told (gaps, irregular sampling, skipped rows, units, warm-up).
     pub notes: Vec<String>,
 }
@@ -841,6 +912,7 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
         None => None,
     };
     Ok(AllanDocument {
+        run: manifest.as_ref().map(RunHeader::of),
         input: path.to_path_buf(),
         file,
         value_column: cols.value_name,
@@ -1312,6 +1384,67 @@ pub fn noise_term_rows(nt: &NoiseTerms) -> Vec<(Term, String, String)> {
         .collect()
 }
 
+/// The head of a run's page: whose record, where, by whom, when, with what; a simulated record
+/// says so first.
+fn render_run_header(h: &mut String, r: &RunHeader) {
+    if r.simulated {
+        h.push_str("<div class=\"banner\" id=\"simulated\"><strong>SIMULATED</strong>: this record was taken on gyrocal's simulated bench, not on instruments; it is not a measurement of a gyro.</div>\n");
+    }
+    h.push_str("<h2 id=\"run\">The record</h2>\n<table>\n");
+    let mut row = |k: &str, v: String| {
+        let _ = writeln!(h, "<tr><th>{}</th><td>{v}</td></tr>", esc(k));
+    };
+    row(
+        "gyro",
+        match (&r.dut_serial, &r.dut_model) {
+            (Some(s), Some(m)) => {
+                format!("<strong id=\"dut-serial\">{}</strong> ({})", esc(s), esc(m))
+            }
+            (Some(s), None) => format!("<strong id=\"dut-serial\">{}</strong>", esc(s)),
+            (None, Some(m)) => format!("{} (serial not given)", esc(m)),
+            (None, None) => "not identified (give --dut-serial, or [dut] in the plan)".into(),
+        },
+    );
+    row(
+        "station",
+        r.station.as_deref().map_or("not identified".into(), esc),
+    );
+    row("operator", r.operator.as_deref().map_or("-".into(), esc));
+    row(
+        "performed (UTC)",
+        format!(
+            "{} to {}",
+            esc(&r.started_utc),
+            r.ended_utc.as_deref().map_or("(not ended)".into(), esc)
+        ),
+    );
+    row(
+        "plan",
+        format!(
+            "{} (hash <code>{}</code>), {}",
+            esc(&r.plan_name),
+            esc(r.plan_hash.get(..12).unwrap_or(&r.plan_hash)),
+            esc(&r.status)
+        ),
+    );
+    row(
+        "multimeter",
+        r.multimeter.as_deref().map_or("-".into(), esc),
+    );
+    row("rate table", esc(&r.table));
+    if !r.deviations.is_empty() {
+        row(
+            "deviations",
+            r.deviations
+                .iter()
+                .map(|d| esc(d))
+                .collect::<Vec<_>>()
+                .join("<br>"),
+        );
+    }
+    h.push_str("</table>\n");
+}
+
 /// The self-contained HTML page of an Allan analysis: the σ(τ) plot with 95 % bars, the fitted
 /// five-term model, each term and slope guides; the noise-term table; bias and bias stability;
 /// the warm-up curve; the curve table; the notes.
@@ -1331,6 +1464,9 @@ pub fn render_allan(doc: &AllanDocument) -> Result<String, ReportError> {
             .unwrap_or_default(),
         doc.rows
     );
+    if let Some(r) = &doc.run {
+        render_run_header(&mut h, r);
+    }
     h.push_str("<table>\n");
     let mut row = |k: &str, v: String| {
         let _ = writeln!(h, "<tr><th>{}</th><td>{v}</td></tr>", esc(k));

@@ -323,6 +323,12 @@ fn a_drift_record_with_the_servo_off_finds_its_warm_up_while_it_records() {
     let a = json(&out, "allan.json");
     let cut = a["warmup"]["time_s"].as_f64().unwrap();
     assert!((cut - time).abs() <= 61.0, "analysis {cut} s, run {time} s");
+    // the page says whose record it is, and that it is simulated
+    assert_eq!(a["run"]["dut_serial"], "SIM-GYRO-11", "{}", a["run"]);
+    assert!(a["run"]["table"].as_str().unwrap().contains("servo off"));
+    let page = std::fs::read_to_string(out.join("allan.html")).unwrap();
+    assert!(page.contains("id=\"simulated\""), "banner");
+    assert!(page.contains("<strong id=\"dut-serial\">SIM-GYRO-11</strong>"));
     // `gyrocal report` on a drift run writes its Allan page, not a scale-factor certificate
     std::fs::remove_file(out.join("allan.html")).unwrap();
     let o = gyrocal()
