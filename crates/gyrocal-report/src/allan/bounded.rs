@@ -1,0 +1,417 @@
+//! The bounded-memory path of [`super::analyse_input`]: the record goes to temporary files and
+//! everything is computed from them through fixed-size buffers, with the same numbers as the
+//! in-memory path.
+//!
+//! # Design
+//! The CSV is read exactly as on the in-memory path (same passes, same checks, same segment
+//! choice); only where the numbers are kept changes:
+//!
+//! * the time intervals of pass 1 (for the median τ0) and the values of pass 2 go into a
+//!   [`Spill`]: a vector until the memory budget is reached, then an unnamed temporary file
+//!   ([`gyrocal_allan::disk::SampleFile`], 8 bytes a value) that vanishes when closed;
+//! * the median of a spilled pass 1 is the same order statistic as the in-memory
+//!   `select_nth_unstable_by(mid, f64::total_cmp)`, found by a radix selection over the file
+//!   (four passes of 16 bits of the total-order key, 512 KiB of counters) — the same value,
+//!   bit for bit;
+//! * the warm-up ([`detect_warmup_file`]) streams the analysed segment twice (the white-noise
+//!   σ, then the window means) and does the in-memory `detect_warmup`'s arithmetic in the same
+//!   order, so its window means, tolerance and cut are the same bits;
+//! * the record after the warm-up becomes a [`gyrocal_allan::DiskRecord`] (its prefix sums in a
+//!   second temporary file, built with the same compensated sums as `Record::from_vec`), and the
+//!   curve, the noise identification and the bias figures run on it through the estimators'
+//!   one code path for memory and files ([`gyrocal_allan::phase`]).
+//!
+//! Memory: the CSV reader's 64 KiB, a 1 MiB write buffer, a few read buffers of 64 KiB, the
+//! radix counters, the segment list (a few dozen bytes a gap) and the document: nothing that
+//! grows with the number of samples. Disk: 8 bytes a sample for the values (all segments), 8
+//! for the prefix sums of the analysed part, 8 an interval during pass 1 (freed before pass 2).
+//!
+//! The warm-up is the one computation written twice (here and in `detect_warmup`, which must
+//! see a slice): `tests/allan_bounded.rs` compares the two paths' documents field by field, so
+//! a change to one that the other does not follow fails there.
+//!
+//! # Measured (2·10⁷ rows of `t_s,rate_dph`, 2 cores, release build)
+//! See the crate's `examples/allan_big_csv.rs` for the commands; the figures are in the commit
+//! that added this module.
+
+use std::fs::File;
+use std::io;
+use std::ops::Range;
+use std::path::Path;
+
+use gyrocal_allan::disk::{SampleFile, SampleWriter};
+use serde::{Deserialize, Serialize};
+
+use super::{DEFAULT_WARMUP_SIGMAS, MAX_WARMUP_POINTS, Warmup, WarmupOptions, fmt_g};
+use crate::ReportError;
+
+/// Default memory budget of the in-memory path, MiB (`--max-memory-mib`).
+pub const DEFAULT_MAX_MEMORY_MIB: u64 = 1024;
+
+/// Bytes a sample takes on the in-memory path at its peak: the value (8 bytes) and as much
+/// again while its vector doubles. The in-memory path holds every sample of the record (all
+/// segments) at once; when that would exceed the budget, the bounded path runs.
+pub const IN_MEMORY_BYTES_PER_SAMPLE: u64 = 16;
+
+/// Which path analysed the record.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AnalysisPath {
+    /// Every value in memory.
+    #[default]
+    InMemory,
+    /// The values in temporary files, read through fixed-size buffers.
+    Bounded,
+}
+
+/// Which path analysed the record, and why ([`super::AllanDocument::memory`]).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct MemoryUse {
+    /// `in_memory` or `bounded`.
+    pub path: AnalysisPath,
+    /// Why: `--streaming`, or the record's size against the budget.
+    pub reason: String,
+    /// The in-memory path's budget, bytes.
+    pub budget_bytes: u64,
+    /// Samples of the record (every segment): what the in-memory path holds.
+    pub record_samples: usize,
+}
+
+fn mib(bytes: f64) -> String {
+    fmt_g(bytes / (1024.0 * 1024.0))
+}
+
+/// The [`MemoryUse`] of an analysis.
+pub(super) fn memory_use(
+    bounded: bool,
+    forced: bool,
+    record_samples: usize,
+    budget_bytes: u64,
+) -> MemoryUse {
+    let need = record_samples as f64 * IN_MEMORY_BYTES_PER_SAMPLE as f64;
+    let (path, reason) = match (bounded, forced) {
+        (true, true) => (AnalysisPath::Bounded, "--streaming".to_string()),
+        (true, false) => (
+            AnalysisPath::Bounded,
+            format!(
+                "the record's {record_samples} samples would take about {} MiB in memory, more than the --max-memory-mib budget of {} MiB",
+                mib(need),
+                mib(budget_bytes as f64)
+            ),
+        ),
+        (false, _) => (
+            AnalysisPath::InMemory,
+            format!(
+                "the record's {record_samples} samples take about {} MiB in memory, within the --max-memory-mib budget of {} MiB",
+                mib(need),
+                mib(budget_bytes as f64)
+            ),
+        ),
+    };
+    MemoryUse {
+        path,
+        reason,
+        budget_bytes,
+        record_samples,
+    }
+}
+
+/// An unnamed temporary file in `dir`.
+pub(super) fn temp_file(dir: &Path) -> Result<File, ReportError> {
+    tempfile::tempfile_in(dir).map_err(|source| ReportError::Io {
+        path: dir.to_path_buf(),
+        action: "create a temporary file in",
+        source,
+    })
+}
+
+/// An I/O error on the temporary files in `dir`.
+pub(super) fn temp_err(dir: &Path, source: io::Error) -> ReportError {
+    ReportError::Io {
+        path: dir.to_path_buf(),
+        action: "write or read a temporary file in",
+        source,
+    }
+}
+
+/// Values kept in memory up to `cap`, then in a temporary file.
+pub(super) struct Spill<'a> {
+    mem: Vec<f64>,
+    cap: usize,
+    disk: Option<SampleWriter>,
+    dir: &'a Path,
+}
+
+/// What a [`Spill`] holds at the end.
+pub(super) enum Samples {
+    /// In memory: the in-memory path.
+    Memory(Vec<f64>),
+    /// In a temporary file: the bounded path.
+    Disk(SampleFile),
+}
+
+impl<'a> Spill<'a> {
+    /// At most `cap` values in memory (0: straight to a file); the file, if any, in `dir`.
+    pub(super) fn new(cap: usize, dir: &'a Path) -> Spill<'a> {
+        Spill {
+            mem: Vec::new(),
+            cap,
+            disk: None,
+            dir,
+        }
+    }
+
+    /// Appends a value.
+    #[inline]
+    pub(super) fn push(&mut self, v: f64) -> Result<(), ReportError> {
+        if self.disk.is_none() && self.mem.len() >= self.cap {
+            let mut w =
+                SampleWriter::new(temp_file(self.dir)?).map_err(|e| temp_err(self.dir, e))?;
+            w.extend_from_slice(&self.mem)
+                .map_err(|e| temp_err(self.dir, e))?;
+            self.mem = Vec::new();
+            self.disk = Some(w);
+        }
+        match &mut self.disk {
+            Some(w) => w.push(v).map_err(|e| temp_err(self.dir, e)),
+            None => {
+                self.mem.push(v);
+                Ok(())
+            }
+        }
+    }
+
+    /// Values so far.
+    pub(super) fn len(&self) -> usize {
+        self.disk.as_ref().map_or(self.mem.len(), SampleWriter::len)
+    }
+
+    /// True once the values went to a file.
+    pub(super) fn spilled(&self) -> bool {
+        self.disk.is_some()
+    }
+
+    /// The values.
+    pub(super) fn finish(self) -> Result<Samples, ReportError> {
+        match self.disk {
+            Some(w) => Ok(Samples::Disk(
+                w.finish().map_err(|e| temp_err(self.dir, e))?,
+            )),
+            None => Ok(Samples::Memory(self.mem)),
+        }
+    }
+}
+
+/// The key ordering u64 as `f64::total_cmp` orders the values.
+fn total_key(v: f64) -> u64 {
+    let b = v.to_bits();
+    if b >> 63 == 1 { !b } else { b | (1 << 63) }
+}
+
+fn from_total_key(k: u64) -> f64 {
+    if k >> 63 == 1 {
+        f64::from_bits(k & !(1 << 63))
+    } else {
+        f64::from_bits(!k)
+    }
+}
+
+/// The `k`-th smallest value (0-based) of a file in `f64::total_cmp` order: what
+/// `select_nth_unstable_by(k, f64::total_cmp)` puts at `k`. Four passes, 16 bits of the key
+/// each. `None` when `k` is out of range.
+pub(super) fn kth_smallest(file: &SampleFile, k: usize) -> io::Result<Option<f64>> {
+    if k >= file.len() {
+        return Ok(None);
+    }
+    let mut prefix = 0u64;
+    let mut rank = k as u64;
+    let mut hist = vec![0u64; 1 << 16];
+    for shift in [48u32, 32, 16, 0] {
+        hist.fill(0);
+        let mut chunks = file.chunks(0..file.len())?;
+        while let Some(c) = chunks.next_chunk()? {
+            for &v in c {
+                let key = total_key(v);
+                if shift == 48 || key >> (shift + 16) == prefix >> (shift + 16) {
+                    hist[((key >> shift) & 0xFFFF) as usize] += 1;
+                }
+            }
+        }
+        let mut below = 0u64;
+        let mut found = false;
+        for (digit, &count) in hist.iter().enumerate() {
+            if below + count > rank {
+                prefix |= (digit as u64) << shift;
+                rank -= below;
+                found = true;
+                break;
+            }
+            below += count;
+        }
+        if !found {
+            return Ok(None);
+        }
+    }
+    Ok(Some(from_total_key(prefix)))
+}
+
+/// The warm-up of the segment `range` of `file`: `detect_warmup` (see its docs in the parent
+/// module) computed in two sequential passes with the same arithmetic in the same order.
+pub(super) fn detect_warmup_file(
+    file: &SampleFile,
+    range: Range<usize>,
+    tau0: f64,
+    t0: f64,
+    factor: f64,
+    opts: &WarmupOptions,
+    notes: &mut Vec<String>,
+) -> io::Result<Option<Warmup>> {
+    if !(opts.window_s.is_finite() && opts.window_s > 0.0) {
+        return Ok(None);
+    }
+    let w = (opts.window_s / tau0).round().max(1.0) as usize;
+    let n = range.len();
+    let n_means = n / w;
+    if n_means < 2 {
+        notes.push(format!(
+            "no warm-up detection: the analysed segment is shorter than two {} s windows",
+            fmt_g(w as f64 * tau0)
+        ));
+        return Ok(None);
+    }
+    // `Iterator::sum` for f64 is a fold from its neutral element: start from the same one
+    let zero: f64 = std::iter::empty::<f64>().sum();
+    let (tolerance, tolerance_source) = match opts.tolerance {
+        Some(t) => (t * factor.abs(), "option".to_string()),
+        None => {
+            let mut ss = zero;
+            let mut prev: Option<f64> = None;
+            let mut chunks = file.chunks(range.clone())?;
+            while let Some(c) = chunks.next_chunk()? {
+                for &v in c {
+                    if let Some(p) = prev {
+                        ss += (v - p).powi(2);
+                    }
+                    prev = Some(v);
+                }
+            }
+            let sigma_a = (ss / (2.0 * (n - 1) as f64)).sqrt();
+            (
+                DEFAULT_WARMUP_SIGMAS * sigma_a / (w as f64).sqrt(),
+                "3 x white-noise sigma of a window mean (sigma_A(tau0)/sqrt(w))".to_string(),
+            )
+        }
+    };
+    let window_s = w as f64 * tau0;
+    let step = n_means.div_ceil(MAX_WARMUP_POINTS).max(1);
+    let mut curve = Vec::with_capacity(n_means.min(MAX_WARMUP_POINTS));
+    let mut found = None;
+    let mut prev_mean: Option<f64> = None;
+    let (mut i, mut in_window, mut acc) = (0usize, 0usize, zero);
+    let mut chunks = file.chunks(range.start..range.start + n_means * w)?;
+    while let Some(c) = chunks.next_chunk()? {
+        for &v in c {
+            acc += v;
+            in_window += 1;
+            if in_window < w {
+                continue;
+            }
+            let m = acc / w as f64;
+            if found.is_none()
+                && let Some(p) = prev_mean
+                && (m - p).abs() < tolerance
+            {
+                found = Some((i - 1) as f64 * window_s);
+            }
+            if i % step == 0 {
+                curve.push((t0 + (i as f64 + 0.5) * window_s, m));
+            }
+            prev_mean = Some(m);
+            i += 1;
+            in_window = 0;
+            acc = zero;
+        }
+    }
+    let (time_s, ended_by) = match (found, opts.max_s) {
+        (Some(t), Some(m)) if t > m => (m, "max"),
+        (Some(t), _) => (t, "criterion"),
+        (None, Some(m)) => (m, "max"),
+        (None, None) => {
+            notes.push(
+                "warm-up criterion never met (consecutive window means never agreed within the tolerance): nothing cut; give --warmup-max to cut"
+                    .into(),
+            );
+            (0.0, "not_reached")
+        }
+    };
+    Ok(Some(Warmup {
+        window_s,
+        tolerance,
+        tolerance_source,
+        max_s: opts.max_s,
+        time_s,
+        ended_by: ended_by.into(),
+        curve,
+    }))
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)]
+
+    use super::*;
+
+    #[test]
+    fn the_radix_median_is_the_in_memory_order_statistic() {
+        let mut v: Vec<f64> = vec![
+            0.1,
+            0.1,
+            0.10000000000002274,
+            -0.0,
+            0.0,
+            -3.5,
+            1e300,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            -1e-300,
+            0.099999999,
+        ];
+        for i in 0..200 {
+            v.push(0.1 + (i % 7) as f64 * 1e-12 - 3e-12);
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let mut w = SampleWriter::new(temp_file(dir.path()).unwrap()).unwrap();
+        w.extend_from_slice(&v).unwrap();
+        let f = w.finish().unwrap();
+        for k in 0..v.len() {
+            let mut m = v.clone();
+            let (_, want, _) = m.select_nth_unstable_by(k, f64::total_cmp);
+            let got = kth_smallest(&f, k).unwrap().unwrap();
+            assert_eq!(got.to_bits(), want.to_bits(), "k = {k}");
+        }
+        assert_eq!(kth_smallest(&f, v.len()).unwrap(), None);
+        for x in [0.0, -0.0, 1.5, -2.25, f64::MAX, f64::MIN_POSITIVE] {
+            assert_eq!(from_total_key(total_key(x)).to_bits(), x.to_bits());
+        }
+    }
+
+    #[test]
+    fn a_spill_keeps_the_values_in_order_across_the_switch() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut s = Spill::new(5, dir.path());
+        for i in 0..12 {
+            s.push(i as f64).unwrap();
+        }
+        assert!(s.spilled());
+        assert_eq!(s.len(), 12);
+        let Samples::Disk(f) = s.finish().unwrap() else {
+            panic!("not spilled")
+        };
+        let mut out = vec![0.0; 12];
+        f.read_values(0, &mut out).unwrap();
+        assert_eq!(out, (0..12).map(|i| i as f64).collect::<Vec<_>>());
+        let mut s = Spill::new(5, dir.path());
+        s.push(1.0).unwrap();
+        assert!(matches!(s.finish().unwrap(), Samples::Memory(v) if v == [1.0]));
+    }
+}
