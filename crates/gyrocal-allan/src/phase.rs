@@ -84,8 +84,12 @@ impl PhaseSource for [f64] {
     }
 
     fn gather(&self, start: usize, stride: usize, out: &mut [f64]) -> Result<(), Infallible> {
-        for (k, o) in out.iter_mut().enumerate() {
-            *o = self[start + k * stride];
+        if stride <= 1 {
+            return self.read_at(start, out);
+        }
+        let span = &self[start..start + (out.len().saturating_sub(1)) * stride + 1];
+        for (o, v) in out.iter_mut().zip(span.iter().step_by(stride)) {
+            *o = *v;
         }
         Ok(())
     }

@@ -10,19 +10,28 @@ pub(crate) struct Neumaier {
 impl Neumaier {
     #[inline]
     pub(crate) fn add(&mut self, v: f64) {
-        let t = self.sum + v;
-        if self.sum.abs() >= v.abs() {
-            self.comp += (self.sum - t) + v;
-        } else {
-            self.comp += (v - t) + self.sum;
-        }
-        self.sum = t;
+        neumaier_add(&mut self.sum, &mut self.comp, v);
     }
 
     #[inline]
     pub(crate) fn value(&self) -> f64 {
         self.sum + self.comp
     }
+}
+
+/// One step of [`Neumaier`] on a (sum, compensation) pair held elsewhere (per-order lanes of the
+/// noise identification); its value is `sum + comp`.
+#[inline]
+pub(crate) fn neumaier_add(sum: &mut f64, comp: &mut f64, v: f64) {
+    let t = *sum + v;
+    // (big − t) + small, as selects rather than a branch (which mispredicts on noise)
+    let (big, small) = if sum.abs() >= v.abs() {
+        (*sum, v)
+    } else {
+        (v, *sum)
+    };
+    *comp += (big - t) + small;
+    *sum = t;
 }
 
 /// Sum of squares of `f(i)` for `i in 0..n`: four independent lanes inside blocks of
