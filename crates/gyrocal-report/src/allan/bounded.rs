@@ -35,16 +35,18 @@
 //! from `examples/allan_big_csv.rs` (`t_s,rate_dph` at τ0 = 0.01 s, octave OADEV, the same
 //! output from both paths):
 //!
-//! | rows | path | peak resident memory | wall time |
+//! | rows | path | peak resident memory (max RSS) | wall time |
 //! |---|---|---|---|
-//! | 2·10⁶ | in memory | 22.8 MB | 0.68 s |
-//! | 2·10⁶ | bounded (`--streaming`) | 8.3 MB | 0.77 s |
-//! | 2·10⁷ | in memory | 163 MB | 6.6 s |
-//! | 2·10⁷ | bounded (`--streaming`) | 7.8 MB | 9.0 s |
-//! | 2·10⁷ | bounded (`--max-memory-mib 100`: switched in pass 1) | 58.9 MB | 8.4 s |
+//! | 2·10⁶ | in memory | 22.3 MiB | 0.59 s |
+//! | 2·10⁶ | bounded (`--streaming`) | 8.1 MiB | 0.69 s |
+//! | 2·10⁷ | in memory | 159 MiB | 6.1–6.3 s |
+//! | 2·10⁷ | bounded (`--streaming`) | 7.7–8.3 MiB | 7.1–7.4 s |
+//! | 2·10⁷ | bounded (`--max-memory-mib 100`: switched in pass 1) | 57.3 MiB | 7.2 s |
 //!
-//! (TOTDEV on 2·10⁷ rows, bounded: 8.6 MB, 10.1 s.) The in-memory path took 8.2 bytes a
-//! sample (glibc grows a large vector in place); the budget counts 16 for allocators that copy.
+//! (TOTDEV on 2·10⁷ rows: 160 MiB and 6.4 s in memory, 8.0 MiB and 8.0 s bounded. Before the
+//! bounded path existed the in-memory path took 312 MiB and 5.6 s on 2·10⁷ rows: the noise
+//! identification copied the record.) The in-memory path takes 8.4 bytes a sample (glibc grows
+//! a large vector in place); the budget counts 16 for allocators that copy.
 
 use std::fs::File;
 use std::io;
@@ -61,7 +63,7 @@ use crate::ReportError;
 pub const DEFAULT_MAX_MEMORY_MIB: u64 = 1024;
 
 /// Bytes a sample takes on the in-memory path at its peak, at most: the value (8 bytes) and as
-/// much again while its vector doubles (measured: 8.2 bytes with glibc, which grows a large
+/// much again while its vector doubles (measured: 8.4 bytes with glibc, which grows a large
 /// vector in place). The in-memory path holds every sample of the record (all segments) at
 /// once; when that would exceed the budget, the bounded path runs.
 pub const IN_MEMORY_BYTES_PER_SAMPLE: u64 = 16;
