@@ -3,7 +3,8 @@
 use crate::edf::{ONE_SIGMA_COVERAGE, confidence_interval, edf_greenhall, edf_simple, edf_totdev};
 use crate::error::{Error, Result};
 use crate::estimators::Estimator;
-use crate::noise_id::{NoiseIdMethod, autocorr_noise_id};
+use crate::noise_id::{NoiseIdMethod, autocorr_noise_id_in};
+use crate::phase::{PhaseSource, RateRecord};
 use crate::record::Record;
 use crate::taus::TauSet;
 use crate::terms::{Term, fit_model};
@@ -63,38 +64,41 @@ pub struct Curve {
 /// Minimum record length (rate samples) for any estimator.
 pub const MIN_SAMPLES: usize = 3;
 
-fn check_len(rec: &Record) -> Result<()> {
-    if rec.len() < MIN_SAMPLES {
+fn check_len(n: usize) -> Result<()> {
+    if n < MIN_SAMPLES {
         return Err(Error::TooShort {
             what: "a stability curve",
             needed: MIN_SAMPLES,
-            got: rec.len(),
+            got: n,
         });
     }
     Ok(())
 }
 
 /// The deviations alone (no noise identification, no EDF): one pass over the record per τ.
-/// Points with fewer than two terms are left out, as in allantools.
-pub fn deviations(rec: &Record, estimator: Estimator, taus: &TauSet) -> Result<Vec<RawPoint>> {
-    check_len(rec)?;
-    let p = rec.prefix();
-    let pts: Vec<RawPoint> = taus
-        .factors(rec.len(), rec.tau0_s())
-        .into_iter()
-        .filter_map(|m| {
-            estimator
-                .deviation(p, m)
-                .map(|(deviation, n_terms)| RawPoint {
-                    tau_s: m as f64 * rec.tau0_s(),
-                    m,
-                    deviation,
-                    n_terms,
-                })
-        })
-        .collect();
+/// Points with fewer than two terms are left out, as in allantools. `rec` is a [`Record`] or a
+/// [`crate::DiskRecord`] (the same numbers from either).
+pub fn deviations<R: RateRecord + ?Sized>(
+    rec: &R,
+    estimator: Estimator,
+    taus: &TauSet,
+) -> Result<Vec<RawPoint>> {
+    let n = rec.samples();
+    check_len(n)?;
+    let p = rec.phase();
+    let mut pts = Vec::new();
+    for m in taus.factors(n, rec.tau0_s()) {
+        if let Some((deviation, n_terms)) = estimator.deviation_in(p, m).map_err(Into::into)? {
+            pts.push(RawPoint {
+                tau_s: m as f64 * rec.tau0_s(),
+                m,
+                deviation,
+                n_terms,
+            });
+        }
+    }
     if pts.is_empty() {
-        return Err(Error::NoTaus { n: rec.len() });
+        return Err(Error::NoTaus { n });
     }
     Ok(pts)
 }
@@ -137,22 +141,22 @@ fn alpha_of_term(term: Term) -> i32 {
 
 /// Builds full points (noise id, EDF, intervals) from raw deviations. `phase` is the record's
 /// prefix sums when available (for the autocorrelation noise id), else the model fallback is used.
-pub(crate) fn complete(
+pub(crate) fn complete<S: PhaseSource + ?Sized>(
     estimator: Estimator,
     tau0_s: f64,
     n: usize,
     raw: &[RawPoint],
-    phase: Option<&[f64]>,
-) -> Vec<Point> {
+    phase: Option<&S>,
+) -> std::result::Result<Vec<Point>, S::Error> {
     let dmax = estimator.difference_order();
-    let ids: Vec<Option<i32>> = raw
-        .iter()
-        .map(|r| {
-            phase
-                .and_then(|x| autocorr_noise_id(x, r.m, dmax))
-                .map(|id| clamp_alpha(estimator, id.alpha))
-        })
-        .collect();
+    let mut ids: Vec<Option<i32>> = Vec::with_capacity(raw.len());
+    for r in raw {
+        let id = match phase {
+            Some(x) => autocorr_noise_id_in(x, r.m, dmax)?,
+            None => None,
+        };
+        ids.push(id.map(|id| clamp_alpha(estimator, id.alpha)));
+    }
     let mut alphas: Vec<(i32, NoiseIdMethod)> = ids
         .iter()
         .map(|a| (a.unwrap_or(0), NoiseIdMethod::Lag1Autocorrelation))
@@ -197,7 +201,8 @@ pub(crate) fn complete(
         }
     }
     let t = n as f64 * tau0_s;
-    raw.iter()
+    Ok(raw
+        .iter()
         .zip(alphas)
         .map(|(r, (alpha, method))| {
             let edf = point_edf(estimator, n, r.m, alpha, r.n_terms);
@@ -215,17 +220,29 @@ pub(crate) fn complete(
                 beyond_quarter: r.tau_s > t / 4.0,
             }
         })
-        .collect()
+        .collect())
 }
 
-/// The full curve of `estimator` over `taus` for a record.
-pub fn compute_record(rec: &Record, estimator: Estimator, taus: &TauSet) -> Result<Curve> {
+/// The full curve of `estimator` over `taus` for a record: a [`Record`] in memory or a
+/// [`crate::DiskRecord`] in a file, the same numbers from either.
+pub fn compute_record<R: RateRecord + ?Sized>(
+    rec: &R,
+    estimator: Estimator,
+    taus: &TauSet,
+) -> Result<Curve> {
     let raw = deviations(rec, estimator, taus)?;
-    let points = complete(estimator, rec.tau0_s(), rec.len(), &raw, Some(rec.prefix()));
+    let points = complete(
+        estimator,
+        rec.tau0_s(),
+        rec.samples(),
+        &raw,
+        Some(rec.phase()),
+    )
+    .map_err(Into::into)?;
     Ok(Curve {
         estimator,
         tau0_s: rec.tau0_s(),
-        n_samples: rec.len(),
+        n_samples: rec.samples(),
         points,
     })
 }

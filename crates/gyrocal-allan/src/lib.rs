@@ -7,8 +7,10 @@
 //! by the lag-1 autocorrelation ([`NoiseIdMethod`] says how, with a model-based fallback that
 //! never fails) and 68 %/95 % chi-squared intervals ([`Point`]); the IEEE 952 noise terms by slope
 //! reads and by a weighted non-negative fit ([`noise_terms`]); bias and GJB bias stability
-//! ([`bias_figures`]); a streaming accumulator for records larger than memory ([`Streaming`]);
-//! and noise generators for simulations and tests ([`sim`]).
+//! ([`bias_figures`]); records larger than memory, with the prefix sums in a file
+//! ([`DiskRecord`], [`disk`]) and every figure the same bits as from memory; a streaming
+//! octave-OADEV accumulator ([`Streaming`]); and noise generators for simulations and tests
+//! ([`sim`]).
 //!
 //! # Definitions
 //! Every estimator reproduces allantools 2024.6 with `data_type="freq"`: the rate samples y are
@@ -25,18 +27,26 @@
 //! accumulation with compensated block totals; MDEV slides its inner window with error-free
 //! two-sum updates. See the module docs of [`estimators`] for the formulas.
 //!
+//! Every kernel (estimators, noise identification, bias figures) reads the prefix sums through
+//! [`phase::PhaseSource`] as a few sequential streams in blocks of [`phase::BLOCK`]: a slice in
+//! memory, or a file read through fixed-size buffers ([`DiskRecord`]: O(1) memory). One code
+//! path for both, so a record gives the same bits from either.
+//!
 //! # Not here
-//! No I/O beyond parsing text from a [`std::io::Read`] ([`Record::from_reader`]); no plots; no
-//! gaps (a time column with a gap is rejected).
+//! No I/O beyond parsing text from a [`std::io::Read`] ([`Record::from_reader`]) and the f64
+//! files of [`disk`] (the caller opens them); no plots; no gaps (a time column with a gap is
+//! rejected).
 
 #![deny(missing_docs)]
 
 mod curve;
+pub mod disk;
 pub mod edf;
 mod error;
 pub mod estimators;
 mod lsq;
 pub mod noise_id;
+pub mod phase;
 mod record;
 pub mod sim;
 mod streaming;
@@ -46,15 +56,17 @@ mod terms;
 pub mod warmup;
 
 pub use curve::{Curve, MIN_SAMPLES, Point, RawPoint, compute, compute_record, deviations};
+pub use disk::DiskRecord;
 pub use error::{Error, ErrorKind, Result};
 pub use estimators::Estimator;
 pub use noise_id::NoiseIdMethod;
+pub use phase::RateRecord;
 pub use record::Record;
 pub use streaming::Streaming;
 pub use taus::TauSet;
 pub use terms::{
     BiasFigures, BiasInstability, BiasStability, FLICKER_FLOOR, FittedTerm, ModelFit, NoiseTerms,
-    Quantity, SLOPE_TOLERANCE, SlopeRead, Term, bias_figures, bias_stability, fit_model,
-    noise_terms,
+    Quantity, SLOPE_TOLERANCE, SlopeRead, Term, bias_figures, bias_figures_in, bias_stability,
+    fit_model, noise_terms,
 };
 pub use warmup::{WarmupDetector, WarmupEnd};

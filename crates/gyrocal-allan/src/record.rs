@@ -24,7 +24,7 @@ pub struct Record {
     prefix: Vec<f64>,
 }
 
-fn check_tau0(tau0_s: f64) -> Result<()> {
+pub(crate) fn check_tau0(tau0_s: f64) -> Result<()> {
     if !tau0_s.is_finite() || tau0_s <= 0.0 {
         return Err(Error::InvalidParameter {
             name: "sample interval tau0_s",

@@ -7,6 +7,10 @@ use crate::sum::{Neumaier, sum_sq};
 
 /// Streaming overlapping Allan deviation at octave τ (m = 1, 2, 4, … ≤ `max_m`).
 ///
+/// For every estimator and τ set on a record larger than memory, with the same bits as in
+/// memory, use a [`crate::DiskRecord`] instead: this accumulator keeps 2·`max_m` + 1 phase
+/// values (half the record for τ up to T/4) and rounds differently from the batch path.
+///
 /// Feed rate samples with [`Streaming::push`] in chunks of any size; [`Streaming::deviations`]
 /// gives, for every octave m ≤ `max_m`, the same deviation and number of terms as
 /// [`crate::deviations`] with [`Estimator::Oadev`] and [`crate::TauSet::Octave`] on the whole
@@ -184,7 +188,13 @@ impl Streaming {
             estimator: Estimator::Oadev,
             tau0_s: self.tau0_s,
             n_samples: n,
-            points: complete(Estimator::Oadev, self.tau0_s, n, &raw, None),
+            points: crate::phase::infallible(complete::<[f64]>(
+                Estimator::Oadev,
+                self.tau0_s,
+                n,
+                &raw,
+                None,
+            )),
         })
     }
 }

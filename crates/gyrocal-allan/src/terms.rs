@@ -27,6 +27,7 @@ use crate::curve::Curve;
 use crate::error::{Error, Result};
 use crate::estimators::Estimator;
 use crate::lsq::{nnls, wls};
+use crate::phase::{BLOCK, PhaseCursor, PhaseSource, RateRecord};
 use crate::record::Record;
 
 /// √(2 ln 2 / π) = 0.6643: σ of pure flicker FM relative to B at the flat of the curve.
@@ -552,50 +553,122 @@ pub struct BiasFigures {
     pub stability_100s: Option<BiasStability>,
 }
 
+/// What reading a record's prefix sums can fail with.
+type ReadError<R> = <<R as RateRecord>::Phase as PhaseSource>::Error;
+
 /// Bias stability over windows of `window_s` seconds (rounded to whole samples); `unit` is the
-/// unit of the record's samples.
-pub fn bias_stability(rec: &Record, window_s: f64, unit: &str) -> Result<BiasStability> {
+/// unit of the record's samples. `rec` is a [`Record`] or a [`crate::DiskRecord`]: the window
+/// means are read in two passes (their mean, then the squares), never held.
+pub fn bias_stability<R: RateRecord + ?Sized>(
+    rec: &R,
+    window_s: f64,
+    unit: &str,
+) -> Result<BiasStability> {
+    match stability(rec, window_s, unit) {
+        Ok(r) => r,
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// [`bias_stability`], the reading error (outer) apart from the record's own (inner).
+fn stability<R: RateRecord + ?Sized>(
+    rec: &R,
+    window_s: f64,
+    unit: &str,
+) -> std::result::Result<Result<BiasStability>, ReadError<R>> {
     let w = (window_s / rec.tau0_s()).round();
     if !w.is_finite() || w < 1.0 {
-        return Err(Error::InvalidParameter {
+        return Ok(Err(Error::InvalidParameter {
             name: "window_s",
             value: window_s,
             why: "must be at least one sample interval",
-        });
+        }));
     }
     let w = w as usize;
-    let means = rec.window_means(w);
-    if means.len() < 2 {
-        return Err(Error::TooShort {
+    let windows = rec.samples() / w;
+    if windows < 2 {
+        return Ok(Err(Error::TooShort {
             what: "bias stability (two windows)",
             needed: 2 * w,
-            got: rec.len(),
-        });
+            got: rec.samples(),
+        }));
     }
-    let n = means.len() as f64;
-    let mu = crate::sum::mean(&means);
-    let s = (means.iter().map(|m| (m - mu) * (m - mu)).sum::<f64>() / (n - 1.0)).sqrt();
-    Ok(BiasStability {
+    let n = windows as f64;
+    let mut sum = crate::sum::Neumaier::default();
+    for_each_window_mean(rec, w, windows, |m| sum.add(m))?;
+    let mu = sum.value() / n;
+    // `Iterator::sum` for f64 is a fold from its neutral element (as over Record::window_means)
+    let mut ss: f64 = std::iter::empty::<f64>().sum();
+    for_each_window_mean(rec, w, windows, |m| ss += (m - mu) * (m - mu))?;
+    let s = (ss / (n - 1.0)).sqrt();
+    Ok(Ok(BiasStability {
         window_s: w as f64 * rec.tau0_s(),
-        windows: means.len(),
+        windows,
         stability: Quantity::new(s, s / (2.0 * (n - 1.0)).sqrt(), unit),
-    })
+    }))
 }
 
-/// Bias and the 10 s / 100 s bias stabilities of a record in `unit`.
+/// The means of the `windows` consecutive windows of `w` samples, in order, as
+/// [`Record::window_means`] computes them.
+fn for_each_window_mean<R: RateRecord + ?Sized>(
+    rec: &R,
+    w: usize,
+    windows: usize,
+    mut f: impl FnMut(f64),
+) -> std::result::Result<(), ReadError<R>> {
+    let p = rec.phase();
+    let mean = rec.mean();
+    let mut buf = vec![0.0; BLOCK.min(windows) + 1];
+    let mut done = 0;
+    while done < windows {
+        let l = BLOCK.min(windows - done);
+        p.gather(done * w, w, &mut buf[..l + 1])?;
+        for k in 0..l {
+            f((buf[k + 1] - buf[k]) / w as f64 + mean);
+        }
+        done += l;
+    }
+    Ok(())
+}
+
+/// Bias and the 10 s / 100 s bias stabilities of a record in memory in `unit`.
 pub fn bias_figures(rec: &Record, unit: &str) -> BiasFigures {
-    let p = rec.prefix();
-    let n = rec.len() as f64;
+    crate::phase::infallible(figures(rec, unit))
+}
+
+/// [`bias_figures`] of a [`Record`] or a [`crate::DiskRecord`] (the same numbers from either);
+/// fails only when reading the file fails ([`Error::Io`]).
+pub fn bias_figures_in<R: RateRecord + ?Sized>(rec: &R, unit: &str) -> Result<BiasFigures> {
+    figures(rec, unit).map_err(Into::into)
+}
+
+fn figures<R: RateRecord + ?Sized>(
+    rec: &R,
+    unit: &str,
+) -> std::result::Result<BiasFigures, ReadError<R>> {
+    let p = rec.phase();
+    let len = rec.samples();
+    let n = len as f64;
     // sample standard deviation from the stored deviations from the mean: y_i − ȳ = P[i+1] − P[i]
-    let ss: f64 = p.windows(2).map(|w| (w[1] - w[0]).powi(2)).sum();
-    let sd = if rec.len() > 1 {
+    let mut ss: f64 = std::iter::empty::<f64>().sum();
+    let (mut c0, mut c1) = (p.cursor(0), p.cursor(1));
+    let mut done = 0;
+    while done < len {
+        let l = BLOCK.min(len - done);
+        let (a, b) = (c0.next(l)?, c1.next(l)?);
+        for k in 0..l {
+            ss += (b[k] - a[k]).powi(2);
+        }
+        done += l;
+    }
+    let sd = if len > 1 {
         (ss / (n - 1.0)).sqrt()
     } else {
         f64::NAN
     };
-    BiasFigures {
+    Ok(BiasFigures {
         bias: Quantity::new(rec.mean(), sd / n.sqrt(), unit),
-        stability_10s: bias_stability(rec, 10.0, unit).ok(),
-        stability_100s: bias_stability(rec, 100.0, unit).ok(),
-    }
+        stability_10s: stability(rec, 10.0, unit)?.ok(),
+        stability_100s: stability(rec, 100.0, unit)?.ok(),
+    })
 }

@@ -14,9 +14,26 @@
 //!   `value`, `rate_dph` (already °/h); the time column `t_s` or `time` (seconds), else τ0 must be
 //!   given. An `overload` column, when present, is honoured as in `samples.csv`.
 //!
-//! The file is read with the csv crate, streaming: memory is the values themselves (8 bytes a
-//! sample) plus, for τ0, one pass over the time column keeping its intervals (freed before the
-//! values are read). At most [`MAX_INPUT_BYTES`]; a regular file only.
+//! The file is read with the csv crate, streaming: one pass over the time column for τ0 (its
+//! intervals kept for the median), one for the values and the segments. At most
+//! [`MAX_INPUT_BYTES`]; a regular file only.
+//!
+//! # Memory: two paths, the same figures
+//! * **In memory** (the default while it fits): the intervals, then every value of the record,
+//!   are held in memory ([`IN_MEMORY_BYTES_PER_SAMPLE`] = 16 bytes a sample at the peak: the
+//!   value and a vector's growth), and the analysis runs on a `Record`.
+//! * **Bounded** (`--streaming`, [`AllanOptions::streaming`], or automatically once the record
+//!   would take more than the budget, [`AllanOptions::max_memory_bytes`], default
+//!   [`DEFAULT_MAX_MEMORY_MIB`] MiB, `--max-memory-mib`): the same passes write the intervals
+//!   and the values to unnamed temporary files ([`AllanOptions::temp_dir`], default `$TMPDIR`;
+//!   16 bytes a sample of disk at most, gone when the analysis ends, even after a crash), and
+//!   everything is computed from the files through fixed-size buffers: the resident memory
+//!   stays a few MiB whatever the record. Under an automatic switch the values already read
+//!   (up to the budget) are written out and freed. The figures are the in-memory path's, bit
+//!   for bit (module `bounded` says how; `tests/allan_bounded.rs` checks every field). Put
+//!   `$TMPDIR` (or `--temp-dir`) on a disk: a `tmpfs` keeps the files in memory.
+//!
+//! [`AllanDocument::memory`] says which path ran and why; the bounded path also adds a note.
 //!
 //! # Sampling, gaps
 //! τ0 is the median interval of the time column rounded to 9 significant digits (or the one
@@ -50,8 +67,8 @@ use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
 use gyrocal_allan::{
-    BiasFigures, Curve, Estimator, NoiseTerms, Record, TauSet, Term, bias_figures, compute_record,
-    noise_terms,
+    BiasFigures, Curve, DiskRecord, Estimator, NoiseTerms, Record, TauSet, Term, bias_figures,
+    bias_figures_in, compute_record, noise_terms,
 };
 use gyrocal_files::rundir::{FIT_JSON, MAX_FIT_BYTES, MAX_SAMPLES_BYTES, SAMPLES_CSV};
 use plotters::prelude::*;
@@ -59,6 +76,11 @@ use serde::{Deserialize, Serialize};
 
 use crate::ReportError;
 use crate::html::esc;
+
+mod bounded;
+
+pub use bounded::{AnalysisPath, DEFAULT_MAX_MEMORY_MIB, IN_MEMORY_BYTES_PER_SAMPLE, MemoryUse};
+use bounded::{Samples, Spill};
 
 /// Largest input file read (the limit of a run's `samples.csv`: about 10⁸ readings).
 pub const MAX_INPUT_BYTES: u64 = MAX_SAMPLES_BYTES;
@@ -120,6 +142,14 @@ pub struct AllanOptions {
     /// Where the input axis points and the latitude, to remove the Earth's rate from the bias.
     /// `None`: a run directory's plan (`[drift] axis`, `latitude_deg`), if it has them.
     pub earth: Option<(Axis, f64)>,
+    /// Take the bounded-memory path whatever the record's size (`--streaming`).
+    pub streaming: bool,
+    /// Memory budget of the in-memory path, bytes: a record that would take more (at
+    /// [`IN_MEMORY_BYTES_PER_SAMPLE`]) takes the bounded path. `None`:
+    /// [`DEFAULT_MAX_MEMORY_MIB`] MiB.
+    pub max_memory_bytes: Option<u64>,
+    /// Directory of the bounded path's temporary files. `None`: the system's (`$TMPDIR`).
+    pub temp_dir: Option<PathBuf>,
 }
 
 /// Where a gyro's input axis points, and Earth's rotation rate: the plan's (`[drift] axis`).
@@ -318,6 +348,9 @@ pub struct AllanDocument {
     pub run: Option<RunHeader>,
     /// What the reader must be told (gaps, irregular sampling, skipped rows, units, warm-up).
     pub notes: Vec<String>,
+    /// Which path analysed the record (in memory or bounded) and why.
+    #[serde(default)]
+    pub memory: MemoryUse,
 }
 
 fn data_err(path: &Path, line: Option<u64>, message: impl Into<String>) -> ReportError {
@@ -473,14 +506,20 @@ fn is_overload(rec: &csv::ByteRecord, cols: &Columns) -> bool {
         .is_some_and(|f| f.trim_ascii() == b"1")
 }
 
-/// Pass 1: the median interval of the time column (over rows that are not overloads).
-fn median_interval(path: &Path, column: Option<&str>) -> Result<Option<f64>, ReportError> {
+/// Pass 1: the median interval of the time column (over rows that are not overloads), and
+/// whether the intervals went to a temporary file (more than `cap` of them).
+fn median_interval(
+    path: &Path,
+    column: Option<&str>,
+    cap: usize,
+    temp_dir: &Path,
+) -> Result<(Option<f64>, bool), ReportError> {
     let mut rdr = reader(path)?;
     let cols = columns(path, &mut rdr, column)?;
     let Some((ti, tname)) = &cols.time else {
-        return Ok(None);
+        return Ok((None, false));
     };
-    let mut intervals: Vec<f64> = Vec::new();
+    let mut intervals = Spill::new(cap, temp_dir);
     let mut prev: Option<f64> = None;
     let mut rec = csv::ByteRecord::new();
     loop {
@@ -495,16 +534,28 @@ fn median_interval(path: &Path, column: Option<&str>) -> Result<Option<f64>, Rep
         let line = rec.position().map_or(0, csv::Position::line);
         let t = number(path, line, tname, rec.get(*ti))?;
         if let Some(p) = prev {
-            intervals.push(t - p);
+            intervals.push(t - p)?;
         }
         prev = Some(t);
     }
-    if intervals.is_empty() {
-        return Ok(None);
-    }
+    let spilled = intervals.spilled();
     let mid = intervals.len() / 2;
-    let (_, m, _) = intervals.select_nth_unstable_by(mid, f64::total_cmp);
-    Ok(Some(round_significant(*m, 9)))
+    let m = match intervals.finish()? {
+        Samples::Memory(mut intervals) => {
+            if intervals.is_empty() {
+                return Ok((None, spilled));
+            }
+            let (_, m, _) = intervals.select_nth_unstable_by(mid, f64::total_cmp);
+            *m
+        }
+        Samples::Disk(file) => {
+            match bounded::kth_smallest(&file, mid).map_err(|e| bounded::temp_err(temp_dir, e))? {
+                Some(m) => m,
+                None => return Ok((None, spilled)),
+            }
+        }
+    };
+    Ok((Some(round_significant(m, 9)), spilled))
 }
 
 /// `v` rounded to `digits` significant digits: a median of time differences carries the
@@ -665,12 +716,27 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
     };
     let is_rate = unit == "deg/h";
 
+    // where the numbers are kept: in memory up to the budget, else in temporary files
+    let budget = opts
+        .max_memory_bytes
+        .unwrap_or(DEFAULT_MAX_MEMORY_MIB * 1024 * 1024);
+    let mut cap = if opts.streaming {
+        0
+    } else {
+        usize::try_from(budget / IN_MEMORY_BYTES_PER_SAMPLE).unwrap_or(usize::MAX)
+    };
+    let temp_dir = opts.temp_dir.clone().unwrap_or_else(std::env::temp_dir);
+
     // τ0
     let (tau0, tau0_source) = match (opts.tau0_s, &cols.time) {
         (Some(t), _) => (t, "option".to_string()),
         (None, Some((_, name))) => {
             drop(rdr);
-            let m = median_interval(&file, column)?.ok_or_else(|| {
+            let (m, spilled) = median_interval(&file, column, cap, &temp_dir)?;
+            if spilled {
+                cap = 0;
+            }
+            let m = m.ok_or_else(|| {
                 data_err(&file, None, "fewer than two samples: no sample interval")
             })?;
             if !(m.is_finite() && m > 0.0) {
@@ -694,7 +760,7 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
     let cols = columns(&file, &mut rdr, column)?;
 
     // pass 2: the values and the segments
-    let mut values: Vec<f64> = Vec::new();
+    let mut values = Spill::new(cap, &temp_dir);
     let mut segments: Vec<Segment> = Vec::new();
     let mut seg_start_idx: Vec<usize> = Vec::new();
     let (mut rows, mut overloads, mut irregular) = (0u64, 0u64, 0u64);
@@ -778,10 +844,10 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
             s.samples += 1;
         }
         prev_t = Some(t);
-        values.push(v * factor);
+        values.push(v * factor)?;
     }
     drop(rdr);
-    if values.is_empty() {
+    if values.len() == 0 {
         return Err(data_err(&file, None, "no samples (only a header?)"));
     }
     if joined_gaps > 0 {
@@ -833,40 +899,62 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
             s.samples
         ));
     }
+    let record_samples = values.len();
+    let samples = values.finish()?;
+    let memory = bounded::memory_use(
+        matches!(samples, Samples::Disk(_)),
+        opts.streaming,
+        record_samples,
+        budget,
+    );
+    if memory.path == AnalysisPath::Bounded {
+        notes.push(format!(
+            "bounded-memory path ({}): the record was read into temporary files in {} and analysed from them through fixed-size buffers; the figures are those of the in-memory path",
+            memory.reason,
+            temp_dir.display()
+        ));
+    }
     let start = seg_start_idx[si];
-    values.truncate(start + segments[si].samples);
-    values.drain(..start);
+    let seg_len = segments[si].samples;
 
     // warm-up
-    let warmup = detect_warmup(
-        &values,
-        tau0,
-        segments[si].t_s.0,
-        factor,
-        &warmup_opts,
-        &mut notes,
-    );
-    let warmup_samples = warmup.as_ref().map_or(0, |w| {
-        ((w.time_s / tau0).round() as usize).min(values.len())
-    });
+    let warmup = match &samples {
+        Samples::Memory(values) => detect_warmup(
+            &values[start..start + seg_len],
+            tau0,
+            segments[si].t_s.0,
+            factor,
+            &warmup_opts,
+            &mut notes,
+        ),
+        Samples::Disk(values) => bounded::detect_warmup_file(
+            values,
+            start..start + seg_len,
+            tau0,
+            segments[si].t_s.0,
+            factor,
+            &warmup_opts,
+            &mut notes,
+        )
+        .map_err(|e| bounded::temp_err(&temp_dir, e))?,
+    };
+    let warmup_samples = warmup
+        .as_ref()
+        .map_or(0, |w| ((w.time_s / tau0).round() as usize).min(seg_len));
     if warmup_samples > 0 {
-        values.drain(..warmup_samples);
         notes.push(format!(
             "the first {} s of the analysed segment are warm-up ({warmup_samples} samples): the Allan analysis and the bias figures use the record after it",
             fmt_g(warmup_samples as f64 * tau0)
         ));
     }
-    if values.len() < gyrocal_allan::MIN_SAMPLES {
+    let n = seg_len - warmup_samples;
+    if n < gyrocal_allan::MIN_SAMPLES {
         return Err(data_err(
             &file,
             None,
-            format!(
-                "{} sample(s) left to analyse after gaps and warm-up: too few",
-                values.len()
-            ),
+            format!("{n} sample(s) left to analyse after gaps and warm-up: too few"),
         ));
     }
-    let n = values.len();
     let t_first = segments[si].t_s.0 + warmup_samples as f64 * tau0;
     let analysed = Analysed {
         segment: si,
@@ -875,9 +963,28 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
         duration_s: n as f64 * tau0,
         warmup_samples,
     };
-    let rec = Record::from_vec(values, tau0).map_err(|e| data_err(&file, None, e.to_string()))?;
-    let curve = compute_record(&rec, opts.estimator, &opts.taus)
-        .map_err(|e| data_err(&file, None, e.to_string()))?;
+    let first = start + warmup_samples;
+    let allan_err = |e: gyrocal_allan::Error| match e {
+        gyrocal_allan::Error::Io(e) => bounded::temp_err(&temp_dir, e),
+        e => data_err(&file, None, e.to_string()),
+    };
+    let (curve, bias) = match samples {
+        Samples::Memory(mut values) => {
+            values.truncate(first + n);
+            values.drain(..first);
+            let rec = Record::from_vec(values, tau0).map_err(allan_err)?;
+            let curve = compute_record(&rec, opts.estimator, &opts.taus).map_err(allan_err)?;
+            (curve, bias_figures(&rec, &unit))
+        }
+        Samples::Disk(values) => {
+            let prefix = bounded::temp_file(&temp_dir)?;
+            let rec = DiskRecord::from_samples(&values, first..first + n, prefix, tau0)
+                .map_err(allan_err)?;
+            drop(values);
+            let curve = compute_record(&rec, opts.estimator, &opts.taus).map_err(allan_err)?;
+            (curve, bias_figures_in(&rec, &unit).map_err(allan_err)?)
+        }
+    };
     let noise_terms = if is_rate {
         Some(noise_terms(&curve))
     } else {
@@ -886,7 +993,6 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
         ));
         None
     };
-    let bias = bias_figures(&rec, &unit);
     // the option, else the run's plan (`[drift] axis` and `latitude_deg`)
     let earth = opts
         .earth
@@ -933,6 +1039,7 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
         bias,
         earth_rate,
         notes,
+        memory,
     })
 }
 
@@ -944,26 +1051,56 @@ fn detect_warmup(
     opts: &WarmupOptions,
     notes: &mut Vec<String>,
 ) -> Option<Warmup> {
+    let chunks = |r: std::ops::Range<usize>, f: &mut dyn FnMut(&[f64])| {
+        f(y.get(r).unwrap_or(&[]));
+        Ok(())
+    };
+    // reading a slice cannot fail
+    detect_warmup_in(chunks, y.len(), tau0, t0, factor, opts, notes).unwrap_or(None)
+}
+
+/// The warm-up criterion over a segment of `n` samples handed over in chunks by `chunks(range,
+/// f)` (a slice in memory; a file's buffers on the bounded path): one pass for the white-noise
+/// σ when the tolerance is the default, one for the window means. Written once for both
+/// paths, so their cuts are the same bits.
+pub(crate) fn detect_warmup_in<F>(
+    mut chunks: F,
+    n: usize,
+    tau0: f64,
+    t0: f64,
+    factor: f64,
+    opts: &WarmupOptions,
+    notes: &mut Vec<String>,
+) -> std::io::Result<Option<Warmup>>
+where
+    F: FnMut(std::ops::Range<usize>, &mut dyn FnMut(&[f64])) -> std::io::Result<()>,
+{
     if !(opts.window_s.is_finite() && opts.window_s > 0.0) {
-        return None;
+        return Ok(None);
     }
     let w = (opts.window_s / tau0).round().max(1.0) as usize;
-    let means: Vec<f64> = y
-        .chunks_exact(w)
-        .map(|c| c.iter().sum::<f64>() / w as f64)
-        .collect();
-    if means.len() < 2 {
+    let n_means = n / w;
+    if n_means < 2 {
         notes.push(format!(
             "no warm-up detection: the analysed segment is shorter than two {} s windows",
             fmt_g(w as f64 * tau0)
         ));
-        return None;
+        return Ok(None);
     }
     let (tolerance, tolerance_source) = match opts.tolerance {
         Some(t) => (t * factor.abs(), "option".to_string()),
         None => {
-            let ss: f64 = y.windows(2).map(|p| (p[1] - p[0]).powi(2)).sum();
-            let sigma_a = (ss / (2.0 * (y.len() - 1) as f64)).sqrt();
+            let mut ss = 0.0_f64;
+            let mut prev: Option<f64> = None;
+            chunks(0..n, &mut |c: &[f64]| {
+                for &v in c {
+                    if let Some(p) = prev {
+                        ss += (v - p).powi(2);
+                    }
+                    prev = Some(v);
+                }
+            })?;
+            let sigma_a = (ss / (2.0 * (n - 1) as f64)).sqrt();
             (
                 DEFAULT_WARMUP_SIGMAS * sigma_a / (w as f64).sqrt(),
                 "3 x white-noise sigma of a window mean (sigma_A(tau0)/sqrt(w))".to_string(),
@@ -971,9 +1108,34 @@ fn detect_warmup(
         }
     };
     let window_s = w as f64 * tau0;
-    let found = (1..means.len())
-        .find(|&k| (means[k] - means[k - 1]).abs() < tolerance)
-        .map(|k| (k - 1) as f64 * window_s);
+    let step = n_means.div_ceil(MAX_WARMUP_POINTS).max(1);
+    let mut curve = Vec::with_capacity(n_means.min(MAX_WARMUP_POINTS));
+    let mut found = None;
+    let mut prev_mean: Option<f64> = None;
+    let (mut i, mut in_window, mut acc) = (0usize, 0usize, 0.0_f64);
+    chunks(0..n_means * w, &mut |c: &[f64]| {
+        for &v in c {
+            acc += v;
+            in_window += 1;
+            if in_window < w {
+                continue;
+            }
+            let m = acc / w as f64;
+            if found.is_none()
+                && let Some(p) = prev_mean
+                && (m - p).abs() < tolerance
+            {
+                found = Some((i - 1) as f64 * window_s);
+            }
+            if i % step == 0 {
+                curve.push((t0 + (i as f64 + 0.5) * window_s, m));
+            }
+            prev_mean = Some(m);
+            i += 1;
+            in_window = 0;
+            acc = 0.0;
+        }
+    })?;
     let (time_s, ended_by) = match (found, opts.max_s) {
         (Some(t), Some(m)) if t > m => (m, "max"),
         (Some(t), _) => (t, "criterion"),
@@ -986,14 +1148,7 @@ fn detect_warmup(
             (0.0, "not_reached")
         }
     };
-    let step = means.len().div_ceil(MAX_WARMUP_POINTS).max(1);
-    let curve = means
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| i % step == 0)
-        .map(|(i, m)| (t0 + (i as f64 + 0.5) * window_s, *m))
-        .collect();
-    Some(Warmup {
+    Ok(Some(Warmup {
         window_s,
         tolerance,
         tolerance_source,
@@ -1001,7 +1156,7 @@ fn detect_warmup(
         time_s,
         ended_by: ended_by.into(),
         curve,
-    })
+    }))
 }
 
 // ---------------------------------------------------------------------------------------------

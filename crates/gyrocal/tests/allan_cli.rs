@@ -268,3 +268,99 @@ fn the_page_has_the_plot_and_the_noise_term_table() {
     assert!(html.contains("five-term model"));
     assert!(!html.contains("<script"));
 }
+
+/// `--streaming` takes the bounded-memory path and prints the same figures: the text differs
+/// only in its `memory:` line and the bounded path's note, the JSON only in `memory` and that
+/// note. A budget smaller than the record chooses the bounded path by itself.
+#[test]
+fn streaming_prints_the_same_figures_and_says_the_bounded_path_ran() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = write_record(dir.path(), "drift.csv", 30_000, 4, Some((2_000, 3.0)));
+    let csv = csv.to_str().unwrap();
+    let tmp = dir.path().to_str().unwrap();
+    let run = |extra: &[&str]| {
+        let mut args = vec!["allan", csv, "--scale-factor", "0.05", "--temp-dir", tmp];
+        args.extend_from_slice(extra);
+        let out = gyrocal(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let mem = run(&[]);
+    let bounded = run(&["--streaming"]);
+    assert!(
+        mem.lines()
+            .any(|l| l.starts_with("memory: in memory (the record's 30000 samples")),
+        "{mem}"
+    );
+    assert!(
+        bounded
+            .lines()
+            .any(|l| l == "memory: bounded (--streaming)"),
+        "{bounded}"
+    );
+    assert!(
+        bounded
+            .lines()
+            .any(|l| l.starts_with("note: bounded-memory path (--streaming)")),
+        "{bounded}"
+    );
+    let figures = |s: &str| -> Vec<String> {
+        s.lines()
+            .filter(|l| !l.starts_with("memory:") && !l.starts_with("note: bounded-memory"))
+            .map(str::to_string)
+            .collect()
+    };
+    assert_eq!(figures(&mem), figures(&bounded));
+    // the figures are there to compare: the curve, the terms, the bias
+    assert!(figures(&mem).iter().any(|l| l.starts_with("bias: ")));
+    assert!(figures(&mem).len() > 30);
+
+    // the JSON, every figure; a budget below the record's 16 bytes a sample switches by itself
+    let a = json(&gyrocal(&[
+        "allan",
+        csv,
+        "--scale-factor",
+        "0.05",
+        "--json",
+        "--estimator",
+        "mdev",
+    ]));
+    let mut b = json(&gyrocal(&[
+        "allan",
+        csv,
+        "--scale-factor",
+        "0.05",
+        "--json",
+        "--estimator",
+        "mdev",
+        "--max-memory-mib",
+        "0",
+        "--temp-dir",
+        tmp,
+    ]));
+    assert_eq!(a["memory"]["path"], "in_memory");
+    assert_eq!(a["memory"]["budget_bytes"], 1024 * 1024 * 1024);
+    assert_eq!(b["memory"]["path"], "bounded");
+    assert!(
+        b["memory"]["reason"]
+            .as_str()
+            .unwrap()
+            .contains("more than the --max-memory-mib budget of 0 MiB"),
+        "{}",
+        b["memory"]
+    );
+    let mut a = a;
+    a.as_object_mut().unwrap().remove("memory");
+    b.as_object_mut().unwrap().remove("memory");
+    b["notes"]
+        .as_array_mut()
+        .unwrap()
+        .retain(|n| !n.as_str().unwrap().starts_with("bounded-memory path"));
+    assert_eq!(a, b);
+    // nothing left behind in the temporary directory but the record
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+}

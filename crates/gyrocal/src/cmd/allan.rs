@@ -9,8 +9,8 @@ use clap::{Args, ValueEnum};
 use gyrocal_allan::{Estimator, TauSet};
 use gyrocal_report::ReportError;
 use gyrocal_report::allan::{
-    AllanDocument, AllanOptions, DEFAULT_WARMUP_WINDOW_S, WarmupOptions, analyse_input, fmt_num,
-    noise_name, noise_term_rows, render_allan, term_name,
+    AllanDocument, AllanOptions, AnalysisPath, DEFAULT_MAX_MEMORY_MIB, DEFAULT_WARMUP_WINDOW_S,
+    WarmupOptions, analyse_input, fmt_num, noise_name, noise_term_rows, render_allan, term_name,
 };
 
 use crate::BadInput;
@@ -94,6 +94,14 @@ fn non_negative(s: &str) -> Result<f64, String> {
 /// σ of a window mean, σ_A(τ0)/√w), or at --warmup-max. The analysis and the bias figures use
 /// the record after the warm-up.
 ///
+/// Memory: while the record fits the budget (--max-memory-mib, 1024 MiB; 16 bytes a sample of
+/// the whole record) it is analysed in memory. A larger record, or any with --streaming, takes
+/// the bounded path: the values go to unnamed temporary files (--temp-dir, else $TMPDIR; about
+/// 16 bytes a sample of disk, removed at the end) and everything is computed from them through
+/// fixed-size buffers, so the resident memory stays a few MiB however long the record. The
+/// figures are the same, bit for bit; the output says which path ran (text: "memory:", JSON:
+/// "memory", and a note for the bounded path).
+///
 /// Output: the curve (τ, m, σ, 68 %/95 % chi-squared intervals, EDF, noise type, τ > T/4
 /// flagged), the noise terms by slope reads and by a weighted five-term fit, each ± its standard
 /// uncertainty, the bias and the GJB bias stability over 10 s and 100 s. Exit 2 for a bad input
@@ -147,6 +155,18 @@ pub struct AllanArgs {
     /// The bench's latitude, degrees north (negative south), for --axis.
     #[arg(long, value_name = "DEG", requires = "axis", allow_hyphen_values = true, value_parser = latitude)]
     pub latitude: Option<f64>,
+    /// Take the bounded-memory path whatever the record's size: the record goes to temporary
+    /// files and is analysed through fixed-size buffers, with the same figures as in memory.
+    #[arg(long)]
+    pub streaming: bool,
+    /// Memory budget of the in-memory path, MiB: a record that would take more (16 bytes a
+    /// sample) takes the bounded path (0: always).
+    #[arg(long, value_name = "MIB", default_value_t = DEFAULT_MAX_MEMORY_MIB)]
+    pub max_memory_mib: u64,
+    /// Directory of the bounded path's temporary files (default: $TMPDIR, else /tmp); on a disk,
+    /// not a tmpfs, which keeps them in memory.
+    #[arg(long, value_name = "DIR")]
+    pub temp_dir: Option<PathBuf>,
 }
 
 fn parse_axis(s: &str) -> Result<gyrocal_report::allan::Axis, String> {
@@ -197,6 +217,9 @@ pub fn run(args: &AllanArgs) -> anyhow::Result<u8> {
         },
         join_gaps_below_s: args.join_gaps_below,
         earth: args.axis.zip(args.latitude),
+        streaming: args.streaming,
+        max_memory_bytes: Some(args.max_memory_mib.saturating_mul(1024 * 1024)),
+        temp_dir: args.temp_dir.clone(),
     };
     let doc = analyse_input(&args.input, &opts).map_err(classify)?;
     if let Some(out) = &args.out {
@@ -255,6 +278,15 @@ fn text(doc: &AllanDocument) -> String {
         fmt_num(a.t_s.1),
         fmt_num(a.duration_s),
         fmt_num(a.duration_s / 3600.0)
+    );
+    let _ = writeln!(
+        s,
+        "memory: {} ({})",
+        match doc.memory.path {
+            AnalysisPath::InMemory => "in memory",
+            AnalysisPath::Bounded => "bounded",
+        },
+        doc.memory.reason
     );
     if let Some(w) = &doc.warmup {
         let _ = writeln!(
