@@ -46,8 +46,10 @@ enum Command {
     History(cmd::history::HistoryArgs),
     /// Fill the calibration catalog from run directories (import, rebuild).
     Catalog(cmd::catalog::CatalogArgs),
-    /// Allan deviation, noise terms, bias stability and warm-up of a drift record (run
-    /// directory or CSV).
+    // the one-line summary here; `gyrocal allan --help` shows the arguments' own long text
+    #[command(
+        about = "Allan deviation, noise terms, bias stability and warm-up of a drift record (run directory or CSV)"
+    )]
     Allan(Box<cmd::allan::AllanArgs>),
     /// Print the shell completion script for SHELL (bash, zsh, fish, elvish, powershell).
     Completions(cmd::completions::CompletionsArgs),

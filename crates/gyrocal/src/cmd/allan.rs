@@ -70,7 +70,7 @@ fn non_negative(s: &str) -> Result<f64, String> {
     }
 }
 
-/// Arguments of `gyrocal allan`.
+/// Allan deviation, noise terms, bias stability and warm-up of a drift record.
 ///
 /// Input: a run directory (its samples.csv: time t_s, value volts; rows with overload = 1 are
 /// skipped and counted) or a CSV file with a header naming a value column (volts, value,
@@ -80,19 +80,26 @@ fn non_negative(s: &str) -> Result<f64, String> {
 /// Sampling: τ0 is the median interval of the time column. An interval longer than 1.5 τ0 is a
 /// gap (an interrupted and resumed recording, a skipped overload): the record is split into
 /// gap-free segments and only the LONGEST segment is analysed; the output lists the segments
-/// and says which one (JSON: "segments", "analysed"). Intervals off τ0 by more than 10 % are
-/// counted and reported as irregular sampling.
+/// and says which one (JSON: "segments", "analysed"). In a drift run directory, gaps up to
+/// 10 s (the re-arming between its segments; --join-gaps-below) are dead time, not breaks.
+/// Intervals off τ0 by more than 10 % are counted and reported as irregular sampling.
+///
+/// Earth rate: --axis and --latitude (for a drift run directory, the plan's [drift] axis and
+/// latitude_deg when the options are absent) remove the Earth's rate along the input axis
+/// from the bias.
 ///
 /// Units: with --scale-factor K (V/(°/s)) the values become rates (v/K)·3600 in °/h and the
 /// noise terms are in IEEE 952 units (Q arcsec, N °/√h, B °/h, K °/h/√h, R °/h²). For a run
-/// directory the run's fit.json supplies K when the option is absent. Without K the curve is
+/// directory the run's fit.json supplies K when the option is absent (a simulated run: the
+/// simulated gyro's K). Without K the curve is
 /// in the input's unit and no noise term is computed.
 ///
 /// Warm-up (IEEE 1431 §12.6): means of consecutive windows (--warmup-window, 60 s); the warm-up
 /// is complete at the start of the first pair of consecutive windows whose means differ by less
 /// than the tolerance (--warmup-tolerance, in the value column's unit; default 3 × the white-noise
 /// σ of a window mean, σ_A(τ0)/√w), or at --warmup-max. The analysis and the bias figures use
-/// the record after the warm-up.
+/// the record after the warm-up. A run that watched its warm-up ([warmup] in its plan) is cut
+/// with the run's window, maximum and the tolerance it used, unless these options say otherwise.
 ///
 /// Memory: while the record fits the budget (--max-memory-mib, 1024 MiB; 16 bytes a sample of
 /// the whole record) it is analysed in memory. A larger record, or any with --streaming, takes
