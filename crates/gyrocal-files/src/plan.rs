@@ -1159,9 +1159,11 @@ pub enum TableRole {
     /// cables and the floor).
     #[default]
     Hold,
-    /// Stopped with the servo off (mode OFF) for the whole record: no servo jitter on the
-    /// input axis; the table's rate is still sampled, and a segment during which it moved
-    /// more than the hold tolerance, or left OFF, is not recorded.
+    /// Brought to rest, then its servo switched off (ACL `:Interlock:Open`, the controller's
+    /// orderly shutdown: an ABORT profile to zero, then servo off) for the whole record: no
+    /// servo jitter on the input axis. The table's rate is still sampled; a segment during
+    /// which it moved more than the hold tolerance is not recorded, and one during which it
+    /// left OFF ends the run. ACL tables only (the aerosmith dialect has no servo-off command).
     ServoOff,
     /// No table at all (a gyro on a bench or a fixture): nothing is opened, moved or sampled
     /// on a table's port, and `[table]` may be left out.
@@ -2785,7 +2787,17 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
                     .into(),
             ));
         }
-        Some(d) => Some(validate_drift(&d, cx)?),
+        Some(d) => {
+            let d = validate_drift(&d, cx)?;
+            if d.table == TableRole::ServoOff && dialect == TableDialect::Aerosmith {
+                return Err(cx.err(
+                    "drift.table",
+                    "= \"servo_off\" needs a table whose servo gyrocal can switch off: the ACL dialect (`:Interlock:Open`); the aerosmith dialect knows no servo-off command (`STO` only stops): write \"hold\" or \"none\""
+                        .into(),
+                ));
+            }
+            Some(d)
+        }
     };
 
     // [warmup]

@@ -837,3 +837,15 @@ fn a_drift_record_without_a_table_may_leave_the_table_section_out() {
     // and the plans that have a table keep their hashes: no [table] change when present
     assert!(parse(GOOD).unwrap().has_table());
 }
+
+#[test]
+fn servo_off_needs_a_table_whose_servo_can_be_switched_off() {
+    let text = format!("{DRIFT}[drift]\ntable = \"servo_off\"\n")
+        .replace("[table]\n", "[table]\ndialect = \"aerosmith\"\n");
+    let e = parse(&text).unwrap_err();
+    assert!(
+        e.to_string().contains("aerosmith") && e.to_string().contains("servo"),
+        "{e}"
+    );
+    assert!(parse(&text.replace("servo_off", "hold")).is_ok());
+}

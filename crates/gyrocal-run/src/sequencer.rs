@@ -780,10 +780,15 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
         if !self.plan.has_table() {
             tracing::info!("no rate table in this plan: the record is taken without one");
         } else if self.servo_off() {
-            // a drift record with the servo off: the table is brought to rest (mode OFF) and
-            // left there; it is never enabled
+            // a drift record with the servo off: the table is brought to rest (mode OFF, a
+            // zero-rate hold with the servo still on), then the servo is switched off the
+            // orderly way the controller offers (ACL `:Interlock:Open`: an ABORT profile to
+            // zero, at rest already, then servo off), and it is never enabled again; the
+            // driver knows the interlock event is its own
             self.table.stop().await?;
             let deadline = self.table.stop_deadline(self.plan.table().max_rate_dps);
+            self.table.wait_stopped(deadline).await?;
+            self.table.emergency_stop().await?;
             let rest = self.table.wait_stopped(deadline).await?;
             tracing::info!(
                 rate_dps = rest.rate_dps,

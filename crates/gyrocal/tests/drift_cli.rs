@@ -318,6 +318,13 @@ fn a_drift_record_with_the_servo_off_finds_its_warm_up_while_it_records() {
     }
     assert_eq!(rows, 40);
     assert!(stderr.contains("mode OFF"), "{stderr}");
+    // the servo was switched off (the interlock opened, the controller's orderly shutdown)
+    // and never switched on again
+    assert_eq!(
+        doc["simulated_bench"]["table"]["interlock_closed"], false,
+        "{}",
+        doc["simulated_bench"]
+    );
     // the run's Allan analysis cuts the same warm-up (the criterion and tolerance the run
     // used, applied to the whole record) and removes the Earth rate the plan's axis sees
     let a = json(&out, "allan.json");

@@ -639,6 +639,7 @@ async fn execute(
                 "mode": format!("{:?}", t.mode()),
                 "demanded_dps": t.demanded_rate(),
                 "stopped": t.is_stopped(),
+                "interlock_closed": t.interlock_closed(),
             }
         });
         Ok((dir, summary, run, signal, Some(state)))
