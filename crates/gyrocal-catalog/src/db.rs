@@ -22,17 +22,31 @@ use crate::record::{CheckRow, InstrumentRow, Results, RunRecord, RunRow, StepRow
 use crate::url::CatalogUrl;
 
 /// The SQLite migrations, oldest first (version, description, SQL).
-const SQLITE_MIGRATIONS: &[(i64, &str, &str)] = &[(
-    1,
-    "catalog",
-    include_str!("../migrations/sqlite/0001_catalog.sql"),
-)];
+const SQLITE_MIGRATIONS: &[(i64, &str, &str)] = &[
+    (
+        1,
+        "catalog",
+        include_str!("../migrations/sqlite/0001_catalog.sql"),
+    ),
+    (
+        2,
+        "drift results",
+        include_str!("../migrations/sqlite/0002_drift_results.sql"),
+    ),
+];
 /// The PostgreSQL migrations, oldest first.
-const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[(
-    1,
-    "catalog",
-    include_str!("../migrations/postgres/0001_catalog.sql"),
-)];
+const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
+    (
+        1,
+        "catalog",
+        include_str!("../migrations/postgres/0001_catalog.sql"),
+    ),
+    (
+        2,
+        "drift results",
+        include_str!("../migrations/postgres/0002_drift_results.sql"),
+    ),
+];
 
 /// The migrations compiled into the program (no migration files at run time).
 #[derive(Debug)]
@@ -157,7 +171,9 @@ const RESULT_COLUMNS: &str = "res.run_id AS res_run_id, res.scale_factor, \
      res.scale_factor_std_error, res.bias_v, res.bias_v_std_error, res.bias_dph, res.k_pos, \
      res.k_neg, res.k2, res.nonlinearity_ppm, res.asymmetry_ppm, res.asymmetry_common_k2_ppm, \
      res.repeatability_ppm, res.u_scale_factor, res.u_bias_v, res.u_bias_dph, res.u_k_pos, \
-     res.u_k_neg, res.best_model";
+     res.u_k_neg, res.best_model, res.arw_deg_rt_h, res.u_arw_deg_rt_h, \
+     res.bias_instability_dph, res.u_bias_instability_dph, res.rrw_dph_rt_h, res.u_rrw_dph_rt_h, \
+     res.drift_bias_dph, res.u_drift_bias_dph, res.bias_stability_100s_dph, res.drift_duration_s";
 
 const UPSERT_RUN: &str = "INSERT INTO runs (id, directory, host, station_id, plan_name, \
      plan_hash, kind, dut_serial, dut_model, operator, customer, status, reason, started_utc, \
@@ -178,8 +194,11 @@ const UPSERT_RUN: &str = "INSERT INTO runs (id, directory, host, station_id, pla
 const INSERT_RESULTS: &str = "INSERT INTO results (run_id, scale_factor, \
      scale_factor_std_error, bias_v, bias_v_std_error, bias_dph, k_pos, k_neg, k2, \
      nonlinearity_ppm, asymmetry_ppm, asymmetry_common_k2_ppm, repeatability_ppm, \
-     u_scale_factor, u_bias_v, u_bias_dph, u_k_pos, u_k_neg, best_model) VALUES ($1, $2, $3, \
-     $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, $16, $17, $18, $19)";
+     u_scale_factor, u_bias_v, u_bias_dph, u_k_pos, u_k_neg, best_model, arw_deg_rt_h, \
+     u_arw_deg_rt_h, bias_instability_dph, u_bias_instability_dph, rrw_dph_rt_h, u_rrw_dph_rt_h, \
+     drift_bias_dph, u_drift_bias_dph, bias_stability_100s_dph, drift_duration_s) VALUES ($1, \
+     $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, $16, $17, $18, $19, $20, $21, \
+     $22, $23, $24, $25, $26, $27, $28, $29)";
 const INSERT_STEP: &str = "INSERT INTO steps (run_id, step, pass, rate_dps, rate_meas_dps, \
      volts, volts_std, n, overloads) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9)";
 const INSERT_INSTRUMENT: &str = "INSERT INTO instruments (run_id, role, identity, model, \
@@ -247,6 +266,16 @@ macro_rules! results_row {
                 u_k_pos: $r.try_get("u_k_pos")?,
                 u_k_neg: $r.try_get("u_k_neg")?,
                 best_model: $r.try_get("best_model")?,
+                arw_deg_rt_h: $r.try_get("arw_deg_rt_h")?,
+                u_arw_deg_rt_h: $r.try_get("u_arw_deg_rt_h")?,
+                bias_instability_dph: $r.try_get("bias_instability_dph")?,
+                u_bias_instability_dph: $r.try_get("u_bias_instability_dph")?,
+                rrw_dph_rt_h: $r.try_get("rrw_dph_rt_h")?,
+                u_rrw_dph_rt_h: $r.try_get("u_rrw_dph_rt_h")?,
+                drift_bias_dph: $r.try_get("drift_bias_dph")?,
+                u_drift_bias_dph: $r.try_get("u_drift_bias_dph")?,
+                bias_stability_100s_dph: $r.try_get("bias_stability_100s_dph")?,
+                drift_duration_s: $r.try_get("drift_duration_s")?,
             }),
         }
     }};
@@ -448,6 +477,16 @@ impl Catalog {
                         .bind(x.u_k_pos)
                         .bind(x.u_k_neg)
                         .bind(&x.best_model)
+                        .bind(x.arw_deg_rt_h)
+                        .bind(x.u_arw_deg_rt_h)
+                        .bind(x.bias_instability_dph)
+                        .bind(x.u_bias_instability_dph)
+                        .bind(x.rrw_dph_rt_h)
+                        .bind(x.u_rrw_dph_rt_h)
+                        .bind(x.drift_bias_dph)
+                        .bind(x.u_drift_bias_dph)
+                        .bind(x.bias_stability_100s_dph)
+                        .bind(x.drift_duration_s)
                         .execute(&mut *tx)
                         .await?;
                 }

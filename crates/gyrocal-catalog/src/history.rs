@@ -19,7 +19,7 @@ pub struct Quantity {
 }
 
 /// The quantities of a history, in the order shown.
-pub const QUANTITIES: [Quantity; 10] = [
+pub const QUANTITIES: [Quantity; 14] = [
     Quantity {
         name: "scale_factor",
         label: "Scale factor K",
@@ -89,6 +89,35 @@ pub const QUANTITIES: [Quantity; 10] = [
         unit: "ppm",
         value: |r| r.repeatability_ppm,
         uncertainty: |_| None,
+    },
+    // a drift test's (IEEE 952 terms from its Allan analysis)
+    Quantity {
+        name: "arw_deg_rt_h",
+        label: "Angle random walk N (drift test)",
+        unit: "°/√h",
+        value: |r| r.arw_deg_rt_h,
+        uncertainty: |r| r.u_arw_deg_rt_h,
+    },
+    Quantity {
+        name: "bias_instability_dph",
+        label: "Bias instability B (drift test)",
+        unit: "°/h",
+        value: |r| r.bias_instability_dph,
+        uncertainty: |r| r.u_bias_instability_dph,
+    },
+    Quantity {
+        name: "rrw_dph_rt_h",
+        label: "Rate random walk K (drift test)",
+        unit: "°/h/√h",
+        value: |r| r.rrw_dph_rt_h,
+        uncertainty: |r| r.u_rrw_dph_rt_h,
+    },
+    Quantity {
+        name: "drift_bias_dph",
+        label: "Bias (drift test)",
+        unit: "°/h",
+        value: |r| r.drift_bias_dph,
+        uncertainty: |r| r.u_drift_bias_dph,
     },
 ];
 

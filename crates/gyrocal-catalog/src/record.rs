@@ -107,6 +107,37 @@ pub struct Results {
     pub u_k_neg: Option<f64>,
     /// The model the fit chose.
     pub best_model: Option<String>,
+    /// A drift test's angle random walk N, °/√h (five-term fit).
+    #[serde(default)]
+    pub arw_deg_rt_h: Option<f64>,
+    /// Expanded uncertainty (k = 2) of N, °/√h.
+    #[serde(default)]
+    pub u_arw_deg_rt_h: Option<f64>,
+    /// A drift test's bias instability B, °/h (five-term fit).
+    #[serde(default)]
+    pub bias_instability_dph: Option<f64>,
+    /// Expanded uncertainty (k = 2) of B, °/h.
+    #[serde(default)]
+    pub u_bias_instability_dph: Option<f64>,
+    /// A drift test's rate random walk K, °/h/√h (five-term fit).
+    #[serde(default)]
+    pub rrw_dph_rt_h: Option<f64>,
+    /// Expanded uncertainty (k = 2) of K, °/h/√h.
+    #[serde(default)]
+    pub u_rrw_dph_rt_h: Option<f64>,
+    /// A drift test's bias, °/h (the Earth rate removed when the run's axis and latitude were
+    /// known).
+    #[serde(default)]
+    pub drift_bias_dph: Option<f64>,
+    /// Expanded uncertainty (k = 2) of the drift bias, °/h.
+    #[serde(default)]
+    pub u_drift_bias_dph: Option<f64>,
+    /// GJB bias stability over 100 s windows, °/h.
+    #[serde(default)]
+    pub bias_stability_100s_dph: Option<f64>,
+    /// The analysed record's length, s (after gaps and warm-up).
+    #[serde(default)]
+    pub drift_duration_s: Option<f64>,
 }
 
 /// One row of `steps`.
@@ -304,7 +335,12 @@ pub fn read_run(dir: &Path, host: Option<&str>) -> Result<RunRecord, CatalogErro
         humidity_pct: m.context.as_ref().and_then(|c| c.humidity_pct),
         gyrocal_version: Some(m.gyrocal_version.clone()).filter(|v| !v.is_empty()),
     };
-    let results = fit.as_ref().map(|fit| results_of(fit, m));
+    let results = if m.plan.kind() == gyrocal_files::PlanKind::Drift {
+        // a drift record is not fitted: its figures are the Allan analysis's
+        read_json(dir, ALLAN_JSON)?.map(|a| drift_results_of(&a))
+    } else {
+        fit.as_ref().map(|fit| results_of(fit, m))
+    };
     let steps = data
         .steps
         .iter()
@@ -349,6 +385,53 @@ pub fn read_run(dir: &Path, host: Option<&str>) -> Result<RunRecord, CatalogErro
         instruments,
         checks,
     })
+}
+
+/// The Allan analysis a drift run writes at its end.
+const ALLAN_JSON: &str = "allan.json";
+
+/// A drift test's figures from its `allan.json`: the five-term fit's N, B and K (the tests
+/// recover them within their intervals where the slope reads are biased), the bias (the Earth
+/// rate removed when known) and the 100 s bias stability; uncertainties expanded to k = 2. In
+/// °/h only: a record left in volts has none.
+fn drift_results_of(a: &Value) -> Results {
+    let in_rate = a.get("unit").and_then(Value::as_str) == Some("deg/h");
+    let term = |name: &str| -> (Option<f64>, Option<f64>) {
+        let q = a
+            .pointer("/noise_terms/fit/terms")
+            .and_then(Value::as_array)
+            .and_then(|t| {
+                t.iter()
+                    .find(|x| x.get("term").and_then(Value::as_str) == Some(name))
+            })
+            .and_then(|x| x.get("value"));
+        let f = |k: &str| q.and_then(|q| q.get(k)).and_then(Value::as_f64);
+        (f("value"), f("uncertainty").map(|u| 2.0 * u))
+    };
+    let num = |p: &str| a.pointer(p).and_then(Value::as_f64);
+    if !in_rate {
+        return Results {
+            drift_duration_s: num("/analysed/duration_s"),
+            ..Results::default()
+        };
+    }
+    let (arw, u_arw) = term("angle_random_walk");
+    let (b, u_b) = term("bias_instability");
+    let (k, u_k) = term("rate_random_walk");
+    let bias = num("/earth_rate/bias_dph").or_else(|| num("/bias/bias/value"));
+    Results {
+        arw_deg_rt_h: arw,
+        u_arw_deg_rt_h: u_arw,
+        bias_instability_dph: b,
+        u_bias_instability_dph: u_b,
+        rrw_dph_rt_h: k,
+        u_rrw_dph_rt_h: u_k,
+        drift_bias_dph: bias,
+        u_drift_bias_dph: num("/bias/bias/uncertainty").map(|u| 2.0 * u),
+        bias_stability_100s_dph: num("/bias/stability_100s/stability/value"),
+        drift_duration_s: num("/analysed/duration_s"),
+        ..Results::default()
+    }
 }
 
 fn results_of(fit: &Value, m: &gyrocal_files::Manifest) -> Results {
@@ -397,6 +480,7 @@ fn results_of(fit: &Value, m: &gyrocal_files::Manifest) -> Results {
         u_k_pos: u("k_pos"),
         u_k_neg: u("k_neg"),
         best_model: s(fit, "best_model"),
+        ..Results::default()
     }
 }
 

@@ -299,3 +299,73 @@ async fn connection_errors_never_show_the_password() {
     assert!(!text.contains("hunter2"), "{text}");
     assert!(text.contains("gyrocal:***@127.0.0.1"), "{text}");
 }
+
+/// A lab's catalog created by the first schema (before drift results) is migrated when a newer
+/// gyrocal opens it: its calibrations stay, and new ones carry the new columns.
+#[tokio::test]
+async fn a_version_1_sqlite_catalog_is_migrated_and_keeps_its_calibrations() {
+    let tmp = tempfile::tempdir().unwrap();
+    let file = tmp.path().join("lab.sqlite");
+    // schema version 1 exactly as an earlier gyrocal applied it (sqlx's own bookkeeping)
+    let only_v1 = tmp.path().join("v1");
+    std::fs::create_dir_all(&only_v1).unwrap();
+    std::fs::copy(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("migrations/sqlite/0001_catalog.sql"),
+        only_v1.join("0001_catalog.sql"),
+    )
+    .unwrap();
+    let opts = sqlx::sqlite::SqliteConnectOptions::new()
+        .filename(&file)
+        .create_if_missing(true);
+    let pool = sqlx::SqlitePool::connect_with(opts).await.unwrap();
+    sqlx::migrate::Migrator::new(only_v1.as_path())
+        .await
+        .unwrap()
+        .run(&pool)
+        .await
+        .unwrap();
+    // a calibration written under version 1
+    sqlx::query(
+        "INSERT INTO runs (id, directory, plan_name, plan_hash, kind, dut_serial, status, \
+         started_utc, simulated, steps_total, steps_done, imported_utc) VALUES ('r1', '/runs/r1', \
+         'paper', 'abc', 'scale_factor', 'OLD-1', 'complete', '2026-01-02T03:04:05Z', false, 19, \
+         19, '2026-01-02T04:00:00Z')",
+    )
+    .execute(&pool)
+    .await
+    .unwrap();
+    sqlx::query(
+        "INSERT INTO results (run_id, scale_factor, u_scale_factor) VALUES ('r1', 0.05, 1e-5)",
+    )
+    .execute(&pool)
+    .await
+    .unwrap();
+    pool.close().await;
+    // a newer gyrocal opens it: migrated, the calibration still there, the new columns empty
+    let url = CatalogUrl::Sqlite(file.clone());
+    let catalog = Catalog::open(&url).await.unwrap();
+    let cals = catalog.calibrations("OLD-1", true).await.unwrap();
+    assert_eq!(cals.len(), 1);
+    let r = cals[0].results.as_ref().unwrap();
+    assert_eq!(r.scale_factor, Some(0.05));
+    assert_eq!(r.u_scale_factor, Some(1e-5));
+    assert!(r.arw_deg_rt_h.is_none());
+    // and new calibrations go in beside it
+    let new_run = clone_run(&tmp.path().join("new"), &Spec::new("OLD-1", 3, 0.0501));
+    catalog.import_dir(&new_run).await.unwrap();
+    assert_eq!(catalog.calibrations("OLD-1", true).await.unwrap().len(), 2);
+    let applied: i64 = {
+        let pool = sqlx::SqlitePool::connect_with(
+            sqlx::sqlite::SqliteConnectOptions::new().filename(&file),
+        )
+        .await
+        .unwrap();
+        let n = sqlx::query_scalar("SELECT MAX(version) FROM _sqlx_migrations")
+            .fetch_one(&pool)
+            .await
+            .unwrap();
+        pool.close().await;
+        n
+    };
+    assert_eq!(applied, 2, "migrated to version 2");
+}

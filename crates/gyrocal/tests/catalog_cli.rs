@@ -487,3 +487,84 @@ fn a_catalog_killed_during_a_run_lets_it_complete_and_an_import_catches_up() {
     assert_eq!(list[0]["status"], "complete");
     assert!(list[0]["results"]["scale_factor"].as_f64().unwrap() > 0.0);
 }
+
+/// A short simulated drift run (configs/drift.toml, 40 segments ≈ 44 min) that indexes itself
+/// in the catalog, then its history: the drift figures are there, with their uncertainty.
+fn drift_history(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
+    let serial = format!("DRIFT{tag}");
+    let plan = root.join("drift.toml");
+    std::fs::write(
+        &plan,
+        std::fs::read_to_string(config("drift.toml"))
+            .unwrap()
+            .replace("repeat = 167", "repeat = 40"),
+    )
+    .unwrap();
+    let doc = json(
+        &gyrocal(data_home)
+            .args(["run", "--simulate", "--json", "--dut-serial", &serial])
+            .args(extra)
+            .arg("--out")
+            .arg(root.join("drift-run"))
+            .arg(&plan)
+            .output()
+            .unwrap(),
+    );
+    assert_eq!(doc["catalog"]["updated"], true, "{doc:#}");
+    let h = json(
+        &gyrocal(data_home)
+            .args(["history", &serial, "--include-simulated", "--json"])
+            .args(extra)
+            .output()
+            .unwrap(),
+    );
+    let cals = h["calibrations"].as_array().unwrap();
+    assert_eq!(cals.len(), 1, "{h:#}");
+    assert_eq!(cals[0]["kind"], "drift");
+    let r = &cals[0]["results"];
+    // configs/drift.toml's gyro: N 0.02 °/√h, B 1 °/h; within the expanded uncertainty (k = 2)
+    for (key, set) in [("arw_deg_rt_h", 0.02), ("bias_instability_dph", 1.0)] {
+        let v = r[key].as_f64().unwrap_or_else(|| panic!("{key} in {r}"));
+        let u = r[format!("u_{key}")].as_f64().unwrap();
+        assert!((v - set).abs() <= u, "{key}: {v} ± {u} (k = 2), set {set}");
+    }
+    // the Earth rate of the plan's axis and latitude is out of the catalogued bias
+    let bias = r["drift_bias_dph"].as_f64().unwrap();
+    assert!((bias - 0.0088 / 0.3612 * 3600.0).abs() < 10.0, "{bias}");
+    assert!(
+        r["scale_factor"].is_null(),
+        "a drift test fits no scale factor"
+    );
+    let trends: Vec<&str> = h["trends"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|t| t["quantity"].as_str().or_else(|| t["name"].as_str()))
+        .collect();
+    assert!(trends.contains(&"arw_deg_rt_h"), "{trends:?}");
+    let text = ok(&gyrocal(data_home)
+        .args(["history", &serial, "--include-simulated"])
+        .args(extra)
+        .output()
+        .unwrap());
+    assert!(text.contains("drift tests:"), "{text}");
+}
+
+#[test]
+fn a_drift_test_is_catalogued_with_its_noise_terms() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data_home = tmp.path().join("data");
+    drift_history(&data_home, tmp.path(), &[], "");
+}
+
+#[test]
+fn a_drift_test_is_catalogued_with_its_noise_terms_on_postgres() {
+    let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
+        eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL test skipped");
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let data_home = tmp.path().join("data");
+    let tag = format!("-{}", std::process::id());
+    drift_history(&data_home, tmp.path(), &["--catalog", &url], &tag);
+}

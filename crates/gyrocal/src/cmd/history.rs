@@ -75,7 +75,7 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<u8> {
         "{:<20} {:<26} {:<22} {:<13} {:<3} DIRECTORY",
         "STARTED (UTC)", "K ± U V/(°/s)", "BIAS ± U °/h", "VERDICT", "SIM"
     );
-    for c in &h.calibrations {
+    for c in h.calibrations.iter().filter(|c| c.run.kind != "drift") {
         let r = c.results.clone().unwrap_or_default();
         println!(
             "{:<20} {:<26} {:<22} {:<13} {:<3} {}",
@@ -86,6 +86,29 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<u8> {
             if c.run.simulated { "yes" } else { "" },
             c.run.directory
         );
+    }
+    let drift: Vec<_> = h
+        .calibrations
+        .iter()
+        .filter(|c| c.results.as_ref().is_some_and(|r| r.arw_deg_rt_h.is_some()))
+        .collect();
+    if !drift.is_empty() {
+        println!(
+            "\ndrift tests:\n{:<20} {:<22} {:<22} {:<22} {:<22} DIRECTORY",
+            "STARTED (UTC)", "N ± U °/√h", "B ± U °/h", "K ± U °/h/√h", "BIAS ± U °/h"
+        );
+        for c in drift {
+            let r = c.results.clone().unwrap_or_default();
+            println!(
+                "{:<20} {:<22} {:<22} {:<22} {:<22} {}",
+                c.run.started_utc.chars().take(19).collect::<String>(),
+                sci(r.arw_deg_rt_h, r.u_arw_deg_rt_h),
+                sci(r.bias_instability_dph, r.u_bias_instability_dph),
+                sci(r.rrw_dph_rt_h, r.u_rrw_dph_rt_h),
+                sci(r.drift_bias_dph, r.u_drift_bias_dph),
+                c.run.directory
+            );
+        }
     }
     let rep = &h.repeatability;
     match (rep.scale_factor_ppm, rep.bias_dph) {
