@@ -71,11 +71,18 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<u8> {
         );
         return Ok(0);
     }
-    println!(
-        "{:<20} {:<26} {:<22} {:<13} {:<3} DIRECTORY",
-        "STARTED (UTC)", "K ± U V/(°/s)", "BIAS ± U °/h", "VERDICT", "SIM"
-    );
-    for c in h.calibrations.iter().filter(|c| c.run.kind != "drift") {
+    let sweeps: Vec<_> = h
+        .calibrations
+        .iter()
+        .filter(|c| c.run.kind != "drift")
+        .collect();
+    if !sweeps.is_empty() {
+        println!(
+            "{:<20} {:<26} {:<22} {:<13} {:<3} DIRECTORY",
+            "STARTED (UTC)", "K ± U V/(°/s)", "BIAS ± U °/h", "VERDICT", "SIM"
+        );
+    }
+    for c in &sweeps {
         let r = c.results.clone().unwrap_or_default();
         println!(
             "{:<20} {:<26} {:<22} {:<13} {:<3} {}",
@@ -94,8 +101,13 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<u8> {
         .collect();
     if !drift.is_empty() {
         println!(
-            "\ndrift tests:\n{:<20} {:<22} {:<22} {:<22} {:<22} DIRECTORY",
-            "STARTED (UTC)", "N ± U °/√h", "B ± U °/h", "K ± U °/h/√h", "BIAS ± U °/h"
+            "{}drift tests:\n{:<20} {:<22} {:<22} {:<22} {:<22} DIRECTORY",
+            if sweeps.is_empty() { "" } else { "\n" },
+            "STARTED (UTC)",
+            "N ± U °/√h",
+            "B ± U °/h",
+            "K ± U °/h/√h",
+            "BIAS ± U °/h"
         );
         for c in drift {
             let r = c.results.clone().unwrap_or_default();
@@ -109,6 +121,9 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<u8> {
                 c.run.directory
             );
         }
+    }
+    if sweeps.is_empty() {
+        return Ok(0);
     }
     let rep = &h.repeatability;
     match (rep.scale_factor_ppm, rep.bias_dph) {
