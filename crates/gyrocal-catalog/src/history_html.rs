@@ -62,44 +62,84 @@ pub fn render(h: &History) -> String {
     for w in &h.warnings {
         let _ = write!(out, "<p class=\"warn\">Warning: {}</p>", esc(w));
     }
-    let r = &h.repeatability;
-    let _ = write!(
-        out,
-        "<h2>Repeatability from calibration to calibration</h2><ul>\
-         <li>scale factor: mean {} V/(°/s), {} ppm (std/mean over {} calibrations)</li>\
-         <li>bias: mean {} °/h, std {} °/h</li></ul>",
-        num(r.scale_factor_mean),
-        r.scale_factor_ppm
-            .map_or("—".to_string(), |v| format!("{v:.2}")),
-        r.n,
-        num(r.bias_dph_mean),
-        num(r.bias_dph),
-    );
-    out.push_str(
-        "<h2>Calibrations</h2><table><tr><th>started (UTC)</th><th>run</th><th>station</th>\
-         <th>plan</th><th>K ± U (V/(°/s))</th><th>bias ± U (°/h)</th><th>nonlinearity (ppm)</th>\
-         <th>asymmetry (ppm)</th><th>verdict</th><th>sim.</th></tr>",
-    );
-    for c in &h.calibrations {
-        let res = c.results.clone().unwrap_or_default();
+    let sweeps: Vec<_> = h
+        .calibrations
+        .iter()
+        .filter(|c| c.run.kind != "drift")
+        .collect();
+    let drifts: Vec<_> = h
+        .calibrations
+        .iter()
+        .filter(|c| c.run.kind == "drift")
+        .collect();
+    if !sweeps.is_empty() {
+        let r = &h.repeatability;
         let _ = write!(
             out,
-            "<tr><td class=\"l\">{}</td><td class=\"l\" title=\"{}\">{}</td><td class=\"l\">{}</td>\
-             <td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td><td>{}</td></tr>",
-            esc(&c.run.started_utc),
-            esc(&c.run.directory),
-            esc(&c.run.id.chars().take(12).collect::<String>()),
-            esc(c.run.station_id.as_deref().unwrap_or("")),
-            esc(&c.run.plan_name),
-            with_u(res.scale_factor, res.u_scale_factor),
-            with_u(res.bias_dph, res.u_bias_dph),
-            num(res.nonlinearity_ppm),
-            num(res.asymmetry_ppm),
-            esc(c.run.verdict.as_deref().unwrap_or("")),
-            if c.run.simulated { "yes" } else { "" },
+            "<h2>Repeatability from calibration to calibration</h2><ul>\
+             <li>scale factor: mean {} V/(°/s), {} ppm (std/mean over {} calibrations)</li>\
+             <li>bias: mean {} °/h, std {} °/h</li></ul>",
+            num(r.scale_factor_mean),
+            r.scale_factor_ppm
+                .map_or("—".to_string(), |v| format!("{v:.2}")),
+            r.n,
+            num(r.bias_dph_mean),
+            num(r.bias_dph),
         );
+        out.push_str(
+            "<h2>Calibrations</h2><table><tr><th>started (UTC)</th><th>run</th><th>station</th>\
+             <th>plan</th><th>K ± U (V/(°/s))</th><th>bias ± U (°/h)</th><th>nonlinearity (ppm)</th>\
+             <th>asymmetry (ppm)</th><th>verdict</th><th>sim.</th></tr>",
+        );
+        for c in &sweeps {
+            let res = c.results.clone().unwrap_or_default();
+            let _ = write!(
+                out,
+                "<tr><td class=\"l\">{}</td><td class=\"l\" title=\"{}\">{}</td><td class=\"l\">{}</td>\
+                 <td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td><td>{}</td></tr>",
+                esc(&c.run.started_utc),
+                esc(&c.run.directory),
+                esc(&c.run.id.chars().take(12).collect::<String>()),
+                esc(c.run.station_id.as_deref().unwrap_or("")),
+                esc(&c.run.plan_name),
+                with_u(res.scale_factor, res.u_scale_factor),
+                with_u(res.bias_dph, res.u_bias_dph),
+                num(res.nonlinearity_ppm),
+                num(res.asymmetry_ppm),
+                esc(c.run.verdict.as_deref().unwrap_or("")),
+                if c.run.simulated { "yes" } else { "" },
+            );
+        }
+        out.push_str("</table>");
     }
-    out.push_str("</table><h2>Trends</h2>");
+    if !drifts.is_empty() {
+        out.push_str(
+            "<h2>Drift tests</h2><table><tr><th>started (UTC)</th><th>run</th><th>station</th>\
+             <th>plan</th><th>N ± U (°/√h)</th><th>B ± U (°/h)</th><th>K ± U (°/h/√h)</th>\
+             <th>bias ± U (°/h)</th><th>record (h)</th><th>sim.</th></tr>",
+        );
+        for c in &drifts {
+            let res = c.results.clone().unwrap_or_default();
+            let _ = write!(
+                out,
+                "<tr><td class=\"l\">{}</td><td class=\"l\" title=\"{}\">{}</td><td class=\"l\">{}</td>\
+                 <td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                esc(&c.run.started_utc),
+                esc(&c.run.directory),
+                esc(&c.run.id.chars().take(12).collect::<String>()),
+                esc(c.run.station_id.as_deref().unwrap_or("")),
+                esc(&c.run.plan_name),
+                with_u(res.arw_deg_rt_h, res.u_arw_deg_rt_h),
+                with_u(res.bias_instability_dph, res.u_bias_instability_dph),
+                with_u(res.rrw_dph_rt_h, res.u_rrw_dph_rt_h),
+                with_u(res.drift_bias_dph, res.u_drift_bias_dph),
+                num(res.drift_duration_s.map(|s| s / 3600.0)),
+                if c.run.simulated { "yes" } else { "" },
+            );
+        }
+        out.push_str("</table>");
+    }
+    out.push_str("<h2>Trends</h2>");
     for t in &h.trends {
         let _ = write!(out, "<h3>{} ({})</h3>", esc(&t.label), esc(&t.unit));
         match trend_svg(t) {

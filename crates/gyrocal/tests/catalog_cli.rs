@@ -548,6 +548,19 @@ fn drift_history(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
         .output()
         .unwrap());
     assert!(text.contains("drift tests:"), "{text}");
+    let page = root.join("history.html");
+    ok(&gyrocal(data_home)
+        .args(["history", &serial, "--include-simulated", "-o"])
+        .arg(&page)
+        .args(extra)
+        .output()
+        .unwrap());
+    let html = std::fs::read_to_string(&page).unwrap();
+    assert!(html.contains("<h2>Drift tests</h2>"), "drift table");
+    assert!(
+        !html.contains("<h2>Calibrations</h2>"),
+        "no empty sweep table"
+    );
 }
 
 #[test]
