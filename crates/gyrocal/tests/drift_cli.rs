@@ -8,7 +8,7 @@ mod common;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use common::{config, gyrocal, json};
+use common::{RunOutput, config, gyrocal, json, run_json};
 
 /// configs/drift.toml, shortened to `segments` segments of `readings` readings.
 fn short_drift(dir: &Path, segments: u32, readings: u32) -> std::path::PathBuf {
@@ -116,14 +116,8 @@ fn a_killed_drift_record_resumes_with_a_gap_and_the_table_at_rest() {
     let kept = segments_done(&out);
     assert!((4..16).contains(&kept), "{kept} segments kept");
 
-    let o = gyrocal()
-        .args(["run", "--simulate", "--json", "--resume"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(0), "{stderr}");
-    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let RunOutput { code, doc, stderr } = run_json(&[&"--simulate", &"--resume", &out]);
+    assert_eq!(code, Some(0), "{stderr}");
     assert_eq!(doc["status"], "complete");
     assert_eq!(doc["table"]["at_rest"], true, "{doc:#}");
     let m = json(&out, "manifest.json");
@@ -180,14 +174,8 @@ fn a_three_hour_simulated_drift_run_survives_a_kill_and_its_allan_analysis_finds
     child.kill().unwrap();
     child.wait().unwrap();
     assert!(segments_done(&out) < 167, "killed part-way");
-    let o = gyrocal()
-        .args(["run", "--simulate", "--json", "--resume"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(0), "{stderr}");
-    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let RunOutput { code, doc, stderr } = run_json(&[&"--simulate", &"--resume", &out]);
+    assert_eq!(code, Some(0), "{stderr}");
     assert_eq!(doc["status"], "complete");
     assert_eq!(doc["table"]["at_rest"], true);
     assert!(t0.elapsed() < Duration::from_secs(90), "seconds, not hours");
@@ -278,16 +266,8 @@ fn a_drift_record_with_the_servo_off_finds_its_warm_up_while_it_records() {
     let tmp = tempfile::tempdir().unwrap();
     let plan = servo_off_drift(tmp.path());
     let out = tmp.path().join("run");
-    let o = gyrocal()
-        .arg("run")
-        .arg(&plan)
-        .args(["--simulate", "--json", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(0), "{stderr}");
-    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let RunOutput { code, doc, stderr } = run_json(&[&plan, &"--simulate", &"--out", &out]);
+    assert_eq!(code, Some(0), "{stderr}");
     assert_eq!(doc["status"], "complete");
     assert_eq!(doc["table"]["at_rest"], true, "{}", doc["table"]);
     // the operator saw the warm-up end and the running deviation
@@ -400,14 +380,8 @@ fn a_table_fault_during_a_servo_off_drift_record_ends_with_the_table_at_rest_and
     assert_eq!(doc["warmup"]["complete"], false, "{}", doc["warmup"]);
     let done = segments_done(&out);
     assert!((3..40).contains(&done), "{done} segments before the fault");
-    let o = gyrocal()
-        .args(["run", "--simulate", "--json", "--resume"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(0), "{stderr}");
-    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let RunOutput { code, doc, stderr } = run_json(&[&"--simulate", &"--resume", &out]);
+    assert_eq!(code, Some(0), "{stderr}");
     assert_eq!(doc["table"]["at_rest"], true);
     assert_eq!(doc["warmup"]["complete"], true, "{}", doc["warmup"]);
     assert_eq!(segments_done(&out), 40);
@@ -435,16 +409,8 @@ fn a_drift_record_on_a_bench_without_a_table_opens_no_table() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(text.contains("table: none"), "{text}");
     let out = tmp.path().join("run");
-    let o = gyrocal()
-        .arg("run")
-        .arg(&plan)
-        .args(["--simulate", "--json", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(0), "{stderr}");
-    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let RunOutput { code, doc, stderr } = run_json(&[&plan, &"--simulate", &"--out", &out]);
+    assert_eq!(code, Some(0), "{stderr}");
     assert_eq!(doc["status"], "complete");
     assert_eq!(doc["table"]["none"], true, "{}", doc["table"]);
     assert!(stderr.contains("no rate table in this plan"), "{stderr}");
@@ -509,12 +475,7 @@ fn a_meter_fault_in_a_record_without_a_table_fails_cleanly_and_resumes() {
         3,
         "the segments before the fault are kept"
     );
-    let o = gyrocal()
-        .args(["run", "--simulate", "--json", "--resume"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(0), "{stderr}");
+    let RunOutput { code, stderr, .. } = run_json(&[&"--simulate", &"--resume", &out]);
+    assert_eq!(code, Some(0), "{stderr}");
     assert_eq!(segments_done(&out), 10);
 }

@@ -8,7 +8,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{config, gyrocal, json};
+use common::{RunOutput, config, json, run_json};
 
 /// configs/quick.toml with a gyro whose bias settles from 200 °/h over τ = 120 s and a
 /// `[warmup]` section (`extra` keys appended to it).
@@ -22,18 +22,14 @@ fn plan_with_warmup(dir: &Path, extra: &str) -> PathBuf {
 }
 
 fn run(args: &[&str], plan_or_dir: &Path) -> (Option<i32>, serde_json::Value, String) {
-    let o = gyrocal()
-        .arg("run")
-        .args(args)
-        .arg(plan_or_dir)
-        .output()
-        .unwrap();
-    let doc = serde_json::from_slice(&o.stdout).unwrap_or(serde_json::Value::Null);
-    (
-        o.status.code(),
-        doc,
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
+    let mut all: Vec<&dyn AsRef<std::ffi::OsStr>> = args
+        .iter()
+        .filter(|a| **a != "--json")
+        .map(|a| a as &dyn AsRef<std::ffi::OsStr>)
+        .collect();
+    all.push(&plan_or_dir);
+    let RunOutput { code, doc, stderr } = run_json(&all);
+    (code, doc, stderr)
 }
 
 /// `t_start_s` of the first step in steps.csv.

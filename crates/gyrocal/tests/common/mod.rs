@@ -42,3 +42,25 @@ pub fn between<'a>(s: &'a str, from: &str, to: &str) -> &'a str {
     let j = rest.find(to).unwrap_or(rest.len());
     &rest[..j]
 }
+
+/// What `gyrocal run ... --json` gave: the exit code, its JSON document (`Null` when it
+/// printed none) and the human text on stderr.
+pub struct RunOutput {
+    pub code: Option<i32>,
+    pub doc: serde_json::Value,
+    pub stderr: String,
+}
+
+/// `gyrocal run --json` with `args` (a plan or `--resume DIR`, `--simulate`, `--out DIR`, ...).
+pub fn run_json(args: &[&dyn AsRef<std::ffi::OsStr>]) -> RunOutput {
+    let o = gyrocal()
+        .args(["run", "--json"])
+        .args(args.iter().map(|a| a.as_ref()))
+        .output()
+        .unwrap();
+    RunOutput {
+        code: o.status.code(),
+        doc: serde_json::from_slice(&o.stdout).unwrap_or(serde_json::Value::Null),
+        stderr: String::from_utf8_lossy(&o.stderr).into_owned(),
+    }
+}
