@@ -3,7 +3,7 @@
 //! Aerosmith ASCII dialect ([`aerosmith`]).
 //!
 //! The table runs as a tokio task serving a byte stream (an in-memory pipe or a pseudo-terminal).
-//! Its motion is not ticked: the state holds the current profile [`Segment`] (start time, start
+//! Its motion is not ticked: the state holds the current profile `Segment` (start time, start
 //! rate and position, target, acceleration) and every observation evaluates it in closed form at
 //! the observing instant on tokio's clock. Virtual time therefore stays exact and costs nothing
 //! while the table "turns" for an hour. Latched faults that depend on the motion (rate trip, a

@@ -28,7 +28,7 @@ impl ErrorSurface {
     /// Evaluates the SSE on a `size × size` grid centred on `(weight, threshold)` with the given
     /// half-widths. `size` is made odd (so the centre is a grid point) and at least 3.
     ///
-    /// One pass over the data, then the grid in closed form (see [`SseForm`]).
+    /// One pass over the data, then the grid in closed form (see `SseForm`).
     pub fn grid(
         data: &Dataset,
         weight: f64,

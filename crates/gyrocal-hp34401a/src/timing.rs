@@ -24,7 +24,7 @@ pub const BITS_PER_CHAR: u32 = 11;
 /// Most readings one `INIT` can store in the meter's memory.
 pub const MEMORY_READINGS: usize = 512;
 /// Time of one character on a GPIB bus behind a Prologix controller: about 100 kB/s end to
-/// end [U] (the bus itself is faster; the controller's USB or TCP side and its `++read`
+/// end \[U\] (the bus itself is faster; the controller's USB or TCP side and its `++read`
 /// handling bound it). The simulated bench's GPIB uses the same figure.
 pub const GPIB_CHAR_TIME: Duration = Duration::from_micros(10);
 /// Most readings per trigger (`SAMP:COUN`).

@@ -2,18 +2,18 @@
 //! encoder (the model is tokio-serial's `SerialFramed<C>`).
 //!
 //! Framing is kept apart from the byte stream so that another framing (a prompt-terminated
-//! dialect, fixed-length records) is another codec, not another transport. [`StreamTransport`]
+//! dialect, fixed-length records) is another codec, not another transport. [`StreamTransport`](crate::StreamTransport)
 //! drives this codec over its read buffer and adds what a codec cannot know: deadlines and the
 //! end of the stream.
 //!
-//! [`StreamTransport`]: crate::StreamTransport
+//! [`StreamTransport`](crate::StreamTransport): crate::StreamTransport
 
 use bytes::{Buf, BufMut, BytesMut};
 use tokio_util::codec::{Decoder, Encoder};
 
 use crate::Field;
 
-/// A framing a [`StreamTransport`] can drive: decodes pieces ([`Field`]s, or [`Garbled`]
+/// A framing a [`StreamTransport`](crate::StreamTransport) can drive: decodes pieces ([`Field`]s, or [`Garbled`]
 /// bytes as an item so reading goes on after them), encodes a line to send, and cuts whole
 /// lines or fields as [`Transport::read_line`] and [`Transport::read_field`] ask.
 /// [`LineCodec`] is the one every current instrument uses; a prompt-terminated dialect would

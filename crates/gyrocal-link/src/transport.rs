@@ -40,8 +40,8 @@ pub trait Transport: Send {
     /// reply (thousands of comma-separated readings on one line) as it arrives. `timeout` applies
     /// to this piece.
     ///
-    /// The provided implementation returns the whole line as one piece; [`StreamTransport`] and
-    /// [`ScriptedTransport`] split it, so callers must accept either (split every piece on `sep`).
+    /// The provided implementation returns the whole line as one piece; [`StreamTransport`](crate::StreamTransport) and
+    /// [`ScriptedTransport`](crate::ScriptedTransport) split it, so callers must accept either (split every piece on `sep`).
     fn read_field(
         &mut self,
         sep: u8,
@@ -63,7 +63,7 @@ pub trait Transport: Send {
     ///
     /// Added beside `read_line` for prompt-terminated replies; the provided implementation
     /// fails with an [`LinkError::Io`] of kind [`std::io::ErrorKind::Unsupported`].
-    /// [`StreamTransport`] and [`ScriptedTransport`] implement it.
+    /// [`StreamTransport`](crate::StreamTransport) and [`ScriptedTransport`](crate::ScriptedTransport) implement it.
     fn read_until(
         &mut self,
         delimiter: u8,
@@ -87,16 +87,16 @@ pub trait Transport: Send {
     /// [`Transport::discard_input`] again.
     ///
     /// How it is done belongs to the interface:
-    /// - RS-232 (the provided implementation, used by [`StreamTransport`] and
-    ///   [`ScriptedTransport`]): the Ctrl-C byte [`DEVICE_CLEAR`], the 34401A's RS-232 device
+    /// - RS-232 (the provided implementation, used by [`StreamTransport`](crate::StreamTransport) and
+    ///   [`ScriptedTransport`](crate::ScriptedTransport)): the Ctrl-C byte [`DEVICE_CLEAR`](crate::DEVICE_CLEAR), the 34401A's RS-232 device
     ///   clear, then [`Transport::discard_input`]. A `tcp://` link is by default an RS-232
     ///   instrument behind a serial-to-Ethernet converter, so it gets the same byte, passed
     ///   through.
-    /// - A LAN instrument's raw SCPI socket ([`SocketTransport`], `tcp://` opened with
-    ///   [`LinkOptions::scpi_socket`]): no byte at all (the parser would take it as data);
+    /// - A LAN instrument's raw SCPI socket ([`SocketTransport`](crate::SocketTransport), `tcp://` opened with
+    ///   [`LinkOptions::scpi_socket`](crate::LinkOptions::scpi_socket)): no byte at all (the parser would take it as data);
     ///   the socket is closed and connected again, as `viClear()` does on a socket, so the
     ///   instrument drops the output it owed.
-    /// - GPIB through a Prologix controller ([`PrologixTransport`]): `++clr`, the bus's
+    /// - GPIB through a Prologix controller ([`PrologixTransport`](crate::PrologixTransport)): `++clr`, the bus's
     ///   Selected Device Clear.
     fn device_clear(&mut self) -> impl Future<Output = Result<(), LinkError>> + Send {
         async move {

@@ -1,7 +1,7 @@
 //! The Truevolt models' facts, written once (`shared/docs/instruments.md`); the plan, the CLI,
 //! the driver and the simulator take them from here.
 //!
-//! [U] marks a fact not confirmed from a primary document: it is a documented, configurable
+//! \[U\] marks a fact not confirmed from a primary document: it is a documented, configurable
 //! default ([`crate::TimingDefaults`]), never a constant buried in code.
 
 use std::fmt;

@@ -3,7 +3,7 @@
 //! A driver for the Keysight Truevolt 34460A / 34461A / 34465A / 34470A digital multimeters
 //! on a LAN SCPI socket (port 5025), in the multimeter role ([`gyrocal_meter::Multimeter`]).
 //!
-//! Why it looks the way it does (facts in `shared/docs/instruments.md`; [U] marks the
+//! Why it looks the way it does (facts in `shared/docs/instruments.md`; \[U\] marks the
 //! unconfirmed ones, each a documented default in [`TimingDefaults`] or [`TruevoltOptions`]):
 //!
 //! - the model facts (memory, NPLC values, ranges) are written once, in [`facts`]: the CLI

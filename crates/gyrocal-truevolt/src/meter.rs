@@ -22,7 +22,7 @@ pub struct TruevoltOptions {
     pub mem_option: bool,
     /// How readings leave the meter. Default `Auto` (stream).
     pub acquisition: Acquisition,
-    /// The [U] timing figures.
+    /// The \[U\] timing figures.
     pub timing: TimingDefaults,
     /// Recoveries (each followed by a retry of the failed part) per measurement. Default 2.
     pub retries: u32,

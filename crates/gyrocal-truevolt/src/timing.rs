@@ -11,7 +11,7 @@
 //!
 //! One reading takes `delay + t_int·(2 if autozero)`: 41.5 ms at NPLC 1, 50 Hz, autozero on.
 //!
-//! How the time of a step is spent ([`TruevoltTiming::cost`]):
+//! How the time of a step is spent ([`TruevoltTiming`]'s `cost`):
 //!
 //! - **stream** (`SAMP:COUN n`, `INIT`, then `DATA:REMove? k,WAIT` while it measures): the
 //!   meter measures into its memory and the host removes readings as they come, so every
@@ -34,18 +34,18 @@ use serde::{Deserialize, Serialize};
 
 use crate::facts::{MAX_SAMPLE_COUNT, Model};
 
-/// The timing facts that are [U]: documented defaults a lab can change.
+/// The timing facts that are \[U\]: documented defaults a lab can change.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TimingDefaults {
-    /// Entering wait-for-trigger (`INIT`). [U] Default 20 ms (the 34401A's figure).
+    /// Entering wait-for-trigger (`INIT`). \[U\] Default 20 ms (the 34401A's figure).
     pub arm_time: Duration,
-    /// One reading's transfer over the socket (ASCII, `+1.23456789E+00,`). [U] Default
+    /// One reading's transfer over the socket (ASCII, `+1.23456789E+00,`). \[U\] Default
     /// 250 µs: the 34410A's ~4,000 readings/s memory-to-PC over sockets.
     pub transfer_per_reading: Duration,
-    /// Automatic trigger delay at NPLC >= 1. [U] Default 1.5 ms (the 34401A's).
+    /// Automatic trigger delay at NPLC >= 1. \[U\] Default 1.5 ms (the 34401A's).
     pub auto_delay_slow: Duration,
-    /// Automatic trigger delay below NPLC 1. [U] Default 1.0 ms (the 34401A's).
+    /// Automatic trigger delay below NPLC 1. \[U\] Default 1.0 ms (the 34401A's).
     pub auto_delay_fast: Duration,
     /// Readings per stream chunk: about this long of measuring. Default 0.5 s.
     pub chunk_period: Duration,
@@ -105,7 +105,7 @@ pub struct TruevoltTiming {
     pub autozero: bool,
     /// Trigger delay (`None`: automatic).
     pub trigger_delay: Option<Duration>,
-    /// The [U] figures.
+    /// The \[U\] figures.
     pub defaults: TimingDefaults,
     /// How readings leave the meter (never `Auto`).
     pub acquisition: Acquisition,

@@ -4,6 +4,14 @@
 //! definitions and the dispatch. Errors the user can fix (a missing file, a bad value at some
 //! line) are reported on one line with exit code 2; anything else exits with 1.
 
+// The doc comments of this binary's argument types are clap's help text, read in a terminal:
+// `[table]`, `runs/<plan>-<UTC time>` and URLs there are literal text, not rustdoc links or HTML.
+#![allow(
+    rustdoc::broken_intra_doc_links,
+    rustdoc::invalid_html_tags,
+    rustdoc::bare_urls
+)]
+
 mod cmd;
 mod instruments;
 mod runlog;

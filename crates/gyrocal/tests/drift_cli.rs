@@ -408,6 +408,14 @@ fn a_drift_record_on_a_bench_without_a_table_opens_no_table() {
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(text.contains("table: none"), "{text}");
+    let o = gyrocal()
+        .args(["check", "--json"])
+        .arg(&plan)
+        .output()
+        .unwrap();
+    let check: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(check["table"].is_null(), "{}", check["table"]);
+    assert_eq!(check["drift"]["table"], "none");
     let out = tmp.path().join("run");
     let RunOutput { code, doc, stderr } = run_json(&[&plan, &"--simulate", &"--out", &out]);
     assert_eq!(code, Some(0), "{stderr}");

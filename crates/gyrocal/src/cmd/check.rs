@@ -214,10 +214,11 @@ fn json(
         "plan": path,
         "name": plan.name(),
         "hash": plan.hash(),
-        "table": {
+        // a drift record on a bench without a table has none
+        "table": plan.has_table().then(|| serde_json::json!({
             "dialect": plan.table().dialect.as_str(),
             "port": plan.table().port.to_string(),
-        },
+        })),
         "dmm": {
             "model": plan.dmm().model.as_str(),
             "port": plan.dmm().port.to_string(),
