@@ -1597,3 +1597,51 @@ fn e2e_sigint_during_the_warm_up_stops_the_table_and_records_nothing() {
     let last = sim.finish();
     assert_table_parked(&last);
 }
+
+#[test]
+fn e2e_a_drift_record_without_a_table_never_talks_to_one() {
+    let tmp = tempfile::tempdir().unwrap();
+    // a drift record on a bench without a table: no [table] section
+    let plan = tmp.path().join("plan.toml");
+    std::fs::write(
+        &plan,
+        r#"[plan]
+kind = "drift"
+name = "e2e drift without a table"
+rates_dps = [0]
+samples_per_rate = 100
+repeat = 3
+settle_s = 0
+
+[drift]
+table = "none"
+
+[dmm]
+port = "/dev/ttyUSB0"
+nplc = 1
+autozero = false
+
+[simulation]
+seed = 3
+noise_v = 0.0001
+"#,
+    )
+    .unwrap();
+    let dir = tmp.path().join("run");
+    // the simulator serves a table too; the run must leave it alone
+    let sim = Sim::start(&plan, &[]);
+    let end = Run::start(&plan, &sim, &out_args(&dir), None).wait();
+    assert_eq!(end.code, Some(0), "{end:?}");
+    assert!(
+        end.stderr.contains("no rate table in this plan"),
+        "{}",
+        end.stderr
+    );
+    assert_eq!(steps(&dir).len(), 3);
+    let last = sim.finish();
+    assert_eq!(last["table"]["demands_seen"], 0, "{last}");
+    assert!(
+        last["dmm"]["readings_taken"].as_u64().unwrap() >= 300,
+        "{last}"
+    );
+}
