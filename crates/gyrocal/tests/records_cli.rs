@@ -424,3 +424,91 @@ fn a_simulated_certificate_names_the_simulated_instruments_and_gyro() {
     assert!(instruments.contains("SIM-"), "{instruments}");
     assert!(!html.contains("instruments-not-identified"));
 }
+
+/// configs/quick.toml interrupted by a meter that disconnects, with the station given.
+fn interrupted_quick_run(dir: &Path, station_file: &Path) -> std::path::PathBuf {
+    let out = dir.join("run");
+    let o = gyrocal()
+        .args([
+            "run",
+            "--simulate",
+            "--sim-fault",
+            "dmm:disconnect@reading120",
+        ])
+        .arg("--station")
+        .arg(station_file)
+        .arg("--out")
+        .arg(&out)
+        .arg(config("quick.toml"))
+        .output()
+        .unwrap();
+    assert_ne!(o.status.code(), Some(0), "the fault interrupts the run");
+    out
+}
+
+fn station_deviations(out: &Path) -> Vec<String> {
+    json(out, "manifest.json")["deviations"]
+        .as_array()
+        .map(|d| {
+            d.iter()
+                .filter(|x| x["kind"] == "station-changed")
+                .map(|x| x["text"].as_str().unwrap().to_string())
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+#[test]
+fn a_resume_on_another_station_is_a_deviation_and_on_the_same_one_is_not() {
+    let tmp = tempfile::tempdir().unwrap();
+    let a = station(tmp.path(), STATION);
+    // the same station: nothing to record
+    let out = interrupted_quick_run(tmp.path(), &a);
+    let o = gyrocal()
+        .args(["run", "--simulate", "--station"])
+        .arg(&a)
+        .arg("--resume")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(station_deviations(&out).is_empty());
+
+    // another multimeter: the certificate must say the run was finished on it
+    let tmp = tempfile::tempdir().unwrap();
+    let a = station(tmp.path(), STATION);
+    let out = interrupted_quick_run(tmp.path(), &a);
+    let b = tmp.path().join("other-station.toml");
+    std::fs::write(
+        &b,
+        STATION
+            .replace("DMM-0042", "DMM-0099")
+            .replace("3146A12345", "3146A99999"),
+    )
+    .unwrap();
+    let o = gyrocal()
+        .args(["run", "--simulate", "--station"])
+        .arg(&b)
+        .arg("--resume")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("resumed on station bench-2 with multimeter DMM-0099"),
+        "{stderr}"
+    );
+    let d = station_deviations(&out);
+    assert_eq!(d.len(), 1, "{d:?}");
+    assert!(
+        d[0].contains("DMM-0042") && d[0].contains("DMM-0099"),
+        "{}",
+        d[0]
+    );
+    let report = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(
+        report.contains("DMM-0099"),
+        "the report lists the deviation"
+    );
+}

@@ -452,6 +452,13 @@ fn open_run_dir_inner(
     if let Some(dir) = &args.resume {
         let mut run =
             RunDir::open_for_resume(dir, plan).map_err(|e| BadInput(format!("--resume: {e}")))?;
+        // the record keeps the station the run started on; a resume on other instruments is
+        // a departure from it, recorded so the certificate says so
+        if let Some(text) = station_change(run.manifest().station.as_ref(), meta.station.as_ref()) {
+            say!("gyrocal: warning: {text} (recorded as a deviation)");
+            run.add_deviation("station-changed", &text)
+                .map_err(|e| BadInput(format!("--resume: {e}")))?;
+        }
         if virtual_time {
             run.set_virtual_time()
                 .map_err(|e| BadInput(format!("--resume: {e}")))?;
@@ -473,6 +480,60 @@ fn open_run_dir_inner(
     let run = RunDir::create(&dir, plan, meta).map_err(|e| BadInput(e.to_string()))?;
     attach_log(&dir);
     Ok((dir, run))
+}
+
+/// How a station reads in a deviation: its id and its instruments' asset ids and serials.
+fn station_words(s: &gyrocal_run::station::Station) -> String {
+    let instruments = s
+        .instruments()
+        .iter()
+        .map(|(role, r)| format!("{role} {} (serial {})", r.asset_id, r.serial))
+        .collect::<Vec<_>>()
+        .join(", ");
+    if instruments.is_empty() {
+        format!("station {}", s.id)
+    } else {
+        format!("station {} with {instruments}", s.id)
+    }
+}
+
+/// The deviation a resume on another station is, or `None` when the station (its id, and its
+/// instruments' models, asset ids, serials and certificates; not the dates, which a simulated
+/// station takes from the day) is the one the run started on.
+fn station_change(
+    started: Option<&gyrocal_run::station::Station>,
+    now: Option<&gyrocal_run::station::Station>,
+) -> Option<String> {
+    let key = |s: &gyrocal_run::station::Station| {
+        let mut k = vec![s.id.clone()];
+        for (role, r) in s.instruments() {
+            k.extend([
+                role.to_string(),
+                r.model.clone(),
+                r.asset_id.clone(),
+                r.serial.clone(),
+                r.certificate.clone(),
+            ]);
+        }
+        k
+    };
+    match (started, now) {
+        (None, None) => None,
+        (Some(a), Some(b)) if key(a) == key(b) => None,
+        (Some(a), Some(b)) => Some(format!(
+            "the run started on {} and was resumed on {}",
+            station_words(a),
+            station_words(b)
+        )),
+        (None, Some(b)) => Some(format!(
+            "the run started without a station file and was resumed on {}",
+            station_words(b)
+        )),
+        (Some(a), None) => Some(format!(
+            "the run started on {} and was resumed without a station file: the instruments of the resumed steps are not identified",
+            station_words(a)
+        )),
+    }
 }
 
 /// Refuses to continue a run with another gyro: `--dut-serial` on a resume must be the serial
