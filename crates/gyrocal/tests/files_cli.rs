@@ -5,20 +5,12 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a panic is a failed test
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
-fn gyrocal() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_gyrocal"));
-    c.env_remove("RUST_LOG").env("GYROCAL_CATALOG", "off");
-    c
-}
+use std::path::Path;
+use std::process::Output;
 
-fn config(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../configs")
-        .join(name)
-}
+use common::{config, gyrocal};
 
 fn text(out: &Output) -> String {
     format!(

@@ -3,24 +3,16 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a panic is a failed test
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 
-fn gyrocal() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_gyrocal"));
-    c.env_remove("RUST_LOG").env("GYROCAL_CATALOG", "off");
-    c
-}
-
-fn config(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../configs")
-        .join(name)
-}
+use common::{config, gyrocal};
 
 fn steps_done(dir: &Path) -> usize {
     std::fs::read_to_string(dir.join("steps.csv"))

@@ -4,23 +4,15 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a panic is a failed test
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::Stdio;
 use std::time::Duration;
 
-fn gyrocal() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_gyrocal"));
-    c.env_remove("RUST_LOG").env("GYROCAL_CATALOG", "off");
-    c
-}
-
-fn config(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../configs")
-        .join(name)
-}
+use common::{config, gyrocal};
 
 /// `configs/keysight-34461a.toml` with text replaced, written to `dir/name`.
 fn plan_with(dir: &Path, name: &str, edits: &[(&str, &str)]) -> PathBuf {
