@@ -1182,6 +1182,15 @@ impl TableRole {
             TableRole::None => "none",
         }
     }
+
+    /// What the table does, in words for a reader (`gyrocal check`, the Allan page).
+    pub fn describe(self) -> &'static str {
+        match self {
+            TableRole::Hold => "holding 0 °/s (servo on)",
+            TableRole::ServoOff => "at rest, servo off",
+            TableRole::None => "none (no table is opened)",
+        }
+    }
 }
 
 /// Earth's rotation rate, °/h (15.041 °/h: one turn per sidereal day).

@@ -189,11 +189,7 @@ pub struct RunHeader {
 impl RunHeader {
     fn of(m: &gyrocal_files::Manifest) -> RunHeader {
         let d = m.plan.drift();
-        let role = match d.table {
-            gyrocal_files::plan::TableRole::Hold => "holding 0 °/s",
-            gyrocal_files::plan::TableRole::ServoOff => "at rest, servo off",
-            gyrocal_files::plan::TableRole::None => "none",
-        };
+        let role = d.table.describe();
         RunHeader {
             plan_name: m.plan.name().to_string(),
             plan_hash: m.plan_hash.clone(),

@@ -105,9 +105,8 @@ impl WarmupWatch {
             .map(|&(i, m)| [self.time_of(i) + 0.5 * window as f64 * self.period_s, m])
             .collect();
         self.record.last_change_v = self.detector.last_change();
-        if self.record.tolerance_v.is_none() || self.record.tolerance_source != "plan" {
-            self.record.tolerance_v = self.detector.tolerance();
-        }
+        // the tolerance in force: the plan's, or the white-noise estimate so far
+        self.record.tolerance_v = self.detector.tolerance();
         if let Some(end) = end {
             self.record.complete = true;
             self.record.time_s = Some((self.time_of(end.samples) - started).max(0.0));
@@ -168,6 +167,11 @@ impl AdevWatch {
         if let Err(e) = self.stream.push(volts) {
             tracing::debug!(error = %e, "running deviation: chunk skipped");
         }
+    }
+
+    /// Readings fed so far.
+    pub fn readings(&self) -> u64 {
+        self.stream.len() as u64
     }
 
     /// `(τ, σ)` at the octave τ nearest each of [`ADEV_SHOWN_TAUS_S`] that has at least two

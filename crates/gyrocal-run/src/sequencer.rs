@@ -403,8 +403,6 @@ pub struct Sequencer<M: Multimeter, T: RateTable> {
     warmup: Option<WarmupWatch>,
     /// A drift record's running Allan deviation.
     adev: Option<AdevWatch>,
-    /// Readings of the drift record in this session.
-    drift_readings: u64,
 }
 
 impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
@@ -428,7 +426,6 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
             lost: Vec::new(),
             warmup: None,
             adev: None,
-            drift_readings: 0,
         }
     }
 
@@ -678,7 +675,8 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
             },
         };
         match &rest {
-            TableRest::AtRest { .. } | TableRest::NoTable => tracing::info!("table at rest"),
+            TableRest::AtRest { .. } => tracing::info!("table at rest"),
+            TableRest::NoTable => tracing::info!("no rate table: nothing turning"),
             TableRest::NotConfirmed { reason } | TableRest::NeverReached { reason } => {
                 tracing::error!(%reason, "the table could NOT be confirmed at rest: stop it by hand")
             }
@@ -934,25 +932,8 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
                     step: p.step.index,
                     phase: Phase::Fetching,
                 });
-                let dmm = self.dmm_mut()?;
-                match dmm.collect(p.pending).await {
-                    Ok(acq) => self.record_acquired(&p.step, acq, p.stats, p.t_start, p.t_end)?,
-                    Err(e) => {
-                        let e = dmm_error(e);
-                        if !readings_lost(&e) {
-                            return Err(e);
-                        }
-                        self.log_retry(
-                            Some(p.step.index),
-                            "dmm",
-                            format!(
-                                "{e}; step {} is measured again after this one",
-                                p.step.index + 1
-                            ),
-                        )?;
-                        self.lost.push(p.step);
-                    }
-                }
+                let fetched = self.dmm_mut()?.collect(p.pending).await;
+                self.take_fetched(p.step, fetched, p.stats, p.t_start, p.t_end)?;
             }
             return self.acquire_step(step, at_rate, last, ctx).await;
         }
@@ -987,28 +968,7 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
             } = p;
             let (settled, fetched) = tokio::join!(wait, dmm.collect(p_pending));
             // record the previous step before anything else can fail
-            match fetched {
-                Ok(acq) => {
-                    self.record_acquired(&p_step, acq, p_stats, p_start, p_end)?;
-                }
-                Err(e) => {
-                    let e = dmm_error(e);
-                    if !readings_lost(&e) {
-                        return Err(e);
-                    }
-                    // the previous step's readings went with the meter's memory: it is
-                    // measured again right after this step
-                    self.log_retry(
-                        Some(p_step.index),
-                        "dmm",
-                        format!(
-                            "{e}; step {} is measured again after this one",
-                            p_step.index + 1
-                        ),
-                    )?;
-                    self.lost.push(p_step);
-                }
-            }
+            self.take_fetched(p_step, fetched, p_stats, p_start, p_end)?;
             at_rate = settled?.at_rate_since;
         } else {
             let events = self.events.clone();
@@ -1193,6 +1153,37 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
         }
     }
 
+    /// The previous step's readings fetched from the meter's memory: recorded, or, when the
+    /// meter lost them (a power cycle), queued to be measured again right after this step.
+    fn take_fetched(
+        &mut self,
+        step: Step,
+        fetched: Result<Acquired, M::Error>,
+        stats: RateStats,
+        t_start: f64,
+        t_end: f64,
+    ) -> Result<(), SequenceError> {
+        match fetched {
+            Ok(acq) => self.record_acquired(&step, acq, stats, t_start, t_end),
+            Err(e) => {
+                let e = dmm_error(e);
+                if !readings_lost(&e) {
+                    return Err(e);
+                }
+                self.log_retry(
+                    Some(step.index),
+                    "dmm",
+                    format!(
+                        "{e}; step {} is measured again after this one",
+                        step.index + 1
+                    ),
+                )?;
+                self.lost.push(step);
+                Ok(())
+            }
+        }
+    }
+
     /// Logs the recoveries of a collected transfer and writes the step.
     fn record_acquired(
         &mut self,
@@ -1365,8 +1356,7 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
         let adev = self.adev.get_or_insert_with(|| AdevWatch::new(period));
         adev.push(volts);
         let shown = adev.shown();
-        self.drift_readings += volts.len() as u64;
-        let readings = self.drift_readings;
+        let readings = adev.readings();
         if let Some(w) = self.warmup.as_mut()
             && !w.is_complete()
         {

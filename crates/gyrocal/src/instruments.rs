@@ -142,7 +142,8 @@ pub trait WithInstruments {
 
 /// Builds the plan's multimeter on `dmm_link` and its table on `table_link`, and hands both
 /// to `job`. A plan without a table (`[drift] table = "none"`) gets
-/// [`gyrocal_table::NoTable`], whatever link is given: pass `None` for it (nothing is opened).
+/// [`gyrocal_table::NoTable`] whatever link is given (this is the one place that decides it);
+/// a caller on instruments passes `None` for it, so no table port is opened.
 pub async fn with_instruments<D, L, J>(
     plan: &Plan,
     dmm_link: D,

@@ -331,11 +331,7 @@ fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
         let _ = writeln!(
             o,
             "drift record: table {}{}",
-            match d.table {
-                gyrocal_run::plan::TableRole::Hold => "holding 0 °/s (servo on)",
-                gyrocal_run::plan::TableRole::ServoOff => "at rest, servo off",
-                gyrocal_run::plan::TableRole::None => "none (no table is opened)",
-            },
+            d.table.describe(),
             d.earth.map_or(String::new(), |(a, l)| format!(
                 "; input axis {} at latitude {l}°: {:.3} °/h of Earth rate removed from the bias",
                 a.as_str(),

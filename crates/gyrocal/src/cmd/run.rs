@@ -654,8 +654,7 @@ async fn execute(
                 let dmm = gyrocal_link::PrologixTransport::open(bench.dmm, options)
                     .await
                     .context("opening the simulated Prologix controller")?;
-                let table = plan.has_table().then_some(bench.table);
-                sequence(plan, dmm, table, run).await?
+                sequence(plan, dmm, Some(bench.table), run).await?
             }
             // a Truevolt on its LAN socket: device clear reconnects to the simulated meter
             _ if plan.dmm().model.is_truevolt() => {
@@ -663,13 +662,9 @@ async fn execute(
                     anyhow::bail!("the simulated bench has no LAN meter for a Truevolt plan");
                 };
                 let dmm = gyrocal_link::SocketTransport::new(bench.dmm.boxed(), lan.connector());
-                let table = plan.has_table().then_some(bench.table);
-                sequence(plan, dmm, table, run).await?
+                sequence(plan, dmm, Some(bench.table), run).await?
             }
-            _ => {
-                let table = plan.has_table().then_some(bench.table);
-                sequence(plan, bench.dmm, table, run).await?
-            }
+            _ => sequence(plan, bench.dmm, Some(bench.table), run).await?,
         };
         // let the simulator take the last commands before it is dropped
         tokio::time::sleep(Duration::from_millis(50)).await;
