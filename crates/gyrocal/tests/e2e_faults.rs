@@ -1645,3 +1645,85 @@ noise_v = 0.0001
         "{last}"
     );
 }
+
+/// A drift plan of `segments` segments of 150 readings with `[drift] table = ROLE` (`none`:
+/// no `[table]` section).
+fn write_drift_plan(dir: &Path, role: &str, segments: u32) -> PathBuf {
+    let table = if role == "none" {
+        String::new()
+    } else {
+        "[table]\nport = \"/dev/ttyUSB1\"\nmax_rate_dps = 10\nacceleration_dps2 = 20\n\
+         rate_tolerance_dps = 0.01\nstability_window_s = 0.2\nat_rate_timeout_s = 10\n\n"
+            .to_string()
+    };
+    let text = format!(
+        "[plan]\nkind = \"drift\"\nname = \"e2e drift, table {role}\"\nrates_dps = [0]\n\
+         samples_per_rate = 150\nrepeat = {segments}\nsettle_s = 0\n\n[drift]\ntable = \"{role}\"\n\n\
+         {table}[dmm]\nport = \"/dev/ttyUSB0\"\nnplc = 1\nautozero = false\n\n\
+         [simulation]\nseed = 3\nnoise_v = 0.0001\nrate_noise_dps = 0\nripple_dps = 0\n"
+    );
+    let path = dir.join("drift.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// Waits until `n` segments of the run in `dir` are recorded.
+fn wait_segments(dir: &Path, n: usize) {
+    let t0 = Instant::now();
+    while !dir.join("steps.csv").exists() || steps(dir).len() < n {
+        assert!(
+            t0.elapsed() < Duration::from_secs(20),
+            "no segment recorded"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn e2e_sigint_during_a_servo_off_drift_record_leaves_the_table_at_rest_with_its_servo_off() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_drift_plan(tmp.path(), "servo_off", 40);
+    let dir = tmp.path().join("run");
+    let sim = Sim::start_scaled(&plan, &[], "5");
+    let run = Run::start(&plan, &sim, &out_args(&dir), None);
+    wait_segments(&dir, 1);
+    run.guard.signal(Signal::SIGINT);
+    let end = run.wait();
+    assert_eq!(end.code, Some(130), "{end:?}");
+    assert!(end.stderr.contains("table at rest"), "{}", end.stderr);
+    assert_eq!(manifest(&dir)["status"], "aborted");
+    // asked on its own port after the exit: OFF, not turning
+    let (mode, rate) = probe_table(sim.table());
+    assert!(mode == "OFF" || mode == "ABORT", "table mode {mode}");
+    assert!(rate.abs() < 0.05, "table turning at {rate} °/s");
+    let last = sim.finish();
+    assert_table_parked(&last);
+    assert_eq!(last["table"]["interlock_closed"], false, "{last}");
+    assert_eq!(
+        last["table"]["demands_seen"], 0,
+        "never given a rate: {last}"
+    );
+}
+
+#[test]
+fn e2e_sigint_during_a_record_without_a_table_says_nothing_was_moved() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_drift_plan(tmp.path(), "none", 40);
+    let dir = tmp.path().join("run");
+    let sim = Sim::start_scaled(&plan, &[], "5");
+    let run = Run::start(&plan, &sim, &out_args(&dir), None);
+    wait_segments(&dir, 1);
+    run.guard.signal(Signal::SIGINT);
+    let end = run.wait();
+    assert_eq!(end.code, Some(130), "{end:?}");
+    assert!(
+        end.stderr
+            .contains("no rate table in this plan: nothing was moved"),
+        "{}",
+        end.stderr
+    );
+    assert!(!end.stderr.contains("table at rest"), "{}", end.stderr);
+    assert_eq!(manifest(&dir)["status"], "aborted");
+    let last = sim.finish();
+    assert_eq!(last["table"]["demands_seen"], 0, "{last}");
+}
