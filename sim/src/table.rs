@@ -244,7 +244,54 @@ struct State {
     demands_seen: u64,
     /// Faults armed for a demand number.
     on_demand: Vec<(u64, DemandFault)>,
+    /// Replies held back (the `table:slow` fault).
+    slow: Option<Slow>,
     rng: StdRng,
+}
+
+/// Replies held back by `delay`, for `left` more replies (`None`: from now on).
+#[derive(Debug, Clone, Copy)]
+struct Slow {
+    delay: std::time::Duration,
+    left: Option<u32>,
+}
+
+impl State {
+    /// How long the next reply is held back (and one fewer left to hold).
+    fn take_reply_delay(&mut self) -> std::time::Duration {
+        let Some(slow) = &mut self.slow else {
+            return std::time::Duration::ZERO;
+        };
+        let delay = slow.delay;
+        if let Some(left) = &mut slow.left {
+            *left = left.saturating_sub(1);
+            if *left == 0 {
+                self.slow = None;
+            }
+        }
+        delay
+    }
+}
+
+/// Writes replies in order, each not before its release instant: a table whose replies come
+/// late (a controller busy with a profile, a serial converter with a deep buffer, a network
+/// bridge) still answers in order. Without a delay a reply is written at once.
+pub(crate) fn spawn_reply_writer<W>(
+    mut write: W,
+) -> tokio::sync::mpsc::UnboundedSender<(Instant, Vec<u8>)>
+where
+    W: AsyncWrite + Send + Unpin + 'static,
+{
+    let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel::<(Instant, Vec<u8>)>();
+    tokio::spawn(async move {
+        while let Some((at, bytes)) = rx.recv().await {
+            tokio::time::sleep_until(at).await;
+            if write.write_all(&bytes).await.is_err() || write.flush().await.is_err() {
+                return;
+            }
+        }
+    });
+    tx
 }
 
 impl State {
@@ -530,6 +577,7 @@ impl TableHandle {
                 reply_faults: VecDeque::new(),
                 demands_seen: 0,
                 on_demand: Vec::new(),
+                slow: None,
                 rng: StdRng::seed_from_u64(seed),
             })),
             shutdown: Arc::new(watch::channel(false).0),
@@ -655,6 +703,19 @@ impl TableHandle {
         self.at(Instant::now()).0.inject_at_rate = Some(rate);
     }
 
+    /// Holds the next `count` replies (every reply from now on with `None`) back by `delay`:
+    /// commands are executed when they arrive, their replies come late and in order (the
+    /// `table:slow` fault). A zero delay ends it.
+    pub fn hold_replies(&self, delay: std::time::Duration, count: Option<u32>) {
+        let mut st = self.lock();
+        st.slow = (!delay.is_zero() && count != Some(0)).then_some(Slow { delay, left: count });
+    }
+
+    /// Whether replies are being held back.
+    pub fn is_slow(&self) -> bool {
+        self.lock().slow.is_some()
+    }
+
     /// Stops (true) or resumes (false) answering and executing anything.
     pub fn set_silent(&self, silent: bool) {
         let mut st = self.lock();
@@ -700,7 +761,8 @@ impl TableHandle {
     where
         S: AsyncRead + AsyncWrite + Send + Unpin + 'static,
     {
-        let (read, mut write) = tokio::io::split(stream);
+        let (read, write) = tokio::io::split(stream);
+        let write = spawn_reply_writer(write);
         let mut read = BufReader::new(read);
         let mut stop = self.shutdown.subscribe();
         let mut line = Vec::new();
@@ -716,23 +778,21 @@ impl TableHandle {
             }
             let text = String::from_utf8_lossy(&line);
             let text = text.trim_end_matches(['\n', '\r']);
-            let replies = self.execute(text, Instant::now());
-            let mut bytes = Vec::new();
-            {
-                let mut st = self.lock();
-                for r in &replies {
-                    let fault = st.reply_faults.pop_front();
-                    if let Some(f) = fault {
-                        tracing::info!("sim table reply fault {f:?} on {r:?}");
-                    }
-                    bytes.extend(faulty_reply(r, fault));
+            let now = Instant::now();
+            let replies = self.execute(text, now);
+            let mut st = self.lock();
+            for r in &replies {
+                let fault = st.reply_faults.pop_front();
+                if let Some(f) = fault {
+                    tracing::info!("sim table reply fault {f:?} on {r:?}");
                 }
-            }
-            if write.write_all(&bytes).await.is_err() {
-                return;
-            }
-            if write.flush().await.is_err() {
-                return;
+                let delay = st.take_reply_delay();
+                if !delay.is_zero() {
+                    tracing::debug!("sim table holds the reply {r:?} back by {delay:?}");
+                }
+                if write.send((now + delay, faulty_reply(r, fault))).is_err() {
+                    return;
+                }
             }
         }
         tracing::debug!("sim table stopped");

@@ -38,14 +38,24 @@
 //! ([`RateTable::take_retries`]). A `:System:Error?` whose reply was lost or garbled has already
 //! removed its entry from the table's queue: the note says that a table error may be missing.
 //!
-//! A limit of an untagged line protocol: a reply that comes *later* than its attempt's timeout
-//! but after the input was cleared is taken as the answer to the retry (the same question, so
-//! the same kind of answer). The retry's own reply then comes extra: the next query clears the
-//! input first after any retry, but a reply still in flight then is read in its place. Replies
-//! of the status queries (`*STB?`, `:Mode?`, `:System:Error?`) do not parse as each other, so
-//! such a mix-up is caught and retried; two numeric reads in a row (rate, then position) cannot
-//! be told apart. The simulator's `table:drop` loses replies for good, as a framing error does.
-
+//! ## Late replies and a slow table
+//!
+//! ACL is an untagged line protocol: a reply that comes after its query's deadline (a busy
+//! controller, a serial converter with a deep buffer, a network bridge) would be read as the
+//! answer to the next query. The driver keeps a ledger of the replies it is owed
+//! ([`gyrocal_table::latency::Pending`]): a query whose deadline passed, or whose future was
+//! cancelled, stays owed. Before its next query the driver gets back in step: it sends `*IDN?`
+//! as a marker and reads up to its reply, which nothing else in this dialect looks like (four
+//! comma-separated fields, the first not a number; the identity the table gave at connection
+//! when known). Every line before it is a late reply: it is recognised as such (the query it
+//! answers and how late it came are logged) and thrown away, never taken for another query's
+//! answer; a query still owed when the marker's reply arrives got no reply at all (lost). A
+//! marker whose own reply is late stays owed like any query. Each late reply tells how slowly
+//! the table answers, and the deadlines adapt to it
+//! ([`gyrocal_table::latency::ReplyLatency`], at most [`AclConfig::slow_reply_limit`]); the
+//! operator is told once (a retry note in the manifest and on the terminal) that the table
+//! answers slowly. The simulator's `table:slow` fault holds replies back this way;
+//! `table:drop` loses them for good, as a framing error does.
 //!
 //! ## The split
 //!
@@ -64,6 +74,7 @@ use gyrocal_link::{LinkError, Transport};
 use gyrocal_table::RateTable;
 use gyrocal_table::ask::{Asking, Attempt, RetryNotes};
 use gyrocal_table::dialect::{Connected, Dialect, DialectError, StopAttempt};
+use gyrocal_table::latency::{DEFAULT_SLOW_REPLY_LIMIT, Late, Pending, ReplyLatency};
 use gyrocal_table::{Identity, Limits, StopKind, TableError, TableMode, TableStatus};
 use gyrocal_table::{PolicyConfig, Table};
 
@@ -96,6 +107,10 @@ pub struct AclConfig {
     /// flaky link rarely hits two replies in a row, and three attempts still leave each ⅔ s of
     /// the 2 s heartbeat deadline. 0 disables retries.
     pub retries: u32,
+    /// The longest a reply may take when deadlines adapt to a table seen to answer slowly
+    /// (see the [module documentation](self)): a reply later than this is no reply. Default
+    /// [`DEFAULT_SLOW_REPLY_LIMIT`] (5 s).
+    pub slow_reply_limit: Duration,
 }
 
 impl Default for AclConfig {
@@ -108,6 +123,7 @@ impl Default for AclConfig {
             stop_tolerance: 0.01,
             stop_poll_interval: Duration::from_millis(100),
             retries: 2,
+            slow_reply_limit: DEFAULT_SLOW_REPLY_LIMIT,
         }
     }
 }
@@ -158,10 +174,18 @@ impl<T: Transport + 'static> gyrocal_table::dialect::Build for Acl<T> {
 
 struct Link<T> {
     transport: T,
-    /// A query was started and its reply not consumed (timeout or cancelled future): a late
-    /// reply may be waiting, so the next query clears the input first.
+    /// A reply was unusable (garbled, noise): more junk may follow, so the next query clears
+    /// the input first.
     dirty: bool,
+    /// Replies owed by queries whose deadline passed or whose future was cancelled.
+    pending: Pending,
 }
+
+/// The marker query that gets the link back in step.
+const MARKER: &str = "*IDN?";
+
+/// The least quiet window after a marker's reply when earlier markers are still owed.
+const MARKER_WINDOW: Duration = Duration::from_millis(20);
 
 /// The ACL dialect over a line transport. Use it through [`AclTable`].
 pub struct Acl<T> {
@@ -174,6 +198,10 @@ pub struct Acl<T> {
     opened_by_us: AtomicBool,
     /// Retry notes not yet taken.
     retries: RetryNotes,
+    /// How slowly the table answers.
+    latency: ReplyLatency,
+    /// The identity line the table gave at connection (the marker's expected reply).
+    identity: std::sync::Mutex<Option<Identity>>,
 }
 
 impl<T> std::fmt::Debug for Acl<T> {
@@ -194,10 +222,133 @@ impl<T: Transport + 'static> Acl<T> {
             link: tokio::sync::Mutex::new(Link {
                 transport,
                 dirty: false,
+                pending: Pending::default(),
             }),
             rate_mode: AtomicBool::new(false),
             opened_by_us: AtomicBool::new(false),
             retries: RetryNotes::default(),
+            latency: ReplyLatency::new(config.slow_reply_limit),
+            identity: std::sync::Mutex::new(None),
+        }
+    }
+
+    /// Whether `line` is the marker's reply: the identity given at connection, or before
+    /// that anything of its form (four comma-separated fields, the first not a number, which
+    /// no other reply of this dialect has; an error text with commas starts with its code).
+    fn is_marker_reply(&self, line: &str) -> bool {
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        let known = self
+            .identity
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone();
+        match known {
+            Some(id) => fields == [&*id.manufacturer, &*id.model, &*id.serial, &*id.version],
+            None => {
+                fields.len() == 4
+                    && !fields[0].is_empty()
+                    && fields[0].parse::<f64>().is_err()
+                    && !fields[0].starts_with('"')
+            }
+        }
+    }
+
+    /// Gets the link back in step after replies went owed: sends the marker and reads up to
+    /// its reply by `deadline`, throwing away (and logging) every late reply before it. Fails
+    /// like a query when the marker's reply does not come in time (it is then owed too).
+    async fn resync(&self, link: &mut Link<T>, deadline: Instant) -> Result<(), LinkError> {
+        let now = Instant::now();
+        let forgotten = link.pending.forget_older_than(self.latency.limit(), now);
+        if forgotten > 0 {
+            tracing::debug!(device = %self.device, "{forgotten} owed replies older than the slow-reply limit: lost");
+        }
+        if link.pending.is_clear() {
+            return Ok(());
+        }
+        let owed = link.pending.len() - link.pending.markers();
+        tracing::debug!(device = %self.device, "{owed} replies owed: getting back in step with {MARKER}");
+        link.pending.sent(MARKER, true);
+        let marker_sent = Instant::now();
+        link.transport.send_line(MARKER).await?;
+        let mut discarded = Vec::new();
+        // after a marker's reply, the wait for the reply of a later marker (sent because an
+        // earlier one was late or lost): a reply to marker k comes at most the time between
+        // their sends after that of marker k - 1, so a quiet window that long ends the wait
+        let mut window: Option<Duration> = None;
+        let result = loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            let wait = window.map_or(left, |w| w.min(left));
+            let line = match link.transport.read_line(Some(wait)).await {
+                Ok(line) => line,
+                Err(e) if window.is_some() && e.kind() == gyrocal_link::ErrorKind::Timeout => {
+                    // the earlier markers' replies were lost: the one read was the last's
+                    link.pending.clear();
+                    break Ok(());
+                }
+                Err(e) => break Err(e),
+            };
+            let now = Instant::now();
+            if self.is_marker_reply(&line) {
+                let (lost, latency) = link.pending.marker_line(now);
+                for q in lost {
+                    tracing::debug!(device = %self.device, "no reply ever came to `{q}`");
+                }
+                if let Some(latency) = latency
+                    && latency > now.saturating_duration_since(marker_sent)
+                {
+                    // an earlier marker, itself late: it tells the latency as well
+                    self.note_latency(latency, None);
+                }
+                if link.pending.is_clear() {
+                    break Ok(());
+                }
+                // the reply read was the popped marker's: the newest (this resync's) follows
+                // about the time between their sends later
+                let spread = latency.map_or(Duration::ZERO, |l| {
+                    marker_sent.saturating_duration_since(now.checked_sub(l).unwrap_or(now))
+                });
+                window = Some(spread + spread / 2 + MARKER_WINDOW);
+                continue;
+            }
+            match link.pending.late_line(now) {
+                Late::Reply { query, latency } => {
+                    tracing::info!(
+                        device = %self.device,
+                        "late reply {} to `{query}` ({:.3} s after it was asked) discarded",
+                        gyrocal_link::show_bytes(line.as_bytes()),
+                        latency.as_secs_f64()
+                    );
+                    self.note_latency(latency, None);
+                    discarded.push(format!(
+                        "{} to `{query}` ({:.3} s late)",
+                        gyrocal_link::show_bytes(line.as_bytes()),
+                        latency.as_secs_f64()
+                    ));
+                }
+                Late::Unexpected => {
+                    tracing::warn!(
+                        device = %self.device,
+                        "unexpected line {} discarded while getting back in step",
+                        gyrocal_link::show_bytes(line.as_bytes())
+                    );
+                }
+            }
+        };
+        if !discarded.is_empty() {
+            self.retries.push(
+                &self.device,
+                format!(
+                    "late replies recognised and discarded (never taken for another query's): {}",
+                    discarded.join("; ")
+                ),
+            );
+        }
+        result
+    }
+
+    fn note_latency(&self, latency: Duration, deadline: Option<Duration>) {
+        if let Some(note) = self.latency.observe(latency, deadline) {
+            self.retries.push(&self.device, note);
         }
     }
 
@@ -217,17 +368,24 @@ impl<T: Transport + 'static> Acl<T> {
         Ok(())
     }
 
-    /// Sends a query once and returns its one-line reply (no retry).
+    /// Sends a query once and returns its one-line reply (no retry), after getting back in
+    /// step if replies are owed. A reply that does not come by `timeout` stays owed.
     async fn exchange(&self, line: &str, timeout: Duration) -> Result<String, LinkError> {
+        let deadline = Instant::now() + timeout;
         let mut link = self.link.lock().await;
         if link.dirty {
             let dropped = link.transport.discard_input().await.unwrap_or(0);
             tracing::debug!(device = %self.device, "cleared {dropped} stale bytes");
+            link.dirty = false;
         }
-        link.dirty = true;
+        if !link.pending.is_clear() {
+            self.resync(&mut link, deadline).await?;
+        }
+        link.pending.sent(line, false);
         link.transport.send_line(line).await?;
-        let reply = link.transport.read_line(Some(timeout)).await?;
-        link.dirty = false;
+        let left = deadline.saturating_duration_since(Instant::now());
+        let reply = link.transport.read_line(Some(left)).await?;
+        link.pending.answered();
         tracing::trace!(device = %self.device, "> {line} < {reply}");
         Ok(reply)
     }
@@ -364,6 +522,10 @@ impl<T: Transport + 'static> Asking for Acl<T> {
         self.link.lock().await.dirty = true;
     }
 
+    fn latency(&self) -> &ReplyLatency {
+        &self.latency
+    }
+
     fn retry_caveat(&self, line: &str) -> Option<&'static str> {
         line.starts_with(":System:Error?").then_some(
             "; the table had already removed the error-queue entry of that reply, so a table \
@@ -388,10 +550,15 @@ impl<T: Transport + 'static> Dialect for Acl<T> {
                 .await
                 .map_err(|e| TableError::from_link(&self.device, "(clear input)", e))?;
             link.dirty = false;
+            link.pending.clear();
             if dropped > 0 {
                 tracing::info!(device = %self.device, "cleared {dropped} stale bytes");
             }
         }
+        *self
+            .identity
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner) = None;
         let identity = self
             .ask("*IDN?", timeout, |reply| {
                 let fields: Vec<&str> = reply.split(',').map(str::trim).collect();
@@ -406,6 +573,10 @@ impl<T: Transport + 'static> Dialect for Acl<T> {
                 })
             })
             .await?;
+        *self
+            .identity
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(identity.clone());
         for (code, text) in self.drain_errors().await? {
             tracing::warn!(device = %self.device, "stale table error: {code},\"{text}\"");
         }

@@ -237,9 +237,10 @@ async fn wait_stopped_on_a_silent_table_fails_naming_the_last_rate() {
         .and_then(|r| r.parse().ok())
         .unwrap_or_else(|| panic!("no rate in {msg}"));
     assert!((14.0..16.0).contains(&last), "{last} in {msg}");
-    // one query's timeout after the silence, not the 11 s bound
+    // asked again until the 11 s bound (a slow table would have answered meanwhile), and
+    // not much past it: one query's timeout
     assert!(
-        t0.elapsed() < Duration::from_millis(2200),
+        t0.elapsed() >= Duration::from_secs(11) && t0.elapsed() < Duration::from_secs(13),
         "{:?}",
         t0.elapsed()
     );

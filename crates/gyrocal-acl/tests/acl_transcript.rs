@@ -7,6 +7,7 @@ use gyrocal_link::ScriptedTransport;
 use gyrocal_table::{RateTable, TableErrorKind, TableState};
 
 const NO_ERROR: &str = "0,\"No error\"";
+const IDN: &str = "ACUTRONIC,ACUTROL3000,1234,3.1";
 
 fn connected(script: ScriptedTransport) -> ScriptedTransport {
     script
@@ -144,15 +145,19 @@ async fn table_latched_fault_in_a_sample_faults_the_driver_and_stops() {
 #[tokio::test]
 async fn table_silent_heartbeat_is_a_fault_after_retries_and_a_stop_attempt() {
     let script = connected(ScriptedTransport::new("table"))
-        // asked three times (two retries), each after clearing stale input
+        // three attempts (two retries): the reply is owed after the first, so the next two
+        // first send the marker that gets the link back in step, which stays silent too
         .expect_line("*STB?")
         .silence()
-        .expect_line("*STB?")
+        .expect_line("*IDN?")
         .silence()
-        .expect_line("*STB?")
+        .expect_line("*IDN?")
         .silence()
         .expect_line(":Mode:Off 1")
-        // the next query clears whatever late reply may have arrived, then asks again
+        // the next query first gets back in step: a marker answered, a quiet window for the
+        // earlier markers' replies (lost), then the query
+        .query("*IDN?", IDN)
+        .silence()
         .query("*STB?", "0");
     let mut table = AclTable::new(script, AclConfig::default());
     table.connect().await.unwrap();
@@ -216,18 +221,21 @@ async fn table_commands_are_never_resent_when_the_error_check_is_lost() {
     let script = enabled(ScriptedTransport::new("table"))
         .expect_line(":Limit:Acceleration R,1,5.000000")
         .expect_line(":Demand:Rate 1,20.000000")
-        // the error-queue check loses its reply: only the query is asked again
+        // the error-queue check loses its reply: back in step with the marker, only the query
+        // is asked again
         .expect_line(":System:Error?")
         .silence()
+        .query("*IDN?", IDN)
         .query(":System:Error?", NO_ERROR)
         // the same acceleration limit is not sent again
         .expect_line(":Demand:Rate 1,10.000000")
-        // lost three times: the demand is still not repeated; the driver faults and stops
+        // lost, and the table silent: the demand is still not repeated; the driver faults and
+        // stops
         .expect_line(":System:Error?")
         .silence()
-        .expect_line(":System:Error?")
+        .expect_line("*IDN?")
         .silence()
-        .expect_line(":System:Error?")
+        .expect_line("*IDN?")
         .silence()
         .expect_line(":Mode:Off 1");
     let mut table = AclTable::new(script, AclConfig::default());
@@ -348,6 +356,7 @@ async fn table_lost_then_unusable_replies_fault_the_driver() {
     let script = connected(ScriptedTransport::new("table"))
         .expect_line(":Read:Rate? 1")
         .silence()
+        .query("*IDN?", IDN)
         .query(":Read:Rate? 1", "x")
         .query(":Read:Rate? 1", "y")
         // a link that lost a reply and never gave a usable one: fault and stop

@@ -57,6 +57,18 @@
 //! a lost, garbled or unparseable reply, within the query's timeout ([`AerosmithConfig::retries`]),
 //! each retry noted for the run manifest. Commands (`SRV`, `ACL`, `JOG`, `STO`) are never
 //! repeated; a command without its prompt is a link failure.
+//!
+//! ## Late replies
+//!
+//! Every exchange, a stop's included, ends with exactly one prompt, so the driver counts the
+//! prompts it is owed ([`gyrocal_table::latency::Pending`]): an exchange whose deadline passed
+//! (or whose future was cancelled) owes its prompt, and before the next exchange the owed
+//! prompts are read, each recognised as the late reply it is (logged with how late it came) and
+//! thrown away. An owed prompt that has not come when the next exchange's deadline passes fails
+//! that exchange without sending anything, so a late reply is never read as another command's;
+//! one owed longer than [`AerosmithConfig::slow_reply_limit`] is taken as lost. The deadlines
+//! adapt to the slowest late reply seen, within that limit, and the operator is told once that
+//! the table answers slowly ([`gyrocal_table::latency::ReplyLatency`]).
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
@@ -68,6 +80,7 @@ use tokio::time::Instant;
 use gyrocal_table::RateTable;
 use gyrocal_table::ask::{Asking, Attempt, RetryNotes};
 use gyrocal_table::dialect::{Connected, Dialect, DialectError, StopAttempt};
+use gyrocal_table::latency::{DEFAULT_SLOW_REPLY_LIMIT, Late, Pending, ReplyLatency};
 use gyrocal_table::{Identity, Limits, StopKind, TableError, TableMode, TableStatus};
 use gyrocal_table::{PolicyConfig, Table};
 
@@ -167,6 +180,10 @@ pub struct AerosmithConfig {
     pub status_bits: StatusBits,
     /// How many times an idempotent query is asked again. Default 2.
     pub retries: u32,
+    /// The longest a reply may take when deadlines adapt to a table seen to answer slowly
+    /// (see "Late replies" in the [crate documentation](crate)). Default
+    /// [`DEFAULT_SLOW_REPLY_LIMIT`] (5 s).
+    pub slow_reply_limit: Duration,
 }
 
 impl Default for AerosmithConfig {
@@ -179,6 +196,7 @@ impl Default for AerosmithConfig {
             mco_tolerance: 0.01,
             status_bits: StatusBits::default(),
             retries: 2,
+            slow_reply_limit: DEFAULT_SLOW_REPLY_LIMIT,
         }
     }
 }
@@ -213,11 +231,15 @@ impl<T: Transport + 'static> gyrocal_table::dialect::Build for Aerosmith<T> {
 
 struct Link<T> {
     transport: T,
-    /// An exchange was started and its reply not consumed: clear the input first.
+    /// A reply was unusable: more junk may follow, so clear the input first.
     dirty: bool,
-    /// Prompts owed by stops sent without waiting: read before the next exchange.
-    owed_prompts: u32,
+    /// Prompts owed (by exchanges whose deadline passed or whose future was cancelled, and by
+    /// stops sent without waiting): read before the next exchange.
+    pending: Pending,
 }
+
+/// The command a stop sends (its prompt is owed, not late).
+const STOP: &str = "STO";
 
 /// The Ideal Aerosmith dialect over a transport that can read up to a prompt. Use it through
 /// [`AerosmithTable`].
@@ -228,6 +250,7 @@ pub struct Aerosmith<T> {
     /// The servo was turned on by us (or found on): its bit dropping is a fault.
     expect_servo: AtomicBool,
     retries: RetryNotes,
+    latency: ReplyLatency,
 }
 
 impl<T> std::fmt::Debug for Aerosmith<T> {
@@ -256,10 +279,11 @@ impl<T: Transport + 'static> Aerosmith<T> {
             link: tokio::sync::Mutex::new(Link {
                 transport,
                 dirty: false,
-                owed_prompts: 0,
+                pending: Pending::default(),
             }),
             expect_servo: AtomicBool::new(false),
             retries: RetryNotes::default(),
+            latency: ReplyLatency::new(config.slow_reply_limit),
         }
     }
 
@@ -273,29 +297,59 @@ impl<T: Transport + 'static> Aerosmith<T> {
         format!("{v:.4}")
     }
 
-    /// Sends `command` and reads its reply up to the prompt (no retry).
-    async fn exchange(&self, command: &str, timeout: Duration) -> Result<String, LinkError> {
-        let deadline = Instant::now() + timeout;
-        let mut link = self.link.lock().await;
-        while link.owed_prompts > 0 {
+    /// Reads the prompts owed by earlier exchanges by `deadline`, each one recognised as the
+    /// late reply it is and thrown away. A prompt owed longer than the slow-reply limit is
+    /// lost; one still to come when `deadline` passes fails this exchange (nothing is sent), so
+    /// a late reply is never read as another command's.
+    async fn catch_up(&self, link: &mut Link<T>, deadline: Instant) -> Result<(), LinkError> {
+        link.pending
+            .forget_older_than(self.latency.limit(), Instant::now());
+        while !link.pending.is_clear() {
             let left = deadline.saturating_duration_since(Instant::now());
-            match link.transport.read_until(PROMPT, Some(left)).await {
-                Ok(_) => link.owed_prompts -= 1,
-                Err(_) => {
-                    link.owed_prompts = 0;
-                    link.dirty = true;
+            let body = link.transport.read_until(PROMPT, Some(left)).await?;
+            if let Late::Reply { query, latency } = link.pending.late_line(Instant::now()) {
+                if query == STOP {
+                    continue;
+                }
+                tracing::info!(
+                    device = %self.device,
+                    "late reply {} to `{query}` ({:.3} s after it was sent) discarded",
+                    gyrocal_link::show_bytes(body.as_bytes()),
+                    latency.as_secs_f64()
+                );
+                self.retries.push(
+                    &self.device,
+                    format!(
+                        "late reply {} to `{query}` ({:.3} s late) recognised and discarded \
+                         (never taken for another command's)",
+                        gyrocal_link::show_bytes(body.as_bytes()),
+                        latency.as_secs_f64()
+                    ),
+                );
+                if let Some(note) = self.latency.observe(latency, None) {
+                    self.retries.push(&self.device, note);
                 }
             }
         }
+        Ok(())
+    }
+
+    /// Sends `command` and reads its reply up to the prompt (no retry), after the prompts
+    /// owed by earlier exchanges. A reply that does not come by `timeout` stays owed.
+    async fn exchange(&self, command: &str, timeout: Duration) -> Result<String, LinkError> {
+        let deadline = Instant::now() + timeout;
+        let mut link = self.link.lock().await;
+        self.catch_up(&mut link, deadline).await?;
         if link.dirty {
             let dropped = link.transport.discard_input().await.unwrap_or(0);
             tracing::debug!(device = %self.device, "cleared {dropped} stale bytes");
+            link.dirty = false;
         }
-        link.dirty = true;
+        link.pending.sent(command, false);
         link.transport.write_raw(&self.frame(command)).await?;
         let left = deadline.saturating_duration_since(Instant::now());
         let body = link.transport.read_until(PROMPT, Some(left)).await?;
-        link.dirty = false;
+        link.pending.answered();
         tracing::trace!(device = %self.device, "> {command} < {body:?}>");
         Ok(body)
     }
@@ -412,6 +466,10 @@ impl<T: Transport + 'static> Asking for Aerosmith<T> {
     async fn mark_dirty(&self) {
         self.link.lock().await.dirty = true;
     }
+
+    fn latency(&self) -> &ReplyLatency {
+        &self.latency
+    }
 }
 
 impl<T: Transport + 'static> Dialect for Aerosmith<T> {
@@ -432,7 +490,7 @@ impl<T: Transport + 'static> Dialect for Aerosmith<T> {
                 .await
                 .map_err(|e| TableError::from_link(&self.device, "(clear input)", e))?;
             link.dirty = false;
-            link.owed_prompts = 0;
+            link.pending.clear();
             if dropped > 0 {
                 tracing::info!(device = %self.device, "cleared {dropped} stale bytes");
             }
@@ -524,7 +582,7 @@ impl<T: Transport + 'static> Dialect for Aerosmith<T> {
     /// `STO` for both kinds (no interlock command is known: the hardware E-stop is the only
     /// true emergency stop). Does not wait for the prompt; the next exchange reads it.
     async fn send_stop(&self, kind: StopKind, timeout: Duration) -> StopAttempt {
-        let command = "STO";
+        let command = STOP;
         if kind == StopKind::Emergency {
             tracing::warn!(
                 device = %self.device,
@@ -539,13 +597,10 @@ impl<T: Transport + 'static> Dialect for Aerosmith<T> {
             timeout,
             self.link.lock(),
             |mut link| async move {
-                // a write that fails or is cut short leaves the link in an unknown state
-                let was_dirty = link.dirty;
-                link.dirty = true;
+                // the controller answers a stop with a prompt, read before the next exchange (a
+                // write cut short owes it too: the marker-less dialect cannot tell)
+                link.pending.sent(STOP, false);
                 link.transport.write_raw(&frame).await?;
-                link.dirty = was_dirty;
-                // the controller answers a stop with a prompt, read before the next exchange
-                link.owed_prompts += 1;
                 Ok(())
             },
         )

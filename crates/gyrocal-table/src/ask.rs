@@ -4,11 +4,16 @@
 //! `*STB?`, ...) is asked again, at most `1 + retries` times within the query's own deadline
 //! (each attempt gets the time left divided by the attempts left, so a silent table still
 //! fails within the heartbeat deadline). A dead link fails at once. Every retry is noted for
-//! the run's manifest. After a retry succeeded the link is marked dirty: a late reply to an
-//! earlier attempt may have been taken for this one, and this attempt's reply is still to
-//! come. A link that lost or mangled a reply and never gave a usable one is a link failure
-//! (the policy faults the table); a table that answered every time with something unusable
-//! is a reply error only.
+//! the run's manifest. A link that lost or mangled a reply and never gave a usable one is a
+//! link failure (the policy faults the table); a table that answered every time with something
+//! unusable is a reply error only.
+//!
+//! The reply of an attempt whose time ran out is still owed: the dialect keeps it in its
+//! [`crate::latency::Pending`] ledger and gets back in step before its next exchange, so a late
+//! reply is never read as another query's. A table seen to answer late gets longer deadlines
+//! ([`crate::latency::ReplyLatency`]): the query's whole deadline is recomputed before every
+//! attempt (a late reply seen during this very query counts), and each attempt gets at least
+//! twice the slowest reply seen, within the dialect's bound.
 
 use std::future::Future;
 use std::sync::Mutex;
@@ -19,6 +24,7 @@ use tokio::time::Instant;
 
 use crate::TableError;
 use crate::dialect::DialectError;
+use crate::latency::ReplyLatency;
 
 /// The retry notes a dialect keeps for the run's manifest until
 /// [`crate::RateTable::take_retries`] collects them.
@@ -73,6 +79,8 @@ pub trait Asking: Sync {
     fn retry_notes(&self) -> &RetryNotes;
     /// The next exchange must clear stale input first.
     fn mark_dirty(&self) -> impl Future<Output = ()> + Send;
+    /// The table's observed reply latency, which deadlines adapt to.
+    fn latency(&self) -> &ReplyLatency;
     /// Something to add to a retry note of `line` (an error-queue entry that may be lost).
     fn retry_caveat(&self, line: &str) -> Option<&'static str> {
         let _ = line;
@@ -94,20 +102,21 @@ where
     Fut: Future<Output = Attempt<R>>,
 {
     let attempts = dialect.retries().saturating_add(1);
-    let deadline = Instant::now() + timeout;
+    let start = Instant::now();
+    let mut deadline = start + dialect.latency().deadline(timeout);
     let mut first: Option<Miss> = None;
     let mut last = String::new();
     let mut link_missed = false;
     for n in 1..=attempts {
-        let left = attempts - n + 1;
-        let budget = deadline.saturating_duration_since(Instant::now()) / left;
+        // a late reply seen since (in this query's own attempts too) lengthens the deadline
+        deadline = deadline.max(start + dialect.latency().deadline(timeout));
+        let left_attempts = attempts - n + 1;
+        let left = deadline.saturating_duration_since(Instant::now());
+        let budget = (left / left_attempts)
+            .max(dialect.latency().attempt_floor())
+            .min(left);
         let miss = match attempt(budget).await {
-            Attempt::Value(v) => {
-                if n > 1 {
-                    dialect.mark_dirty().await;
-                }
-                return Ok(v);
-            }
+            Attempt::Value(v) => return Ok(v),
             Attempt::Unusable { reply, reason } => Miss::Reply { reply, reason },
             Attempt::Link(e) if retryable(&e) => Miss::Link(e),
             Attempt::Link(e) => {

@@ -64,6 +64,7 @@
 
 pub mod ask;
 mod error;
+pub mod latency;
 mod none;
 mod stats;
 mod stop;

@@ -559,63 +559,98 @@ impl<D: Dialect> RateTable for Table<D> {
         self.shared.stop(StopKind::Emergency).await
     }
 
+    /// Polls rate and mode every [`PolicyConfig::stop_poll_interval`] until the table reports
+    /// rest or `timeout` passes. A poll that gets no usable reply (a slow table, a lost or
+    /// garbled reply) is asked again until the deadline, whatever the reply latency below it:
+    /// after a stop, only a dead link or the deadline ends the wait unconfirmed. The reason
+    /// then quotes the last rate measured, or says none was.
     async fn wait_stopped(&mut self, timeout: Duration) -> Result<RestReport, TableError> {
         let start = Instant::now();
         let deadline = start + timeout;
         let mut last: (Option<f64>, Option<TableMode>) = (None, None);
+        let mut last_error: Option<TableError>;
+        let mut misses = 0u32;
         let seen = |last: &(Option<f64>, Option<TableMode>)| match last {
-            (None, _) => "no rate measured yet".to_string(),
-            (Some(rate), None) => format!("last measured {rate} deg/s, mode not read"),
-            (Some(rate), Some(mode)) => format!("last measured {rate} deg/s in mode {mode}"),
+            (None, _) => "no rate was measured".to_string(),
+            (Some(rate), None) => format!("last measured {rate:+.6} deg/s, mode not read"),
+            (Some(rate), Some(mode)) => format!("last measured {rate:+.6} deg/s in mode {mode}"),
         };
         loop {
-            let rate = match self.read_rate().await {
-                Ok(rate) => rate,
-                Err(e) => {
-                    let reason =
-                        format!("could not confirm the table at rest ({}): {e}", seen(&last));
-                    return Err(self.shared.fault(reason).await);
-                }
+            // straight through the dialect: a missed poll here is asked again, not a fault
+            let poll = async {
+                let rate = self
+                    .shared
+                    .dialect
+                    .read_rate(self.policy.reply_timeout)
+                    .await
+                    .map_err(|e| (None, e))?;
+                let mode = self
+                    .shared
+                    .dialect
+                    .read_mode(self.policy.reply_timeout)
+                    .await
+                    .map_err(|e| (Some(rate), e))?;
+                Ok::<_, (Option<f64>, DialectError)>((rate, mode))
             };
-            last = (Some(rate), None);
-            let mode = match self
-                .call(self.shared.dialect.read_mode(self.policy.reply_timeout))
-                .await
-            {
-                Ok(mode) => mode,
-                Err(e) => {
-                    let reason =
-                        format!("could not confirm the table at rest ({}): {e}", seen(&last));
-                    return Err(self.shared.fault(reason).await);
+            match poll.await {
+                Ok((rate, mode)) => {
+                    last = (Some(rate), Some(mode));
+                    last_error = None;
+                    if rate.abs() <= self.policy.stop_tolerance && mode == TableMode::Off {
+                        let mut st = self.shared.status();
+                        if st.state != TableState::Faulted {
+                            st.state = if st.interlock_closed {
+                                TableState::Servoed
+                            } else {
+                                TableState::Connected
+                            };
+                        }
+                        return Ok(RestReport {
+                            rate_dps: rate,
+                            mode,
+                            waited: start.elapsed(),
+                        });
+                    }
                 }
-            };
-            last = (Some(rate), Some(mode));
-            if rate.abs() <= self.policy.stop_tolerance && mode == TableMode::Off {
-                let mut st = self.shared.status();
-                if st.state != TableState::Faulted {
-                    st.state = if st.interlock_closed {
-                        TableState::Servoed
-                    } else {
-                        TableState::Connected
-                    };
+                Err((rate, DialectError { error, .. })) => {
+                    if let Some(rate) = rate {
+                        last = (Some(rate), None);
+                    }
+                    misses += 1;
+                    tracing::warn!(
+                        device = %self.device(),
+                        "no usable reply while waiting for rest ({error}); asking again until \
+                         the rest deadline"
+                    );
+                    let dead = matches!(&error, TableError::Link { source, .. }
+                        if source.kind() == gyrocal_link::ErrorKind::Disconnected);
+                    last_error = Some(error);
+                    if dead {
+                        break;
+                    }
                 }
-                return Ok(RestReport {
-                    rate_dps: rate,
-                    mode,
-                    waited: start.elapsed(),
-                });
             }
             if Instant::now() >= deadline {
-                let reason = format!(
-                    "table not at rest {timeout:?} after the stop: {} (rest is |rate| <= {} \
-                     deg/s in mode OFF)",
-                    seen(&last),
-                    self.policy.stop_tolerance
-                );
-                return Err(self.shared.fault(reason).await);
+                break;
             }
             tokio::time::sleep(self.policy.stop_poll_interval).await;
         }
+        let reason = match &last_error {
+            Some(e) => format!(
+                "could not confirm the table at rest within {:.1} s after the stop ({}; {misses} \
+                 polls got no usable reply, the last: {e})",
+                timeout.as_secs_f64(),
+                seen(&last)
+            ),
+            _ => format!(
+                "table not at rest {:.1} s after the stop: {} (rest is |rate| <= {} deg/s in \
+                 mode OFF)",
+                timeout.as_secs_f64(),
+                seen(&last),
+                self.policy.stop_tolerance
+            ),
+        };
+        Err(self.shared.fault(reason).await)
     }
 
     /// `|from_rate|/a · 1.5 + 5 s` ([`stop_time`]) with `a` the acceleration limit last sent

@@ -27,7 +27,7 @@
 //! Reply faults ([`ReplyFault`]) hit query replies only (the value and its prompt).
 
 use serde::{Deserialize, Serialize};
-use tokio::io::{AsyncBufReadExt, AsyncRead, AsyncWrite, AsyncWriteExt, BufReader};
+use tokio::io::{AsyncBufReadExt, AsyncRead, AsyncWrite, BufReader};
 use tokio::time::Instant;
 
 use super::profile::Segment;
@@ -107,7 +107,8 @@ impl TableHandle {
     where
         S: AsyncRead + AsyncWrite + Send + Unpin + 'static,
     {
-        let (read, mut write) = tokio::io::split(stream);
+        let (read, write) = tokio::io::split(stream);
+        let write = super::spawn_reply_writer(write);
         let mut read = BufReader::new(read);
         let mut stop = self.shutdown.subscribe();
         let end = match wire.terminator {
@@ -125,10 +126,12 @@ impl TableHandle {
                 Ok(0) | Err(_) => break,
                 Ok(_) => {}
             }
-            let Some(bytes) = self.aerosmith_reply(&line, wire, Instant::now()) else {
+            let now = Instant::now();
+            let Some(bytes) = self.aerosmith_reply(&line, wire, now) else {
                 continue;
             };
-            if write.write_all(&bytes).await.is_err() || write.flush().await.is_err() {
+            let delay = self.lock().take_reply_delay();
+            if write.send((now + delay, bytes)).is_err() {
                 return;
             }
         }
