@@ -7,6 +7,8 @@
 //!           table: "trip" | "fault" | "silent" | "interlock" | "drop" | "garble" | "noise"
 //! trigger = "reading" N        the N-th reading the meter takes (N >= 1)
 //!         | "demand" N         the N-th `:Demand:Rate` the table sees (N >= 1)
+//!         | "stop" N           the N-th stop command the table sees (ACL `:Mode:Off` or
+//!                              `:Interlock:Open`, Aerosmith `STO`; N >= 1)
 //!         | "t=" S ["s"]       S sim seconds after the bench started (S >= 0)
 //! count   = N >= 1, default 1: for overload the number of overload readings, for timeout,
 //!           garble and truncate the number of consecutive replies (readings) hit; for the
@@ -24,7 +26,8 @@
 //! `table:fault@t=12s`, `table:silent@demand3` (the table ignores the 3rd demand and everything
 //! after it), `table:interlock@demand2` (the door opens halfway through the 2nd demand's ramp),
 //! `table:drop@t=5s` (the next reply the table sends after 5 s is lost),
-//! `table:garble@demand3x2`, `table:noise@reading40`.
+//! `table:garble@demand3x2`, `table:noise@reading40`, `table:silent@stop1` (the table ignores
+//! the first stop it is sent and everything after it: it keeps turning, or holding, as it was).
 //!
 //! What the actions do: `timeout` loses a reply (the meter says nothing), `garble` replaces a
 //! digit of a reply by `#`, `truncate` cuts a reply halfway without its terminator, `overload`
@@ -77,7 +80,9 @@ SPEC = DEVICE:ACTION@TRIGGER[xCOUNT][/Ss]
                  drop (a query reply is lost), garble (a character of a reply
                  becomes #), noise (a 0xFF byte comes just before a reply)
   triggers:      readingN (the N-th reading the meter takes), demandN (the N-th
-                 :Demand:Rate the table sees), t=Ss (S sim seconds after start)
+                 :Demand:Rate the table sees), stopN (the N-th stop command the
+                 table sees: table:silent@stop1 ignores the first stop), t=Ss (S sim
+                 seconds after start)
   xCOUNT:        overload: that many readings; timeout/garble/truncate: that many
                  consecutive replies (readings); table drop/garble/noise: that many
                  consecutive query replies
@@ -198,6 +203,8 @@ pub enum Trigger {
     Reading(u64),
     /// At the N-th `:Demand:Rate` the table sees (from 1).
     Demand(u64),
+    /// At the N-th stop command the table sees (from 1).
+    Stop(u64),
     /// This many sim seconds after the bench started.
     Time(f64),
 }
@@ -207,6 +214,7 @@ impl fmt::Display for Trigger {
         match self {
             Trigger::Reading(n) => write!(f, "reading{n}"),
             Trigger::Demand(n) => write!(f, "demand{n}"),
+            Trigger::Stop(n) => write!(f, "stop{n}"),
             Trigger::Time(s) => write!(f, "t={s}s"),
         }
     }
@@ -315,6 +323,8 @@ impl FromStr for FaultSpec {
             Trigger::Reading(positive(n, "the reading number").map_err(err)?)
         } else if let Some(n) = trigger_text.strip_prefix("demand") {
             Trigger::Demand(positive(n, "the demand number").map_err(err)?)
+        } else if let Some(n) = trigger_text.strip_prefix("stop") {
+            Trigger::Stop(positive(n, "the stop number").map_err(err)?)
         } else if let Some(s) = trigger_text.strip_prefix("t=") {
             let s = s.strip_suffix('s').unwrap_or(s);
             match s.parse::<f64>() {
@@ -327,7 +337,7 @@ impl FromStr for FaultSpec {
             }
         } else {
             return Err(err(format!(
-                "unknown trigger `{trigger_text}` (readingN, demandN or t=Ss)"
+                "unknown trigger `{trigger_text}` (readingN, demandN, stopN or t=Ss)"
             )));
         };
         let count = match count {
@@ -372,6 +382,7 @@ impl FaultSchedule {
     pub fn status(&self, bench: &BenchHandle) -> Vec<FaultStatus> {
         let readings = bench.dmm.readings_taken();
         let demands = bench.table.demands_seen();
+        let stops = bench.table.stops_seen();
         let sim_s = self.started.elapsed().as_secs_f64() * self.time_scale;
         let dmm_gone = bench.dmm.is_finished();
         let dmm_stats = bench.dmm.stats();
@@ -390,6 +401,7 @@ impl FaultSchedule {
                                 && readings + 1 >= n)
                     }
                     Trigger::Demand(n) => demands >= n,
+                    Trigger::Stop(n) => stops >= n,
                     Trigger::Time(t) => sim_s >= t,
                 };
                 FaultStatus {
@@ -450,6 +462,9 @@ pub fn schedule(specs: &[FaultSpec], bench: &BenchHandle, time_scale: f64) -> Fa
                     bench.table.arm_at_demand(n, f);
                 }
             }
+            (Trigger::Stop(n), false) if s.action == FaultAction::TableSilent => {
+                bench.table.arm_silent_at_stop(n);
+            }
             _ => pending.push(s.clone()),
         }
     }
@@ -463,10 +478,12 @@ pub fn schedule(specs: &[FaultSpec], bench: &BenchHandle, time_scale: f64) -> Fa
                 let sim_s = started.elapsed().as_secs_f64() * time_scale;
                 let readings = dmm_faults.readings_taken();
                 let demands = table.demands_seen();
+                let stops = table.stops_seen();
                 left.retain(|s| {
                     let due = match s.trigger {
                         Trigger::Reading(n) => readings >= n,
                         Trigger::Demand(n) => demands >= n,
+                        Trigger::Stop(n) => stops >= n,
                         Trigger::Time(t) => sim_s >= t,
                     };
                     if !due {

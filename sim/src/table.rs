@@ -246,6 +246,10 @@ struct State {
     on_demand: Vec<(u64, DemandFault)>,
     /// Replies held back (the `table:slow` fault).
     slow: Option<Slow>,
+    /// Stop commands seen (ACL `:Mode:Off` and `:Interlock:Open`, Aerosmith `STO`).
+    stops_seen: u64,
+    /// The table goes silent at this stop command (it ignores it and everything after).
+    silent_at_stop: Option<u64>,
     rng: StdRng,
 }
 
@@ -257,6 +261,16 @@ struct Slow {
 }
 
 impl State {
+    /// Counts a stop command; true when the table goes silent at it (it executes nothing).
+    pub(crate) fn count_stop(&mut self) -> bool {
+        self.stops_seen += 1;
+        if self.silent_at_stop == Some(self.stops_seen) {
+            tracing::info!("sim table silent from stop {} on", self.stops_seen);
+            self.silent = true;
+        }
+        self.silent
+    }
+
     /// How long the next reply is held back (and one fewer left to hold).
     fn take_reply_delay(&mut self) -> std::time::Duration {
         let Some(slow) = &mut self.slow else {
@@ -578,6 +592,8 @@ impl TableHandle {
                 demands_seen: 0,
                 on_demand: Vec::new(),
                 slow: None,
+                stops_seen: 0,
+                silent_at_stop: None,
                 rng: StdRng::seed_from_u64(seed),
             })),
             shutdown: Arc::new(watch::channel(false).0),
@@ -709,6 +725,18 @@ impl TableHandle {
     pub fn hold_replies(&self, delay: std::time::Duration, count: Option<u32>) {
         let mut st = self.lock();
         st.slow = (!delay.is_zero() && count != Some(0)).then_some(Slow { delay, left: count });
+    }
+
+    /// Makes the table go silent at the `n`-th stop command it sees (counted from 1 since the
+    /// start): it ignores that stop and everything after it, and keeps turning as it was (a
+    /// controller that hangs when asked to stop; the `table:silent@stopN` fault).
+    pub fn arm_silent_at_stop(&self, n: u64) {
+        self.lock().silent_at_stop = Some(n);
+    }
+
+    /// Stop commands seen so far.
+    pub fn stops_seen(&self) -> u64 {
+        self.lock().stops_seen
     }
 
     /// Whether replies are being held back.
@@ -958,6 +986,9 @@ fn command(st: &mut State, t: f64, nodes: &[String], query: bool, args: &[&str])
         }
     } else if path_is(nodes, &["Interlock", "Open"]) {
         parse_axis(st, args.first())?;
+        if st.count_stop() {
+            return None;
+        }
         if st.interlock_closed {
             st.interlock_event = true;
             st.abort(t);
@@ -972,6 +1003,9 @@ fn command(st: &mut State, t: f64, nodes: &[String], query: bool, args: &[&str])
         }
     } else if path_is(nodes, &["Mode", "Off"]) {
         parse_axis(st, args.first())?;
+        if st.count_stop() {
+            return None;
+        }
         st.controlled_stop(t);
     } else if path_is(nodes, &["Mode", "Position"]) {
         parse_axis(st, args.first())?;

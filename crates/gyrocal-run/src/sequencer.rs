@@ -344,6 +344,10 @@ pub struct RunSummary {
     /// change (every reading of a step overloaded: the range is too small), which makes it
     /// another plan: a new run.
     pub resumable: bool,
+    /// An emergency stop was sent (by a second signal, after a table fault, or because the
+    /// controlled stop could not be sent): the table's interlock is open and must be re-armed
+    /// at the table before the run is resumed.
+    pub emergency_stop: bool,
 }
 
 /// What the steps share: how to reach the rate and how to read.
@@ -397,6 +401,8 @@ pub struct Sequencer<M: Multimeter, T: RateTable> {
     table_reached: bool,
     /// A rate was demanded in this session.
     moved: bool,
+    /// An emergency stop was sent in this session (the interlock is open).
+    emergency_sent: bool,
     /// Steps whose readings the meter lost before they were fetched, to measure again.
     lost: Vec<Step>,
     /// The warm-up being watched (a drift record's first segments; see [`crate::monitor`]).
@@ -423,6 +429,7 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
             recorded: 0,
             table_reached: false,
             moved: false,
+            emergency_sent: false,
             lost: Vec::new(),
             warmup: None,
             adev: None,
@@ -533,6 +540,7 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
             elapsed_s,
             table,
             resumable: false,
+            emergency_stop: self.emergency_sent,
         };
         let result = self
             .run
@@ -583,9 +591,16 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
                 tracing::error!(error = %e, "emergency stop failed: STOP THE TABLE BY HAND");
             }
         }
+        self.emergency_sent |= emergency_sent;
         let table = self.bring_to_rest(stop, emergency_sent).await;
         self.release_dmm(true).await;
         let elapsed_s = self.now_s();
+        // the record says an emergency stop when one was sent, whatever the first request was
+        let reason = if self.emergency_sent && !reason.contains("emergency stop") {
+            format!("{reason}; then an emergency stop (interlock open)")
+        } else {
+            reason
+        };
         if let Err(e) = self
             .log_table_retries(None)
             .and_then(|()| self.run.finish(status, Some(reason.clone()), elapsed_s))
@@ -600,6 +615,7 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
             elapsed_s,
             table,
             resumable,
+            emergency_stop: self.emergency_sent,
         }
     }
 
@@ -637,7 +653,10 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
         tracing::info!(from_dps = ?from, ?deadline, "waiting for the table to come to rest");
         let started = Instant::now();
         let Self {
-            table, stop_handle, ..
+            table,
+            stop_handle,
+            emergency_sent: emergency_during,
+            ..
         } = self;
         let mut watching = !emergency_sent;
         let result = {
@@ -650,6 +669,7 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
                             watching = false;
                         } else if matches!(*stop.borrow_and_update(), StopRequest::Emergency(_)) {
                             watching = false;
+                            *emergency_during = true;
                             tracing::warn!("emergency stop requested while the table decelerates");
                             let handle = stop_handle.clone();
                             tokio::spawn(async move {

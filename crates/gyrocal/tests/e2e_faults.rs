@@ -1164,6 +1164,18 @@ fn e2e_a_second_signal_during_the_deceleration_is_the_emergency_stop() {
     assert_eq!(mode, "OFF");
     assert!(rate.abs() < 0.05, "table at {rate} °/s");
     assert_eq!(manifest(&dir)["status"], "aborted");
+    // recorded as the emergency stop it was, not as the controlled stop asked for first, and
+    // the operator is told to re-arm the interlock before the resume
+    let reason = manifest(&dir)["reason"]
+        .as_str()
+        .unwrap_or_default()
+        .to_string();
+    assert!(reason.contains("emergency stop"), "{reason}");
+    assert!(
+        end.stderr.contains("re-arm the interlock"),
+        "{}",
+        end.stderr
+    );
     let last = sim.finish();
     // the emergency stop opened the interlock (servo off)
     assert_eq!(last["table"]["interlock_closed"], false, "{last}");

@@ -236,6 +236,9 @@ fn execute(st: &mut State, t: f64, text: &str, wire: AerosmithWire) -> Result<Op
             if refused { Err(()) } else { Ok(None) }
         }
         "STO" => {
+            if st.count_stop() {
+                return Ok(None);
+            }
             st.controlled_stop(t);
             no_arg(None)
         }

@@ -1163,9 +1163,10 @@ impl Progress {
                         "{how}: table decelerating from {r:+.3} °/s … (waiting up to {} for rest)",
                         hms(deadline.as_secs_f64())
                     ),
-                    Some(r) => format!("{how}: table at {r:+.4} °/s, confirming rest …"),
+                    Some(r) => format!("{how}: table measured at {r:+.4} °/s, confirming rest …"),
                     None => format!(
-                        "{how}: the table did not report its rate; waiting up to {} for rest …",
+                        "{how}: no rate measured (the table did not answer in time); waiting up \
+                         to {} for rest …",
                         hms(deadline.as_secs_f64())
                     ),
                 };
@@ -1281,6 +1282,7 @@ fn finish(
     doc["run_dir"] = serde_json::json!(dir);
     doc["status"] = serde_json::json!(summary.status);
     doc["reason"] = serde_json::json!(summary.reason);
+    doc["emergency_stop"] = serde_json::json!(summary.emergency_stop);
     doc["table"] = table;
     doc["steps_recorded_this_session"] = serde_json::json!(summary.steps_recorded);
     doc["steps_done"] = serde_json::json!(run.done_steps().len());
@@ -1390,12 +1392,21 @@ fn finish_human(
         TableRest::AtRest { .. } => "the table is at rest".to_string(),
         other => rest_text(other),
     };
+    // before a resume the operator re-arms what the emergency stop opened
+    let rearm = if summary.emergency_stop {
+        "\n  an EMERGENCY STOP was sent (it opens the table's interlock: servo off). Find out why \
+         it was needed, make the table safe and re-arm the interlock at its controller before \
+         resuming (the resume re-enables the servo and fails if the table refuses)"
+    } else {
+        ""
+    };
     match summary.status {
         Status::Complete => {}
         Status::Aborted => {
             say!(
                 "gyrocal: run aborted: {}\n  {} step(s) recorded this session (a step cut short \
-                 is not recorded: it is measured afresh on resume); resume with: {}\n  {rest_line}",
+                 is not recorded: it is measured afresh on resume); resume with: {}{rearm}\n  \
+                 {rest_line}",
                 summary.reason.as_deref().unwrap_or("stopped"),
                 summary.steps_recorded,
                 resume_command(args, dir)
@@ -1411,16 +1422,40 @@ fn finish_human(
                     .to_string()
             };
             say!(
-                "gyrocal: run failed: {}\n  {} step(s) recorded this session; {next}\n  {rest_line}",
+                "gyrocal: run failed: {}\n  {} step(s) recorded this session; {next}{rearm}\n  \
+                 {rest_line}",
                 summary.reason.as_deref().unwrap_or("unknown"),
                 summary.steps_recorded,
             );
             return Ok(1);
         }
     }
-    if run.manifest().plan.kind() == gyrocal_run::PlanKind::Drift {
-        return finish_drift(args, dir, human, doc);
+    // one ending for every kind of complete run: its results, then the table's rest state
+    // decides the last line and the exit code
+    let code = if run.manifest().plan.kind() == gyrocal_run::PlanKind::Drift {
+        finish_drift(args, dir, human, doc)?
+    } else {
+        finish_sweep(args, dir, summary, run, human, doc)?
+    };
+    if !summary.table.nothing_turning() {
+        say!(
+            "gyrocal: all steps recorded, but {}",
+            rest_text(&summary.table)
+        );
+        return Ok(1);
     }
+    Ok(code)
+}
+
+/// The end of a complete sweep: the fit, the timing and the report.
+fn finish_sweep(
+    args: &RunArgs,
+    dir: &Path,
+    summary: &RunSummary,
+    run: &mut RunDir,
+    human: &dyn Fn(String),
+    doc: &mut serde_json::Value,
+) -> anyhow::Result<u8> {
     let analysis = fit_run(run, &gyrocal_fit::Options::default())
         .with_context(|| format!("fitting {}", dir.display()))?;
     doc["fit"] = serde_json::json!(run.manifest().fit_summary);
@@ -1450,12 +1485,5 @@ fn finish_human(
         }
     }
     human(format!("run directory: {}", dir.display()));
-    if !summary.table.nothing_turning() {
-        say!(
-            "gyrocal: all steps recorded, but {}",
-            rest_text(&summary.table)
-        );
-        return Ok(1);
-    }
     Ok(0)
 }
