@@ -366,6 +366,8 @@ impl<T: Transport + 'static> Aerosmith<T> {
     /// Sends a command (not repeated); its prompt must come, and without a `?`.
     async fn command(&self, command: &str, timeout: Duration) -> Result<(), DialectError> {
         tracing::debug!(device = %self.device, "> {command}");
+        // a table seen to answer slowly gets longer for a command's prompt as for a query
+        let timeout = self.latency.deadline(timeout);
         let body = self
             .exchange(command, timeout)
             .await

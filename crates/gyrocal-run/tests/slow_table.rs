@@ -13,6 +13,7 @@ use std::time::Duration;
 
 use common::table_config;
 use gyrocal_acl::AclTable;
+use gyrocal_aerosmith::{AerosmithConfig, AerosmithTable};
 use gyrocal_run::{
     Event, Phase, Plan, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status,
     StopRequest, TableRest, load,
@@ -20,6 +21,7 @@ use gyrocal_run::{
 use gyrocal_sim::bench::Bench;
 use gyrocal_sim::from_plan::bench_config;
 use gyrocal_sim::table::{SimMode, TableHandle};
+use gyrocal_table::RateTable;
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
@@ -31,7 +33,12 @@ fn config(name: &str) -> PathBuf {
 
 /// quick.toml with other rates.
 fn plan_with_rates(rates: &[f64]) -> Plan {
-    let path = config("quick.toml");
+    plan_from("quick.toml", rates)
+}
+
+/// A shipped plan with other rates.
+fn plan_from(name: &str, rates: &[f64]) -> Plan {
+    let path = config(name);
     let mut doc: toml::Table = std::fs::read_to_string(&path).unwrap().parse().unwrap();
     let plan = doc.get_mut("plan").unwrap().as_table_mut().unwrap();
     plan.insert(
@@ -52,9 +59,10 @@ fn new_run(plan: &Plan, dir: &Path) -> RunDir {
 
 type Hook = Box<dyn FnMut(&Event, &TableHandle) -> Option<StopRequest> + Send>;
 
-/// Runs `plan` on a fresh simulated bench (34401A, ACL table); `hook` sees every event with the
-/// simulated table in hand (to make it slow) and may ask for a stop.
-async fn run(plan: &Plan, dir: &Path, mut hook: Hook) -> (RunSummary, Vec<Event>, TableHandle) {
+/// Runs `plan` on a fresh simulated bench (34401A, and the table of the plan's dialect: ACL or
+/// Aerosmith); `hook` sees every event with the simulated table in hand (to make it slow) and
+/// may ask for a stop.
+async fn run(plan: &Plan, dir: &Path, hook: Hook) -> (RunSummary, Vec<Event>, TableHandle) {
     // RUST_LOG=gyrocal_acl=debug shows the late replies and the markers
     let _ = tracing_subscriber::fmt()
         .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
@@ -63,7 +71,29 @@ async fn run(plan: &Plan, dir: &Path, mut hook: Hook) -> (RunSummary, Vec<Event>
     let bench = Bench::spawn(bench_config(plan));
     let sim = bench.handle.table.clone();
     let dmm = common::hp34401a(bench.dmm, plan);
-    let table = AclTable::new(bench.table, table_config(plan));
+    let acl = table_config(plan);
+    let (summary, events) = if plan.table().dialect == gyrocal_run::TableDialect::Aerosmith {
+        let config = AerosmithConfig {
+            policy: acl.policy(),
+            ..AerosmithConfig::default()
+        };
+        let table = AerosmithTable::new(bench.table, config);
+        drive(plan, dir, hook, dmm, table, sim.clone()).await
+    } else {
+        let table = AclTable::new(bench.table, acl);
+        drive(plan, dir, hook, dmm, table, sim.clone()).await
+    };
+    (summary, events, sim)
+}
+
+async fn drive<T: RateTable + 'static>(
+    plan: &Plan,
+    dir: &Path,
+    mut hook: Hook,
+    dmm: gyrocal_hp34401a::Hp34401aMeter<gyrocal_link::StreamTransport<tokio::io::DuplexStream>>,
+    table: T,
+    sim: TableHandle,
+) -> (RunSummary, Vec<Event>) {
     let (events_tx, mut events) = mpsc::unbounded_channel();
     let mut seq = Sequencer::new(
         plan.clone(),
@@ -74,11 +104,10 @@ async fn run(plan: &Plan, dir: &Path, mut hook: Hook) -> (RunSummary, Vec<Event>
     )
     .with_events(events_tx);
     let (stop_tx, stop_rx) = watch::channel(StopRequest::None);
-    let hook_sim = sim.clone();
     let seen = tokio::spawn(async move {
         let mut all = Vec::new();
         while let Some(e) = events.recv().await {
-            if let Some(req) = hook(&e, &hook_sim) {
+            if let Some(req) = hook(&e, &sim) {
                 let _ = stop_tx.send(req);
             }
             all.push(e);
@@ -87,7 +116,7 @@ async fn run(plan: &Plan, dir: &Path, mut hook: Hook) -> (RunSummary, Vec<Event>
     });
     let summary = seq.run(stop_rx).await;
     drop(seq);
-    (summary, seen.await.unwrap(), sim)
+    (summary, seen.await.unwrap())
 }
 
 /// Makes every table reply late by `delay` from the moment step `step` starts acquiring.
@@ -278,4 +307,39 @@ async fn a_table_slower_than_the_limit_is_never_called_at_rest() {
     sim.hold_replies(Duration::ZERO, None);
     tokio::time::sleep(Duration::from_secs(10)).await;
     assert!(sim.actual_rate(Instant::now()).abs() < 0.01);
+}
+
+/// The same policy for the Aerosmith dialect, which counts the prompts it is owed: a table
+/// slow from mid-run completes with every step's rate its own and ends at rest.
+#[tokio::test(start_paused = true)]
+async fn an_aerosmith_table_that_turns_slow_mid_run_keeps_the_run_in_step_and_ends_at_rest() {
+    for delay_ms in [500u64, 1200] {
+        let plan = plan_from("aerosmith.toml", &[0.0, 5.0, -2.0]);
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().join("run");
+        let (summary, _events, sim) = run(
+            &plan,
+            &dir,
+            slow_from_step(1, Duration::from_millis(delay_ms)),
+        )
+        .await;
+        assert_eq!(
+            summary.status,
+            Status::Complete,
+            "{delay_ms} ms: {:?}",
+            summary.reason
+        );
+        assert!(
+            matches!(summary.table, TableRest::AtRest { .. }),
+            "{delay_ms} ms: {:?}",
+            summary.table
+        );
+        assert!(sim.actual_rate(Instant::now()).abs() < 0.01);
+        assert_rates_are_rates(&dir);
+        let notes = retry_messages(&dir);
+        assert!(
+            notes.iter().any(|m| m.contains("the table answers slowly")),
+            "{delay_ms} ms: {notes:#?}"
+        );
+    }
 }
