@@ -689,7 +689,8 @@ impl<T: Transport + 'static> Dialect for Acl<T> {
         let attempt = gyrocal_table::dialect::send_stop_with(
             &self.device,
             text,
-            timeout,
+            // a query to a table seen to answer slowly holds the link longer
+            self.latency.deadline(timeout),
             self.link.lock(),
             |mut link| async move { link.transport.send_line(text).await },
         )

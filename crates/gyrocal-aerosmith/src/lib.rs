@@ -596,7 +596,8 @@ impl<T: Transport + 'static> Dialect for Aerosmith<T> {
         gyrocal_table::dialect::send_stop_with(
             &self.device,
             command,
-            timeout,
+            // a query to a table seen to answer slowly holds the link longer
+            self.latency.deadline(timeout),
             self.link.lock(),
             |mut link| async move {
                 // the controller answers a stop with a prompt, read before the next exchange (a

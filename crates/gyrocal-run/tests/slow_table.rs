@@ -343,3 +343,42 @@ async fn an_aerosmith_table_that_turns_slow_mid_run_keeps_the_run_in_step_and_en
         );
     }
 }
+
+/// A second request during the deceleration of a slow table: the emergency stop waits for the
+/// link as long as a query to that table may hold it, and goes through.
+#[tokio::test(start_paused = true)]
+async fn an_emergency_stop_gets_through_while_a_slow_query_holds_the_link() {
+    let plan = plan_with_rates(&[0.0, 20.0]);
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    // replies 2.6 s late: a poll holds the link longer than the 2.5 s a stop used to wait
+    let hook: Hook = Box::new(|e, sim| match e {
+        Event::Phase {
+            step: 1,
+            phase: Phase::Acquiring,
+        } => {
+            sim.hold_replies(Duration::from_millis(2600), None);
+            Some(StopRequest::Controlled("test"))
+        }
+        Event::Stopping { .. } => Some(StopRequest::Emergency("test again")),
+        _ => None,
+    });
+    let (summary, _events, sim) = run(&plan, &dir, hook).await;
+    assert!(!sim.interlock_closed(), "the emergency stop was not sent");
+    assert!(summary.emergency_stop);
+    assert!(
+        summary
+            .reason
+            .as_deref()
+            .unwrap_or_default()
+            .contains("emergency stop"),
+        "{:?}",
+        summary.reason
+    );
+    assert!(
+        matches!(summary.table, TableRest::AtRest { .. }),
+        "{:?}",
+        summary.table
+    );
+    assert_at_rest_now(&sim, &summary);
+}
