@@ -381,7 +381,8 @@ impl<T: Transport + 'static> Acl<T> {
         if !link.pending.is_clear() {
             self.resync(&mut link, deadline).await?;
         }
-        link.pending.sent(line, false);
+        // an owed `*IDN?` is answered like a marker: its reply has the marker's form
+        link.pending.sent(line, line == MARKER);
         link.transport.send_line(line).await?;
         let left = deadline.saturating_duration_since(Instant::now());
         let reply = link.transport.read_line(Some(left)).await?;

@@ -374,3 +374,38 @@ async fn table_lost_then_unusable_replies_fault_the_driver() {
         "{notes:#?}"
     );
 }
+
+#[tokio::test]
+async fn table_late_replies_are_recognised_and_never_taken_for_the_next_query() {
+    let script = ScriptedTransport::new("table")
+        // the identity comes late: the marker sent to get back in step brings both replies,
+        // which are read and dropped before *IDN? is asked again
+        .expect_line("*IDN?")
+        .silence()
+        .expect_line("*IDN?")
+        .reply(IDN)
+        .reply(IDN)
+        .query("*IDN?", IDN)
+        .query(":System:Error?", NO_ERROR)
+        .query(":Mode? 1", "OFF")
+        // a rate read whose reply comes late, then the status byte: the late rate is read
+        // before the marker's reply and dropped, never taken for the status byte
+        .expect_line(":Read:Rate? 1")
+        .silence()
+        .expect_line("*IDN?")
+        .reply("-0.000092")
+        .reply(IDN)
+        .query(":Read:Rate? 1", "0.000011")
+        .query("*STB?", "0");
+    let mut table = AclTable::new(script, AclConfig::default());
+    table.connect().await.unwrap();
+    assert_eq!(table.read_rate().await.unwrap(), 0.000011);
+    table.heartbeat().await.unwrap();
+    let notes = table.take_retries();
+    assert!(
+        notes
+            .iter()
+            .any(|n| n.contains("\"-0.000092\" to `:Read:Rate? 1`") && n.contains("discarded")),
+        "{notes:#?}"
+    );
+}
