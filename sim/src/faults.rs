@@ -4,7 +4,9 @@
 //! spec    = device ":" action "@" trigger [ "x" count ] [ "/" S ["s"] ]
 //! device  = "dmm" | "table"
 //! action  = dmm:   "timeout" | "garble" | "truncate" | "overload" | "disconnect" | "powercycle"
+//!                  | "slow"
 //!           table: "trip" | "fault" | "silent" | "interlock" | "drop" | "garble" | "noise"
+//!                  | "slow"
 //! trigger = "reading" N        the N-th reading the meter takes (N >= 1)
 //!         | "demand" N         the N-th `:Demand:Rate` the table sees (N >= 1)
 //!         | "stop" N           the N-th stop command the table sees (ACL `:Mode:Off` or
@@ -13,8 +15,10 @@
 //! count   = N >= 1, default 1: for overload the number of overload readings, for timeout,
 //!           garble and truncate the number of consecutive replies (readings) hit; for the
 //!           table's drop, garble and noise the number of consecutive query replies hit; not
-//!           allowed for disconnect, powercycle and the other table actions
-//! "/" S   powercycle only: the off time in sim seconds (default the meter's `power_off_s`, 5)
+//!           allowed for disconnect, powercycle and the other table actions; for slow the
+//!           number of replies held back (without it: every reply from the trigger on)
+//! "/" S   powercycle: the off time in sim seconds (default the meter's `power_off_s`, 5);
+//!         slow (required): how long each reply is held back, sim seconds
 //! ```
 //!
 //! Examples: `dmm:timeout@reading100` (the reply carrying reading 100 never comes),
@@ -27,7 +31,20 @@
 //! after it), `table:interlock@demand2` (the door opens halfway through the 2nd demand's ramp),
 //! `table:drop@t=5s` (the next reply the table sends after 5 s is lost),
 //! `table:garble@demand3x2`, `table:noise@reading40`, `table:silent@stop1` (the table ignores
-//! the first stop it is sent and everything after it: it keeps turning, or holding, as it was).
+//! the first stop it is sent and everything after it: it keeps turning, or holding, as it was),
+//! `dmm:slow@reading40/2.5s` (every reply
+//! from the one carrying reading 40 on leaves 2.5 sim seconds late), `dmm:slow@t=10sx3/4s`
+//! (the next three replies after 10 s are 4 s late), `table:slow@demand2/0.5s`.
+//!
+//! `slow` is a reply that comes, but late: a controller busy with something else, a serial
+//! converter with a deep buffer, a network bridge. The instrument is alive and obeys; its
+//! bytes reach the host `S` seconds after it sent them. On the 34401A (RS-232 or GPIB) the
+//! held-back bytes are already on their way (in the converter): a device clear does not
+//! recall them, so a driver that gave up on a reply must recognise it when it comes late. On
+//! a Truevolt's socket the instrument sends its reply `S` seconds late on the connection the
+//! query came on; a reconnect (the socket's device clear) drops what the old connection was
+//! owed. The table executes every command when it arrives and sends its replies `S` seconds
+//! late, in order ([`crate::table::TableHandle::hold_replies`]).
 //!
 //! What the actions do: `timeout` loses a reply (the meter says nothing), `garble` replaces a
 //! digit of a reply by `#`, `truncate` cuts a reply halfway without its terminator, `overload`
@@ -73,22 +90,30 @@ SPEC = DEVICE:ACTION@TRIGGER[xCOUNT][/Ss]
                  truncate (a reply stops halfway), overload (readings are +-9.9E37),
                  disconnect (the meter closes its link and is gone for good),
                  powercycle (the meter is off for 5 s, or /Ss, then back in LOCAL
-                 with power-on settings and an empty memory)
+                 with power-on settings and an empty memory),
+                 slow (every reply is held back by /Ss, which is required: the
+                 meter answers, late; a device clear does not recall bytes on
+                 their way)
   table actions: trip (rate trip, error 210), fault (injected fault, error 220),
                  silent (the table answers and executes nothing more),
                  interlock (the interlock opens: abort to zero, servo off, error 201),
                  drop (a query reply is lost), garble (a character of a reply
-                 becomes #), noise (a 0xFF byte comes just before a reply)
+                 becomes #), noise (a 0xFF byte comes just before a reply),
+                 slow (every reply held back by /Ss, which is required: the
+                 table executes commands at once and answers late, in order)
   triggers:      readingN (the N-th reading the meter takes), demandN (the N-th
                  :Demand:Rate the table sees), stopN (the N-th stop command the
                  table sees: table:silent@stop1 ignores the first stop), t=Ss (S sim
                  seconds after start)
   xCOUNT:        overload: that many readings; timeout/garble/truncate: that many
                  consecutive replies (readings); table drop/garble/noise: that many
-                 consecutive query replies
-  /Ss:           powercycle only: off for S sim seconds (default 5)
+                 consecutive query replies; slow: that many replies held back
+                 (without xCOUNT: every reply from the trigger on)
+  /Ss:           powercycle: off for S sim seconds (default 5); slow: each reply
+                 held back by S sim seconds (required)
   examples: dmm:garble@reading100  dmm:overload@reading50x5  dmm:disconnect@reading300
             dmm:powercycle@reading250  dmm:powercycle@t=30s/10s
+            dmm:slow@reading40/2.5s  dmm:slow@t=10sx3/4s  table:slow@demand2/0.5s
             table:trip@demand4  table:fault@t=12s  table:silent@demand3
             table:interlock@demand2  table:drop@t=5s  table:garble@demand3x2";
 
@@ -107,6 +132,8 @@ pub enum FaultAction {
     DmmDisconnect,
     /// The meter is switched off and on again.
     DmmPowerCycle,
+    /// The meter's replies are held back (they come, late).
+    DmmSlow,
     /// The table latches a rate trip.
     TableTrip,
     /// The table latches an injected fault.
@@ -121,6 +148,8 @@ pub enum FaultAction {
     TableGarble,
     /// A noise byte (0xFF) comes just before table query replies.
     TableNoise,
+    /// The table's replies are held back (they come, late, in order).
+    TableSlow,
 }
 
 impl FaultAction {
@@ -133,6 +162,7 @@ impl FaultAction {
             FaultAction::DmmOverload => "dmm:overload",
             FaultAction::DmmDisconnect => "dmm:disconnect",
             FaultAction::DmmPowerCycle => "dmm:powercycle",
+            FaultAction::DmmSlow => "dmm:slow",
             FaultAction::TableTrip => "table:trip",
             FaultAction::TableFault => "table:fault",
             FaultAction::TableSilent => "table:silent",
@@ -140,6 +170,22 @@ impl FaultAction {
             FaultAction::TableDrop => "table:drop",
             FaultAction::TableGarble => "table:garble",
             FaultAction::TableNoise => "table:noise",
+            FaultAction::TableSlow => "table:slow",
+        }
+    }
+
+    /// Whether the simulator implements the action; the grammar is defined for more (a
+    /// spec naming one that is not is refused with this message).
+    pub fn implemented(self) -> Result<(), &'static str> {
+        Ok(())
+    }
+
+    /// Whether the action takes `/Ss` (and whether it must).
+    fn takes_seconds(self) -> (bool, bool) {
+        match self {
+            FaultAction::DmmPowerCycle => (true, false),
+            FaultAction::DmmSlow | FaultAction::TableSlow => (true, true),
+            _ => (false, false),
         }
     }
 
@@ -153,6 +199,8 @@ impl FaultAction {
                 | FaultAction::TableDrop
                 | FaultAction::TableGarble
                 | FaultAction::TableNoise
+                | FaultAction::DmmSlow
+                | FaultAction::TableSlow
         )
     }
 
@@ -160,10 +208,16 @@ impl FaultAction {
         self.as_str().starts_with("dmm:")
     }
 
-    /// The meter faults this action injects (`count` of them, or one overload of `count`;
-    /// `off_s` for a power cycle).
-    fn dmm_faults(self, count: u32, off_s: Option<f64>) -> Vec<Fault> {
+    /// The meter faults a spec injects (`count` of them, or one overload of `count`; `off_s`
+    /// for a power cycle; one slow fault for `count` replies, every one when `count` is 0).
+    fn dmm_faults(self, count: u32, off_s: Option<f64>, delay_s: Option<f64>) -> Vec<Fault> {
         let one = match self {
+            FaultAction::DmmSlow => {
+                return vec![Fault::Slow {
+                    delay_s: delay_s.unwrap_or(0.0),
+                    replies: (count > 0).then_some(count),
+                }];
+            }
             FaultAction::DmmTimeout => Fault::NoReply,
             FaultAction::DmmGarble => Fault::Garble,
             FaultAction::DmmTruncate => Fault::Truncate,
@@ -227,20 +281,24 @@ pub struct FaultSpec {
     pub action: FaultAction,
     /// When.
     pub trigger: Trigger,
-    /// How many (see the grammar); 1 unless given.
+    /// How many (see the grammar); 1 unless given, except for `slow`: 0 unless given (every
+    /// reply from the trigger on).
     pub count: u32,
     /// `dmm:powercycle` only: the off time in sim seconds (`/Ss`); `None` is the meter's
     /// configured `power_off_s`.
     pub off_s: Option<f64>,
+    /// `slow` only: how long each reply is held back, sim seconds (`/Ss`, required).
+    pub delay_s: Option<f64>,
 }
 
 impl fmt::Display for FaultSpec {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}@{}", self.action.as_str(), self.trigger)?;
-        if self.count != 1 {
+        let slow = matches!(self.action, FaultAction::DmmSlow | FaultAction::TableSlow);
+        if (slow && self.count != 0) || (!slow && self.count != 1) {
             write!(f, "x{}", self.count)?;
         }
-        if let Some(s) = self.off_s {
+        if let Some(s) = self.off_s.or(self.delay_s) {
             write!(f, "/{s}s")?;
         }
         Ok(())
@@ -283,6 +341,7 @@ impl FromStr for FaultSpec {
             "dmm:overload" => FaultAction::DmmOverload,
             "dmm:disconnect" => FaultAction::DmmDisconnect,
             "dmm:powercycle" => FaultAction::DmmPowerCycle,
+            "dmm:slow" => FaultAction::DmmSlow,
             "table:trip" => FaultAction::TableTrip,
             "table:fault" => FaultAction::TableFault,
             "table:silent" => FaultAction::TableSilent,
@@ -290,30 +349,51 @@ impl FromStr for FaultSpec {
             "table:drop" => FaultAction::TableDrop,
             "table:garble" => FaultAction::TableGarble,
             "table:noise" => FaultAction::TableNoise,
+            "table:slow" => FaultAction::TableSlow,
             other => {
                 return Err(err(format!(
                     "unknown action `{other}` (dmm: timeout, garble, truncate, overload, \
-                     disconnect, powercycle; table: trip, fault, silent, interlock, drop, \
-                     garble, noise)"
+                     disconnect, powercycle, slow; table: trip, fault, silent, interlock, \
+                     drop, garble, noise, slow)"
                 )));
             }
         };
-        let (when, off_s) = match when.trim().rsplit_once('/') {
-            Some(_) if action != FaultAction::DmmPowerCycle => {
+        let (takes_seconds, needs_seconds) = action.takes_seconds();
+        let what_seconds = if action == FaultAction::DmmPowerCycle {
+            "the off time"
+        } else {
+            "the delay"
+        };
+        let (when, seconds) = match when.trim().rsplit_once('/') {
+            Some(_) if !takes_seconds => {
                 return Err(err(format!(
-                    "{} takes no off time (/Ss is for dmm:powercycle)",
+                    "{} takes no time (/Ss is for dmm:powercycle and slow)",
                     action.as_str()
                 )));
             }
             Some((w, s)) => match s.strip_suffix('s').unwrap_or(s).parse::<f64>() {
-                Ok(v) if (0.0..1e6).contains(&v) => (w, Some(v)),
+                Ok(v) if (0.0..1e6).contains(&v) && !(needs_seconds && v == 0.0) => (w, Some(v)),
                 _ => {
                     return Err(err(format!(
-                        "the off time must be sim seconds >= 0, such as /8s, not `/{s}`"
+                        "{what_seconds} must be sim seconds {}, such as /8s, not `/{s}`",
+                        if needs_seconds { "> 0" } else { ">= 0" }
                     )));
                 }
             },
+            None if needs_seconds => {
+                return Err(err(format!(
+                    "{} needs the delay of each reply, such as {}@{}/2.5s",
+                    action.as_str(),
+                    action.as_str(),
+                    when.trim()
+                )));
+            }
             None => (when.trim(), None),
+        };
+        let (off_s, delay_s) = if action == FaultAction::DmmPowerCycle {
+            (seconds, None)
+        } else {
+            (None, seconds)
         };
         let (trigger_text, count) = match when.rsplit_once('x') {
             Some((t, c)) => (t, Some(positive(c, "the count").map_err(err)?)),
@@ -341,6 +421,7 @@ impl FromStr for FaultSpec {
             )));
         };
         let count = match count {
+            None if takes_seconds && needs_seconds => 0,
             None => 1,
             Some(_) if !action.takes_count() => {
                 return Err(err(format!("{} takes no count", action.as_str())));
@@ -350,11 +431,13 @@ impl FromStr for FaultSpec {
                 .filter(|&c| c <= 100_000)
                 .ok_or_else(|| err(format!("count {c} is above 100000")))?,
         };
+        action.implemented().map_err(|why| err(why.to_string()))?;
         Ok(FaultSpec {
             action,
             trigger,
             count,
             off_s,
+            delay_s,
         })
     }
 }
@@ -445,7 +528,7 @@ pub fn schedule(specs: &[FaultSpec], bench: &BenchHandle, time_scale: f64) -> Fa
             (Trigger::Reading(n), true) => {
                 for (i, f) in s
                     .action
-                    .dmm_faults(s.count, s.off_s)
+                    .dmm_faults(s.count, s.off_s, s.delay_s)
                     .into_iter()
                     .enumerate()
                 {
@@ -457,7 +540,7 @@ pub fn schedule(specs: &[FaultSpec], bench: &BenchHandle, time_scale: f64) -> Fa
                     bench.dmm.inject_at_reading(n + offset, f);
                 }
             }
-            (Trigger::Demand(n), false) => {
+            (Trigger::Demand(n), false) if s.action.demand_fault(s.count).is_some() => {
                 if let Some(f) = s.action.demand_fault(s.count) {
                     bench.table.arm_at_demand(n, f);
                 }
@@ -495,11 +578,15 @@ pub fn schedule(specs: &[FaultSpec], bench: &BenchHandle, time_scale: f64) -> Fa
                         FaultAction::TableFault => table.inject_fault(&message),
                         FaultAction::TableSilent => table.set_silent(true),
                         FaultAction::TableInterlock => table.open_interlock(),
+                        FaultAction::TableSlow => table.hold_replies(
+                            table.sim_duration(s.delay_s.unwrap_or(0.0)),
+                            (s.count > 0).then_some(s.count),
+                        ),
                         a => {
                             if let Some(f) = a.reply_fault() {
                                 table.inject_reply_faults(f, s.count);
                             }
-                            for f in a.dmm_faults(s.count, s.off_s) {
+                            for f in a.dmm_faults(s.count, s.off_s, s.delay_s) {
                                 dmm_faults.inject(f);
                             }
                         }
@@ -552,7 +639,7 @@ mod tests {
         assert_eq!((s.trigger, s.off_s), (Trigger::Time(30.0), Some(7.5)));
         assert_eq!(s.to_string(), "dmm:powercycle@t=30s/7.5s");
         assert_eq!(
-            s.action.dmm_faults(1, s.off_s),
+            s.action.dmm_faults(1, s.off_s, None),
             [Fault::PowerCycle { off_s: Some(7.5) }]
         );
         assert_eq!(
@@ -672,6 +759,69 @@ mod tests {
         for a in ["interlock", "drop", "garble", "noise"] {
             assert!(GRAMMAR.contains(a), "{a}");
         }
+    }
+
+    #[test]
+    fn slow_specs() {
+        let s: FaultSpec = "dmm:slow@reading40/2.5s".parse().unwrap();
+        assert_eq!(
+            (s.action, s.trigger, s.count, s.delay_s, s.off_s),
+            (
+                FaultAction::DmmSlow,
+                Trigger::Reading(40),
+                0,
+                Some(2.5),
+                None
+            )
+        );
+        assert_eq!(s.to_string(), "dmm:slow@reading40/2.5s");
+        assert_eq!(
+            s.action.dmm_faults(s.count, s.off_s, s.delay_s),
+            [Fault::Slow {
+                delay_s: 2.5,
+                replies: None
+            }]
+        );
+        let s: FaultSpec = "DMM:Slow@t=10sx3/4".parse().unwrap();
+        assert_eq!(
+            (s.trigger, s.count, s.delay_s),
+            (Trigger::Time(10.0), 3, Some(4.0))
+        );
+        assert_eq!(s.to_string(), "dmm:slow@t=10sx3/4s");
+        assert_eq!(s.to_string().parse::<FaultSpec>().unwrap(), s);
+        assert_eq!(
+            s.action.dmm_faults(s.count, s.off_s, s.delay_s),
+            [Fault::Slow {
+                delay_s: 4.0,
+                replies: Some(3)
+            }]
+        );
+        let s: FaultSpec = "dmm:slow@demand2x1/0.5s".parse().unwrap();
+        assert_eq!(s.to_string(), "dmm:slow@demand2x1/0.5s");
+        for (bad, names) in [
+            (
+                "dmm:slow@reading40",
+                "dmm:slow needs the delay of each reply",
+            ),
+            ("dmm:slow@reading40/0s", "the delay must be sim seconds > 0"),
+            (
+                "dmm:slow@reading40/-1s",
+                "the delay must be sim seconds > 0",
+            ),
+            (
+                "dmm:slow@reading40x0/1s",
+                "the count must be a whole number >= 1",
+            ),
+            ("table:slow@demand2", "table:slow needs the delay"),
+            ("dmm:garble@reading4/1s", "dmm:garble takes no time"),
+        ] {
+            let e = bad.parse::<FaultSpec>().unwrap_err();
+            let msg = e.to_string();
+            assert!(msg.contains(&format!("`{bad}`")), "{msg}");
+            assert!(msg.contains(names), "{bad}: {msg}");
+        }
+        assert!(GRAMMAR.contains("slow (every reply is held back by /Ss"));
+        assert!(GRAMMAR.contains("dmm:slow@reading40/2.5s"));
     }
 
     #[tokio::test(start_paused = true)]

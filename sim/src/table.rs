@@ -739,6 +739,17 @@ impl TableHandle {
         self.lock().stops_seen
     }
 
+    /// The real (tokio) duration of `sim_s` sim seconds on this table's clock.
+    pub fn sim_duration(&self, sim_s: f64) -> std::time::Duration {
+        let scale = self.lock().config.time_scale;
+        let scale = if scale.is_finite() && scale > 0.0 {
+            scale
+        } else {
+            1.0
+        };
+        std::time::Duration::try_from_secs_f64(sim_s.max(0.0) / scale).unwrap_or_default()
+    }
+
     /// Whether replies are being held back.
     pub fn is_slow(&self) -> bool {
         self.lock().slow.is_some()

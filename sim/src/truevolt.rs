@@ -42,7 +42,10 @@
 //! reply that carries that reading; `Overload`; `Disconnect` closes the connection and ends
 //! the instrument for good (no more connections); `PowerCycle` kills the connection, keeps
 //! the meter off for the off time (input ignored, nothing sent) and brings it back with the
-//! `*RST` settings, an empty memory and error queue, and the Power On bit set; `PushError`.
+//! `*RST` settings, an empty memory and error queue, and the Power On bit set; `PushError`;
+//! `Slow` sends each reply its delay late (the meter executes nothing meanwhile, as a busy
+//! instrument), on the connection the query came on: a reconnect drops it with the rest of
+//! what the old connection was owed.
 
 use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Mutex};
@@ -268,6 +271,8 @@ struct Meter {
     at_reading: Vec<(u64, Fault)>,
     overloads_left: u32,
     off_until: Option<Instant>,
+    /// A [`Fault::Slow`] in force: the delay, and the replies it still holds back.
+    slow: Option<(Duration, Option<u32>)>,
     gone: bool,
     stop: bool,
 }
@@ -389,6 +394,7 @@ impl Meter {
             at_reading: Vec::new(),
             overloads_left: 0,
             off_until: None,
+            slow: None,
             gone: false,
             stop: false,
         }
@@ -684,6 +690,10 @@ impl Meter {
             Fault::Overload { readings } => self.overloads_left += readings,
             Fault::PowerCycle { off_s } => self.power_off(off_s, at),
             Fault::PushError { code, message } => self.raise(code, &message),
+            Fault::Slow { delay_s, replies } => {
+                let delay = Duration::from_secs_f64(delay_s.clamp(0.0, 1e6));
+                self.slow = (replies != Some(0)).then(|| (self.scaled(delay), replies));
+            }
         }
     }
 
@@ -709,7 +719,22 @@ impl Meter {
         };
         let transfer = self.scaled(self.cfg.timing.transfer_per_reading)
             * u32::try_from(numbers.len()).unwrap_or(u32::MAX);
-        self.out = Some((bytes, now + transfer));
+        // a slow meter sends its reply late, and executes nothing meanwhile
+        let late = match self.slow.as_mut() {
+            Some((delay, left)) => {
+                let delay = *delay;
+                self.counters.late_replies += 1;
+                if let Some(n) = left {
+                    *n = n.saturating_sub(1);
+                    if *n == 0 {
+                        self.slow = None;
+                    }
+                }
+                delay
+            }
+            None => Duration::ZERO,
+        };
+        self.out = Some((bytes, now + transfer + late));
     }
 
     fn readings_text(items: &[(f64, u64)]) -> String {

@@ -2,7 +2,7 @@
 
 use std::time::Duration;
 
-use gyrocal_link::Transport;
+use gyrocal_link::{LinkError, Transport};
 use tokio::time::Instant;
 
 use crate::timing::{MAX_SAMPLE_COUNT, MEMORY_READINGS, Strategy, Timing};
@@ -37,6 +37,14 @@ pub struct DriverOptions {
     pub reconnect_timeout: Duration,
     /// Pause between two attempts to re-establish the link. Default 1 s.
     pub reconnect_pause: Duration,
+    /// How late a reply may come and still be recognised as the late answer to the query
+    /// that timed out. After a timeout the driver waits this long for it; when it comes, it
+    /// is thrown away (never taken as the next query's answer), every later deadline is
+    /// widened by about twice the lateness seen (at most this much), and each device clear
+    /// then waits until the link has been quiet that long, so bytes still on their way (a
+    /// serial converter's deep buffer, a network bridge) are thrown away too. A reply later
+    /// than this is treated as lost. Default 5 s.
+    pub max_reply_delay: Duration,
 }
 
 impl Default for DriverOptions {
@@ -51,6 +59,7 @@ impl Default for DriverOptions {
             in_flight_budget: 80,
             reconnect_timeout: Duration::from_secs(30),
             reconnect_pause: Duration::from_secs(1),
+            max_reply_delay: Duration::from_secs(5),
         }
     }
 }
@@ -106,6 +115,24 @@ pub enum LinkLoss {
     PowerOn,
 }
 
+impl LinkLoss {
+    /// What cleared the meter's memory when the link was re-established for this cause, for
+    /// [`Error::ReadingsLost`]: a power cycle, or gyrocal's own reconfiguration.
+    pub fn memory_cause(self) -> &'static str {
+        match self {
+            LinkLoss::PowerOn => "the meter was power-cycled: its Power On status bit was set",
+            LinkLoss::Local => {
+                "the meter was found in LOCAL (error 550) and gyrocal configured it again, \
+                 which clears its memory"
+            }
+            LinkLoss::NoAnswer => {
+                "gyrocal configured the meter again after it did not answer, which clears its \
+                 memory; no power cycle was seen: its replies may be too late or lost"
+            }
+        }
+    }
+}
+
 impl std::fmt::Display for LinkLoss {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(match self {
@@ -132,11 +159,21 @@ pub struct Recovery {
     pub attempts: u32,
     /// How long the recovery took.
     pub elapsed: Duration,
+    /// The late reply seen before it (see [`Hp34401a::await_late_reply`]), if one came.
+    pub late: Option<String>,
 }
 
 impl Recovery {
     /// One line for a log or a run manifest.
     pub fn describe(&self) -> String {
+        let what = self.what();
+        match &self.late {
+            Some(late) => format!("{late}; {what}"),
+            None => what,
+        }
+    }
+
+    fn what(&self) -> String {
         match self.cause {
             Some(cause) => format!(
                 "link re-established ({cause}; {} attempt{}, {:.1} s): SYST:REM, *CLS, *IDN? and \
@@ -222,6 +259,14 @@ pub struct Hp34401a<T: Transport> {
     /// The `SAMP:COUN` the meter holds, as far as the driver knows (sent since the last
     /// connection, configuration or recovery): settings are sent only when they change.
     sample_count: Option<usize>,
+    /// Why the link was last re-established (what cleared the memory, for
+    /// [`Error::ReadingsLost`]).
+    last_loss: Option<LinkLoss>,
+    /// Added to every reply deadline once the meter was seen answering late (see
+    /// [`DriverOptions::max_reply_delay`]).
+    reply_delay: Duration,
+    /// The latest a late reply came after its deadline, if one did.
+    latest_seen: Option<Duration>,
 }
 
 impl<T: Transport> Hp34401a<T> {
@@ -236,6 +281,71 @@ impl<T: Transport> Hp34401a<T> {
             progress: None,
             epoch: 0,
             sample_count: None,
+            last_loss: None,
+            reply_delay: Duration::ZERO,
+            latest_seen: None,
+        }
+    }
+
+    /// What every reply deadline has been widened by, after replies came late (zero for a
+    /// meter that answers in time).
+    pub fn reply_delay(&self) -> Duration {
+        self.reply_delay
+    }
+
+    /// After a query timed out: waits up to [`DriverOptions::max_reply_delay`] for its late
+    /// reply. When something comes, the meter is alive but slow: what came is thrown away
+    /// (the caller's recovery clears the rest), the deadlines are widened, and the returned
+    /// note says so. `None` when nothing came (the reply was lost, or the meter is gone).
+    ///
+    /// Only one query is ever outstanding (see the type's protocol rules), so whatever comes
+    /// now can only be the answer to the one that timed out.
+    pub async fn await_late_reply(&mut self) -> Option<String> {
+        let waited_from = Instant::now();
+        let got = self
+            .link
+            .read_field(b',', Some(self.options.max_reply_delay))
+            .await;
+        let came = match &got {
+            Ok(_) => true,
+            Err(LinkError::Timeout { partial, .. }) => !partial.is_empty(),
+            Err(_) => false,
+        };
+        if !came {
+            return None;
+        }
+        let late = waited_from.elapsed();
+        self.latest_seen = Some(self.latest_seen.map_or(late, |l| l.max(late)));
+        // the deadline missed already held the slack and the widening so far: twice what
+        // came on top of them covers the meter's delay with a margin
+        let widened = ((self.reply_delay + late + self.options.timeout_slack) * 2)
+            .min(self.options.max_reply_delay);
+        self.reply_delay = self.reply_delay.max(widened);
+        tracing::warn!(
+            device = self.device(),
+            late_s = late.as_secs_f64(),
+            reply_delay_s = self.reply_delay.as_secs_f64(),
+            "the multimeter answers late; its late reply is thrown away and deadlines widened"
+        );
+        Some(format!(
+            "the meter answers slowly: the reply came {:.1} s after its deadline and was thrown \
+             away; reply deadlines widened by {:.1} s",
+            late.as_secs_f64(),
+            self.reply_delay.as_secs_f64()
+        ))
+    }
+
+    /// For [`Error::GaveUp`]: what was seen of a slow meter, or nothing.
+    pub fn slow_note(&self) -> String {
+        match self.latest_seen {
+            Some(late) => format!(
+                "; the meter answers slowly: a reply came {:.1} s after its deadline, and \
+                 deadlines were widened by {:.1} s (at most {:.1} s, DriverOptions::max_reply_delay)",
+                late.as_secs_f64(),
+                self.reply_delay.as_secs_f64(),
+                self.options.max_reply_delay.as_secs_f64()
+            ),
+            None => String::new(),
         }
     }
 
@@ -440,6 +550,7 @@ impl<T: Transport> Hp34401a<T> {
                                 cause: None,
                                 attempts: 0,
                                 elapsed: started.elapsed(),
+                                late: None,
                             });
                         }
                         Ok(true) => (errors, LinkLoss::PowerOn),
@@ -453,6 +564,7 @@ impl<T: Transport> Hp34401a<T> {
         };
         // whatever the meter held may be gone: bursts armed until now cannot be fetched
         self.epoch += 1;
+        self.last_loss = Some(cause);
         tracing::warn!(device = self.device(), %cause, "multimeter link lost; re-establishing it");
         let attempts = self.reestablish(started).await?;
         let recovery = Recovery {
@@ -461,6 +573,7 @@ impl<T: Transport> Hp34401a<T> {
             cause: Some(cause),
             attempts,
             elapsed: started.elapsed(),
+            late: None,
         };
         tracing::warn!(device = self.device(), what = %recovery.describe(), "multimeter link re-established");
         Ok(recovery)
@@ -504,6 +617,7 @@ impl<T: Transport> Hp34401a<T> {
                 return Err(Error::NotBack {
                     device: self.device().to_string(),
                     waited: now - started,
+                    slow: self.slow_note(),
                     last: Box::new(error),
                 });
             }
@@ -654,6 +768,10 @@ impl<T: Transport> Hp34401a<T> {
         Err(Error::ReadingsLost {
             device: self.device().to_string(),
             count: burst.count,
+            cause: self
+                .last_loss
+                .map_or("the link was re-established", LinkLoss::memory_cause)
+                .to_string(),
         })
     }
 
@@ -664,7 +782,8 @@ impl<T: Transport> Hp34401a<T> {
         let deadline = burst.armed_at + self.scaled(burst.expected);
         let timeout = deadline
             .saturating_duration_since(Instant::now())
-            .max(self.options.timeout_slack);
+            .max(self.options.timeout_slack)
+            + self.reply_delay;
         let reply = self.link.read_line(Some(timeout)).await?;
         self.in_flight = 0;
         if reply.trim() != "1" {
@@ -757,7 +876,7 @@ impl<T: Transport> Hp34401a<T> {
         total: usize,
     ) -> Result<Vec<Reading>, Error> {
         let mut out = Vec::with_capacity(k);
-        let mut timeout = first;
+        let mut timeout = first + self.reply_delay;
         loop {
             let field = self.link.read_field(b',', Some(timeout)).await?;
             for piece in field.text.split(',') {
@@ -819,10 +938,16 @@ impl<T: Transport> Hp34401a<T> {
             if !error.is_retryable() {
                 return Err(error);
             }
+            let late = if error.kind() == ErrorKind::Timeout {
+                self.await_late_reply().await
+            } else {
+                None
+            };
             if *failures >= self.options.retries {
                 return Err(Error::GaveUp {
                     device: self.device().to_string(),
                     attempts: *failures + 1,
+                    slow: self.slow_note(),
                     last: Box::new(error),
                 });
             }
@@ -835,7 +960,7 @@ impl<T: Transport> Hp34401a<T> {
                 "acquisition step failed; device clear and retry"
             );
             match self.recover().await {
-                Ok(r) => return Ok(r),
+                Ok(r) => return Ok(Recovery { late, ..r }),
                 Err(e) => error = e,
             }
         }
@@ -848,11 +973,19 @@ impl<T: Transport> Hp34401a<T> {
     /// The interface's device clear ([`Transport::device_clear`]: the 0x03 byte on RS-232,
     /// `++clr` through a Prologix GPIB controller), then the settle pause and the stale input
     /// thrown away.
+    ///
+    /// Once the meter was seen answering late ([`Hp34401a::reply_delay`] above zero), the
+    /// input is drained until the link has been quiet for that long (at most
+    /// [`DriverOptions::max_reply_delay`] more): bytes the meter sent before the clear and
+    /// still on their way are thrown away here, not read as the next query's answer.
     async fn device_clear(&mut self) -> Result<(), Error> {
         self.link.device_clear().await?;
         self.in_flight = 0;
         tokio::time::sleep(self.options.clear_settle).await;
-        let dropped = self.link.discard_input().await?;
+        let mut dropped = self.link.discard_input().await?;
+        if !self.reply_delay.is_zero() {
+            dropped += self.drain_until_quiet(self.reply_delay).await?;
+        }
         if dropped > 0 {
             tracing::debug!(
                 device = self.device(),
@@ -863,6 +996,23 @@ impl<T: Transport> Hp34401a<T> {
         Ok(())
     }
 
+    /// Throws input away until nothing has come for `quiet` (bounded: at most
+    /// `quiet + max_reply_delay`). Returns the bytes dropped.
+    async fn drain_until_quiet(&mut self, quiet: Duration) -> Result<usize, Error> {
+        let limit = Instant::now() + quiet + self.options.max_reply_delay;
+        let mut dropped = 0;
+        while Instant::now() < limit {
+            match self.link.read_field(b',', Some(quiet)).await {
+                Ok(f) => dropped += f.text.len() + 1,
+                Err(LinkError::Timeout { partial, .. }) if partial.is_empty() => break,
+                // bytes without a separator yet: not quiet
+                Err(LinkError::Timeout { .. }) => dropped += self.link.discard_input().await?,
+                Err(e) => return Err(e.into()),
+            }
+        }
+        Ok(dropped)
+    }
+
     /// Makes room for `len` more characters within the in-flight budget: when they would not
     /// fit, sends `*OPC?` and waits for its `1` (the meter has then read everything before it).
     async fn make_room(&mut self, len: usize) -> Result<(), Error> {
@@ -870,7 +1020,7 @@ impl<T: Transport> Hp34401a<T> {
             self.link.send_line("*OPC?").await?;
             let reply = self
                 .link
-                .read_line(Some(self.options.query_timeout))
+                .read_line(Some(self.options.query_timeout + self.reply_delay))
                 .await?;
             self.in_flight = 0;
             if reply.trim() != "1" {
@@ -904,7 +1054,10 @@ impl<T: Transport> Hp34401a<T> {
     async fn query(&mut self, line: &str, timeout: Duration) -> Result<String, Error> {
         self.make_room(line.len() + 1).await?;
         self.link.send_line(line).await?;
-        let reply = self.link.read_line(Some(timeout)).await?;
+        let reply = self
+            .link
+            .read_line(Some(timeout + self.reply_delay))
+            .await?;
         self.in_flight = 0;
         Ok(reply)
     }

@@ -96,7 +96,7 @@ pub enum Error {
     /// and the driver gave up re-establishing the link after `waited`.
     #[error(
         "{device}: the multimeter did not come back within {}: is it powered and connected? \
-         (last attempt: {last})",
+         (last attempt: {last}){slow}",
         seconds(*waited)
     )]
     NotBack {
@@ -104,6 +104,9 @@ pub enum Error {
         device: String,
         /// How long the driver kept trying (about [`crate::DriverOptions::reconnect_timeout`]).
         waited: std::time::Duration,
+        /// Empty, or what the driver saw earlier of a meter that answers late (`; the meter
+        /// answers slowly: ...`): replies later than the widened deadlines count as none.
+        slow: String,
         /// The last attempt's error.
         #[source]
         last: Box<Error>,
@@ -112,22 +115,28 @@ pub enum Error {
     /// re-established: the meter's memory was cleared (it came back from a power cycle, or was
     /// found in LOCAL and reconfigured), so its readings are gone; the driver sends nothing.
     #[error(
-        "{device}: the multimeter's memory was cleared (power cycle?) since the burst of {count} \
-         readings was armed: the burst must be measured again"
+        "{device}: the multimeter's memory was cleared since the burst of {count} readings was \
+         armed ({cause}): the burst must be measured again"
     )]
     ReadingsLost {
         /// The link.
         device: String,
         /// Readings the lost burst held.
         count: usize,
+        /// What cleared the memory: a power cycle, or gyrocal's own reconfiguration after the
+        /// meter did not answer (see [`crate::LinkLoss::memory_cause`]).
+        cause: String,
     },
     /// Recovery was tried `attempts - 1` times and the last attempt failed too.
-    #[error("{device}: gave up after {attempts} attempts: {last}")]
+    #[error("{device}: gave up after {attempts} attempts{slow}: {last}")]
     GaveUp {
         /// The link.
         device: String,
         /// Attempts made, the first included.
         attempts: u32,
+        /// Empty, or what the driver saw of a meter that answers late (`; the meter answers
+        /// slowly: ...`), so the message names the real cause.
+        slow: String,
         /// The last attempt's error.
         #[source]
         last: Box<Error>,

@@ -74,13 +74,30 @@ impl<T: Transport> Hp34401aMeter<T> {
 
     /// A failed exchange: recover and count it, or give up with `e` when the budget is spent
     /// or `e` is not retryable.
+    ///
+    /// After a timeout the late reply is waited for first ([`Hp34401a::await_late_reply`]):
+    /// thrown away if it comes, and the deadlines widened.
     async fn recover_or(&mut self, e: Error, acc: &mut Acquired, what: &str) -> Result<(), Error> {
         let allowed = self.driver.options().retries;
-        if !e.is_retryable() || acc.retries >= allowed {
+        if !e.is_retryable() {
             return Err(e);
+        }
+        let late = if e.kind() == ErrorKind::Timeout {
+            self.driver.await_late_reply().await
+        } else {
+            None
+        };
+        if acc.retries >= allowed {
+            return Err(Error::GaveUp {
+                device: self.driver.device().to_string(),
+                attempts: acc.retries + 1,
+                slow: self.driver.slow_note(),
+                last: Box::new(e),
+            });
         }
         acc.retries += 1;
         let r = self.driver.recover().await?;
+        let r = crate::Recovery { late, ..r };
         acc.notes.push(format!(
             "{what} failed ({e}); {}; taken again (retry {})",
             r.describe(),

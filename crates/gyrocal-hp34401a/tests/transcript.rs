@@ -203,6 +203,8 @@ async fn timeout_then_device_clear_drain_and_retry() {
         .expect_line("SAMP:COUN 2")
         .expect_line("READ?")
         .silence()
+        // no late reply within max_reply_delay either
+        .silence()
         .expect_raw(&[0x03])
         .query("SYST:ERR?", "-410,\"Query INTERRUPTED\"")
         .query("SYST:ERR?", NO_ERROR)
@@ -217,6 +219,39 @@ async fn timeout_then_device_clear_drain_and_retry() {
     assert_eq!(acq.reestablished(), 0);
     assert_eq!(acq.recoveries[0].errors[0].code, -410);
     assert_eq!(dmm.link_epoch(), 0);
+}
+
+/// A reply that comes after its deadline is recognised as the late answer to the query that
+/// timed out (only one is ever outstanding) and thrown away: it is never read as the answer
+/// to `SYST:ERR?`, and the retry's readings are the retry's. The deadlines widen, and the
+/// device clear now drains until the link is quiet.
+#[tokio::test(start_paused = true)]
+async fn a_late_reply_is_thrown_away_and_never_taken_for_the_next_answer() {
+    let t = configure_script(connect_script())
+        .expect_line("SAMP:COUN 1")
+        .expect_line("READ?")
+        .silence()
+        // the late reply to READ?
+        .reply("+1.00000000E+00")
+        .expect_raw(&[0x03])
+        // drained until quiet: nothing more on its way
+        .silence()
+        .query("SYST:ERR?", NO_ERROR)
+        .query("*ESR?", "+0")
+        .expect_line("SAMP:COUN 1")
+        .query("READ?", "+3.00000000E+00");
+    let mut dmm = ready(t).await;
+    let acq = dmm.acquire(1, Strategy::Stream).await.unwrap();
+    assert_eq!(acq.volts(), [3.0]);
+    assert_eq!(acq.retries, 1);
+    assert_eq!(acq.reestablished(), 0);
+    let note = acq.recoveries[0].describe();
+    assert!(
+        note.starts_with("the meter answers slowly: the reply came")
+            && note.ends_with("device clear"),
+        "{note}"
+    );
+    assert!(dmm.reply_delay() > std::time::Duration::ZERO);
 }
 
 #[tokio::test(start_paused = true)]
@@ -300,6 +335,8 @@ async fn no_answer_after_device_clear_reestablishes_the_link_and_streams_again()
         .expect_line("SAMP:COUN 2")
         .expect_line("READ?")
         .silence()
+        // no late reply within max_reply_delay either
+        .silence()
         .expect_raw(&[0x03])
         .expect_line("SYST:ERR?")
         .silence();
@@ -326,6 +363,8 @@ async fn power_on_bit_reestablishes_the_link() {
     let t = configure_script(connect_script())
         .expect_line("SAMP:COUN 1")
         .expect_line("READ?")
+        .silence()
+        // no late reply within max_reply_delay either
         .silence()
         .expect_raw(&[0x03])
         .query("SYST:ERR?", NO_ERROR)
@@ -395,7 +434,7 @@ async fn fetch_of_a_burst_armed_before_a_reestablish_fails_without_sending() {
     assert!(!err.is_retryable());
     assert!(
         err.to_string()
-            .contains("memory was cleared (power cycle?) since the burst of 2 readings was armed: the burst must be measured again"),
+            .contains("memory was cleared since the burst of 2 readings was armed (gyrocal configured the meter again after it did not answer, which clears its memory; no power cycle was seen: its replies may be too late or lost): the burst must be measured again"),
         "{err}"
     );
     assert!(matches!(
@@ -409,6 +448,8 @@ async fn memory_burst_lost_in_acquire_is_measured_again() {
     let t = configure_script(connect_script())
         .expect_line("SAMP:COUN 2")
         .expect_line("INIT;*OPC?")
+        .silence()
+        // no late reply within max_reply_delay either
         .silence()
         .expect_raw(&[0x03])
         .expect_line("SYST:ERR?")

@@ -75,6 +75,12 @@ impl SocketTransport {
     }
 
     /// Closes the connection and opens a new one (input buffered from the old one is gone).
+    ///
+    /// A failed connect leaves the transport usable for another attempt (the next device
+    /// clear connects again). A refused connection is what a LAN instrument that is switched
+    /// off or rebooting gives; the error says so, and it is not the end of the instrument:
+    /// a driver's recovery keeps reconnecting within its come-back window, exactly as for an
+    /// instrument that accepts the connection and does not answer.
     pub async fn reconnect(&mut self) -> Result<(), LinkError> {
         // a polite close; a peer that is gone already is no error here
         let _ =
@@ -135,11 +141,40 @@ pub fn tcp_connector(addr: String, timeout: Duration) -> Connector {
     Arc::new(move || {
         let addr = addr.clone();
         Box::pin(async move {
-            let t = crate::open_tcp(&addr, timeout).await?;
+            let t = crate::open_tcp(&addr, timeout)
+                .await
+                .map_err(refusal_explained)?;
             let stream: DynStream = Box::new(t.into_stream());
             Ok(stream)
         })
     })
+}
+
+/// Whether a failed connect is the instrument refusing (or resetting) the connection: a LAN
+/// instrument switched off, rebooting, or with its socket held by another client.
+fn is_refused(e: &LinkError) -> bool {
+    matches!(e, LinkError::Io { source, .. } if matches!(
+        source.kind(),
+        std::io::ErrorKind::ConnectionRefused
+            | std::io::ErrorKind::ConnectionReset
+            | std::io::ErrorKind::ConnectionAborted
+    ))
+}
+
+fn refusal_explained(e: LinkError) -> LinkError {
+    if !is_refused(&e) {
+        return e;
+    }
+    match e {
+        LinkError::Io { device, source, .. } => LinkError::Io {
+            device,
+            context: "connecting (refused: is the instrument switched on, back from a reboot, \
+                      and its socket free?)"
+                .into(),
+            source,
+        },
+        other => other,
+    }
 }
 
 #[cfg(test)]
@@ -191,6 +226,47 @@ mod tests {
             "bytes after the query on the old socket: {old_rest:?}"
         );
         assert_eq!(new_first, b"SYST:ERR?\n");
+    }
+
+    /// A refused reconnect (the instrument switched off) is an error that says so, and the
+    /// transport connects again on the next device clear, once the instrument listens again.
+    #[tokio::test]
+    async fn a_refused_reconnect_says_so_and_the_next_clear_connects_again() {
+        let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let addr = listener.local_addr().unwrap();
+        let options = crate::LinkOptions {
+            scpi_socket: true,
+            ..crate::LinkOptions::default()
+        };
+        let mut link = crate::open(&format!("tcp://{addr}"), &options)
+            .await
+            .unwrap();
+        let (first, _) = listener.accept().await.unwrap();
+        // the instrument goes off: its port refuses connections
+        drop(first);
+        drop(listener);
+        let e = link.device_clear().await.unwrap_err();
+        assert!(is_refused(&e), "{e}");
+        let text = e.to_string();
+        assert!(text.contains(&addr.to_string()), "{text}");
+        assert!(
+            text.contains("refused: is the instrument switched on"),
+            "{text}"
+        );
+        // back on: the same address listens again, and the next device clear reconnects
+        let listener = TcpListener::bind(addr).await.unwrap();
+        let server = tokio::spawn(async move {
+            let (mut b, _) = listener.accept().await.unwrap();
+            let mut buf = [0u8; 16];
+            let n = b.read(&mut buf).await.unwrap();
+            b.write_all(b"BACK\n").await.unwrap();
+            buf[..n].to_vec()
+        });
+        link.device_clear().await.unwrap();
+        link.send_line("*IDN?").await.unwrap();
+        let reply = link.read_line(Some(Duration::from_secs(2))).await.unwrap();
+        assert_eq!(reply, "BACK");
+        assert_eq!(server.await.unwrap(), b"*IDN?\n");
     }
 
     /// Without `scpi_socket` a `tcp://` link is a serial converter and keeps the 0x03 byte.

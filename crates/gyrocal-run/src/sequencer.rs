@@ -228,6 +228,13 @@ pub struct SequencerOptions {
     /// it reached the rate and held it for the stability window) before the run fails.
     /// Default 1.
     pub step_retries: u32,
+    /// Times a step whose readings the meter lost before they were fetched (its memory was
+    /// cleared: a power cycle, or the meter's own recovery configured it again) is measured
+    /// again before the run fails. Default 2. This bounds the loop as a whole: a meter that
+    /// loses a step's readings at every attempt (one whose replies are too late for its
+    /// recovery, say) ends the run after 1 + this many attempts at that step, with the
+    /// meter's own words for what cleared its memory.
+    pub lost_retries: u32,
 }
 
 impl Default for SequencerOptions {
@@ -238,6 +245,7 @@ impl Default for SequencerOptions {
             overlap_fetch: true,
             hold_tolerance_factor: 5.0,
             step_retries: 1,
+            lost_retries: 2,
         }
     }
 }
@@ -294,6 +302,23 @@ pub enum SequenceError {
     /// The run was stopped by the operator or a signal.
     #[error("{}", stopped_text(.0))]
     Stopped(StopRequest),
+    /// The meter lost a step's readings at every attempt allowed
+    /// ([`SequencerOptions::lost_retries`]): the run ends rather than measure it for ever.
+    #[error(
+        "step {} at {rate_dps} °/s not recorded: the multimeter lost its readings at all \
+         {attempts} attempts, the most allowed; the last time: {last}",
+        .step + 1
+    )]
+    ReadingsLostAgain {
+        /// Step index (0-based; messages say `index + 1`, the plan's step number).
+        step: usize,
+        /// The step's rate.
+        rate_dps: f64,
+        /// Attempts at the step, the first included.
+        attempts: u32,
+        /// The meter's last error (it says what cleared its memory).
+        last: Box<dyn MeterError>,
+    },
     /// The sequencer panicked (a bug); the table was still brought to rest.
     #[error("internal error (panic) in the sequencer: {0}")]
     Panicked(String),
@@ -405,6 +430,9 @@ pub struct Sequencer<M: Multimeter, T: RateTable> {
     emergency_sent: bool,
     /// Steps whose readings the meter lost before they were fetched, to measure again.
     lost: Vec<Step>,
+    /// How many times each step's readings were lost (bounded by
+    /// [`SequencerOptions::lost_retries`]).
+    lost_count: HashMap<usize, u32>,
     /// The warm-up being watched (a drift record's first segments; see [`crate::monitor`]).
     warmup: Option<WarmupWatch>,
     /// A drift record's running Allan deviation.
@@ -431,6 +459,7 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
             moved: false,
             emergency_sent: false,
             lost: Vec::new(),
+            lost_count: HashMap::new(),
             warmup: None,
             adev: None,
         }
@@ -1189,6 +1218,20 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
                 let e = dmm_error(e);
                 if !readings_lost(&e) {
                     return Err(e);
+                }
+                let times = self.lost_count.entry(step.index).or_default();
+                *times += 1;
+                if *times > self.options.lost_retries {
+                    let attempts = *times;
+                    let SequenceError::Dmm(last) = e else {
+                        return Err(e);
+                    };
+                    return Err(SequenceError::ReadingsLostAgain {
+                        step: step.index,
+                        rate_dps: step.rate_dps,
+                        attempts,
+                        last,
+                    });
                 }
                 self.log_retry(
                     Some(step.index),

@@ -104,35 +104,44 @@ pub enum Error {
         device: String,
     },
     /// Readings still in the meter were lost (the link was re-established since they were
-    /// taken: a power cycle clears the memory).
+    /// taken: a power cycle clears the memory, and so does gyrocal's own reconfiguration).
     #[error(
-        "{device}: the multimeter's memory was cleared (power cycle?) since {count} readings \
-         were taken: they must be measured again"
+        "{device}: the multimeter's memory was cleared since {count} readings were taken \
+         ({cause}): they must be measured again"
     )]
     ReadingsLost {
         /// The link.
         device: String,
         /// Readings lost.
         count: usize,
+        /// What cleared the memory: a power cycle, or gyrocal's reconfiguration after the
+        /// meter did not answer or the connection was lost.
+        cause: String,
     },
     /// The meter did not come back within the reconnect timeout.
-    #[error("{device}: the multimeter did not come back within {:.0} s: is it powered and on the network? (last attempt: {last})", waited.as_secs_f64())]
+    #[error("{device}: the multimeter did not come back within {:.0} s: is it powered and on the network? (last attempt: {last}){slow}", waited.as_secs_f64())]
     NotBack {
         /// The link.
         device: String,
         /// How long the driver kept trying.
         waited: std::time::Duration,
+        /// Empty, or what the driver saw earlier of a meter that answers late (`; the meter
+        /// answers slowly: ...`): replies later than the widened deadlines count as none.
+        slow: String,
         /// The last attempt's error.
         #[source]
         last: Box<Error>,
     },
     /// The retry budget was spent; the last failure.
-    #[error("{device}: gave up after {attempts} attempts: {last}")]
+    #[error("{device}: gave up after {attempts} attempts{slow}: {last}")]
     GaveUp {
         /// The link.
         device: String,
         /// Attempts made, the first included.
         attempts: u32,
+        /// Empty, or what the driver saw of a meter that answers late (`; the meter answers
+        /// slowly: ...`), so the message names the real cause.
+        slow: String,
         /// The last failure.
         #[source]
         last: Box<Error>,

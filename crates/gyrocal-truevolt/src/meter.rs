@@ -39,6 +39,13 @@ pub struct TruevoltOptions {
     pub reconnect_timeout: Duration,
     /// Pause between two reconnect attempts. Default 1 s.
     pub reconnect_pause: Duration,
+    /// How late a reply may come and still be recognised as the late answer to the query
+    /// that timed out. After a timeout the driver waits this long for it on the same
+    /// connection before the recovery's reconnect; when it comes it is thrown away (the
+    /// reconnect drops anything else owed to the old connection), and every later deadline
+    /// is widened by about twice the lateness seen (at most this much). A reply later than
+    /// this is treated as lost. Default 5 s.
+    pub max_reply_delay: Duration,
 }
 
 impl TruevoltOptions {
@@ -56,6 +63,7 @@ impl TruevoltOptions {
             timeout_slack: Duration::from_secs(1),
             reconnect_timeout: Duration::from_secs(30),
             reconnect_pause: Duration::from_secs(1),
+            max_reply_delay: Duration::from_secs(5),
         }
     }
 
@@ -94,6 +102,13 @@ pub struct TruevoltMeter<T: Transport> {
     progress: Option<ProgressFn>,
     /// Incremented whenever the link is re-established (the meter may have lost its memory).
     epoch: u64,
+    /// What cleared the memory the last time the link was re-established (for
+    /// [`Error::ReadingsLost`]).
+    loss_cause: Option<String>,
+    /// Added to every reply deadline once the meter was seen answering late.
+    reply_delay: Duration,
+    /// The latest a late reply came after its deadline, if one did.
+    latest_seen: Option<Duration>,
 }
 
 /// Parses one reading (`+1.00010310E+01`; ±9.9E37 is an overload).
@@ -132,6 +147,68 @@ impl<T: Transport> TruevoltMeter<T> {
             samp_count: None,
             progress: None,
             epoch: 0,
+            loss_cause: None,
+            reply_delay: Duration::ZERO,
+            latest_seen: None,
+        }
+    }
+
+    /// What every reply deadline has been widened by, after replies came late (zero for a
+    /// meter that answers in time).
+    pub fn reply_delay(&self) -> Duration {
+        self.reply_delay
+    }
+
+    /// After a query timed out: waits up to [`TruevoltOptions::max_reply_delay`] on the same
+    /// connection for its late reply. When it comes the meter is alive but slow: the reply is
+    /// thrown away, the deadlines are widened, and the returned note says so. `None` when
+    /// nothing came. One query at a time is outstanding, so what comes can only be its reply.
+    async fn await_late_reply(&mut self) -> Option<String> {
+        let waited_from = Instant::now();
+        let came = match self
+            .link
+            .read_line(Some(self.options.max_reply_delay))
+            .await
+        {
+            Ok(_) => true,
+            Err(e) => {
+                matches!(&e, gyrocal_link::LinkError::Timeout { partial, .. } if !partial.is_empty())
+            }
+        };
+        if !came {
+            return None;
+        }
+        let late = waited_from.elapsed();
+        self.latest_seen = Some(self.latest_seen.map_or(late, |l| l.max(late)));
+        let widened = ((self.reply_delay + late + self.options.timeout_slack) * 2)
+            .min(self.options.max_reply_delay);
+        self.reply_delay = self.reply_delay.max(widened);
+        tracing::warn!(
+            device = %self.device(),
+            late_s = late.as_secs_f64(),
+            reply_delay_s = self.reply_delay.as_secs_f64(),
+            "the multimeter answers late; its late reply is thrown away and deadlines widened"
+        );
+        Some(format!(
+            "the meter answers slowly: the reply came {:.1} s after its deadline and was thrown \
+             away; reply deadlines widened by {:.1} s",
+            late.as_secs_f64(),
+            self.reply_delay.as_secs_f64()
+        ))
+    }
+
+    /// For [`Error::GaveUp`]: what was seen of a slow meter, or nothing.
+    fn slow_note(&self) -> String {
+        match self.latest_seen {
+            Some(late) => format!(
+                "; the meter answers slowly: a reply came {:.1} s after its deadline, and \
+                 deadlines were widened by {:.1} s (at most {:.1} s, \
+                 TruevoltOptions::max_reply_delay)",
+                late.as_secs_f64(),
+                self.reply_delay.as_secs_f64(),
+                self.options.max_reply_delay.as_secs_f64()
+            ),
+            None => String::new(),
         }
     }
 
@@ -175,7 +252,7 @@ impl<T: Transport> TruevoltMeter<T> {
     async fn query(&mut self, command: &str, timeout: Duration) -> Result<String, Error> {
         self.send(command).await?;
         self.link
-            .read_line(Some(timeout))
+            .read_line(Some(timeout + self.reply_delay))
             .await
             .map_err(|source| Error::Link {
                 command: command.to_string(),
@@ -250,7 +327,8 @@ impl<T: Transport> TruevoltMeter<T> {
         // a Truevolt posing as an older meter answers SYST:IDEN? with that personality; the
         // older meter itself does not know the command (-113) and answers nothing
         self.send("SYST:IDEN?").await?;
-        match self.link.read_line(Some(self.options.iden_timeout)).await {
+        let iden_timeout = self.options.iden_timeout + self.reply_delay;
+        match self.link.read_line(Some(iden_timeout)).await {
             Ok(reply) if reply.trim().trim_matches('"').ends_with(said.as_str()) => {
                 tracing::info!(device = %self.device(), idn = %raw, model = %want,
                     "a Truevolt posing as a {said} (SYST:IDEN {reply}): trusting the plan's model");
@@ -333,7 +411,7 @@ impl<T: Transport> TruevoltMeter<T> {
         total: usize,
     ) -> Result<Vec<Reading>, Error> {
         let mut out = Vec::with_capacity(expected);
-        let mut timeout = first;
+        let mut timeout = first + self.reply_delay;
         loop {
             let field = self
                 .link
@@ -453,6 +531,10 @@ impl<T: Transport> TruevoltMeter<T> {
             return Err(Error::ReadingsLost {
                 device: self.device(),
                 count,
+                cause: self
+                    .loss_cause
+                    .clone()
+                    .unwrap_or_else(|| "the link was re-established".into()),
             });
         }
         self.send("FETC?").await?;
@@ -463,19 +545,33 @@ impl<T: Transport> TruevoltMeter<T> {
 
     /// A failed exchange: recover and count it in `acc`, or give up when the budget is spent
     /// or `e` is not retryable.
+    ///
+    /// After a timeout the late reply is waited for first (see
+    /// [`TruevoltOptions::max_reply_delay`]): thrown away if it comes, and the deadlines
+    /// widened, so a meter that is slow but alive is not reconnected again and again.
     async fn recover_or(&mut self, e: Error, acc: &mut Acquired, what: &str) -> Result<(), Error> {
         if !e.is_retryable() {
             return Err(e);
         }
+        let late = if gyrocal_meter::MeterError::kind(&e) == gyrocal_meter::ErrorKind::Timeout {
+            self.await_late_reply().await
+        } else {
+            None
+        };
         if acc.retries >= self.options.retries {
             return Err(Error::GaveUp {
                 device: self.device(),
                 attempts: acc.retries + 1,
+                slow: self.slow_note(),
                 last: Box::new(e),
             });
         }
         acc.retries += 1;
         let note = self.recover_inner().await?;
+        let note = match late {
+            Some(late) => format!("{late}; {note}"),
+            None => note,
+        };
         acc.notes.push(format!(
             "{what} failed ({e}); {note}; taken again (retry {})",
             acc.retries
@@ -502,7 +598,7 @@ impl<T: Transport> TruevoltMeter<T> {
             Ok::<_, Error>((errors, esr))
         }
         .await;
-        let cause = match plain {
+        let (cause, memory_cause) = match plain {
             Ok((errors, esr)) => {
                 let value: u16 = esr.trim().trim_start_matches('+').parse().map_err(|_| {
                     Error::InvalidReply {
@@ -523,13 +619,30 @@ impl<T: Transport> TruevoltMeter<T> {
                         )
                     });
                 }
-                "the Power On status bit was set (power cycle)".to_string()
+                (
+                    "the Power On status bit was set (power cycle)".to_string(),
+                    "the meter was power-cycled: its Power On status bit was set".to_string(),
+                )
             }
-            Err(e) if e.is_retryable() => format!("the meter did not answer ({e})"),
+            Err(e) if e.is_retryable() => (
+                format!("the meter did not answer ({e})"),
+                "gyrocal configured the meter again after it did not answer, which clears its \
+                 memory; no power cycle was seen: its replies may be too late or lost"
+                    .to_string(),
+            ),
+            // the reconnect itself failed (a meter switched off or rebooting refuses the
+            // connection): the same come-back window as a meter that does not answer
+            Err(e @ Error::Link { .. }) => (
+                format!("the connection was lost ({e})"),
+                "the connection to the meter was lost and gyrocal configured it again, which \
+                 clears its memory"
+                    .to_string(),
+            ),
             Err(e) => return Err(e),
         };
         // whatever the meter held may be gone
         self.epoch += 1;
+        self.loss_cause = Some(memory_cause);
         self.samp_count = None;
         tracing::warn!(device = %self.device(), %cause, "multimeter link lost; re-establishing it");
         let deadline = started + self.options.reconnect_timeout;
@@ -551,6 +664,7 @@ impl<T: Transport> TruevoltMeter<T> {
                         return Err(Error::NotBack {
                             device: self.device(),
                             waited: now - started,
+                            slow: self.slow_note(),
                             last: Box::new(e),
                         });
                     }

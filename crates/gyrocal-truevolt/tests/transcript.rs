@@ -334,14 +334,20 @@ async fn a_silent_meter_gives_up_after_the_retry_budget() {
         .expect_line("SAMP:COUN 3")
         .expect_line("INIT")
         .expect_line("DATA:REM? 3,WAIT")
+        .silence()
+        // no late reply within max_reply_delay either
         .silence();
     t = recovery(t)
         .expect_line("INIT")
         .expect_line("DATA:REM? 3,WAIT")
+        .silence()
+        // no late reply within max_reply_delay either
         .silence();
     t = recovery(t)
         .expect_line("INIT")
         .expect_line("DATA:REM? 3,WAIT")
+        .silence()
+        // no late reply within max_reply_delay either
         .silence();
     let mut m = ready(t, options(Model::M34461A)).await;
     let e = m.measure(3, false).await.unwrap_err();

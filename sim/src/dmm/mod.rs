@@ -132,6 +132,19 @@ pub enum Fault {
         #[serde(default)]
         off_s: Option<f64>,
     },
+    /// Replies held back: every byte the meter sends from now on reaches the host `delay_s`
+    /// sim seconds after it was sent, for the next `replies` replies (lines), or for good.
+    /// The meter itself is alive and obeys at once. On the 34401A the held bytes are already
+    /// on their way (a serial converter's deep buffer, a network bridge): a device clear does
+    /// not recall them. On a Truevolt the reply is sent late on the connection its query came
+    /// on, and a reconnect drops it (see [`crate::truevolt`]).
+    Slow {
+        /// How late each reply is, sim seconds.
+        delay_s: f64,
+        /// Replies held back; `None`: every reply from now on.
+        #[serde(default)]
+        replies: Option<u32>,
+    },
     /// An entry pushed into the error queue.
     PushError {
         /// The code.
@@ -287,6 +300,8 @@ pub struct DmmStats {
     pub error_queue: Vec<(i32, String)>,
     /// True once the simulator has stopped (stop, disconnect, or the host closed the link).
     pub stopped: bool,
+    /// Replies held back by a [`Fault::Slow`] (sent late).
+    pub late_replies: u64,
 }
 
 pub(crate) enum Ctl {
@@ -587,6 +602,11 @@ struct Meter {
     esr: u8,
     /// Switched off until then (a power cycle).
     off_until: Option<Instant>,
+    /// A [`Fault::Slow`] in force: the delay, and the replies it still holds back (`None`:
+    /// every one).
+    slow: Option<(Duration, Option<u32>)>,
+    /// Bytes on their way to the host, with the instant they arrive (in order).
+    delayed: VecDeque<(Vec<u8>, Instant)>,
     /// GPIB mode: addressed to talk.
     talk: bool,
     /// GPIB mode: addressed to talk while commands were still waiting to run; whether that
@@ -648,6 +668,8 @@ impl Meter {
             memory_fault: None,
             esr: ESR_PON,
             off_until: None,
+            slow: None,
+            delayed: VecDeque::new(),
         }
     }
 
@@ -665,12 +687,28 @@ impl Meter {
                 && let Some((bytes, due)) = self.tx.take_if(|(_, due)| *due <= now)
             {
                 let _ = due;
+                if self.slow.is_some() || !self.delayed.is_empty() {
+                    // held back (or behind bytes that are): they arrive later, in order
+                    if self.gpib() && bytes.last() == Some(&b'\n') {
+                        self.talk = false;
+                    }
+                    self.hold_back(bytes, now);
+                    continue;
+                }
                 if wr.write_all(&bytes).await.is_err() || wr.flush().await.is_err() {
                     break;
                 }
                 if self.gpib() && bytes.last() == Some(&b'\n') {
                     // end of message (EOI): the meter stops talking
                     self.talk = false;
+                }
+                continue;
+            }
+            if self.delayed.front().is_some_and(|(_, at)| *at <= now)
+                && let Some((bytes, _)) = self.delayed.pop_front()
+            {
+                if wr.write_all(&bytes).await.is_err() || wr.flush().await.is_err() {
+                    break;
                 }
                 continue;
             }
@@ -730,11 +768,33 @@ impl Meter {
         )
     }
 
-    fn next_wake(&self) -> Option<Instant> {
-        if self.off_until.is_some() {
-            return self.off_until;
+    /// Puts bytes the meter sent at `now` on their way with the [`Fault::Slow`] delay in
+    /// force (none when it ran out: they still wait behind the earlier ones).
+    fn hold_back(&mut self, bytes: Vec<u8>, now: Instant) {
+        let delay = self.slow.map_or(Duration::ZERO, |(d, _)| d);
+        let at = self
+            .delayed
+            .back()
+            .map_or(now + delay, |(_, last)| (*last).max(now + delay));
+        if self.slow.is_some() {
+            let lines = bytes.iter().filter(|&&b| b == b'\n').count() as u64;
+            self.counters.late_replies += lines;
+            if let Some((_, Some(left))) = self.slow.as_mut() {
+                *left = left.saturating_sub(u32::try_from(lines).unwrap_or(u32::MAX));
+                if *left == 0 {
+                    self.slow = None;
+                }
+            }
         }
-        let mut wake: Option<Instant> = None;
+        self.delayed.push_back((bytes, at));
+    }
+
+    fn next_wake(&self) -> Option<Instant> {
+        let in_transit = self.delayed.front().map(|(_, at)| *at);
+        if let Some(off) = self.off_until {
+            return Some(in_transit.map_or(off, |t| t.min(off)));
+        }
+        let mut wake: Option<Instant> = in_transit;
         let mut consider = |t: Instant| wake = Some(wake.map_or(t, |w| w.min(t)));
         if let Some((_, due)) = &self.tx
             && self.may_send()
@@ -890,6 +950,10 @@ impl Meter {
             Fault::PowerCycle { off_s } => self.power_off(off_s),
             Fault::Overload { readings } => self.overloads_left += readings,
             Fault::PushError { code, message } => self.raise(code, &message),
+            Fault::Slow { delay_s, replies } => {
+                let delay = Duration::from_secs_f64(delay_s.clamp(0.0, 1e6));
+                self.slow = (replies != Some(0)).then(|| (scaled(&self.cfg, delay), replies));
+            }
         }
     }
 
