@@ -1739,3 +1739,55 @@ fn e2e_sigint_during_a_record_without_a_table_says_nothing_was_moved() {
     let last = sim.finish();
     assert_eq!(last["table"]["demands_seen"], 0, "{last}");
 }
+
+// ---------------------------------------------------------------------------------------------
+// The slow table over pseudo-terminals: replies held back, never taken for another query's
+
+/// `count` table replies held back by `real_s` real seconds from reading 40 (step 1) on, on the
+/// bench at the usual time scale (more would outlast the test's 20 s bound on the run): the run completes, each recorded step's measured table rate is
+/// its own (a status byte, an error entry or a mode taken for a rate would show), the late
+/// replies are said to be recognised and the table to answer slowly, and the table ends parked.
+fn slow_table_completes(real_s: f64, count: u32) {
+    let tmp = tempfile::tempdir().unwrap();
+    let scale: f64 = TIME_SCALE.parse().unwrap();
+    let spec = format!("table:slow@reading40x{count}/{}s", real_s * scale);
+    let (plan, sim, dir) = start(tmp.path(), &[&spec]);
+    let end = Run::start(&plan, &sim, &out_args(&dir), None).wait();
+    assert_eq!(end.code, Some(0), "{spec}: {end:?}");
+    check_complete(&dir);
+    for row in steps(&dir) {
+        let demanded: f64 = num(&row, "rate_dps");
+        let measured: f64 = num(&row, "rate_meas_dps");
+        assert!(
+            (measured - demanded).abs() < 0.01,
+            "{spec}: step at {demanded} °/s recorded a table rate of {measured} °/s"
+        );
+    }
+    let m = manifest(&dir);
+    let said =
+        |what: &str| {
+            m["retries"].as_array().unwrap().iter().any(|r| {
+                r["instrument"] == "table" && r["message"].as_str().unwrap().contains(what)
+            })
+        };
+    assert!(said("the table answers slowly"), "{spec}: {m}");
+    assert!(said("discarded"), "{spec}: {m}");
+    assert!(
+        end.stderr.contains("the table answers slowly"),
+        "{}",
+        end.stderr
+    );
+    let last = sim.finish();
+    assert!(fault_fired(&last, &spec), "{last}");
+    assert_table_parked(&last);
+}
+
+#[test]
+fn e2e_a_table_whose_replies_come_half_a_second_late_keeps_in_step() {
+    slow_table_completes(0.5, 20);
+}
+
+#[test]
+fn e2e_a_table_whose_replies_come_1_2_s_late_keeps_in_step() {
+    slow_table_completes(1.2, 8);
+}
