@@ -76,7 +76,9 @@ pub(crate) fn write_atomic_with(
 /// Removes a temporary file after a failed write (a missing one is fine).
 fn remove_temp(tmp: &Path) {
     match fs::remove_file(tmp) {
-        Ok(()) => tracing::debug!(file = %tmp.display(), "removed the temporary file of a failed write"),
+        Ok(()) => {
+            tracing::debug!(file = %tmp.display(), "removed the temporary file of a failed write")
+        }
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
         Err(e) => {
             tracing::warn!(file = %tmp.display(), error = %e, "cannot remove the temporary file of a failed write")

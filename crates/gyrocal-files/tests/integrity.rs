@@ -7,9 +7,7 @@
 use std::fs;
 use std::path::Path;
 
-use gyrocal_files::rundir::{
-    FileState, STEPS_CSV, WriteResult as _, check_files, verify,
-};
+use gyrocal_files::rundir::{FileState, STEPS_CSV, WriteResult as _, check_files, verify};
 use gyrocal_files::{
     Plan, RunDir, RunError, RunErrorKind, RunMeta, RunResults, Sample, Status, StepRecord,
 };
@@ -102,19 +100,29 @@ fn an_emptied_steps_csv_of_a_run_that_is_not_complete_is_found() {
     }
     assert!(check_files(&dir, &[STEPS_CSV]).unwrap().is_empty());
     let steps = dir.join(STEPS_CSV);
-    let header = fs::read_to_string(&steps).unwrap().lines().next().unwrap().to_string();
+    let header = fs::read_to_string(&steps)
+        .unwrap()
+        .lines()
+        .next()
+        .unwrap()
+        .to_string();
     fs::write(&steps, format!("{header}\n")).unwrap();
     let d = check_files(&dir, &[STEPS_CSV]).unwrap();
     assert_eq!(d.len(), 1, "{d:?}");
     assert!(
-        d[0].text.contains("lacks 3 of the 3 steps manifest.json records as done (plan steps 1, 2, 3)"),
+        d[0].text
+            .contains("lacks 3 of the 3 steps manifest.json records as done (plan steps 1, 2, 3)"),
         "{}",
         d[0].text
     );
     // and verify says the run cannot be verified (it has no checksums yet)
     let v = verify(&dir).unwrap();
     assert!(!v.ok());
-    assert!(v.problems[0].contains("not complete (status failed)"), "{:?}", v.problems);
+    assert!(
+        v.problems[0].contains("not complete (status failed)"),
+        "{:?}",
+        v.problems
+    );
 }
 
 #[test]
@@ -138,7 +146,10 @@ fn results_are_written_through_the_run_directory_and_verified() {
     {
         let mut r = RunResults::open(&dir).unwrap();
         // while it holds the lock nobody else writes the run
-        assert!(matches!(RunResults::open(&dir), Err(RunError::Locked { .. })));
+        assert!(matches!(
+            RunResults::open(&dir),
+            Err(RunError::Locked { .. })
+        ));
         r.write_result("allan.html", b"<html></html>").unwrap();
         assert!(r.manifest().checksums.contains_key("allan.html"));
     }
@@ -159,7 +170,11 @@ fn results_are_written_through_the_run_directory_and_verified() {
     let v = verify(&dir).unwrap();
     let c = v.checks.iter().find(|c| c.file == "allan.json").unwrap();
     assert_eq!(c.state, FileState::NotRecorded);
-    assert!(c.describe().contains("allan.json NOT RECORDED"), "{}", c.describe());
+    assert!(
+        c.describe().contains("allan.json NOT RECORDED"),
+        "{}",
+        c.describe()
+    );
 }
 
 #[test]

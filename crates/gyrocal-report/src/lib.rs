@@ -371,9 +371,15 @@ pub fn load_inputs_checked(
         };
         let mut input = load_input(p)?;
         // fit.json's own note (the report always adds it) says the same as ours
-        let fit = p.join(gyrocal_files::rundir::FIT_JSON).display().to_string();
+        let fit = p
+            .join(gyrocal_files::rundir::FIT_JSON)
+            .display()
+            .to_string();
         let fit_noted = input.notes.iter().any(|n| n.contains(&fit));
-        let fit_note = format!("MODIFIED SINCE THE RUN: {}", gyrocal_files::rundir::FIT_JSON);
+        let fit_note = format!(
+            "MODIFIED SINCE THE RUN: {}",
+            gyrocal_files::rundir::FIT_JSON
+        );
         let ours = notes
             .into_iter()
             .filter(|n| !(fit_noted && n.starts_with(&fit_note)));

@@ -53,7 +53,10 @@ fn drift_run(tmp: &Path, no_report: bool) -> PathBuf {
     let plan = short_drift_plan(tmp);
     let dir = tmp.join("drift");
     let mut c = gyrocal();
-    c.arg("run").arg(&plan).args(["--simulate", "--out"]).arg(&dir);
+    c.arg("run")
+        .arg(&plan)
+        .args(["--simulate", "--out"])
+        .arg(&dir);
     if no_report {
         c.arg("--no-report");
     }
@@ -121,8 +124,9 @@ fn verify_fails_a_complete_run_whose_manifest_lost_its_checksums() {
     assert_eq!(r.status.code(), Some(0), "{}", text(&r));
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
     assert!(
-        html.contains("NOT CHECKED: manifest.json records no checksum of samples.csv and steps.csv")
-            || html.contains("NOT CHECKED: manifest.json records no checksum of steps.csv"),
+        html.contains(
+            "NOT CHECKED: manifest.json records no checksum of samples.csv and steps.csv"
+        ) || html.contains("NOT CHECKED: manifest.json records no checksum of steps.csv"),
         "banner"
     );
     // and an emptied steps.csv is still found by the steps the manifest records as done
@@ -220,7 +224,10 @@ fn verify_and_report_refuse_a_samples_csv_linked_to_dev_zero_at_once() {
     let o = within(c, Duration::from_secs(20));
     let out = text(&o);
     assert_eq!(o.status.code(), Some(1), "{out}");
-    assert!(out.contains("samples.csv") && out.contains("not a regular file"), "{out}");
+    assert!(
+        out.contains("samples.csv") && out.contains("not a regular file"),
+        "{out}"
+    );
     assert!(!dir.join("allan.json").exists());
 }
 
@@ -279,12 +286,19 @@ fn a_full_disk_while_writing_the_allan_page_leaves_no_temporary_file_and_says_wh
     std::os::unix::fs::symlink("/dev/full", &tmp_page).unwrap();
     let r = gyrocal().arg("report").arg(&dir).output().unwrap();
     let out = text(&r);
-    assert_eq!(r.status.code(), Some(1), "a full disk is not bad input: {out}");
+    assert_eq!(
+        r.status.code(),
+        Some(1),
+        "a full disk is not bad input: {out}"
+    );
     assert!(
         out.contains("No space left on device") && out.contains(".allan.html.tmp"),
         "{out}"
     );
-    assert!(out.contains("written:") && out.contains("allan.json"), "{out}");
+    assert!(
+        out.contains("written:") && out.contains("allan.json"),
+        "{out}"
+    );
     assert!(
         std::fs::symlink_metadata(&tmp_page).is_err(),
         "the temporary file is removed"
@@ -326,6 +340,9 @@ fn a_run_that_cannot_write_its_first_file_exits_1_and_leaves_nothing() {
         .unwrap();
     let out = text(&o);
     assert_eq!(o.status.code(), Some(1), "{out}");
-    assert!(out.contains("samples.csv") || out.contains("manifest"), "{out}");
+    assert!(
+        out.contains("samples.csv") || out.contains("manifest"),
+        "{out}"
+    );
     assert!(!dir.exists(), "the run directory it created is removed");
 }

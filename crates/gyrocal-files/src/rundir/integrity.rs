@@ -317,7 +317,11 @@ pub fn check_files(dir: &Path, files: &[&str]) -> Result<Vec<Discrepancy>, RunEr
             .filter(|s| !have.contains(s))
             .collect();
         if !lacking.is_empty() {
-            let shown: Vec<String> = lacking.iter().take(8).map(|s| (s + 1).to_string()).collect();
+            let shown: Vec<String> = lacking
+                .iter()
+                .take(8)
+                .map(|s| (s + 1).to_string())
+                .collect();
             out.push(Discrepancy {
                 file: STEPS_CSV.to_string(),
                 text: format!(
@@ -328,7 +332,11 @@ pub fn check_files(dir: &Path, files: &[&str]) -> Result<Vec<Discrepancy>, RunEr
                     MANIFEST_JSON,
                     if lacking.len() == 1 { "" } else { "s" },
                     shown.join(", "),
-                    if lacking.len() > shown.len() { ", …" } else { "" }
+                    if lacking.len() > shown.len() {
+                        ", …"
+                    } else {
+                        ""
+                    }
                 ),
                 differs: true,
             });

@@ -413,7 +413,9 @@ fn opened(e: crate::open::OpenError) -> RunError {
     match e {
         crate::open::OpenError::NotRegular { path, what } => RunError::Inconsistent {
             path,
-            message: format!("not a regular file (it is {what}); a run directory's files are regular files"),
+            message: format!(
+                "not a regular file (it is {what}); a run directory's files are regular files"
+            ),
         },
         crate::open::OpenError::Io { path, source } => RunError::Io {
             path,
@@ -1882,7 +1884,11 @@ const NOT_RESULTS: [&str; 6] = [
 /// stores the manifest (the caller holds the run's lock). If the manifest cannot be stored,
 /// the result file is on disk without a record (`gyrocal verify` then says so).
 fn record_result(dir: &Path, m: &mut Manifest, name: &str, bytes: &[u8]) -> Result<(), RunError> {
-    if name.contains(['/', '\\']) || name.starts_with('.') || name.is_empty() || NOT_RESULTS.contains(&name) {
+    if name.contains(['/', '\\'])
+        || name.starts_with('.')
+        || name.is_empty()
+        || NOT_RESULTS.contains(&name)
+    {
         return Err(RunError::Protocol {
             path: dir.join(name),
             message: "a result file name must be a plain, non-hidden name other than the run's data, manifest, fit, lock and log".into(),

@@ -84,7 +84,11 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
             ))
             .into());
         }
-        let notes = checked(drift, &gyrocal_report::DRIFT_FILES_READ, args.allow_modified)?;
+        let notes = checked(
+            drift,
+            &gyrocal_report::DRIFT_FILES_READ,
+            args.allow_modified,
+        )?;
         for n in &notes {
             eprintln!("gyrocal: warning: {n}");
         }

@@ -444,14 +444,14 @@ fn open_run_dir_inner(
             "{}: the run never started (no manifest.json); starting it in this directory",
             dir.display()
         );
-        let run =
-            RunDir::create(dir, plan, meta).map_err(|e| crate::run_dir_error(e, Some("--resume")))?;
+        let run = RunDir::create(dir, plan, meta)
+            .map_err(|e| crate::run_dir_error(e, Some("--resume")))?;
         attach_log(dir);
         return Ok((dir.clone(), run));
     }
     if let Some(dir) = &args.resume {
-        let mut run =
-            RunDir::open_for_resume(dir, plan).map_err(|e| crate::run_dir_error(e, Some("--resume")))?;
+        let mut run = RunDir::open_for_resume(dir, plan)
+            .map_err(|e| crate::run_dir_error(e, Some("--resume")))?;
         // the record keeps the station the run started on; a resume on other instruments is
         // a departure from it, recorded so the certificate says so
         if let Some(text) = station_change(run.manifest().station.as_ref(), meta.station.as_ref()) {

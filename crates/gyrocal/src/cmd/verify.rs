@@ -29,7 +29,10 @@ pub fn run(args: &VerifyArgs) -> anyhow::Result<u8> {
         if v.checks.is_empty() && v.problems.is_empty() {
             // a complete run always has data files to check: this cannot be a clean run
             bad += 1;
-            println!("{}: no file recorded: nothing can be verified", dir.display());
+            println!(
+                "{}: no file recorded: nothing can be verified",
+                dir.display()
+            );
         }
         for c in &v.checks {
             if !c.ok() {
