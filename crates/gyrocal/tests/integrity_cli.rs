@@ -275,6 +275,23 @@ fn the_allan_results_are_recorded_and_an_edited_allan_json_fails_verify_and_repo
     let ok = verify(&dir);
     assert_eq!(ok.status.code(), Some(0), "{}", text(&ok));
     assert!(!dir.join(".lock").exists());
+    // an analysis an earlier gyrocal wrote without a record: verify fails it, and the report
+    // (no flag needed: nothing recorded differs) writes it again, recorded
+    let mut m = json(&dir, "manifest.json");
+    m["checksums"].as_object_mut().unwrap().remove("allan.json");
+    std::fs::write(
+        dir.join("manifest.json"),
+        serde_json::to_vec_pretty(&m).unwrap(),
+    )
+    .unwrap();
+    let bad = verify(&dir);
+    let out = text(&bad);
+    assert_eq!(bad.status.code(), Some(1), "{out}");
+    assert!(out.contains("allan.json NOT RECORDED"), "{out}");
+    let r = gyrocal().arg("report").arg(&dir).output().unwrap();
+    assert_eq!(r.status.code(), Some(0), "{}", text(&r));
+    let ok = verify(&dir);
+    assert_eq!(ok.status.code(), Some(0), "{}", text(&ok));
 }
 
 #[test]

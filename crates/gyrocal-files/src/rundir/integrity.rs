@@ -129,7 +129,12 @@ impl FileCheck {
             FileState::NotRecorded => format!(
                 "{file} NOT RECORDED: the file is there but the manifest holds no checksum of \
                  it (written outside the run directory, by an earlier gyrocal, or its record was \
-                 removed); it cannot be verified"
+                 removed); it cannot be verified{}",
+                if file == FIT_JSON {
+                    ""
+                } else {
+                    " (`gyrocal report RUN_DIR` writes the Allan results again, recorded)"
+                }
             ),
         }
     }
@@ -255,9 +260,10 @@ pub struct Discrepancy {
 ///
 /// A file differs ([`Discrepancy::differs`]) when its bytes differ from its recorded SHA-256
 /// or it is not a regular file; when `fit.json` was recorded and is gone (a reader would fit
-/// the data itself, silently); when it is a result file on disk without a record; and
-/// `steps.csv` when it lacks a step the manifest records as done (an emptied `steps.csv` in a
-/// run that is not complete, or whose checksums were removed). A missing data file is left to
+/// the data itself, silently); when `fit.json` is on disk without a record (an Allan result
+/// without one, left by an earlier gyrocal, is not: its reader writes it again, recorded);
+/// and `steps.csv` when it lacks a step the manifest records as done (an emptied `steps.csv`
+/// in a run that is not complete, or whose checksums were removed). A missing data file is left to
 /// the reader, whose error names it. A complete run without a checksum of a data file read
 /// gets a discrepancy that does not differ: runs written before gyrocal recorded checksums
 /// have none, and their report says the files could not be checked. An error only when the
@@ -285,13 +291,16 @@ pub fn check_files(dir: &Path, files: &[&str]) -> Result<Vec<Discrepancy>, RunEr
             // the reader's own error names a missing data file (exit 2); a recorded fit that
             // is gone would be replaced by the reader's own fit without a word
             FileState::Missing => file == FIT_JSON,
-            FileState::Changed { .. } | FileState::Unreadable(_) | FileState::NotRecorded => true,
+            FileState::Changed { .. } | FileState::Unreadable(_) => true,
+            // a fit.json the run never recorded is not the run's; an Allan result left
+            // unrecorded by an earlier gyrocal is replaced (and recorded) by its reader
+            FileState::NotRecorded => file == FIT_JSON,
         };
         if differs {
             out.push(Discrepancy {
                 file: file.to_string(),
                 text: c.describe(),
-                differs: true,
+                differs,
             });
         }
     }
