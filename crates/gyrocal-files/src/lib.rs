@@ -17,8 +17,13 @@
 //! - [`station`]: the bench a run is made on: laboratory, conditions and the instruments'
 //!   calibration records (traceability, due dates), from a station file.
 //! - [`fit_run`]: a run directory's steps fitted, the analysis stored beside them.
+//! - [`open`]: data files are opened only when they are regular files (never a device, a FIFO
+//!   or a directory); [`atomic`]: a file replaced atomically, its temporary file removed on
+//!   any failure.
 
+pub mod atomic;
 pub mod num;
+pub mod open;
 pub mod plan;
 pub mod rundir;
 pub mod station;
@@ -31,7 +36,8 @@ pub use plan::{
 };
 pub use rundir::{
     Deviation, Dut, FitSummary, Instruments, Manifest, Resume, Retry, RunContext, RunData, RunDir,
-    RunError, RunMeta, Sample, SampleRow, Status, StepRecord, Timing, load, load_fit, load_samples,
+    RunError, RunErrorKind, RunMeta, RunResults, Sample, SampleRow, Status, StepRecord, Timing,
+    WriteResult, load, load_fit, load_samples,
 };
 pub use station::{
     InstrumentRecord, MeterAccuracySpec, Overdue, STATION_ENV, SpecPeriod, Station, StationError,

@@ -112,6 +112,33 @@ pub enum ReportError {
         /// The backend's message.
         message: String,
     },
+    /// Files of the run differ from the run's own record of them (SHA-256 in its manifest),
+    /// or the record is missing: the report is refused rather than issued from files nobody
+    /// vouches for (`gyrocal report --allow-modified` makes it with a banner naming them).
+    #[error(
+        "{}: {}; the report is not made from files that differ from the run's record (give --allow-modified to make it anyway, with a banner naming them)",
+        path.display(),
+        differences.join("; ")
+    )]
+    Modified {
+        /// The run directory.
+        path: PathBuf,
+        /// Each difference, a sentence naming the file.
+        differences: Vec<String>,
+    },
+    /// Some of the files were written, then one could not be: what was written is on disk
+    /// (and recorded), the rest is not.
+    #[error(
+        "{}; written: {}",
+        failed,
+        if written.is_empty() { "nothing".to_string() } else { written.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ") }
+    )]
+    PartlyWritten {
+        /// The files written before the failure.
+        written: Vec<PathBuf>,
+        /// The failure.
+        failed: Box<ReportError>,
+    },
 }
 
 impl ReportError {
@@ -119,8 +146,14 @@ impl ReportError {
     /// malformed), as opposed to a failure to write the report.
     pub fn is_input_error(&self) -> bool {
         match self {
-            ReportError::Run(_)
-            | ReportError::Input(_)
+            // a full disk while writing a run's result is the environment's, not the input's
+            ReportError::Run(e) => matches!(
+                e.kind(),
+                gyrocal_files::RunErrorKind::Input | gyrocal_files::RunErrorKind::Busy
+            ),
+            ReportError::Modified { .. } => false,
+            ReportError::PartlyWritten { failed, .. } => failed.is_input_error(),
+            ReportError::Input(_)
             | ReportError::FitDocument { .. }
             | ReportError::NotFound { .. }
             | ReportError::NotAFile { .. }
@@ -171,21 +204,13 @@ impl Report {
     }
 }
 
+/// Writes a file of the report atomically ([`gyrocal_files::atomic`]): on any failure (a full
+/// disk) its temporary file is removed and the old file, if any, stays.
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "report".to_string());
-    let tmp = path.with_file_name(format!(".{name}.tmp"));
-    fs::write(&tmp, bytes).map_err(|source| ReportError::Io {
-        path: tmp.clone(),
+    gyrocal_files::atomic::write_atomic(path, bytes).map_err(|e| ReportError::Io {
+        path: e.path,
         action: "write",
-        source,
-    })?;
-    fs::rename(&tmp, path).map_err(|source| ReportError::Io {
-        path: path.to_path_buf(),
-        action: "write",
-        source,
+        source: e.source,
     })
 }
 
@@ -252,28 +277,226 @@ pub fn write_run_report(run_dir: &Path) -> Result<PathBuf, ReportError> {
 }
 
 /// File name of the Allan analysis document in a run directory.
-pub const ALLAN_JSON: &str = "allan.json";
+pub const ALLAN_JSON: &str = gyrocal_files::rundir::ALLAN_JSON;
 /// File name of the Allan page in a run directory.
-pub const ALLAN_HTML: &str = "allan.html";
+pub const ALLAN_HTML: &str = gyrocal_files::rundir::ALLAN_HTML;
+
+/// The files of a scale-factor run its report reads: checked against the run's record by
+/// [`check_run`] before the report is made.
+pub const SWEEP_FILES_READ: [&str; 2] = [
+    gyrocal_files::rundir::STEPS_CSV,
+    gyrocal_files::rundir::FIT_JSON,
+];
+/// The files of a drift run its Allan analysis reads (the record, its steps, the scale factor
+/// from fit.json) and the analysis it replaces (`allan.json`: an edited one is not silently
+/// overwritten).
+pub const DRIFT_FILES_READ: [&str; 4] = [
+    gyrocal_files::rundir::SAMPLES_CSV,
+    gyrocal_files::rundir::STEPS_CSV,
+    gyrocal_files::rundir::FIT_JSON,
+    ALLAN_JSON,
+];
+
+/// The files of a run a report reads, checked against the run's record by [`check_run`].
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct RunCheck {
+    /// Files that differ from the record, each a sentence naming the file: the report is
+    /// refused ([`ReportError::Modified`]) unless the caller allows it, then each is a banner.
+    pub differences: Vec<String>,
+    /// What could not be checked (a run written before checksums were recorded): said on the
+    /// report, never a refusal.
+    pub unchecked: Vec<String>,
+}
+
+/// Checks the files of the run in `run_dir` that a report reads (`files`, e.g.
+/// [`SWEEP_FILES_READ`]) against the run's record (see
+/// [`gyrocal_files::rundir::check_files`]). Each file is opened only when it is a regular
+/// file.
+pub fn check_run(run_dir: &Path, files: &[&str]) -> Result<RunCheck, ReportError> {
+    let mut out = RunCheck::default();
+    for d in gyrocal_files::rundir::check_files(run_dir, files)? {
+        if d.differs {
+            out.differences.push(d.text);
+        } else {
+            out.unchecked.push(d.text);
+        }
+    }
+    Ok(out)
+}
+
+impl RunCheck {
+    /// The refusal when files differ and `allow_modified` is not given; else the notes for
+    /// the report's banners (the differences first, each as [`modified_note`]).
+    pub fn notes(self, run_dir: &Path, allow_modified: bool) -> Result<Vec<String>, ReportError> {
+        if !self.differences.is_empty() && !allow_modified {
+            return Err(ReportError::Modified {
+                path: run_dir.to_path_buf(),
+                differences: self.differences,
+            });
+        }
+        Ok(self
+            .differences
+            .iter()
+            .map(|d| modified_note(d))
+            .chain(self.unchecked.iter().map(|u| format!("NOT CHECKED: {u}.")))
+            .collect())
+    }
+}
+
+/// The banner text of a report made from files that differ from the run's record
+/// (`gyrocal report --allow-modified`).
+pub fn modified_note(difference: &str) -> String {
+    format!(
+        "MODIFIED SINCE THE RUN: {difference}. The figures below come from the files as they are now, not as the run recorded them."
+    )
+}
+
+/// Loads the inputs of a report (run directories or steps CSVs), each run directory checked
+/// first against its record ([`check_run`] over [`SWEEP_FILES_READ`]): a difference refuses
+/// the report ([`ReportError::Modified`]) unless `allow_modified`, which puts a banner naming
+/// each difference on the report instead ([`Input::notes`]); what could not be checked is
+/// said there too.
+pub fn load_inputs_checked(
+    paths: &[PathBuf],
+    allow_modified: bool,
+) -> Result<Vec<Input>, ReportError> {
+    let mut inputs = Vec::with_capacity(paths.len());
+    for p in paths {
+        let is_run = p.is_dir()
+            && fs::symlink_metadata(p.join(gyrocal_files::rundir::MANIFEST_JSON)).is_ok();
+        let notes = if is_run {
+            check_run(p, &SWEEP_FILES_READ)?.notes(p, allow_modified)?
+        } else {
+            Vec::new()
+        };
+        let mut input = load_input(p)?;
+        // fit.json's own note (the report always adds it) says the same as ours
+        let fit = p
+            .join(gyrocal_files::rundir::FIT_JSON)
+            .display()
+            .to_string();
+        let fit_noted = input.notes.iter().any(|n| n.contains(&fit));
+        let fit_note = format!(
+            "MODIFIED SINCE THE RUN: {}",
+            gyrocal_files::rundir::FIT_JSON
+        );
+        let ours = notes
+            .into_iter()
+            .filter(|n| !(fit_noted && n.starts_with(&fit_note)));
+        input.notes.splice(0..0, ours);
+        inputs.push(input);
+    }
+    Ok(inputs)
+}
 
 /// The call for the end of a drift run: analyses `run_dir` ([`allan::analyse_input`]) and writes
 /// `run_dir/allan.json` (the [`allan::AllanDocument`], as `gyrocal allan --json` prints it) and
-/// `run_dir/allan.html` ([`allan::render_allan`]), each atomically. Returns the document and the
-/// paths written (JSON first).
+/// `run_dir/allan.html` ([`allan::render_allan`]). A run directory (one with a manifest) is
+/// opened for its results ([`gyrocal_files::RunResults`]: under its lock, each file recorded
+/// with its SHA-256 in the manifest; see [`write_allan_into`]); a directory without a manifest
+/// (a bare `samples.csv`) just gets the two files, each atomically. Returns the document and
+/// the paths written (JSON first).
 pub fn write_run_allan(
     run_dir: &Path,
     opts: &allan::AllanOptions,
 ) -> Result<(allan::AllanDocument, Vec<PathBuf>), ReportError> {
+    write_run_allan_noted(run_dir, opts, &[])
+}
+
+/// [`write_run_allan`] with `notes` put first among the page's notes (e.g. the banners of
+/// `gyrocal report --allow-modified`).
+pub fn write_run_allan_noted(
+    run_dir: &Path,
+    opts: &allan::AllanOptions,
+    notes: &[String],
+) -> Result<(allan::AllanDocument, Vec<PathBuf>), ReportError> {
+    if fs::symlink_metadata(run_dir.join(gyrocal_files::rundir::MANIFEST_JSON)).is_ok() {
+        let mut run = gyrocal_files::RunResults::open(run_dir)?;
+        return write_allan_into(&mut run, opts, notes);
+    }
     let _span = tracing::info_span!("allan", dir = %run_dir.display()).entered();
-    let doc = allan::analyse_input(run_dir, opts)?;
+    let (doc, json, html) = allan_files(run_dir, opts, notes)?;
+    let (jp, hp) = (run_dir.join(ALLAN_JSON), run_dir.join(ALLAN_HTML));
+    write_atomic(&jp, json.as_bytes())?;
+    write_atomic(&hp, html.as_bytes()).map_err(|e| ReportError::PartlyWritten {
+        written: vec![jp.clone()],
+        failed: Box::new(e),
+    })?;
+    tracing::info!(json = %jp.display(), html = %hp.display(), "allan analysis written");
+    Ok((doc, vec![jp, hp]))
+}
+
+/// The Allan analysis of the run `run` writes (a run that just ended, its [`gyrocal_files::RunDir`]
+/// still open, or a [`gyrocal_files::RunResults`]): `allan.json` then `allan.html`, each through
+/// the run directory (atomically, under the run's lock, its SHA-256 recorded in the manifest),
+/// `notes` first among the page's notes. When `allan.html` cannot be written after
+/// `allan.json` was, the error is [`ReportError::PartlyWritten`]: the analysis is on disk, the
+/// page is not (see [`ReportError::allan_warning`]).
+pub fn write_allan_into(
+    run: &mut dyn gyrocal_files::WriteResult,
+    opts: &allan::AllanOptions,
+    notes: &[String],
+) -> Result<(allan::AllanDocument, Vec<PathBuf>), ReportError> {
+    let dir = run.dir().to_path_buf();
+    let _span = tracing::info_span!("allan", dir = %dir.display()).entered();
+    let (doc, json, html) = allan_files(&dir, opts, notes)?;
+    let jp = dir.join(ALLAN_JSON);
+    if let Err(e) = run.write_result(ALLAN_JSON, json.as_bytes()) {
+        // the file may have landed before its record failed (the manifest could not be
+        // stored): say so rather than "no Allan analysis"
+        let landed = gyrocal_files::rundir::sha256_file(&jp)
+            .is_ok_and(|h| h == gyrocal_files::rundir::sha256_hex(json.as_bytes()));
+        return Err(if landed {
+            ReportError::PartlyWritten {
+                written: vec![jp],
+                failed: Box::new(e.into()),
+            }
+        } else {
+            e.into()
+        });
+    }
+    run.write_result(ALLAN_HTML, html.as_bytes())
+        .map_err(|e| ReportError::PartlyWritten {
+            written: vec![jp.clone()],
+            failed: Box::new(e.into()),
+        })?;
+    let hp = dir.join(ALLAN_HTML);
+    tracing::info!(json = %jp.display(), html = %hp.display(), "allan analysis written and recorded");
+    Ok((doc, vec![jp, hp]))
+}
+
+/// The analysis of `dir` with `notes` first, as JSON and as the page.
+fn allan_files(
+    dir: &Path,
+    opts: &allan::AllanOptions,
+    notes: &[String],
+) -> Result<(allan::AllanDocument, String, String), ReportError> {
+    let mut doc = allan::analyse_input(dir, opts)?;
+    if !notes.is_empty() {
+        doc.notes.splice(0..0, notes.iter().cloned());
+    }
     let json = serde_json::to_string_pretty(&doc).map_err(|e| ReportError::Plot {
         name: ALLAN_JSON.into(),
         message: e.to_string(),
     })?;
     let html = allan::render_allan(&doc)?;
-    let (jp, hp) = (run_dir.join(ALLAN_JSON), run_dir.join(ALLAN_HTML));
-    write_atomic(&jp, json.as_bytes())?;
-    write_atomic(&hp, html.as_bytes())?;
-    tracing::info!(json = %jp.display(), html = %hp.display(), "allan analysis written");
-    Ok((doc, vec![jp, hp]))
+    Ok((doc, json, html))
+}
+
+impl ReportError {
+    /// The operator's warning when a drift run's Allan analysis could not be written at the
+    /// end of the run, worded by what was written: "no Allan analysis" only when nothing was.
+    pub fn allan_warning(&self) -> String {
+        match self {
+            ReportError::PartlyWritten { written, failed } if !written.is_empty() => format!(
+                "the Allan analysis is in {}, but its page could not be written: {failed}",
+                written
+                    .iter()
+                    .map(|p| p.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(" and ")
+            ),
+            other => format!("no Allan analysis: {other}"),
+        }
+    }
 }

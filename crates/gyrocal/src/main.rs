@@ -77,6 +77,22 @@ impl std::fmt::Display for BadInput {
 
 impl std::error::Error for BadInput {}
 
+/// A run directory's error with its exit code chosen by its kind: bad input (a malformed
+/// file, a wrong path, a directory in use) exits 2 through [`BadInput`]; a failure of the
+/// environment (a full disk, an I/O error) or of gyrocal itself exits 1. `context` (e.g.
+/// `--resume`) goes before the message.
+pub fn run_dir_error(e: gyrocal_run::RunError, context: Option<&str>) -> anyhow::Error {
+    use gyrocal_run::rundir::RunErrorKind;
+    let text = match context {
+        Some(c) => format!("{c}: {e}"),
+        None => e.to_string(),
+    };
+    match e.kind() {
+        RunErrorKind::Input | RunErrorKind::Busy => BadInput(text).into(),
+        RunErrorKind::Environment | RunErrorKind::Internal => anyhow::Error::msg(text),
+    }
+}
+
 fn main() -> ExitCode {
     use tracing_subscriber::layer::SubscriberExt as _;
     use tracing_subscriber::util::SubscriberInitExt as _;

@@ -1,10 +1,17 @@
 //! `gyrocal report`: the HTML calibration report of run directories or steps CSV files.
+//!
+//! Before a run directory's files are used they are checked against the run's record
+//! ([`gyrocal_report::check_run`]: the SHA-256 its manifest holds of steps.csv and fit.json,
+//! and of samples.csv and allan.json for a drift record; the steps the manifest records as
+//! done): a run whose files differ is refused with exit 1 naming them, or, with
+//! `--allow-modified`, reported with a banner naming them. Why: a report is a certificate; it
+//! must never vouch for a `fit.json` whose `steps.csv` was emptied or edited.
 
 use std::path::PathBuf;
 
 use anyhow::Context as _;
 use clap::Args;
-use gyrocal_report::{ReportError, render_many};
+use gyrocal_report::ReportError;
 
 use crate::BadInput;
 
@@ -31,6 +38,12 @@ pub struct ReportArgs {
     /// configs/acceptance.example.toml). One run directory only; its fit.json is not changed.
     #[arg(long, value_name = "FILE")]
     pub acceptance: Option<PathBuf>,
+    /// Make the report even when files of a run differ from the run's record of them (their
+    /// SHA-256 in its manifest, or a steps.csv that lacks steps the manifest records): the
+    /// report then opens with a banner naming each such file. Without it such a run is
+    /// refused (exit 1), so a certificate is never issued from files nobody vouches for.
+    #[arg(long)]
+    pub allow_modified: bool,
 }
 
 /// Where the report goes: `--out`, else beside the one input (never the current directory,
@@ -71,8 +84,16 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
             ))
             .into());
         }
-        let (_, files) =
-            gyrocal_report::write_run_allan(drift, &Default::default()).map_err(classify)?;
+        let notes = checked(
+            drift,
+            &gyrocal_report::DRIFT_FILES_READ,
+            args.allow_modified,
+        )?;
+        for n in &notes {
+            eprintln!("gyrocal: warning: {n}");
+        }
+        let (_, files) = gyrocal_report::write_run_allan_noted(drift, &Default::default(), &notes)
+            .map_err(classify)?;
         let page = files
             .iter()
             .find(|f| f.extension().is_some_and(|e| e == "html"))
@@ -85,7 +106,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
                     "report": page,
                     "files": files,
                     "inputs": args.inputs,
-                    "warnings": [],
+                    "warnings": notes,
                     "kind": "drift",
                 })
             );
@@ -99,7 +120,11 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     }
     let out = destination(args)?;
     let report = match &args.acceptance {
-        None => render_many(&args.inputs).map_err(classify)?,
+        None => gyrocal_report::render(
+            &gyrocal_report::load_inputs_checked(&args.inputs, args.allow_modified)
+                .map_err(classify)?,
+        )
+        .map_err(classify)?,
         Some(path) => {
             let [one] = args.inputs.as_slice() else {
                 return Err(BadInput(
@@ -109,7 +134,11 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
             };
             let spec = gyrocal_run::plan::load_acceptance(path)
                 .map_err(|e| BadInput(format!("--acceptance: {e}")))?;
-            let mut input = gyrocal_report::load_input(one).map_err(classify)?;
+            let mut input =
+                gyrocal_report::load_inputs_checked(std::slice::from_ref(one), args.allow_modified)
+                    .map_err(classify)?
+                    .pop()
+                    .ok_or_else(|| BadInput("--acceptance: no input".into()))?;
             if let Err(e) = &input.analysis {
                 return Err(BadInput(format!(
                     "--acceptance: {} has no fit to evaluate: {e}",
@@ -145,6 +174,14 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     }
     tracing::info!(files = written.len(), "report written");
     Ok(())
+}
+
+/// The files `files` of the drift run `dir` checked against the run's record: the banners for
+/// the page when `allow` and some differ; an error (exit 1, naming them) when not `allow`.
+fn checked(dir: &std::path::Path, files: &[&str], allow: bool) -> anyhow::Result<Vec<String>> {
+    gyrocal_report::check_run(dir, files)
+        .and_then(|c| c.notes(dir, allow))
+        .map_err(classify)
 }
 
 /// Input problems (missing or malformed files) exit with 2, others with 1.

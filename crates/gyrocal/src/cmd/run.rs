@@ -167,7 +167,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
         (Some(path), _) => (load_plan(path)?, path.clone()),
         (None, Some(dir)) => {
             let plan = gyrocal_run::rundir::run_plan(dir)
-                .map_err(|e| BadInput(format!("--resume: {e}")))?;
+                .map_err(|e| crate::run_dir_error(e, Some("--resume")))?;
             (plan, dir.join(gyrocal_run::rundir::MANIFEST_JSON))
         }
         (None, None) => return Err(BadInput("a plan (or --resume DIR) is needed".into()).into()),
@@ -444,24 +444,24 @@ fn open_run_dir_inner(
             "{}: the run never started (no manifest.json); starting it in this directory",
             dir.display()
         );
-        let run =
-            RunDir::create(dir, plan, meta).map_err(|e| BadInput(format!("--resume: {e}")))?;
+        let run = RunDir::create(dir, plan, meta)
+            .map_err(|e| crate::run_dir_error(e, Some("--resume")))?;
         attach_log(dir);
         return Ok((dir.clone(), run));
     }
     if let Some(dir) = &args.resume {
-        let mut run =
-            RunDir::open_for_resume(dir, plan).map_err(|e| BadInput(format!("--resume: {e}")))?;
+        let mut run = RunDir::open_for_resume(dir, plan)
+            .map_err(|e| crate::run_dir_error(e, Some("--resume")))?;
         // the record keeps the station the run started on; a resume on other instruments is
         // a departure from it, recorded so the certificate says so
         if let Some(text) = station_change(run.manifest().station.as_ref(), meta.station.as_ref()) {
             say!("gyrocal: warning: {text} (recorded as a deviation)");
             run.add_deviation("station-changed", &text)
-                .map_err(|e| BadInput(format!("--resume: {e}")))?;
+                .map_err(|e| crate::run_dir_error(e, Some("--resume")))?;
         }
         if virtual_time {
             run.set_virtual_time()
-                .map_err(|e| BadInput(format!("--resume: {e}")))?;
+                .map_err(|e| crate::run_dir_error(e, Some("--resume")))?;
         }
         let done = run.done_steps().len();
         say!(
@@ -477,7 +477,7 @@ fn open_run_dir_inner(
         Some(d) => d.clone(),
         None => default_dir(args.plan.as_deref().unwrap_or(Path::new("run"))),
     };
-    let run = RunDir::create(&dir, plan, meta).map_err(|e| BadInput(e.to_string()))?;
+    let run = RunDir::create(&dir, plan, meta).map_err(|e| crate::run_dir_error(e, None))?;
     attach_log(&dir);
     Ok((dir, run))
 }
@@ -1307,6 +1307,7 @@ fn finish(
 fn finish_drift(
     args: &RunArgs,
     dir: &Path,
+    run: &mut RunDir,
     human: &dyn Fn(String),
     doc: &mut serde_json::Value,
 ) -> anyhow::Result<u8> {
@@ -1318,7 +1319,9 @@ fn finish_drift(
     } else {
         // the analysis finds the scale factor itself (the run's fit.json, or the simulated
         // gyro's); without one the record stays in volts
-        match gyrocal_report::write_run_allan(dir, &Default::default()) {
+        // through the run directory still open: allan.json and allan.html are recorded in
+        // the manifest with their SHA-256, under the run's lock
+        match gyrocal_report::write_allan_into(run, &Default::default(), &[]) {
             Ok((a, files)) => {
                 doc["allan"] = serde_json::json!({
                     "files": files,
@@ -1348,7 +1351,8 @@ fn finish_drift(
                 ));
             }
             Err(e) => say!(
-                "gyrocal: warning: no Allan analysis: {e} (the record is complete: `gyrocal allan {}`)",
+                "gyrocal: warning: {} (the record is complete: `gyrocal report {}` writes the analysis again)",
+                e.allan_warning(),
                 dir.display()
             ),
         }
@@ -1433,7 +1437,7 @@ fn finish_human(
     // one ending for every kind of complete run: its results, then the table's rest state
     // decides the last line and the exit code
     let code = if run.manifest().plan.kind() == gyrocal_run::PlanKind::Drift {
-        finish_drift(args, dir, human, doc)?
+        finish_drift(args, dir, run, human, doc)?
     } else {
         finish_sweep(args, dir, summary, run, human, doc)?
     };

@@ -1,13 +1,13 @@
-//! `gyrocal verify RUN...`: the data files of completed runs against the SHA-256 their
-//! manifests recorded (samples.csv and steps.csv at completion, fit.json when it was written).
-//! Exit 0 when every file is as recorded; 1 naming each file that changed or went missing, or
-//! a run that recorded no checksums.
+//! `gyrocal verify RUN...`: every file a run wrote against the SHA-256 its manifest recorded
+//! (samples.csv and steps.csv at completion, fit.json and the Allan results when they were
+//! written). Exit 0 only when every file of every run is as recorded; 1 naming each file that
+//! changed, went missing, is not a regular file or is not recorded, a complete run whose
+//! checksums are missing, or a run that is not complete (it has no checksums yet); 2 when a
+//! path is not a readable run directory.
 
 use std::path::PathBuf;
 
 use clap::Args;
-
-use crate::BadInput;
 
 /// Arguments of `gyrocal verify`.
 #[derive(Debug, Args)]
@@ -21,34 +21,38 @@ pub struct VerifyArgs {
 pub fn run(args: &VerifyArgs) -> anyhow::Result<u8> {
     let mut bad = 0usize;
     for dir in &args.runs {
-        let checks = gyrocal_run::rundir::verify(dir).map_err(|e| BadInput(e.to_string()))?;
-        if checks.is_empty() {
+        let v = gyrocal_run::rundir::verify(dir).map_err(|e| crate::run_dir_error(e, None))?;
+        for p in &v.problems {
+            bad += 1;
+            println!("{}: {p}", dir.display());
+        }
+        if v.checks.is_empty() && v.problems.is_empty() {
+            // a complete run always has data files to check: this cannot be a clean run
+            bad += 1;
             println!(
-                "{}: no checksums recorded (the run is not complete, or an earlier gyrocal \
-                 wrote it): nothing to verify",
+                "{}: no file recorded: nothing can be verified",
                 dir.display()
             );
-            bad += 1;
-            continue;
         }
-        for c in &checks {
-            match &c.now {
-                _ if c.ok() => println!("{}: {} ok", dir.display(), c.file),
-                Some(now) => {
-                    bad += 1;
-                    println!(
-                        "{}: {} CHANGED since the run recorded it (sha256 {} recorded, {} now)",
-                        dir.display(),
-                        c.file,
-                        c.recorded,
-                        now
-                    );
-                }
-                None => {
-                    bad += 1;
-                    println!("{}: {} MISSING or unreadable", dir.display(), c.file);
-                }
+        for c in &v.checks {
+            if !c.ok() {
+                bad += 1;
             }
+            println!("{}: {}", dir.display(), c.describe());
+        }
+        let missing: Vec<&str> = v
+            .checks
+            .iter()
+            .filter(|c| c.state == gyrocal_run::rundir::FileState::NotRecorded)
+            .filter(|c| gyrocal_run::rundir::DATA_FILES.contains(&c.file.as_str()))
+            .map(|c| c.file.as_str())
+            .collect();
+        if !missing.is_empty() {
+            println!(
+                "{}: the checksums of {} are missing from manifest.json: this run cannot be verified",
+                dir.display(),
+                missing.join(" and ")
+            );
         }
     }
     Ok(u8::from(bad > 0))

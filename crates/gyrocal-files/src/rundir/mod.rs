@@ -22,6 +22,17 @@
 //!   the best model). It stays a few kilobytes, so an index of many runs reads it cheaply.
 //! - `fit.json`: the whole fit (the `gyrocal fit --json` document: every model, the
 //!   residuals, the error surface), written by [`crate::fit_run`]; read it with [`load_fit`].
+//! - `allan.json`, `allan.html`: a drift record's Allan analysis, written by the report crate
+//!   through [`RunDir::write_result`] or [`RunResults`] (atomically, under the run's lock, with
+//!   its SHA-256 recorded in the manifest's `checksums`).
+//!
+//! ## Integrity
+//!
+//! The manifest records the SHA-256 of every file the run wrote: `samples.csv` and
+//! `steps.csv` when the run completes, `fit.json` in its `fit_summary`, every result file when
+//! it is written. [`verify`] checks them all and fails a complete run whose record is missing;
+//! [`check_files`] is what `gyrocal report` checks before it uses a run's files. See
+//! [`integrity`](self::integrity) for the rules and why they are strict.
 //!
 //! ## Times
 //!
@@ -81,22 +92,35 @@
 //! # Bounds and failures
 //!
 //! Every file is read with a size limit ([`MAX_MANIFEST_BYTES`], [`MAX_STEPS_BYTES`],
-//! [`MAX_SAMPLES_BYTES`], [`MAX_FIT_BYTES`]) and must be a regular file: a huge or endless file
-//! is an error naming it, never a memory exhaustion. A header naming a column twice is an error
+//! [`MAX_SAMPLES_BYTES`], [`MAX_FIT_BYTES`]) and must be a regular file, checked before it is
+//! opened ([`crate::open::open_regular`]: a FIFO never blocks, a device is never read): a huge
+//! or endless file is an error naming it, never a memory exhaustion. Every file replaced is
+//! replaced atomically ([`crate::atomic`]), its temporary file removed on any failure (a full
+//! disk leaves no `.NAME.tmp`). [`RunError::kind`] says whose fault an error is: a full disk
+//! is the environment's, a malformed file the input's. A header naming a column twice is an error
 //! naming both positions. [`RunDir::create`] is all or nothing (a failure removes what it
 //! created), and a directory left half created by a crash during creation is reused by the
 //! next `create` ([`RunDir::is_half_created`]).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs::{self, File, OpenOptions};
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
 use crate::num::{round_json, round_opt, round_significant};
+use crate::open::open_regular;
 use crate::plan::{Plan, Step};
 use crate::time::{ClockAnchor, now_utc};
+
+mod integrity;
+mod results;
+
+pub use integrity::{
+    DATA_FILES, Discrepancy, FileCheck, FileState, RESULT_FILES, Verification, check_files,
+    sha256_file, sha256_hex, verify,
+};
+pub use results::{RunResults, WriteResult};
 
 /// File name of the raw readings.
 pub const SAMPLES_CSV: &str = "samples.csv";
@@ -112,6 +136,11 @@ pub const SIMULATOR_SERIAL_PREFIX: &str = "SIM";
 pub const FIT_JSON: &str = "fit.json";
 /// File name of the HTML report (written by the report crate via [`RunDir::write_file`]).
 pub const REPORT_HTML: &str = "report.html";
+/// File name of a drift record's Allan analysis document (written by the report crate through
+/// [`RunDir::write_result`] or [`RunResults::write_result`], recorded in `checksums`).
+pub const ALLAN_JSON: &str = "allan.json";
+/// File name of a drift record's Allan page (written and recorded as [`ALLAN_JSON`]).
+pub const ALLAN_HTML: &str = "allan.html";
 /// Version of the run-directory format written, recorded in the manifest. Version 1
 /// (gyrocal before the UTC columns and the slim manifest) is still read: see
 /// [`FORMAT_VERSIONS_READ`].
@@ -321,6 +350,79 @@ pub enum RunError {
         /// What was wrong with the call.
         message: String,
     },
+}
+
+/// What kind of [`RunError`] it is: whose the fault is, so the CLI picks its exit code (2 for
+/// bad input, 1 for a failure of the environment) without matching messages.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RunErrorKind {
+    /// The files or the arguments: a malformed or inconsistent file, a directory that holds
+    /// no run, a path that does not exist or may not be written, a changed plan.
+    Input,
+    /// Another process is writing the run directory.
+    Busy,
+    /// The system failed: the disk is full, a quota is exhausted, an I/O error. Nothing the
+    /// operator typed is wrong; the same command succeeds once the cause is removed.
+    Environment,
+    /// gyrocal broke its own writing protocol (a bug).
+    Internal,
+}
+
+impl RunError {
+    /// The kind of error. An I/O error is [`RunErrorKind::Input`] when it says the path is
+    /// wrong (not found, permission denied, read-only file system, not a directory, ...) and
+    /// [`RunErrorKind::Environment`] otherwise (a full disk, an exhausted quota, an I/O error).
+    pub fn kind(&self) -> RunErrorKind {
+        match self {
+            RunError::Io { source, .. } => io_kind(source),
+            RunError::Locked { .. } => RunErrorKind::Busy,
+            RunError::Protocol { .. } => RunErrorKind::Internal,
+            RunError::NotEmpty { .. }
+            | RunError::TooLarge { .. }
+            | RunError::Csv { .. }
+            | RunError::Json { .. }
+            | RunError::Inconsistent { .. }
+            | RunError::PlanChanged { .. }
+            | RunError::NotARun { .. }
+            | RunError::AlreadyComplete { .. } => RunErrorKind::Input,
+        }
+    }
+}
+
+/// Whose fault an I/O error is (see [`RunError::kind`]).
+fn io_kind(e: &std::io::Error) -> RunErrorKind {
+    use std::io::ErrorKind as K;
+    match e.kind() {
+        K::NotFound
+        | K::PermissionDenied
+        | K::AlreadyExists
+        | K::InvalidInput
+        | K::InvalidData
+        | K::NotADirectory
+        | K::IsADirectory
+        | K::DirectoryNotEmpty
+        | K::ReadOnlyFilesystem
+        | K::InvalidFilename
+        | K::NotSeekable => RunErrorKind::Input,
+        _ => RunErrorKind::Environment,
+    }
+}
+
+/// A data file [`open_regular`] refused or could not open, as a run-directory error naming it.
+fn opened(e: crate::open::OpenError) -> RunError {
+    match e {
+        crate::open::OpenError::NotRegular { path, what } => RunError::Inconsistent {
+            path,
+            message: format!(
+                "not a regular file (it is {what}); a run directory's files are regular files"
+            ),
+        },
+        crate::open::OpenError::Io { path, source } => RunError::Io {
+            path,
+            action: "read",
+            source,
+        },
+    }
 }
 
 fn io(path: &Path, action: &'static str) -> impl FnOnce(std::io::Error) -> RunError {
@@ -670,83 +772,6 @@ impl FitSummary {
             best_model: fit.best_model,
         }
     }
-}
-
-/// SHA-256 of `bytes`, lower-case hex.
-pub fn sha256_hex(bytes: &[u8]) -> String {
-    use sha2::Digest as _;
-    sha2::Sha256::digest(bytes)
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
-}
-
-/// SHA-256 of a file's bytes, lower-case hex, read in chunks (memory stays bounded whatever
-/// the file's size).
-pub fn sha256_file(path: &Path) -> std::io::Result<String> {
-    use sha2::Digest as _;
-    use std::io::Read as _;
-    let mut file = File::open(path)?;
-    let mut hasher = sha2::Sha256::new();
-    let mut buf = vec![0u8; 1 << 16];
-    loop {
-        let n = file.read(&mut buf)?;
-        if n == 0 {
-            break;
-        }
-        hasher.update(&buf[..n]);
-    }
-    Ok(hasher
-        .finalize()
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect())
-}
-
-/// One data file checked by [`verify`].
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct FileCheck {
-    /// The file's name in the run directory.
-    pub file: String,
-    /// The SHA-256 the manifest recorded.
-    pub recorded: String,
-    /// The SHA-256 of the file now (`None`: missing or unreadable).
-    pub now: Option<String>,
-}
-
-impl FileCheck {
-    /// The file is as it was recorded.
-    pub fn ok(&self) -> bool {
-        self.now.as_deref() == Some(self.recorded.as_str())
-    }
-}
-
-/// Re-checks the data files of the completed run in `dir` against the checksums its manifest
-/// recorded (`samples.csv` and `steps.csv` at completion, `fit.json` when it was written). An
-/// empty list: the run recorded none (not complete, or from an earlier version).
-pub fn verify(dir: &Path) -> Result<Vec<FileCheck>, RunError> {
-    let path = dir.join(MANIFEST_JSON);
-    if !path.exists() {
-        return Err(RunError::NotARun {
-            path: dir.to_path_buf(),
-        });
-    }
-    let m = read_manifest(&path)?;
-    let mut recorded: Vec<(String, String)> = m.checksums.into_iter().collect();
-    if let Some(f) = m.fit_summary {
-        recorded.push((f.file, f.sha256));
-    }
-    Ok(recorded
-        .into_iter()
-        .map(|(file, recorded)| {
-            let now = sha256_file(&dir.join(&file)).ok();
-            FileCheck {
-                file,
-                recorded,
-                now,
-            }
-        })
-        .collect())
 }
 
 /// The warm-up (IEEE 1431 §12.6) as a run found it online: consecutive window means of the
@@ -1788,7 +1813,7 @@ impl RunDir {
         if status == Status::Complete {
             for name in [SAMPLES_CSV, STEPS_CSV] {
                 let path = self.dir.join(name);
-                let sum = sha256_file(&path).map_err(io(&path, "read"))?;
+                let sum = sha256_file(&path).map_err(opened)?;
                 self.manifest.checksums.insert(name.to_string(), sum);
             }
         }
@@ -1822,14 +1847,58 @@ impl RunDir {
     }
 
     fn write_manifest(&mut self) -> Result<(), RunError> {
-        self.manifest.updated_utc = now_utc();
-        let path = self.dir.join(MANIFEST_JSON);
-        let bytes = serde_json::to_vec_pretty(&self.manifest).map_err(|e| RunError::Protocol {
-            path,
-            message: format!("cannot serialise the manifest: {e}"),
-        })?;
-        write_atomic(&self.dir, MANIFEST_JSON, &bytes)
+        store_manifest(&self.dir, &mut self.manifest)
     }
+
+    /// Writes a result file of the run (`allan.json`, `allan.html`, any later one) atomically
+    /// and records its SHA-256 in the manifest's `checksums`, so `gyrocal verify` checks it
+    /// and `gyrocal report` refuses it edited. Not for the data files, the manifest or
+    /// `fit.json` (see [`RunDir::set_fit`]).
+    pub fn write_result(&mut self, name: &str, bytes: &[u8]) -> Result<(), RunError> {
+        record_result(&self.dir, &mut self.manifest, name, bytes)
+    }
+}
+
+/// Replaces the manifest of `dir` with `m` (its `updated_utc` set to now), atomically.
+fn store_manifest(dir: &Path, m: &mut Manifest) -> Result<(), RunError> {
+    m.updated_utc = now_utc();
+    let bytes = serde_json::to_vec_pretty(m).map_err(|e| RunError::Protocol {
+        path: dir.join(MANIFEST_JSON),
+        message: format!("cannot serialise the manifest: {e}"),
+    })?;
+    write_atomic(dir, MANIFEST_JSON, &bytes)
+}
+
+/// The files a result may not replace: the data, the record, the fit (which has its own
+/// record), the lock and the log.
+const NOT_RESULTS: [&str; 6] = [
+    SAMPLES_CSV,
+    STEPS_CSV,
+    MANIFEST_JSON,
+    FIT_JSON,
+    LOCK_FILE,
+    "run.log",
+];
+
+/// Writes the result `name` into `dir` atomically, then records its SHA-256 in `m` and
+/// stores the manifest (the caller holds the run's lock). If the manifest cannot be stored,
+/// the result file is on disk without a record (`gyrocal verify` then says so).
+fn record_result(dir: &Path, m: &mut Manifest, name: &str, bytes: &[u8]) -> Result<(), RunError> {
+    if name.contains(['/', '\\'])
+        || name.starts_with('.')
+        || name.is_empty()
+        || NOT_RESULTS.contains(&name)
+    {
+        return Err(RunError::Protocol {
+            path: dir.join(name),
+            message: "a result file name must be a plain, non-hidden name other than the run's data, manifest, fit, lock and log".into(),
+        });
+    }
+    write_atomic(dir, name, bytes)?;
+    m.checksums.insert(name.to_string(), sha256_hex(bytes));
+    store_manifest(dir, m)?;
+    tracing::info!(file = %dir.join(name).display(), "result written and recorded");
+    Ok(())
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1893,14 +1962,8 @@ pub fn load_samples(dir: &Path) -> Result<Vec<SampleRow>, RunError> {
 /// that grows or never ends costs at most `cap` bytes of memory).
 pub fn read_capped(path: &Path, cap: u64) -> Result<Vec<u8>, RunError> {
     use std::io::Read as _;
-    let file = File::open(path).map_err(io(path, "read"))?;
+    let file = open_regular(path).map_err(opened)?;
     let meta = file.metadata().map_err(io(path, "read"))?;
-    if !meta.is_file() {
-        return Err(RunError::Inconsistent {
-            path: path.to_path_buf(),
-            message: "not a regular file".into(),
-        });
-    }
     let too_large = || RunError::TooLarge {
         path: path.to_path_buf(),
         cap,
@@ -2083,14 +2146,8 @@ fn read_repaired(path: &Path, accepted: &[&[&str]], cap: u64) -> Result<(Vec<u8>
 /// whether the header has `t_utc`).
 fn repair_samples(path: &Path) -> Result<(u64, u64, bool), RunError> {
     use std::io::{Read as _, Seek as _, SeekFrom};
-    let mut file = File::open(path).map_err(io(path, "read"))?;
+    let mut file = open_regular(path).map_err(opened)?;
     let meta = file.metadata().map_err(io(path, "read"))?;
-    if !meta.is_file() {
-        return Err(RunError::Inconsistent {
-            path: path.to_path_buf(),
-            message: "not a regular file".into(),
-        });
-    }
     let len = meta.len();
     if len > MAX_SAMPLES_BYTES {
         return Err(RunError::TooLarge {
@@ -2234,7 +2291,7 @@ fn scan_samples(
     expected: &BTreeMap<usize, u64>,
 ) -> Result<(u64, u64), RunError> {
     use std::io::Read as _;
-    let file = File::open(path).map_err(io(path, "read"))?;
+    let file = open_regular(path).map_err(opened)?;
     let mut rdr = csv::ReaderBuilder::new()
         .has_headers(true)
         .from_reader(std::io::BufReader::new(file.take(len)));
@@ -2408,27 +2465,17 @@ fn truncate(path: &Path, len: u64) -> Result<(), RunError> {
     Ok(())
 }
 
-/// Writes `name` in `dir` atomically: temp file in the same directory, fsync, rename, fsync
-/// of the directory. Readers see the old or the new content, never a mix.
+/// Writes `name` in `dir` atomically ([`crate::atomic`]): temp file in the same directory,
+/// fsync, rename, fsync of the directory; the temp file removed on any failure. Readers see
+/// the old or the new content, never a mix.
 fn write_atomic(dir: &Path, name: &str, bytes: &[u8]) -> Result<(), RunError> {
-    let tmp = dir.join(format!(".{name}.tmp"));
-    let dest = dir.join(name);
-    let mut f = File::create(&tmp).map_err(io(&tmp, "create"))?;
-    f.write_all(bytes).map_err(io(&tmp, "write"))?;
-    f.sync_all().map_err(io(&tmp, "sync"))?;
-    drop(f);
-    fs::rename(&tmp, &dest).map_err(io(&dest, "replace"))?;
-    sync_dir(dir)
+    crate::atomic::write_atomic(&dir.join(name), bytes).map_err(|e| RunError::Io {
+        path: e.path,
+        action: e.action,
+        source: e.source,
+    })
 }
 
 fn sync_dir(dir: &Path) -> Result<(), RunError> {
-    #[cfg(unix)]
-    {
-        File::open(dir)
-            .and_then(|d| d.sync_all())
-            .map_err(io(dir, "sync the directory"))?;
-    }
-    #[cfg(not(unix))]
-    let _ = dir;
-    Ok(())
+    crate::atomic::sync_dir(dir).map_err(io(dir, "sync the directory"))
 }
