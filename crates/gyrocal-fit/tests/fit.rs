@@ -690,10 +690,28 @@ fn csv_with_a_duplicated_column_names_both_positions() {
     assert!(matches!(e, InputError::DuplicateColumn { .. }));
 }
 
+/// `1,2\n` without end.
+struct EndlessRows(usize);
+
+impl std::io::Read for EndlessRows {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        for b in buf.iter_mut() {
+            *b = b"1,2\n"[self.0 % 4];
+            self.0 += 1;
+        }
+        Ok(buf.len())
+    }
+}
+
 #[test]
 fn endless_input_is_refused_at_the_cap() {
     let started = std::time::Instant::now();
+    // without newlines: refused at the line limit
     let e = parse_csv(std::io::repeat(b'0'), "/dev/zero").unwrap_err();
+    assert!(matches!(e, InputError::LineTooLong { line: 1, .. }), "{e}");
+    // valid rows without end: refused at the size limit
+    let endless_rows = std::io::Read::chain(&b"rate_dps,volts\n"[..], EndlessRows(0));
+    let e = parse_csv(endless_rows, "/dev/zero").unwrap_err();
     assert!(matches!(e, InputError::TooLarge { .. }), "{e}");
     let msg = e.to_string();
     assert!(
