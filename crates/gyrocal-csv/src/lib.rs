@@ -674,7 +674,10 @@ mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
 
-    fn rows(text: &[u8]) -> Result<(Vec<String>, Vec<(u64, Vec<String>)>), Error> {
+    /// Each data row's line and cells.
+    type Rows = Vec<(u64, Vec<String>)>;
+
+    fn rows(text: &[u8]) -> Result<(Vec<String>, Rows), Error> {
         let mut r = Reader::new(text, "t.csv");
         let names = r.header()?.names().to_vec();
         let mut out = Vec::new();

@@ -100,9 +100,8 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
     let est = estimate::estimate(&plan, &steps, 0.0, timing.as_ref());
     let mut warnings = model_warnings(&plan, &args.plan);
     // the station `gyrocal run` would use, read the same way (a bad one is bad input)
-    if let Some((path, station)) =
-        gyrocal_run::station::Station::resolve(args.station.as_deref())
-            .map_err(|e| BadInput(format!("station: {e}")))?
+    if let Some((path, station)) = gyrocal_run::station::Station::resolve(args.station.as_deref())
+        .map_err(|e| BadInput(format!("station: {e}")))?
     {
         warnings.extend(station_warnings(&station, &path, plan.has_table()));
     }
