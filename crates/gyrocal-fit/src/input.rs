@@ -162,7 +162,38 @@ pub enum InputError {
     },
 }
 
+/// What kind of problem an [`InputError`] is, for callers that branch on it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum InputErrorKind {
+    /// The file could not be opened (missing, not a regular file, not readable).
+    Open,
+    /// The input is too large, a line too long, too many rows, or memory ran out: a limit.
+    Limit,
+    /// The header: missing, a required column absent, a column named twice.
+    Header,
+    /// A cell is not a valid value.
+    Value,
+    /// The CSV is malformed (a row with another number of fields, not UTF-8) or unreadable.
+    Csv,
+}
+
 impl InputError {
+    /// What kind of problem this is.
+    pub fn kind(&self) -> InputErrorKind {
+        match self {
+            InputError::Open { .. } => InputErrorKind::Open,
+            InputError::TooLarge { .. }
+            | InputError::LineTooLong { .. }
+            | InputError::TooManyRows { .. }
+            | InputError::OutOfMemory { .. } => InputErrorKind::Limit,
+            InputError::NoHeader { .. }
+            | InputError::MissingColumn { .. }
+            | InputError::DuplicateColumn { .. } => InputErrorKind::Header,
+            InputError::BadValue { .. } => InputErrorKind::Value,
+            InputError::Csv { .. } => InputErrorKind::Csv,
+        }
+    }
+
     /// The line the error refers to.
     pub fn line(&self) -> u64 {
         match self {
@@ -463,6 +494,21 @@ mod tests {
             let b = parse_columns(csv.as_bytes(), "f.csv").unwrap_err();
             assert_eq!(a.to_string(), b.to_string(), "{csv:?}");
         }
+    }
+
+    #[test]
+    fn kinds_sort_the_errors() {
+        let kind = |csv: &str| parse_csv(csv.as_bytes(), "k.csv").unwrap_err().kind();
+        assert_eq!(kind(""), InputErrorKind::Header);
+        assert_eq!(kind("rate,volts\n"), InputErrorKind::Header);
+        assert_eq!(kind("rate_dps,volts\n1,x\n"), InputErrorKind::Value);
+        assert_eq!(kind("rate_dps,volts\n1\n"), InputErrorKind::Csv);
+        let e = read_csv(Path::new("/nonexistent/k.csv")).unwrap_err();
+        assert_eq!(e.kind(), InputErrorKind::Open);
+        assert_eq!(
+            e.to_string(),
+            "/nonexistent/k.csv: cannot open: no such file"
+        );
     }
 
     #[test]
