@@ -1,6 +1,6 @@
 //! A rate record held as its cumulative sum (the phase), and parsing one from text.
 
-use std::io::{BufRead, BufReader, Read};
+use std::io::Read;
 
 use crate::error::{Error, Result};
 use crate::sum::{Neumaier, mean};
@@ -91,22 +91,39 @@ impl Record {
     /// Parses a record from CSV-like text: one sample per line, either `value` or `time,value`
     /// (time in seconds; further columns are ignored). Separators: comma, semicolon, tab or
     /// spaces. Blank lines and lines starting with `#` are skipped; a first line that is not
-    /// numeric is taken as a header.
+    /// numeric is taken as a header. Lines are read by gyrocal's CSV reader's line layer
+    /// (`gyrocal_csv::Lines`): at most 1 MiB a line (a longer one, or an input without
+    /// newlines, is an [`Error::Parse`] naming the line after reading at most that much), a
+    /// UTF-8 byte-order mark at the start skipped.
     ///
     /// With a time column, τ0 is the median time step and every step must lie within ±10 %
     /// of it (a gap or a jump is an [`Error::Parse`] naming the line: Allan variances need evenly
     /// spaced samples). Without a time column `tau0_s` must be given; when both are present the
     /// given `tau0_s` wins and the times are still checked against it.
     pub fn from_reader<R: Read>(reader: R, tau0_s: Option<f64>) -> Result<Record> {
-        let reader = BufReader::new(reader);
+        let mut lines = gyrocal_csv::Lines::new(reader, "record");
         let mut times: Vec<f64> = Vec::new();
         let mut values: Vec<f64> = Vec::new();
         let mut lines_of: Vec<usize> = Vec::new();
         let mut columns: Option<usize> = None;
         let mut seen_data_line = false;
-        for (idx, line) in reader.lines().enumerate() {
-            let line = line?;
-            let lineno = idx + 1;
+        loop {
+            let (lineno, bytes) = match lines.next_line() {
+                Ok(Some(l)) => l,
+                Ok(None) => break,
+                Err(gyrocal_csv::Error::Read { source, .. }) => return Err(Error::Io(source)),
+                Err(e) => {
+                    return Err(Error::Parse {
+                        line: e.line().unwrap_or(1) as usize,
+                        msg: e.detail(),
+                    });
+                }
+            };
+            let lineno = lineno as usize;
+            let line = std::str::from_utf8(bytes).map_err(|_| Error::Parse {
+                line: lineno,
+                msg: "not valid UTF-8".into(),
+            })?;
             let t = line.trim();
             if t.is_empty() || t.starts_with('#') {
                 continue;

@@ -263,6 +263,18 @@ fn bad_input_gives_clear_errors() {
             .kind(),
         ErrorKind::InvalidParameter
     );
+    // a line without end (after two good ones) is refused after a bounded read, not echoed
+    let endless = std::io::Read::chain("t,rate\n0,1\n".as_bytes(), std::io::repeat(b'7'));
+    let e = Record::from_reader(endless, None).unwrap_err();
+    assert_eq!(e.kind(), ErrorKind::Parse);
+    assert!(
+        e.to_string().contains("line 3") && e.to_string().contains("longer than"),
+        "{e}"
+    );
+    assert!(!e.to_string().contains("777"), "{e}");
+    // a byte-order mark before the first sample: the sample is read, not taken as a header
+    let r = Record::from_reader("\u{feff}0,1\n1,2\n2,3\n".as_bytes(), None).unwrap();
+    assert_eq!(r.len(), 3);
 }
 
 #[test]

@@ -281,10 +281,21 @@ pub(crate) enum ReadFailure {
 }
 
 /// Reads a text file of at most `cap` bytes, reading no more than `cap + 1` of it (so an
-/// endless file such as `/dev/zero` is refused quickly).
+/// endless file such as `/dev/zero` is refused quickly). Only a regular file is opened: a
+/// named pipe would block the open until a writer comes (forever), a device may never end.
 pub(crate) fn read_capped_text(path: &Path, cap: u64) -> Result<String, ReadFailure> {
     use std::io::Read as _;
+    // stat first: opening a FIFO for reading blocks until someone writes to it
+    let meta = std::fs::metadata(path).map_err(ReadFailure::Io)?;
+    if !meta.is_file() {
+        return Err(ReadFailure::Io(not_a_regular_file(&meta.file_type())));
+    }
     let file = std::fs::File::open(path).map_err(ReadFailure::Io)?;
+    // and again on what was opened, in case the path was replaced in between
+    let meta = file.metadata().map_err(ReadFailure::Io)?;
+    if !meta.is_file() {
+        return Err(ReadFailure::Io(not_a_regular_file(&meta.file_type())));
+    }
     let mut bytes = Vec::new();
     file.take(cap.saturating_add(1))
         .read_to_end(&mut bytes)
@@ -298,6 +309,35 @@ pub(crate) fn read_capped_text(path: &Path, cap: u64) -> Result<String, ReadFail
             format!("not UTF-8 text (byte {})", e.utf8_error().valid_up_to()),
         ))
     })
+}
+
+/// The error for a path that is not a regular file, saying what it is.
+pub(crate) fn not_a_regular_file(t: &std::fs::FileType) -> std::io::Error {
+    #[cfg(unix)]
+    let what = {
+        use std::os::unix::fs::FileTypeExt as _;
+        if t.is_fifo() {
+            "a named pipe (FIFO)"
+        } else if t.is_char_device() || t.is_block_device() {
+            "a device"
+        } else if t.is_socket() {
+            "a socket"
+        } else if t.is_dir() {
+            "a directory"
+        } else {
+            "not a regular file"
+        }
+    };
+    #[cfg(not(unix))]
+    let what = if t.is_dir() {
+        "a directory"
+    } else {
+        "not a regular file"
+    };
+    std::io::Error::new(
+        std::io::ErrorKind::InvalidInput,
+        format!("{what}: gyrocal reads this file only from a regular file"),
+    )
 }
 
 /// A plan or acceptance file's text, at most [`MAX_PLAN_BYTES`].
@@ -2629,11 +2669,14 @@ fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
     distinct.sort_by(f64::total_cmp);
     distinct.dedup();
     if kind == PlanKind::Drift {
-        if distinct != [0.0] {
+        // exactly one rate: each listed rate is one more record segment, so [0, 0] would
+        // silently double the record
+        if rates != [0.0] {
             return Err(cx.err(
                 "plan.rates_dps",
                 format!(
-                    "a drift plan records at rest: write rates_dps = [0] (got {:?})",
+                    "a drift plan records once at rest: write exactly rates_dps = [0] (got {:?}; \
+                     each listed rate would be one more record)",
                     p.rates_dps
                 ),
             ));

@@ -44,7 +44,13 @@
 //! by the flag or the variable must exist.
 //!
 //! A calibration is valid through its due date: an instrument is overdue the day after
-//! ([`Station::overdue`]).
+//! ([`Station::overdue`]). A `calibrated` date after today is refused, naming the instrument:
+//! it is a typing error (or a wrong clock), and a certificate would otherwise claim a
+//! calibration that had not happened yet. The file must be a regular file: a named pipe or a
+//! device is refused before it is opened (opening a pipe would wait for a writer forever).
+//! A station without a `[multimeter]` (or, for a plan with a table, a `[table]`) section is
+//! accepted, and `gyrocal run` and `gyrocal check` say at the terminal what is missing
+//! ([`Station::missing_sections`]).
 
 use std::ffi::OsString;
 use std::fmt;
@@ -384,6 +390,8 @@ struct Problem {
 /// Walks a parsed station file, keeping every problem; the first in the file is reported.
 struct Walker {
     problems: Vec<Problem>,
+    /// The calendar day a `calibrated` date may not be after.
+    today: Date,
 }
 
 type Entry<'a, 'i> = (
@@ -635,6 +643,25 @@ impl Walker {
         let certificate = self.text(s, "certificate", g("certificate"), header);
         let calibrated = self.date(s, "calibrated", g("calibrated"), header);
         let due = self.date(s, "due", g("due"), header);
+        // a calibration in the future is a typing error (or a wrong clock): the certificate
+        // would state a traceability that did not exist on the day of the measurement
+        if let (Some(c), Some(v)) = (calibrated, g("calibrated"))
+            && c > self.today
+        {
+            let instrument = asset_id
+                .as_deref()
+                .map_or_else(|| format!("the {role}"), |id| format!("the {role} {id}"));
+            self.problem(
+                Some(v.span().start),
+                s,
+                "calibrated",
+                format!(
+                    "= {c} is after today ({}): {instrument} cannot have been calibrated in \
+                     the future; correct the date (or the computer's clock)",
+                    self.today
+                ),
+            );
+        }
         if let (Some(c), Some(d), Some(v)) = (calibrated, due, g("due"))
             && d < c
         {
@@ -728,8 +755,15 @@ fn shown(v: &DeValue<'_>) -> String {
 }
 
 impl Station {
-    /// Reads and validates a station file (at most [`MAX_STATION_BYTES`]); errors name `path`.
+    /// Reads and validates a station file (at most [`MAX_STATION_BYTES`], a regular file only:
+    /// a named pipe or a device is refused before it is opened); errors name `path`. A
+    /// `calibrated` date after today (the local calendar day) is refused.
     pub fn from_file(path: &Path) -> Result<Station, StationError> {
+        Station::from_file_on(path, jiff::Zoned::now().date())
+    }
+
+    /// [`Station::from_file`] with `today` given.
+    pub fn from_file_on(path: &Path, today: Date) -> Result<Station, StationError> {
         let src = read_capped_text(path, MAX_STATION_BYTES).map_err(|f| match f {
             ReadFailure::Io(source) => StationError::Read {
                 path: path.to_path_buf(),
@@ -740,11 +774,17 @@ impl Station {
                 cap: MAX_STATION_BYTES,
             },
         })?;
-        Station::from_toml_str(&src, path)
+        Station::from_toml_str_on(&src, path, today)
     }
 
-    /// Parses and validates station text; `name` is the file name used in errors.
+    /// Parses and validates station text; `name` is the file name used in errors. A
+    /// `calibrated` date after today (the local calendar day) is refused.
     pub fn from_toml_str(src: &str, name: &Path) -> Result<Station, StationError> {
+        Station::from_toml_str_on(src, name, jiff::Zoned::now().date())
+    }
+
+    /// [`Station::from_toml_str`] with `today` given.
+    pub fn from_toml_str_on(src: &str, name: &Path, today: Date) -> Result<Station, StationError> {
         let location = |offset: Option<usize>| Location::in_text(name, src, offset);
         let root = DeTable::parse(src).map_err(|e| StationError::Syntax {
             location: location(e.span().map(|s: Range<usize>| s.start)),
@@ -753,6 +793,7 @@ impl Station {
         let root = root.get_ref();
         let mut w = Walker {
             problems: Vec::new(),
+            today,
         };
         w.unknown_keys(root, None, &TOP_KEYS);
         let g = |k: &str| Walker::get(root, k);
@@ -803,6 +844,21 @@ impl Station {
             .into_iter()
             .filter_map(|(role, r)| r.as_ref().map(|r| (role, r)))
             .collect()
+    }
+
+    /// The sections a run would need and the file lacks: `multimeter` always, `table` when
+    /// `needs_table` (a plan that drives a table). A station without them is accepted (a
+    /// bench may record only some instruments) but the certificate cannot name what is
+    /// missing, so the CLI says so at the terminal.
+    pub fn missing_sections(&self, needs_table: bool) -> Vec<&'static str> {
+        let mut missing = Vec::new();
+        if self.multimeter.is_none() {
+            missing.push("multimeter");
+        }
+        if needs_table && self.table.is_none() {
+            missing.push("table");
+        }
+        missing
     }
 
     /// The instruments whose calibration has expired on `today`: due before today. A

@@ -493,11 +493,26 @@ fn integer_keys_out_of_range_name_the_key_the_value_and_the_range() {
 #[test]
 fn plan_files_larger_than_the_cap_are_refused_before_being_read_whole() {
     let started = std::time::Instant::now();
+    // a device is refused before it is opened (it would never end)
     let err = Plan::from_file(Path::new("/dev/zero")).unwrap_err();
-    assert!(matches!(err, PlanError::TooLarge { .. }), "{err}");
+    assert!(matches!(err, PlanError::Read { .. }), "{err}");
     assert_eq!(
         err.to_string(),
-        "/dev/zero: larger than the 1024 KiB limit for a plan (a plan is a few kilobytes); is it the right file?"
+        "/dev/zero: cannot read the plan: a device: gyrocal reads this file only from a regular file"
+    );
+    // a file larger than the cap is refused after reading the cap
+    let tmp = tempfile::tempdir().unwrap();
+    let sparse = tmp.path().join("sparse.toml");
+    std::fs::File::create(&sparse)
+        .unwrap()
+        .set_len(8 << 20)
+        .unwrap();
+    let err = Plan::from_file(&sparse).unwrap_err();
+    assert!(matches!(err, PlanError::TooLarge { .. }), "{err}");
+    assert!(
+        err.to_string()
+            .ends_with("larger than the 1024 KiB limit for a plan (a plan is a few kilobytes); is it the right file?"),
+        "{err}"
     );
     assert!(started.elapsed() < std::time::Duration::from_secs(5));
     // A real file just over the cap; one just under parses as usual (comments are fine).

@@ -312,11 +312,22 @@ max = 50
             .contains("cannot read the acceptance file"),
         "{missing}"
     );
-    let big = load_acceptance(Path::new("/dev/zero")).unwrap_err();
+    let device = load_acceptance(Path::new("/dev/zero")).unwrap_err();
+    assert_eq!(device.kind(), PlanErrorKind::Read);
+    assert!(device.to_string().contains("a device"), "{device}");
+    let sparse = tmp.path().join("huge.toml");
+    std::fs::File::create(&sparse)
+        .unwrap()
+        .set_len(8 << 20)
+        .unwrap();
+    let big = load_acceptance(&sparse).unwrap_err();
     assert_eq!(big.kind(), PlanErrorKind::TooLarge);
     assert_eq!(
         big.to_string(),
-        "/dev/zero: larger than the 1024 KiB limit for an acceptance file (an acceptance file \
-         is a few kilobytes); is it the right file?"
+        format!(
+            "{}: larger than the 1024 KiB limit for an acceptance file (an acceptance file \
+             is a few kilobytes); is it the right file?",
+            sparse.display()
+        )
     );
 }

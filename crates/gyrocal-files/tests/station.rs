@@ -258,11 +258,25 @@ fn refusals_name_the_file_line_and_key() {
 
 #[test]
 fn reading_is_capped_and_names_the_file() {
+    // a device (or a named pipe) is refused before it is opened
     let e = Station::from_file(Path::new("/dev/zero")).unwrap_err();
+    assert_eq!(e.kind(), StationErrorKind::Read);
+    assert!(
+        e.to_string()
+            .starts_with("/dev/zero: cannot read the station file: a device"),
+        "{e}"
+    );
+    let tmp = tempfile::tempdir().unwrap();
+    let sparse = tmp.path().join("huge.toml");
+    std::fs::File::create(&sparse)
+        .unwrap()
+        .set_len(8 << 20)
+        .unwrap();
+    let e = Station::from_file(&sparse).unwrap_err();
     assert_eq!(e.kind(), StationErrorKind::TooLarge);
     assert!(
         e.to_string()
-            .starts_with("/dev/zero: larger than the 1024 KiB limit for a station file"),
+            .ends_with("larger than the 1024 KiB limit for a station file (a station file is a few hundred bytes); is it the right file?"),
         "{e}"
     );
     let e = Station::from_file(Path::new("/nonexistent/station.toml")).unwrap_err();

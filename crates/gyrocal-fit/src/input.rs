@@ -6,21 +6,31 @@
 //! weighting; other columns are ignored. Lines starting with `#` are comments. Empty
 //! `volts_std`/`n` cells mean "not given".
 //!
-//! This module parses from any [`Read`]; it never opens files. Errors name the source (the name
-//! the caller passes, usually the file name) and the line. A column name that appears twice
-//! (case-insensitively) is an error naming both positions. The input is read whole, up to
-//! [`MAX_INPUT_BYTES`] (64 MiB, several hundred thousand rows; a calibration's steps CSV is a
-//! few kilobytes): a larger or endless input (`/dev/zero`) is an error after reading at most
-//! that much, never a memory exhaustion.
+//! The text is read by `gyrocal-csv`, the one CSV reader of `gyrocal fit`, `gyrocal report`
+//! and `gyrocal allan`: lines are bounded ([`MAX_LINE_BYTES`]: a file without newlines is
+//! refused after reading that much, before or after a valid header), a UTF-8 byte-order mark
+//! (Excel's) is skipped, every error names the source (the name the caller passes, usually the
+//! file name) and the line, counted over every line (comments and blank lines included). A
+//! column name that appears twice (case-insensitively) is an error naming both positions.
+//! [`read_csv`] and [`read_columns`] open a path, a regular file only (a named pipe or a
+//! device is refused before anything is read); [`parse_csv`] and [`parse_columns`] parse any
+//! [`Read`].
+//!
+//! [`parse_csv`] keeps every row as a [`Point`] and reads at most [`MAX_INPUT_BYTES`] (64 MiB,
+//! several hundred thousand rows; a calibration's steps CSV is a few kilobytes);
+//! [`parse_columns`] keeps only the columns and reads up to [`MAX_ROWS`] rows.
 
 use std::io::Read;
+use std::path::Path;
+
+use gyrocal_csv::{Header, Row};
 
 use crate::data::{Columns, Dataset, Point};
 
-/// The longest line [`parse_columns`] accepts: 1 MiB. A longer one (an endless input without
-/// newlines such as `/dev/zero`, a binary file) is refused with [`InputError::LineTooLong`]
-/// after reading at most that much.
-pub const MAX_LINE_BYTES: usize = 1024 * 1024;
+/// The longest line accepted: 1 MiB (`gyrocal_csv::MAX_LINE_BYTES`). A longer one (an endless
+/// input without newlines, a binary file) is refused with [`InputError::LineTooLong`] after
+/// reading at most that much.
+pub const MAX_LINE_BYTES: usize = gyrocal_csv::MAX_LINE_BYTES;
 
 /// The most data rows [`parse_columns`] reads: 2²⁵ = 33 554 432 (about 1 GB of CSV; the columns
 /// take 16 bytes a row, 24 with `volts_std`). More is refused with [`InputError::TooManyRows`],
@@ -130,6 +140,15 @@ pub enum InputError {
         /// What is wrong with it.
         reason: &'static str,
     },
+    /// The file could not be opened: missing, not a regular file (a named pipe, a device), or
+    /// not readable. The message names the file.
+    #[error("{message}")]
+    Open {
+        /// Source name.
+        file: String,
+        /// What is wrong, naming the file.
+        message: String,
+    },
     /// The CSV itself is malformed (e.g. a row with a different number of fields) or could not
     /// be read.
     #[error("{file}: line {line}: {message}")]
@@ -143,11 +162,44 @@ pub enum InputError {
     },
 }
 
+/// What kind of problem an [`InputError`] is, for callers that branch on it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum InputErrorKind {
+    /// The file could not be opened (missing, not a regular file, not readable).
+    Open,
+    /// The input is too large, a line too long, too many rows, or memory ran out: a limit.
+    Limit,
+    /// The header: missing, a required column absent, a column named twice.
+    Header,
+    /// A cell is not a valid value.
+    Value,
+    /// The CSV is malformed (a row with another number of fields, not UTF-8) or unreadable.
+    Csv,
+}
+
 impl InputError {
+    /// What kind of problem this is.
+    pub fn kind(&self) -> InputErrorKind {
+        match self {
+            InputError::Open { .. } => InputErrorKind::Open,
+            InputError::TooLarge { .. }
+            | InputError::LineTooLong { .. }
+            | InputError::TooManyRows { .. }
+            | InputError::OutOfMemory { .. } => InputErrorKind::Limit,
+            InputError::NoHeader { .. }
+            | InputError::MissingColumn { .. }
+            | InputError::DuplicateColumn { .. } => InputErrorKind::Header,
+            InputError::BadValue { .. } => InputErrorKind::Value,
+            InputError::Csv { .. } => InputErrorKind::Csv,
+        }
+    }
+
     /// The line the error refers to.
     pub fn line(&self) -> u64 {
         match self {
-            InputError::NoHeader { .. } | InputError::TooLarge { .. } => 1,
+            InputError::NoHeader { .. } | InputError::TooLarge { .. } | InputError::Open { .. } => {
+                1
+            }
             InputError::MissingColumn { line, .. }
             | InputError::DuplicateColumn { line, .. }
             | InputError::BadValue { line, .. }
@@ -159,8 +211,159 @@ impl InputError {
     }
 }
 
+/// The error of `gyrocal-csv`, as this module's.
+fn from_csv(e: gyrocal_csv::Error) -> InputError {
+    use gyrocal_csv::Error as E;
+    match e {
+        E::NoHeader { file } => InputError::NoHeader { file },
+        E::LineTooLong { file, line, cap } => InputError::LineTooLong { file, line, cap },
+        E::TooLarge { file, cap } => InputError::TooLarge { file, cap },
+        E::DuplicateColumn {
+            file,
+            line,
+            name,
+            first,
+            second,
+        } => InputError::DuplicateColumn {
+            file,
+            line,
+            name,
+            first,
+            second,
+        },
+        e @ (E::NotFound { .. } | E::NotAFile { .. } | E::Open { .. }) => InputError::Open {
+            file: e.file().to_string(),
+            message: e.to_string(),
+        },
+        e => InputError::Csv {
+            file: e.file().to_string(),
+            line: e.line().unwrap_or(1),
+            message: e.detail(),
+        },
+    }
+}
+
+/// Where the columns are, once the header is read.
+struct Cols {
+    rate: usize,
+    volts: usize,
+    std: Option<usize>,
+    n: Option<usize>,
+}
+
+impl Cols {
+    fn of(header: &Header, file: &str) -> Result<Cols, InputError> {
+        let missing = |column| InputError::MissingColumn {
+            file: file.to_string(),
+            line: header.line(),
+            column,
+            found: header.joined(),
+        };
+        Ok(Cols {
+            rate: header.find("rate_dps").ok_or_else(|| missing("rate_dps"))?,
+            volts: header.find("volts").ok_or_else(|| missing("volts"))?,
+            std: header.find("volts_std"),
+            n: header.find("n"),
+        })
+    }
+
+    /// The row's point; `None` for a row of empty cells (a trailing `,,`), skipped like a
+    /// blank line.
+    fn point(&self, row: &Row<'_>, file: &str) -> Result<Option<Point>, InputError> {
+        if row.all_empty() {
+            return Ok(None);
+        }
+        let line = row.line();
+        let bad = |column: &'static str, value: &[u8], reason: &'static str| InputError::BadValue {
+            file: file.to_string(),
+            line,
+            column,
+            value: String::from_utf8_lossy(value).into_owned(),
+            reason,
+        };
+        let number = |col: usize, column: &'static str| -> Result<f64, InputError> {
+            let text = row.get(col).unwrap_or_default();
+            if text.is_empty() {
+                return Err(bad(column, text, "missing value"));
+            }
+            let v: f64 = std::str::from_utf8(text)
+                .ok()
+                .and_then(|t| t.parse().ok())
+                .ok_or_else(|| bad(column, text, "not a number"))?;
+            if !v.is_finite() {
+                return Err(bad(column, text, "not a finite number"));
+            }
+            Ok(v)
+        };
+        let rate_dps = number(self.rate, "rate_dps")?;
+        let volts = number(self.volts, "volts")?;
+        let volts_std = match self.std {
+            Some(c) if !row.get(c).unwrap_or_default().is_empty() => {
+                let s = number(c, "volts_std")?;
+                if s < 0.0 {
+                    return Err(bad("volts_std", row.get(c).unwrap_or_default(), "negative"));
+                }
+                Some(s)
+            }
+            _ => None,
+        };
+        let n = match self.n {
+            Some(c) if !row.get(c).unwrap_or_default().is_empty() => {
+                let text = row.get(c).unwrap_or_default();
+                let v: u64 = std::str::from_utf8(text)
+                    .ok()
+                    .and_then(|t| t.parse().ok())
+                    .filter(|v| *v > 0)
+                    .ok_or_else(|| bad("n", text, "not a positive whole number"))?;
+                Some(v)
+            }
+            _ => None,
+        };
+        Ok(Some(Point {
+            rate_dps,
+            volts,
+            volts_std,
+            n,
+            line: Some(line),
+        }))
+    }
+}
+
+/// Reads every data point of `rdr`, handing each to `sink`.
+fn read_points<R: Read>(
+    mut rdr: gyrocal_csv::Reader<R>,
+    file: &str,
+    mut sink: impl FnMut(Point) -> Result<(), InputError>,
+) -> Result<(), InputError> {
+    let cols = Cols::of(rdr.header().map_err(from_csv)?, file)?;
+    while let Some(row) = rdr.next_row().map_err(from_csv)? {
+        if let Some(p) = cols.point(&row, file)? {
+            sink(p)?;
+        }
+    }
+    Ok(())
+}
+
+/// Opens a data file for reading (a regular file only); errors name it.
+fn open(path: &Path) -> Result<std::fs::File, InputError> {
+    gyrocal_csv::open(path).map_err(from_csv)
+}
+
+/// Reads the CSV data set at `path` ([`parse_csv`]), named in errors as given. A regular file
+/// only: a missing file, a named pipe or a device is [`InputError::Open`], before anything is
+/// read.
+pub fn read_csv(path: &Path) -> Result<Dataset, InputError> {
+    parse_csv(open(path)?, &path.display().to_string())
+}
+
+/// Reads the CSV data set at `path` into columns ([`parse_columns`]), named in errors as given.
+/// A regular file only, as [`read_csv`].
+pub fn read_columns(path: &Path) -> Result<Columns, InputError> {
+    parse_columns(open(path)?, &path.display().to_string())
+}
+
 /// Parses a CSV data set from `reader`; `source` names it in errors and in
-/// [`Dataset::source`].
+/// [`Dataset::source`]. At most [`MAX_INPUT_BYTES`] are read.
 ///
 /// Each [`Point::line`] is the line the row was read from (1-based, comments counted).
 ///
@@ -172,179 +375,14 @@ impl InputError {
 /// assert_eq!(data.points[1].line, Some(4));
 /// ```
 pub fn parse_csv<R: Read>(reader: R, source: &str) -> Result<Dataset, InputError> {
-    let file = source.to_string();
-    // The csv reader's own line count skips comment lines after the header, so lines are
-    // computed from byte offsets over the whole input (calibration files are small; the cap
-    // keeps a wrong or endless file from exhausting memory).
-    let mut bytes = Vec::new();
-    reader
-        .take(MAX_INPUT_BYTES + 1)
-        .read_to_end(&mut bytes)
-        .map_err(|e| InputError::Csv {
-            file: file.clone(),
-            line: 1,
-            message: format!("cannot read: {e}"),
-        })?;
-    if bytes.len() as u64 > MAX_INPUT_BYTES {
-        return Err(InputError::TooLarge {
-            file,
-            cap: MAX_INPUT_BYTES,
-        });
-    }
-    let newlines: Vec<u64> = bytes
-        .iter()
-        .enumerate()
-        .filter(|(_, b)| **b == b'\n')
-        .map(|(i, _)| i as u64)
-        .collect();
-    // A record's position is where the reader started looking for it, which may be a comment
-    // or blank line before it: skip those to reach the record's own line.
-    let line_of = |pos: &csv::Position| -> u64 {
-        let mut line = newlines.partition_point(|&nl| nl < pos.byte());
-        loop {
-            let start = if line == 0 {
-                0
-            } else {
-                newlines[line - 1] as usize + 1
-            };
-            let end = newlines.get(line).map_or(bytes.len(), |&nl| nl as usize);
-            let text = bytes.get(start..end).unwrap_or(&[]);
-            let skip = text.first() == Some(&b'#') || text.iter().all(u8::is_ascii_whitespace);
-            if !skip || line >= newlines.len() {
-                return line as u64 + 1;
-            }
-            line += 1;
-        }
-    };
-    let mut rdr = csv::ReaderBuilder::new()
-        .has_headers(true)
-        .comment(Some(b'#'))
-        .trim(csv::Trim::All)
-        .flexible(false)
-        .from_reader(bytes.as_slice());
-    let csv_err = |e: csv::Error, fallback_line: u64| {
-        let line = e.position().map_or(fallback_line, line_of);
-        let message = match e.kind() {
-            csv::ErrorKind::UnequalLengths {
-                expected_len, len, ..
-            } => {
-                format!("expected {expected_len} fields like the header, found {len}")
-            }
-            csv::ErrorKind::Utf8 { .. } => "not valid UTF-8".to_string(),
-            _ => e.to_string(),
-        };
-        InputError::Csv {
-            file: file.clone(),
-            line,
-            message,
-        }
-    };
-    let headers = rdr.headers().map_err(|e| csv_err(e, 1))?.clone();
-    if headers.is_empty() || (headers.len() == 1 && headers[0].is_empty()) {
-        return Err(InputError::NoHeader { file });
-    }
-    let header_line = headers.position().map_or(1, line_of);
-    for (j, name) in headers.iter().enumerate() {
-        if name.is_empty() {
-            continue;
-        }
-        if let Some(i) = headers
-            .iter()
-            .take(j)
-            .position(|h| h.eq_ignore_ascii_case(name))
-        {
-            return Err(InputError::DuplicateColumn {
-                file,
-                line: header_line,
-                name: name.to_string(),
-                first: i + 1,
-                second: j + 1,
-            });
-        }
-    }
-    let find = |name: &str| headers.iter().position(|h| h.eq_ignore_ascii_case(name));
-    let found = headers.iter().collect::<Vec<_>>().join(", ");
-    let missing = |column| InputError::MissingColumn {
-        file: file.clone(),
-        line: header_line,
-        column,
-        found: found.clone(),
-    };
-    let rate_col = find("rate_dps").ok_or_else(|| missing("rate_dps"))?;
-    let volts_col = find("volts").ok_or_else(|| missing("volts"))?;
-    let std_col = find("volts_std");
-    let n_col = find("n");
-
+    let rdr = gyrocal_csv::Reader::new(reader, source).with_max_bytes(MAX_INPUT_BYTES);
     let mut points = Vec::new();
-    let mut record = csv::StringRecord::new();
-    let mut last_line = header_line;
-    loop {
-        match rdr.read_record(&mut record) {
-            Ok(false) => break,
-            Ok(true) => {}
-            Err(e) => return Err(csv_err(e, last_line + 1)),
-        }
-        let line = record.position().map_or(last_line + 1, line_of);
-        last_line = line;
-        // A row of empty cells (e.g. a trailing ",,") is skipped like a blank line.
-        if record.iter().all(str::is_empty) {
-            continue;
-        }
-        let bad = |column: &'static str, value: &str, reason: &'static str| InputError::BadValue {
-            file: file.clone(),
-            line,
-            column,
-            value: value.to_string(),
-            reason,
-        };
-        let number = |col: usize, column: &'static str| -> Result<f64, InputError> {
-            let text = record.get(col).unwrap_or("");
-            if text.is_empty() {
-                return Err(bad(column, text, "missing value"));
-            }
-            let v: f64 = text
-                .parse()
-                .map_err(|_| bad(column, text, "not a number"))?;
-            if !v.is_finite() {
-                return Err(bad(column, text, "not a finite number"));
-            }
-            Ok(v)
-        };
-        let rate_dps = number(rate_col, "rate_dps")?;
-        let volts = number(volts_col, "volts")?;
-        let volts_std = match std_col {
-            Some(c) if !record.get(c).unwrap_or("").is_empty() => {
-                let s = number(c, "volts_std")?;
-                if s < 0.0 {
-                    return Err(bad("volts_std", record.get(c).unwrap_or(""), "negative"));
-                }
-                Some(s)
-            }
-            _ => None,
-        };
-        let n = match n_col {
-            Some(c) if !record.get(c).unwrap_or("").is_empty() => {
-                let text = record.get(c).unwrap_or("");
-                let n: u64 = text
-                    .parse()
-                    .map_err(|_| bad("n", text, "not a positive whole number"))?;
-                if n == 0 {
-                    return Err(bad("n", text, "not a positive whole number"));
-                }
-                Some(n)
-            }
-            _ => None,
-        };
-        points.push(Point {
-            rate_dps,
-            volts,
-            volts_std,
-            n,
-            line: Some(line),
-        });
-    }
+    read_points(rdr, source, |p| {
+        points.push(p);
+        Ok(())
+    })?;
     Ok(Dataset {
-        source: Some(file),
+        source: Some(source.to_string()),
         points,
     })
 }
@@ -352,15 +390,11 @@ pub fn parse_csv<R: Read>(reader: R, source: &str) -> Result<Dataset, InputError
 /// Parses a CSV data set from `reader` into column arrays, streaming: the fast path of
 /// `gyrocal fit` for files of millions of rows.
 ///
-/// The format and the errors are those of [`parse_csv`] (same messages, same lines), with
-/// these differences: the input is read in 1 MiB chunks and never held whole, so its size is
-/// not capped; instead a line may not exceed [`MAX_LINE_BYTES`] and there may be at most
-/// [`MAX_ROWS`] data rows, and running out of memory is an error
+/// The format and the errors are those of [`parse_csv`] (same reader, same messages, same
+/// lines), with these differences: the input's size is not capped; instead there may be at
+/// most [`MAX_ROWS`] data rows, and running out of memory is an error
 /// ([`InputError::OutOfMemory`]), not an abort. Memory is the columns used (16 bytes a row,
-/// 8 more with `volts_std`); other columns are skipped without being stored. Quoted fields
-/// are unquoted, but a quoted field may not contain a comma or a line break (data files hold
-/// numbers). Cells are parsed from bytes with the standard library's float parser, which is
-/// the Eisel–Lemire/fast-float algorithm (Rust ≥ 1.55), so no extra crate is needed.
+/// 8 more with `volts_std`) and one line; other columns are not stored.
 ///
 /// ```
 /// let csv = "# a comment\nVolts,Rate_DPS,temp\n0.0088,0,25\n0.3700,1,25\n";
@@ -374,76 +408,44 @@ pub fn parse_columns<R: Read>(reader: R, source: &str) -> Result<Columns, InputE
 
 /// [`parse_columns`] with a row limit other than [`MAX_ROWS`].
 pub fn parse_columns_limited<R: Read>(
-    mut reader: R,
+    reader: R,
     source: &str,
     max_rows: u64,
 ) -> Result<Columns, InputError> {
-    let file = source.to_string();
-    let mut parser = ColumnParser {
-        file: &file,
-        max_rows,
-        header: None,
-        rates: Vec::new(),
-        volts: Vec::new(),
-        sigmas: None,
-        last_line: None,
-    };
-    let mut buf = vec![0_u8; MAX_LINE_BYTES];
-    let mut filled = 0_usize;
-    let mut line = 0_u64;
-    loop {
-        if filled == buf.len() {
-            return Err(InputError::LineTooLong {
-                file,
-                line: line + 1,
-                cap: MAX_LINE_BYTES,
+    let mut rdr = gyrocal_csv::Reader::new(reader, source);
+    let with_std = rdr.header().map_err(from_csv)?.find("volts_std").is_some();
+    let mut rates: Vec<f64> = Vec::new();
+    let mut volts: Vec<f64> = Vec::new();
+    let mut sigmas: Option<Vec<f64>> = with_std.then(Vec::new);
+    let mut last_line = None;
+    read_points(rdr, source, |p| {
+        let line = p.line.unwrap_or(0);
+        let rows = rates.len() as u64;
+        if rows >= max_rows {
+            return Err(InputError::TooManyRows {
+                file: source.to_string(),
+                line,
+                cap: max_rows,
             });
         }
-        let got = match reader.read(&mut buf[filled..]) {
-            Ok(k) => k,
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-            Err(e) => {
-                return Err(InputError::Csv {
-                    file,
-                    line: line + 1,
-                    message: format!("cannot read: {e}"),
-                });
-            }
-        };
-        let eof = got == 0;
-        let scan_from = filled;
-        filled += got;
-        let mut start = 0_usize;
-        let mut from = scan_from;
-        while let Some(k) = buf[from..filled].iter().position(|&b| b == b'\n') {
-            let end = from + k;
-            line += 1;
-            parser.line(&buf[start..end], line)?;
-            start = end + 1;
-            from = start;
+        let room = grow(&mut rates) && grow(&mut volts) && sigmas.as_mut().is_none_or(grow);
+        if !room {
+            return Err(InputError::OutOfMemory {
+                file: source.to_string(),
+                line,
+                rows,
+            });
         }
-        if eof {
-            if start < filled {
-                line += 1;
-                parser.line(&buf[start..filled], line)?;
-            }
-            break;
+        rates.push(p.rate_dps);
+        volts.push(p.volts);
+        if let Some(s) = &mut sigmas {
+            s.push(p.sigma().unwrap_or(f64::NAN));
         }
-        buf.copy_within(start..filled, 0);
-        filled -= start;
-    }
-    if parser.header.is_none() {
-        return Err(InputError::NoHeader { file });
-    }
-    let ColumnParser {
-        rates,
-        volts,
-        sigmas,
-        last_line,
-        ..
-    } = parser;
+        last_line = Some(line);
+        Ok(())
+    })?;
     Ok(Columns {
-        source: Some(file),
+        source: Some(source.to_string()),
         rates,
         volts,
         sigmas,
@@ -451,213 +453,8 @@ pub fn parse_columns_limited<R: Read>(
     })
 }
 
-/// Where the columns are, once the header is read.
-struct Header {
-    fields: usize,
-    rate: usize,
-    volts: usize,
-    std: Option<usize>,
-    n: Option<usize>,
-}
-
-struct ColumnParser<'a> {
-    file: &'a str,
-    max_rows: u64,
-    header: Option<Header>,
-    rates: Vec<f64>,
-    volts: Vec<f64>,
-    sigmas: Option<Vec<f64>>,
-    last_line: Option<u64>,
-}
-
-/// A cell: surrounding whitespace trimmed, surrounding quotes removed.
-fn cell(raw: &[u8]) -> &[u8] {
-    let t = raw.trim_ascii();
-    if t.len() >= 2 && t[0] == b'"' && t[t.len() - 1] == b'"' {
-        t[1..t.len() - 1].trim_ascii()
-    } else {
-        t
-    }
-}
-
 fn grow<T>(v: &mut Vec<T>) -> bool {
     v.len() < v.capacity() || v.try_reserve(v.len().max(1 << 16)).is_ok()
-}
-
-impl ColumnParser<'_> {
-    fn line(&mut self, raw: &[u8], line: u64) -> Result<(), InputError> {
-        let raw = raw.strip_suffix(b"\r").unwrap_or(raw);
-        if raw.is_empty() || raw[0] == b'#' {
-            return Ok(());
-        }
-        let Some(h) = &self.header else {
-            return self.header(raw, line);
-        };
-        let file = self.file;
-        let (mut rate, mut volts, mut std, mut n) = (None, None, None, None);
-        let mut fields = 0_usize;
-        let mut all_empty = true;
-        for (j, f) in raw.split(|&b| b == b',').enumerate() {
-            fields += 1;
-            let c = cell(f);
-            all_empty &= c.is_empty();
-            if j == h.rate {
-                rate = Some(c);
-            } else if j == h.volts {
-                volts = Some(c);
-            } else if Some(j) == h.std {
-                std = Some(c);
-            } else if Some(j) == h.n {
-                n = Some(c);
-            }
-        }
-        if fields != h.fields {
-            return Err(InputError::Csv {
-                file: file.to_string(),
-                line,
-                message: format!(
-                    "expected {} fields like the header, found {fields}",
-                    h.fields
-                ),
-            });
-        }
-        // A row of empty cells (e.g. a trailing ",,") is skipped like a blank line.
-        if all_empty {
-            return Ok(());
-        }
-        let bad = |column: &'static str, value: &[u8], reason: &'static str| InputError::BadValue {
-            file: file.to_string(),
-            line,
-            column,
-            value: String::from_utf8_lossy(value).into_owned(),
-            reason,
-        };
-        let number = |text: Option<&[u8]>, column: &'static str| -> Result<f64, InputError> {
-            let text = text.unwrap_or(b"");
-            if text.is_empty() {
-                return Err(bad(column, text, "missing value"));
-            }
-            let v: f64 = std::str::from_utf8(text)
-                .ok()
-                .and_then(|t| t.parse().ok())
-                .ok_or_else(|| bad(column, text, "not a number"))?;
-            if !v.is_finite() {
-                return Err(bad(column, text, "not a finite number"));
-            }
-            Ok(v)
-        };
-        let rate_dps = number(rate, "rate_dps")?;
-        let volts_v = number(volts, "volts")?;
-        let volts_std = match std {
-            Some(c) if !c.is_empty() => {
-                let s = number(Some(c), "volts_std")?;
-                if s < 0.0 {
-                    return Err(bad("volts_std", c, "negative"));
-                }
-                Some(s)
-            }
-            _ => None,
-        };
-        let n = match n {
-            Some(c) if !c.is_empty() => {
-                let v: u64 = std::str::from_utf8(c)
-                    .ok()
-                    .and_then(|t| t.parse().ok())
-                    .filter(|v| *v > 0)
-                    .ok_or_else(|| bad("n", c, "not a positive whole number"))?;
-                Some(v)
-            }
-            _ => None,
-        };
-        if self.rates.len() as u64 >= self.max_rows {
-            return Err(InputError::TooManyRows {
-                file: file.to_string(),
-                line,
-                cap: self.max_rows,
-            });
-        }
-        let rows = self.rates.len() as u64;
-        let room =
-            grow(&mut self.rates) && grow(&mut self.volts) && self.sigmas.as_mut().is_none_or(grow);
-        if !room {
-            return Err(InputError::OutOfMemory {
-                file: file.to_string(),
-                line,
-                rows,
-            });
-        }
-        self.rates.push(rate_dps);
-        self.volts.push(volts_v);
-        if let Some(s) = &mut self.sigmas {
-            let p = Point {
-                rate_dps,
-                volts: volts_v,
-                volts_std,
-                n,
-                line: None,
-            };
-            s.push(p.sigma().unwrap_or(f64::NAN));
-        }
-        self.last_line = Some(line);
-        Ok(())
-    }
-
-    fn header(&mut self, raw: &[u8], line: u64) -> Result<(), InputError> {
-        let file = self.file;
-        let text = std::str::from_utf8(raw).map_err(|_| InputError::Csv {
-            file: file.to_string(),
-            line,
-            message: "not valid UTF-8".to_string(),
-        })?;
-        let headers: Vec<&str> = text
-            .split(',')
-            .map(|f| std::str::from_utf8(cell(f.as_bytes())).unwrap_or(""))
-            .collect();
-        if headers.len() == 1 && headers[0].is_empty() {
-            return Err(InputError::NoHeader {
-                file: file.to_string(),
-            });
-        }
-        for (j, name) in headers.iter().enumerate() {
-            if name.is_empty() {
-                continue;
-            }
-            if let Some(i) = headers
-                .iter()
-                .take(j)
-                .position(|h| h.eq_ignore_ascii_case(name))
-            {
-                return Err(InputError::DuplicateColumn {
-                    file: file.to_string(),
-                    line,
-                    name: name.to_string(),
-                    first: i + 1,
-                    second: j + 1,
-                });
-            }
-        }
-        let find = |name: &str| headers.iter().position(|h| h.eq_ignore_ascii_case(name));
-        let missing = |column| InputError::MissingColumn {
-            file: file.to_string(),
-            line,
-            column,
-            found: headers.join(", "),
-        };
-        let rate = find("rate_dps").ok_or_else(|| missing("rate_dps"))?;
-        let volts = find("volts").ok_or_else(|| missing("volts"))?;
-        let std = find("volts_std");
-        self.header = Some(Header {
-            fields: headers.len(),
-            rate,
-            volts,
-            std,
-            n: find("n"),
-        });
-        if std.is_some() {
-            self.sigmas = Some(Vec::new());
-        }
-        Ok(())
-    }
 }
 
 #[cfg(test)]
@@ -700,10 +497,46 @@ mod tests {
     }
 
     #[test]
+    fn kinds_sort_the_errors() {
+        let kind = |csv: &str| parse_csv(csv.as_bytes(), "k.csv").unwrap_err().kind();
+        assert_eq!(kind(""), InputErrorKind::Header);
+        assert_eq!(kind("rate,volts\n"), InputErrorKind::Header);
+        assert_eq!(kind("rate_dps,volts\n1,x\n"), InputErrorKind::Value);
+        assert_eq!(kind("rate_dps,volts\n1\n"), InputErrorKind::Csv);
+        let e = read_csv(Path::new("/nonexistent/k.csv")).unwrap_err();
+        assert_eq!(e.kind(), InputErrorKind::Open);
+        assert_eq!(
+            e.to_string(),
+            "/nonexistent/k.csv: cannot open: no such file"
+        );
+    }
+
+    #[test]
+    fn a_byte_order_mark_is_not_part_of_the_first_column() {
+        // Excel's "CSV UTF-8" starts with EF BB BF
+        let csv = "\u{feff}rate_dps,volts\n0,0.0088\n1,0.37\n";
+        let rows = parse_csv(csv.as_bytes(), "excel.csv").unwrap();
+        let cols = parse_columns(csv.as_bytes(), "excel.csv").unwrap();
+        assert_eq!(rows.rates(), [0.0, 1.0]);
+        assert_eq!(cols.rates, [0.0, 1.0]);
+    }
+
+    #[test]
     fn endless_inputs_end_in_bounded_memory() {
         let zeros = std::io::repeat(0).take(10 * MAX_LINE_BYTES as u64);
         let e = parse_columns(zeros, "/dev/zero").unwrap_err();
         assert!(matches!(e, InputError::LineTooLong { line: 1, .. }), "{e}");
+        // after a valid header and a row, in both parsers
+        let after = || (&b"rate_dps,volts\n0,1\n"[..]).chain(std::io::repeat(b'7'));
+        for e in [
+            parse_columns(after(), "big.csv").unwrap_err(),
+            parse_csv(after(), "big.csv").unwrap_err(),
+        ] {
+            assert_eq!(
+                e.to_string(),
+                "big.csv: line 3: longer than the 1024 KiB limit for a line; is it a CSV data file?"
+            );
+        }
         let text = format!("rate_dps,volts\n{}", "1,2\n".repeat(20));
         let e = parse_columns_limited(text.as_bytes(), "rows.csv", 10).unwrap_err();
         assert_eq!(

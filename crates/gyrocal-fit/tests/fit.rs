@@ -690,10 +690,36 @@ fn csv_with_a_duplicated_column_names_both_positions() {
     assert!(matches!(e, InputError::DuplicateColumn { .. }));
 }
 
+/// Valid rows without end: `1,2,` then a 1000-byte note and a newline (long rows, so the
+/// 64 MiB cap is reached after some 65 000 rows, not millions).
+struct EndlessRows(usize);
+
+impl std::io::Read for EndlessRows {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        const ROW: usize = 1005;
+        for b in buf.iter_mut() {
+            *b = match self.0 % ROW {
+                0 => b'1',
+                1 | 3 => b',',
+                2 => b'2',
+                k if k == ROW - 1 => b'\n',
+                _ => b'x',
+            };
+            self.0 += 1;
+        }
+        Ok(buf.len())
+    }
+}
+
 #[test]
 fn endless_input_is_refused_at_the_cap() {
     let started = std::time::Instant::now();
+    // without newlines: refused at the line limit
     let e = parse_csv(std::io::repeat(b'0'), "/dev/zero").unwrap_err();
+    assert!(matches!(e, InputError::LineTooLong { line: 1, .. }), "{e}");
+    // valid rows without end: refused at the size limit
+    let endless_rows = std::io::Read::chain(&b"rate_dps,volts,note\n"[..], EndlessRows(0));
+    let e = parse_csv(endless_rows, "/dev/zero").unwrap_err();
     assert!(matches!(e, InputError::TooLarge { .. }), "{e}");
     let msg = e.to_string();
     assert!(

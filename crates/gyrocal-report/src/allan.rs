@@ -14,9 +14,14 @@
 //!   `value`, `rate_dph` (already °/h); the time column `t_s` or `time` (seconds), else τ0 must be
 //!   given. An `overload` column, when present, is honoured as in `samples.csv`.
 //!
-//! The file is read with the csv crate, streaming: one pass over the time column for τ0 (its
+//! The file is read with gyrocal's one CSV reader (`gyrocal-csv`, as `gyrocal fit` and
+//! `gyrocal report` read theirs), streaming: one pass over the time column for τ0 (its
 //! intervals kept for the median), one for the values and the segments. At most
-//! [`MAX_INPUT_BYTES`]; a regular file only.
+//! [`MAX_INPUT_BYTES`]; a regular file only (a named pipe or a device is refused before it is
+//! opened); a line of at most 1 MiB (a file without newlines is refused after reading that
+//! much, before or after a valid header, naming the file and the line and never echoing it);
+//! a UTF-8 byte-order mark skipped; lines counted over every line (comments included); a
+//! column named twice refused.
 //!
 //! # Memory: two paths, the same figures
 //! * **In memory** (the default while it fits): the intervals, then every value of the record,
@@ -63,7 +68,6 @@
 
 use std::fmt::Write as _;
 use std::fs::File;
-use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
 use gyrocal_allan::{
@@ -349,6 +353,30 @@ pub struct AllanDocument {
     pub memory: MemoryUse,
 }
 
+/// A temporary directory the user named ([`AllanOptions::temp_dir`], `--temp-dir`) must exist,
+/// be a directory and take a file: checked before the record is read, so a typing error is
+/// bad input (exit 2) at once rather than a failure halfway through a long record. (The
+/// default, `$TMPDIR`, is the environment's: its failures stay failures of the run.)
+pub fn check_temp_dir(dir: &Path) -> Result<(), ReportError> {
+    let problem = |message: String| data_err(dir, None, message);
+    match std::fs::metadata(dir) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(problem(
+            "no such directory (given as the directory for temporary files, --temp-dir)".into(),
+        )),
+        Err(e) => Err(problem(format!(
+            "cannot use it as the directory for temporary files (--temp-dir): {e}"
+        ))),
+        Ok(m) if !m.is_dir() => Err(problem(
+            "not a directory (given as the directory for temporary files, --temp-dir)".into(),
+        )),
+        Ok(_) => tempfile::tempfile_in(dir).map(drop).map_err(|e| {
+            problem(format!(
+                "cannot create a temporary file there (--temp-dir): {e}"
+            ))
+        }),
+    }
+}
+
 fn data_err(path: &Path, line: Option<u64>, message: impl Into<String>) -> ReportError {
     ReportError::Data {
         path: path.to_path_buf(),
@@ -364,86 +392,66 @@ struct Columns {
     overload: Option<usize>,
 }
 
+/// Opens a record: a regular file only (`gyrocal-csv`'s `open`: a named pipe or a device is
+/// refused before it is opened), at most [`MAX_INPUT_BYTES`].
 fn open_checked(path: &Path) -> Result<File, ReportError> {
-    let meta = std::fs::metadata(path).map_err(|e| {
-        if e.kind() == std::io::ErrorKind::NotFound {
-            data_err(path, None, "no such file or run directory")
-        } else {
-            ReportError::Io {
-                path: path.to_path_buf(),
-                action: "read",
-                source: e,
-            }
-        }
+    let file = gyrocal_csv::open(path).map_err(|e| csv_err(path, &e))?;
+    let len = file.metadata().map_err(|source| ReportError::Io {
+        path: path.to_path_buf(),
+        action: "read",
+        source,
     })?;
-    if !meta.is_file() {
-        return Err(ReportError::NotAFile {
-            path: path.to_path_buf(),
-        });
-    }
-    if meta.len() > MAX_INPUT_BYTES {
+    let len = len.len();
+    if len > MAX_INPUT_BYTES {
         return Err(data_err(
             path,
             None,
             format!(
-                "{} bytes: larger than the {} MiB limit of a record (about 10^8 readings); is it the right file?",
-                meta.len(),
+                "{len} bytes: larger than the {} MiB limit of a record (about 10^8 readings); is it the right file?",
                 MAX_INPUT_BYTES / (1024 * 1024)
             ),
         ));
     }
-    File::open(path).map_err(|source| ReportError::Io {
-        path: path.to_path_buf(),
-        action: "read",
-        source,
-    })
+    Ok(file)
 }
 
-fn reader(path: &Path) -> Result<csv::Reader<BufReader<File>>, ReportError> {
-    let file = open_checked(path)?;
-    Ok(csv::ReaderBuilder::new()
-        .has_headers(true)
-        .trim(csv::Trim::All)
-        .comment(Some(b'#'))
-        .from_reader(BufReader::with_capacity(1 << 16, file)))
+/// The record's CSV reader: gyrocal's one reader (`gyrocal-csv`: bounded lines, a byte-order
+/// mark skipped, every line counted).
+type CsvReader = gyrocal_csv::Reader<File>;
+
+fn reader(path: &Path) -> Result<CsvReader, ReportError> {
+    Ok(gyrocal_csv::Reader::new(
+        open_checked(path)?,
+        path.display().to_string(),
+    ))
 }
 
-fn csv_err(path: &Path, e: &csv::Error) -> ReportError {
-    let line = e.position().map(csv::Position::line);
-    let message = match e.kind() {
-        csv::ErrorKind::UnequalLengths {
-            expected_len, len, ..
-        } => format!("{len} fields where the header has {expected_len}"),
-        csv::ErrorKind::Utf8 { .. } => "not UTF-8 text".to_string(),
-        csv::ErrorKind::Io(io) => format!("cannot read: {io}"),
-        _ => e.to_string(),
-    };
-    data_err(path, line, message)
-}
-
-fn columns(
-    path: &Path,
-    rdr: &mut csv::Reader<BufReader<File>>,
-    wanted: Option<&str>,
-) -> Result<Columns, ReportError> {
-    let headers = rdr.byte_headers().map_err(|e| csv_err(path, &e))?.clone();
-    if headers.is_empty() || headers.iter().all(<[u8]>::is_empty) {
-        return Err(data_err(
+fn csv_err(path: &Path, e: &gyrocal_csv::Error) -> ReportError {
+    use gyrocal_csv::ErrorKind;
+    match e.kind() {
+        ErrorKind::NotFound => data_err(path, None, "no such file or run directory"),
+        ErrorKind::NotAFile => ReportError::NotAFile {
+            path: path.to_path_buf(),
+        },
+        ErrorKind::NoHeader => data_err(
             path,
             Some(1),
             "no header line (expected a value column: volts, value or rate_dph)",
-        ));
+        ),
+        _ => data_err(path, e.line(), e.detail()),
     }
-    let names: Vec<String> = headers
-        .iter()
-        .map(|h| String::from_utf8_lossy(h).trim().to_string())
-        .collect();
-    let find = |n: &str| names.iter().position(|h| h.eq_ignore_ascii_case(n));
+}
+
+fn columns(path: &Path, rdr: &mut CsvReader, wanted: Option<&str>) -> Result<Columns, ReportError> {
+    let header = rdr.header().map_err(|e| csv_err(path, &e))?;
+    let names = header.names();
+    let line = Some(header.line());
+    let find = |n: &str| header.find(n);
     let value = match wanted {
         Some(w) => find(w).map(|i| (i, w.to_string())).ok_or_else(|| {
             data_err(
                 path,
-                Some(1),
+                line,
                 format!(
                     "the header has no `{w}` column (columns: {})",
                     names.join(", ")
@@ -456,7 +464,7 @@ fn columns(
             .ok_or_else(|| {
                 data_err(
                     path,
-                    Some(1),
+                    line,
                     format!(
                         "the header has no value column: volts, value or rate_dph (or name one with --column); columns: {}",
                         names.join(", ")
@@ -496,10 +504,10 @@ fn number(path: &Path, line: u64, column: &str, field: Option<&[u8]>) -> Result<
     }
 }
 
-fn is_overload(rec: &csv::ByteRecord, cols: &Columns) -> bool {
+fn is_overload(rec: &gyrocal_csv::Row<'_>, cols: &Columns) -> bool {
     cols.overload
         .and_then(|i| rec.get(i))
-        .is_some_and(|f| f.trim_ascii() == b"1")
+        .is_some_and(|f| f == b"1")
 }
 
 /// Pass 1: the median interval of the time column (over rows that are not overloads), and
@@ -517,17 +525,11 @@ fn median_interval(
     };
     let mut intervals = Spill::new(cap, temp_dir);
     let mut prev: Option<f64> = None;
-    let mut rec = csv::ByteRecord::new();
-    loop {
-        match rdr.read_byte_record(&mut rec) {
-            Ok(false) => break,
-            Ok(true) => {}
-            Err(e) => return Err(csv_err(path, &e)),
-        }
+    while let Some(rec) = rdr.next_row().map_err(|e| csv_err(path, &e))? {
         if is_overload(&rec, &cols) {
             continue;
         }
-        let line = rec.position().map_or(0, csv::Position::line);
+        let line = rec.line();
         let t = number(path, line, tname, rec.get(*ti))?;
         if let Some(p) = prev {
             intervals.push(t - p)?;
@@ -604,6 +606,9 @@ pub fn fmt_num(v: f64) -> String {
 /// docs). Errors name the file and, where it applies, the line.
 pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, ReportError> {
     let mut notes = Vec::new();
+    if let Some(dir) = &opts.temp_dir {
+        check_temp_dir(dir)?;
+    }
     let is_run = path.is_dir();
     let file = if is_run {
         path.join(SAMPLES_CSV)
@@ -764,25 +769,17 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
     let mut prev_t: Option<f64> = None;
     let (mut rate_lo, mut rate_hi) = (f64::INFINITY, f64::NEG_INFINITY);
     let rate_col = if is_run {
-        rdr.byte_headers()
-            .ok()
-            .and_then(|h| h.iter().position(|c| c == b"rate_dps"))
+        rdr.header().ok().and_then(|h| h.find("rate_dps"))
     } else {
         None
     };
-    let mut rec = csv::ByteRecord::new();
-    loop {
-        match rdr.read_byte_record(&mut rec) {
-            Ok(false) => break,
-            Ok(true) => {}
-            Err(e) => return Err(csv_err(&file, &e)),
-        }
+    while let Some(rec) = rdr.next_row().map_err(|e| csv_err(&file, &e))? {
         rows += 1;
         if is_overload(&rec, &cols) {
             overloads += 1;
             continue;
         }
-        let line = rec.position().map_or(0, csv::Position::line);
+        let line = rec.line();
         let v = number(&file, line, &cols.value_name, rec.get(cols.value))?;
         let t = match &cols.time {
             Some((ti, tname)) => number(&file, line, tname, rec.get(*ti))?,
@@ -792,7 +789,7 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
             && let Some(r) = rec
                 .get(ri)
                 .and_then(|f| std::str::from_utf8(f).ok())
-                .and_then(|s| s.trim().parse::<f64>().ok())
+                .and_then(|s| s.parse::<f64>().ok())
         {
             rate_lo = rate_lo.min(r);
             rate_hi = rate_hi.max(r);

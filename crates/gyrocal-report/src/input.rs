@@ -1,7 +1,5 @@
 //! What a report is made from: a run directory or a bare steps CSV, read and fitted.
 
-use std::fs::File;
-use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
 use gyrocal_files::Manifest;
@@ -144,13 +142,8 @@ pub(crate) fn load_run(dir: &Path) -> Result<Input, ReportError> {
 
 /// Reads a bare steps CSV and fits it.
 pub(crate) fn load_csv(path: &Path) -> Result<Input, ReportError> {
-    let name = path.display().to_string();
-    let file = File::open(path).map_err(|source| ReportError::Io {
-        path: path.to_path_buf(),
-        action: "read",
-        source,
-    })?;
-    let data = gyrocal_fit::input::parse_csv(BufReader::new(file), &name)?;
+    // gyrocal's one CSV reader: a regular file only, bounded lines, a byte-order mark skipped
+    let data = gyrocal_fit::input::read_csv(path)?;
     let measured = measured_rates(path);
     let steps = data
         .points
@@ -187,35 +180,34 @@ pub(crate) fn load_csv(path: &Path) -> Result<Input, ReportError> {
 }
 
 /// The optional `rate_meas_dps` / `rate_meas_std_dps` columns of a steps CSV, row by row
-/// (data rows only, in the order `parse_csv` reads them). Best effort: the required columns were
-/// checked by `parse_csv`; a missing or unreadable optional cell is `None`.
+/// (data rows only, in the order `parse_csv` reads them: rows of empty cells skipped). Best
+/// effort, through the same reader: the file was just read whole by `parse_csv`; a missing or
+/// unreadable optional cell is `None`.
 fn measured_rates(path: &Path) -> Vec<(Option<f64>, Option<f64>)> {
-    let Ok(file) = File::open(path) else {
+    let Ok(mut rdr) = gyrocal_csv::Reader::open(path) else {
         return Vec::new();
     };
-    let mut rdr = csv::ReaderBuilder::new()
-        .comment(Some(b'#'))
-        .flexible(true)
-        .trim(csv::Trim::All)
-        .from_reader(BufReader::new(file));
-    let Ok(header) = rdr.headers().cloned() else {
+    let Ok(header) = rdr.header() else {
         return Vec::new();
     };
-    let col = |name: &str| header.iter().position(|h| h.eq_ignore_ascii_case(name));
-    let (Some(meas), std) = (col("rate_meas_dps"), col("rate_meas_std_dps")) else {
+    let (Some(meas), std) = (
+        header.find("rate_meas_dps"),
+        header.find("rate_meas_std_dps"),
+    ) else {
         return Vec::new();
     };
-    let cell = |rec: &csv::StringRecord, i: Option<usize>| {
-        i.and_then(|i| rec.get(i))
+    let cell = |rec: &gyrocal_csv::Row<'_>, i: Option<usize>| {
+        i.and_then(|i| rec.text(i))
             .and_then(|s| s.parse::<f64>().ok())
             .filter(|v| v.is_finite())
     };
-    rdr.records()
-        .map(|r| match r {
-            Ok(rec) => (cell(&rec, Some(meas)), cell(&rec, std)),
-            Err(_) => (None, None),
-        })
-        .collect()
+    let mut out = Vec::new();
+    while let Ok(Some(rec)) = rdr.next_row() {
+        if !rec.all_empty() {
+            out.push((cell(&rec, Some(meas)), cell(&rec, std)));
+        }
+    }
+    out
 }
 
 /// A run's fit document: an [`Analysis`], or a [`MultiAnalysis`] of one file.

@@ -243,5 +243,7 @@ fn a_missing_temporary_directory_is_named() {
     let msg = e.to_string();
     assert!(msg.contains(&nowhere.display().to_string()), "{msg}");
     assert!(msg.contains("temporary file"), "{msg}");
-    assert!(!e.is_input_error());
+    assert!(msg.contains("no such directory"), "{msg}");
+    // a directory the user named is their input to fix (exit 2), checked before the record
+    assert!(e.is_input_error());
 }

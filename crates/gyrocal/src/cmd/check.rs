@@ -32,6 +32,12 @@ pub struct CheckArgs {
     /// With --probe: the rate table's port instead of the plan's.
     #[arg(long, value_name = "PORT", requires = "probe")]
     pub table_port: Option<String>,
+    /// The station file to check with the plan (else $GYROCAL_STATION, else
+    /// ~/.config/gyrocal/station.toml when it exists), as `gyrocal run` would read it: a bad
+    /// file, or a calibration dated after today, exits 2; a missing [multimeter] (or, for a
+    /// plan with a table, [table]) section is a warning.
+    #[arg(long, value_name = "FILE")]
+    pub station: Option<PathBuf>,
 }
 
 /// Reads and validates a plan; a bad plan is the user's to fix (exit 2).
@@ -92,7 +98,13 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
     let steps = plan.schedule();
     let timing = crate::instruments::meter_timing(&plan);
     let est = estimate::estimate(&plan, &steps, 0.0, timing.as_ref());
-    let warnings = model_warnings(&plan, &args.plan);
+    let mut warnings = model_warnings(&plan, &args.plan);
+    // the station `gyrocal run` would use, read the same way (a bad one is bad input)
+    if let Some((path, station)) = gyrocal_run::station::Station::resolve(args.station.as_deref())
+        .map_err(|e| BadInput(format!("station: {e}")))?
+    {
+        warnings.extend(station_warnings(&station, &path, plan.has_table()));
+    }
     let probe = if args.probe {
         use anyhow::Context as _;
         let rt = tokio::runtime::Builder::new_current_thread()
@@ -137,6 +149,34 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
         Some(Err(e)) => Err(e),
         _ => Ok(()),
     }
+}
+
+/// One line per section a run on `plan` needs and the station file at `path` lacks: the
+/// certificate cannot name that instrument or its calibration. Said by `gyrocal check` and
+/// at the start of `gyrocal run`.
+pub fn station_warnings(
+    station: &gyrocal_run::station::Station,
+    path: &std::path::Path,
+    needs_table: bool,
+) -> Vec<String> {
+    station
+        .missing_sections(needs_table)
+        .into_iter()
+        .map(|section| {
+            let what = if section == "multimeter" {
+                "multimeter"
+            } else {
+                "rate table"
+            };
+            format!(
+                "station {} ({}) has no [{section}] section: the certificate will not name the \
+                 {what}, its serial or its calibration (no traceability for it); add the \
+                 section to the station file",
+                station.id,
+                path.display()
+            )
+        })
+        .collect()
 }
 
 /// One line per default model the plan's schedule cannot support: the fit will skip it.

@@ -1,7 +1,6 @@
 //! `gyrocal fit`: fit models to measured data files and report them.
 
 use std::fmt::Write as _;
-use std::fs::File;
 use std::io::{BufWriter, Write as _};
 use std::path::PathBuf;
 
@@ -175,13 +174,12 @@ impl FitArgs {
     }
 }
 
-/// Reads one file into column arrays, streaming; errors name the file (and the line, from
-/// the parser). Memory is bounded by [`input::MAX_ROWS`] rows and [`input::MAX_LINE_BYTES`]
-/// a line: an endless input (`/dev/zero`, a pipe) is refused after at most that much.
-fn read(path: &PathBuf) -> anyhow::Result<Columns> {
-    let name = path.display().to_string();
-    let file = File::open(path).map_err(|e| BadInput(format!("{name}: cannot open: {e}")))?;
-    input::parse_columns(file, &name).map_err(|e| BadInput(e.to_string()).into())
+/// Reads one file into column arrays, streaming, through gyrocal's one CSV reader; errors name
+/// the file (and the line). A regular file only: a named pipe or a device (`/dev/zero`) is
+/// refused before it is opened. Memory is bounded by [`input::MAX_ROWS`] rows and
+/// [`input::MAX_LINE_BYTES`] a line. A UTF-8 byte-order mark (Excel's) is skipped.
+fn read(path: &std::path::Path) -> anyhow::Result<Columns> {
+    input::read_columns(path).map_err(|e| BadInput(e.to_string()).into())
 }
 
 /// Runs `gyrocal fit`.

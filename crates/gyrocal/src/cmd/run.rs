@@ -344,6 +344,9 @@ fn station_for_run(
     {
         Some((path, s)) => {
             say!("station: {} ({})", s.id, path.display());
+            for line in crate::cmd::check::station_warnings(&s, &path, plan.has_table()) {
+                say!("gyrocal: warning: {line}");
+            }
             Some(s)
         }
         None if args.simulate => Some(Station::simulated(sim_seed, today)),
