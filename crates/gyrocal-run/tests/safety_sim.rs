@@ -11,7 +11,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use common::table_config;
+use common::{config, new_run, plan_with_rates, table_config};
 use gyrocal_acl::AclTable;
 use gyrocal_run::{
     Event, Phase, Plan, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status,
@@ -27,32 +27,6 @@ use gyrocal_table::{
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
-fn config(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../configs")
-        .join(name)
-}
-
-/// quick.toml with other rates.
-fn plan_with_rates(rates: &[f64]) -> Plan {
-    let path = config("quick.toml");
-    let mut doc: toml::Table = std::fs::read_to_string(&path).unwrap().parse().unwrap();
-    let plan = doc.get_mut("plan").unwrap().as_table_mut().unwrap();
-    plan.insert(
-        "rates_dps".into(),
-        toml::Value::Array(rates.iter().map(|r| toml::Value::Float(*r)).collect()),
-    );
-    Plan::from_toml_str(&toml::to_string(&doc).unwrap(), &path).unwrap()
-}
-
-fn new_run(plan: &Plan, dir: &Path) -> RunDir {
-    let meta = RunMeta {
-        gyrocal_version: "test".into(),
-        simulated: true,
-        ..RunMeta::default()
-    };
-    RunDir::create(dir, plan, meta).unwrap()
-}
 
 /// What the test's event hook asks for.
 type Hook = Box<dyn FnMut(&Event) -> Option<StopRequest> + Send>;

@@ -11,7 +11,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use common::table_config;
+use common::{new_run, plan_from, plan_with_rates, table_config};
 use gyrocal_acl::AclTable;
 use gyrocal_aerosmith::{AerosmithConfig, AerosmithTable};
 use gyrocal_run::{
@@ -25,37 +25,6 @@ use gyrocal_table::RateTable;
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
 
-fn config(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../configs")
-        .join(name)
-}
-
-/// quick.toml with other rates.
-fn plan_with_rates(rates: &[f64]) -> Plan {
-    plan_from("quick.toml", rates)
-}
-
-/// A shipped plan with other rates.
-fn plan_from(name: &str, rates: &[f64]) -> Plan {
-    let path = config(name);
-    let mut doc: toml::Table = std::fs::read_to_string(&path).unwrap().parse().unwrap();
-    let plan = doc.get_mut("plan").unwrap().as_table_mut().unwrap();
-    plan.insert(
-        "rates_dps".into(),
-        toml::Value::Array(rates.iter().map(|r| toml::Value::Float(*r)).collect()),
-    );
-    Plan::from_toml_str(&toml::to_string(&doc).unwrap(), &path).unwrap()
-}
-
-fn new_run(plan: &Plan, dir: &Path) -> RunDir {
-    let meta = RunMeta {
-        gyrocal_version: "test".into(),
-        simulated: true,
-        ..RunMeta::default()
-    };
-    RunDir::create(dir, plan, meta).unwrap()
-}
 
 type Hook = Box<dyn FnMut(&Event, &TableHandle) -> Option<StopRequest> + Send>;
 
@@ -167,6 +136,19 @@ fn assert_rates_are_rates(dir: &Path) {
     }
 }
 
+/// The operator's "decelerating from" quotes a rate measured in that exchange, or none. The
+/// stop was sent first, so a rate read after it may be anything from `top` °/s down to rest;
+/// what it must not be is another query's reply (a status byte, an error code).
+fn assert_stopping_rate_measured(events: &[Event], top: f64) {
+    let from = events.iter().find_map(|e| match e {
+        Event::Stopping { from_dps, .. } => Some(*from_dps),
+        _ => None,
+    });
+    if let Some(Some(from)) = from {
+        assert!((-0.05..top + 0.05).contains(&from), "decelerating from {from}");
+    }
+}
+
 fn retry_messages(dir: &Path) -> Vec<String> {
     load(dir)
         .unwrap()
@@ -246,15 +228,7 @@ async fn a_stop_on_a_slow_table_waits_for_the_late_replies_and_confirms_rest() {
     );
     assert_at_rest_now(&sim, &summary);
     // the operator's "decelerating from" quotes a rate measured in that exchange, or none
-    let from = events.iter().find_map(|e| match e {
-        Event::Stopping { from_dps, .. } => Some(*from_dps),
-        _ => None,
-    });
-    // the stop was sent first, so a rate read after it may be anything from 10 °/s down to
-    // rest; what it must not be is another query's reply (a status byte, an error code)
-    if let Some(Some(from)) = from {
-        assert!((-0.05..10.05).contains(&from), "decelerating from {from}");
-    }
+    assert_stopping_rate_measured(&events, 10.0);
 }
 
 /// A table whose first late reply comes after the whole deadline of the query it answers (2 s
@@ -277,15 +251,7 @@ async fn a_table_slower_than_its_first_deadline_fails_the_run_but_is_confirmed_a
     assert_at_rest_now(&sim, &summary);
     // step 1 was not recorded: the table's rate during it is unknown
     assert_eq!(load(&dir).unwrap().steps.len(), 1);
-    let from = events.iter().find_map(|e| match e {
-        Event::Stopping { from_dps, .. } => Some(*from_dps),
-        _ => None,
-    });
-    // the stop was sent first, so a rate read after it may be anything from 10 °/s down to
-    // rest; what it must not be is another query's reply (a status byte, an error code)
-    if let Some(Some(from)) = from {
-        assert!((-0.05..10.05).contains(&from), "decelerating from {from}");
-    }
+    assert_stopping_rate_measured(&events, 10.0);
 }
 
 /// A table slower than the slow-reply limit (5 s) is silent as far as gyrocal can tell: the

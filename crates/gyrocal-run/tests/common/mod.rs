@@ -1,12 +1,48 @@
 //! The plan → instrument choice for the tests and the bench (the CLI's `instruments` module
 //! does this for runs; the library itself knows no driver).
 
-#![allow(dead_code)]
+#![allow(dead_code, clippy::unwrap_used)]
+
+use std::path::{Path, PathBuf};
 
 use gyrocal_acl::AclConfig;
 use gyrocal_hp34401a::{DriverOptions, Hp34401aMeter, Strategy};
 use gyrocal_link::Transport;
-use gyrocal_run::{Acquisition, Plan};
+use gyrocal_run::{Acquisition, Plan, RunDir, RunMeta};
+
+/// A file under `configs/`.
+pub fn config(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../configs")
+        .join(name)
+}
+
+/// A shipped plan with other rates.
+pub fn plan_from(name: &str, rates: &[f64]) -> Plan {
+    let path = config(name);
+    let mut doc: toml::Table = std::fs::read_to_string(&path).unwrap().parse().unwrap();
+    let plan = doc.get_mut("plan").unwrap().as_table_mut().unwrap();
+    plan.insert(
+        "rates_dps".into(),
+        toml::Value::Array(rates.iter().map(|r| toml::Value::Float(*r)).collect()),
+    );
+    Plan::from_toml_str(&toml::to_string(&doc).unwrap(), &path).unwrap()
+}
+
+/// quick.toml with other rates.
+pub fn plan_with_rates(rates: &[f64]) -> Plan {
+    plan_from("quick.toml", rates)
+}
+
+/// A fresh run directory of a simulated run.
+pub fn new_run(plan: &Plan, dir: &Path) -> RunDir {
+    let meta = RunMeta {
+        gyrocal_version: "test".into(),
+        simulated: true,
+        ..RunMeta::default()
+    };
+    RunDir::create(dir, plan, meta).unwrap()
+}
 
 /// The 34401A on `link` as `plan` sets it up.
 pub fn hp34401a<T: Transport + 'static>(link: T, plan: &Plan) -> Hp34401aMeter<T> {
