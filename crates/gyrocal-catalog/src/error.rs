@@ -87,8 +87,8 @@ pub enum CatalogError {
     #[error(
         "catalog {} is damaged ({message}); nothing is read from it, since a damaged file can \
          hide runs. The run directories hold every run: `gyrocal catalog rebuild ROOT` (ROOT: the \
-         directory holding them) moves the damaged file aside, keeping it, and rebuilds the \
-         catalog from them",
+         directory holding them) rebuilds the catalog from them, first moving the file aside \
+         (kept) when SQLite finds its pages damaged",
         path.display()
     )]
     Damaged {

@@ -633,51 +633,43 @@ fn history_len(data_home: &Path, catalog: &str, serial: &str) -> usize {
     h["calibrations"].as_array().unwrap().len()
 }
 
-#[test]
-fn a_damaged_catalog_is_refused_naming_the_rebuild_which_recovers_every_calibration() {
-    let tmp = tempfile::tempdir().unwrap();
-    let data = tmp.path().join("data");
-    let runs = tmp.path().join("runs");
-    let serial = "DMG-0421";
+/// Four simulated calibrations of `serial` under `runs`, rebuilt into the SQLite file
+/// `file`; returns the file's bytes and the offset and size of the page holding the rows.
+fn catalog_of_four(data: &Path, runs: &Path, file: &Path, serial: &str) -> (Vec<u8>, usize, usize) {
     for i in 1..=4 {
-        calibrate(&data, &runs.join(format!("c{i}")), serial);
+        calibrate(data, &runs.join(format!("c{i}")), serial);
     }
-    let file = tmp.path().join("lab").join("catalog.sqlite");
     let url = format!("sqlite:{}", file.display());
-    let out = ok(&gyrocal(&data)
+    let out = ok(&gyrocal(data)
         .args(["catalog", "rebuild", "--catalog", &url])
-        .arg(&runs)
+        .arg(runs)
         .output()
         .unwrap());
     assert!(out.contains("4 run(s) imported"), "{out}");
-    assert_eq!(history_len(&data, &url, serial), 4);
-
+    assert_eq!(history_len(data, &url, serial), 4);
     // the catalog closed whole: its rows are in the file, not left in a -wal file
-    let wal = tmp.path().join("lab").join("catalog.sqlite-wal");
+    let mut wal = file.as_os_str().to_os_string();
+    wal.push("-wal");
     assert!(
         std::fs::metadata(&wal).map_or(0, |m| m.len()) == 0,
-        "rows left in {}",
-        wal.display()
+        "rows left in {wal:?}"
     );
-    // random bytes over the middle of the rows of the page that holds them
-    let mut bytes = std::fs::read(&file).unwrap();
+    let bytes = std::fs::read(file).unwrap();
     let (page, size) = page_of_rows(&bytes, serial.as_bytes(), 4);
-    let content = match u16::from_be_bytes([bytes[page + 5], bytes[page + 6]]) {
-        0 => 65536,
-        c => usize::from(c),
-    };
-    let at = page + content + (size - content) / 2 - 128;
-    bytes[at..at + 256].copy_from_slice(&random_bytes(0x9E37_79B9_7F4A_7C15, 256));
-    std::fs::write(&file, &bytes).unwrap();
+    (bytes, page, size)
+}
 
-    // a history from it would be short: it is refused, naming the file and the repair
+/// Every listing of the damaged `file` exits 1, lists nothing, and names the file, the
+/// damage and the rebuild.
+fn listings_refuse(data: &Path, file: &Path, serial: &str) {
+    let url = format!("sqlite:{}", file.display());
     for args in [
         vec!["history", serial, "--include-simulated"],
         vec!["history", serial, "--json"],
         vec!["runs"],
         vec!["runs", "--serial", serial],
     ] {
-        let out = gyrocal(&data)
+        let out = gyrocal(data)
             .args(&args)
             .args(["--catalog", &url])
             .output()
@@ -691,8 +683,60 @@ fn a_damaged_catalog_is_refused_naming_the_rebuild_which_recovers_every_calibrat
             "{args:?}: {err}"
         );
     }
+}
 
-    // the rebuild moves the damaged file aside (kept) and recovers all four
+#[test]
+fn a_garbled_row_is_never_read_as_a_shorter_history() {
+    // The case: random bytes over one run's status in the page of the rows. SQLite's
+    // own checks find nothing (the page is well formed), and a history that filtered on
+    // `complete` in SQL showed 3 of the 4 calibrations and exited 0.
+    let tmp = tempfile::tempdir().unwrap();
+    let (data, runs) = (tmp.path().join("data"), tmp.path().join("runs"));
+    let file = tmp.path().join("lab").join("catalog.sqlite");
+    let serial = "DMG-0421";
+    let (mut bytes, page, size) = catalog_of_four(&data, &runs, &file, serial);
+    let rows = &bytes[page..page + size];
+    let second = rows
+        .windows(8)
+        .enumerate()
+        .filter(|(_, w)| *w == b"complete")
+        .map(|(i, _)| page + i)
+        .nth(1)
+        .expect("four rows say complete");
+    bytes[second..second + 8].copy_from_slice(&random_bytes(0x9E37_79B9_7F4A_7C15, 8));
+    std::fs::write(&file, &bytes).unwrap();
+    listings_refuse(&data, &file, serial);
+    // the rebuild replaces every row from the run directories
+    let url = format!("sqlite:{}", file.display());
+    let out = ok(&gyrocal(&data)
+        .args(["catalog", "rebuild", "--catalog", &url])
+        .arg(&runs)
+        .output()
+        .unwrap());
+    assert!(out.contains("4 run(s) imported"), "{out}");
+    assert_eq!(history_len(&data, &url, serial), 4);
+}
+
+#[test]
+fn a_damaged_page_is_refused_and_the_rebuild_sets_it_aside_and_recovers_every_calibration() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (data, runs) = (tmp.path().join("data"), tmp.path().join("runs"));
+    let lab = tmp.path().join("lab");
+    let file = lab.join("catalog.sqlite");
+    let serial = "DMG-0777";
+    let (mut bytes, page, size) = catalog_of_four(&data, &runs, &file, serial);
+    // random bytes over the middle of the rows' cells: SQLite finds the page malformed
+    let content = match u16::from_be_bytes([bytes[page + 5], bytes[page + 6]]) {
+        0 => 65536,
+        c => usize::from(c),
+    };
+    let at = page + content + (size - content) / 2 - 128;
+    bytes[at..at + 256].copy_from_slice(&random_bytes(0x2545_F491_4F6C_DD1D, 256));
+    std::fs::write(&file, &bytes).unwrap();
+    listings_refuse(&data, &file, serial);
+
+    // the rebuild moves the damaged file aside (kept as it was) and recovers all four
+    let url = format!("sqlite:{}", file.display());
     let out = gyrocal(&data)
         .args(["catalog", "rebuild", "--catalog", &url])
         .arg(&runs)
@@ -702,18 +746,20 @@ fn a_damaged_catalog_is_refused_naming_the_rebuild_which_recovers_every_calibrat
     assert!(stdout.contains("4 run(s) imported"), "{stdout}");
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
-        stderr.contains("damaged") && stderr.contains("moved it aside to"),
+        stderr.contains("is damaged") && stderr.contains("moved it aside to"),
         "{stderr}"
     );
-    let kept: Vec<_> = std::fs::read_dir(tmp.path().join("lab"))
+    let kept: Vec<_> = std::fs::read_dir(&lab)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .filter(|n| n.starts_with("catalog.sqlite.damaged-") && !n.ends_with("-wal") && !n.ends_with("-shm"))
+        .filter(|n| {
+            n.starts_with("catalog.sqlite.damaged-") && !n.ends_with("-wal") && !n.ends_with("-shm")
+        })
         .collect();
     assert_eq!(kept.len(), 1, "{kept:?}");
     assert!(stderr.contains(&kept[0]), "{stderr}");
     assert_eq!(
-        std::fs::read(tmp.path().join("lab").join(&kept[0])).unwrap(),
+        std::fs::read(lab.join(&kept[0])).unwrap(),
         bytes,
         "the damaged file is kept as it was"
     );
