@@ -793,7 +793,10 @@ fn a_listing_creates_no_catalog_and_says_there_is_none() {
             err.contains(&format!("no catalog at {}", nowhere.display())),
             "{args:?}: {err}"
         );
-        assert!(!tmp.path().join("a").exists(), "{args:?} created directories");
+        assert!(
+            !tmp.path().join("a").exists(),
+            "{args:?} created directories"
+        );
     }
     // the default catalog likewise: nothing is created in the data directory
     let err = fails(&gyrocal(&data).args(["runs"]).output().unwrap(), 2);
@@ -803,7 +806,10 @@ fn a_listing_creates_no_catalog_and_says_there_is_none() {
         "{err}"
     );
     assert!(!data.exists(), "runs created {}", data.display());
-    let err = fails(&gyrocal(&data).args(["history", "0421"]).output().unwrap(), 2);
+    let err = fails(
+        &gyrocal(&data).args(["history", "0421"]).output().unwrap(),
+        2,
+    );
     assert!(err.contains("no catalog at"), "{err}");
     assert!(!data.exists(), "history created {}", data.display());
     // a run or an import creates it; then the listing works

@@ -9,10 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::Output;
 
 fn gyrocal(args: &[&str]) -> Output {
-    common::gyrocal()
-        .args(args)
-        .output()
-        .unwrap()
+    common::gyrocal().args(args).output().unwrap()
 }
 
 fn example() -> PathBuf {

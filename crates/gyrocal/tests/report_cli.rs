@@ -12,10 +12,7 @@ use std::process::Output;
 use gyrocal_run::{Plan, RunDir, RunMeta, Sample, Status, StepRecord};
 
 fn gyrocal(args: &[&str]) -> Output {
-    common::gyrocal()
-        .args(args)
-        .output()
-        .unwrap()
+    common::gyrocal().args(args).output().unwrap()
 }
 
 fn example() -> PathBuf {

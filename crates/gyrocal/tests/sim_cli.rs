@@ -16,7 +16,6 @@ use gyrocal_link::LinkOptions;
 use gyrocal_table::{Limits, RateTable, SettleCriteria};
 use serde_json::Value;
 
-
 /// A running `gyrocal sim`; killed on drop if still running.
 struct Sim {
     child: Child,

@@ -98,7 +98,9 @@ fn open_to_fill(opt: &CatalogOpt) -> anyhow::Result<(tokio::runtime::Runtime, Ca
 pub fn open(opt: &CatalogOpt) -> anyhow::Result<(tokio::runtime::Runtime, Catalog)> {
     let url = resolve(opt)?;
     let rt = runtime()?;
-    let catalog = rt.block_on(Catalog::open_existing(&url)).map_err(user_error)?;
+    let catalog = rt
+        .block_on(Catalog::open_existing(&url))
+        .map_err(user_error)?;
     Ok((rt, catalog))
 }
 
