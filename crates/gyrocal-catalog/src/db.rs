@@ -18,6 +18,7 @@ use sqlx::sqlite::{
 };
 
 use crate::error::CatalogError;
+use crate::health;
 use crate::record::{CheckRow, InstrumentRow, Results, RunRecord, RunRow, StepRow};
 use crate::url::CatalogUrl;
 
@@ -91,6 +92,10 @@ pub struct OpenOptions {
     pub busy_timeout: Duration,
     /// Connections in the pool.
     pub max_connections: u32,
+    /// Create a missing SQLite file (and its directory). Off for the listing commands
+    /// (`runs`, `history`), which create nothing: a missing file is
+    /// [`CatalogError::NotFound`].
+    pub create: bool,
 }
 
 impl Default for OpenOptions {
@@ -99,6 +104,7 @@ impl Default for OpenOptions {
             connect_timeout: Duration::from_secs(5),
             busy_timeout: Duration::from_secs(10),
             max_connections: 4,
+            create: true,
         }
     }
 }
@@ -301,9 +307,43 @@ impl Catalog {
         Catalog::open_with(url, &OpenOptions::default()).await
     }
 
+    /// Opens an existing catalog to list from it (`gyrocal runs`, `gyrocal history`):
+    /// creates nothing (a missing SQLite file is [`CatalogError::NotFound`]) and reports a
+    /// damaged one as [`CatalogError::Damaged`].
+    pub async fn open_existing(url: &CatalogUrl) -> Result<Catalog, CatalogError> {
+        let opts = OpenOptions {
+            create: false,
+            ..OpenOptions::default()
+        };
+        Catalog::open_with(url, &opts).await
+    }
+
     /// [`Catalog::open`] with explicit timeouts.
     pub async fn open_with(url: &CatalogUrl, opts: &OpenOptions) -> Result<Catalog, CatalogError> {
         let pool = match url {
+            CatalogUrl::Sqlite(path) if !opts.create => {
+                match std::fs::metadata(path) {
+                    Ok(m) if m.is_file() => {}
+                    Ok(_) => {
+                        return Err(CatalogError::Io {
+                            path: path.clone(),
+                            action: "open the catalog",
+                            source: std::io::Error::other("not a regular file"),
+                        });
+                    }
+                    Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                        return Err(CatalogError::NotFound { path: path.clone() });
+                    }
+                    Err(source) => {
+                        return Err(CatalogError::Io {
+                            path: path.clone(),
+                            action: "open the catalog",
+                            source,
+                        });
+                    }
+                }
+                Pool::Sqlite(sqlite_pool(url, path, opts).await?)
+            }
             CatalogUrl::Sqlite(path) => {
                 if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
                     std::fs::create_dir_all(parent).map_err(|source| CatalogError::Io {
@@ -312,22 +352,7 @@ impl Catalog {
                         source,
                     })?;
                 }
-                let options = SqliteConnectOptions::new()
-                    .filename(path)
-                    .create_if_missing(true)
-                    // several gyrocal processes on one machine: readers never block the
-                    // writer, and a writer waits for another's lock instead of failing
-                    .journal_mode(SqliteJournalMode::Wal)
-                    .synchronous(SqliteSynchronous::Normal)
-                    .busy_timeout(opts.busy_timeout)
-                    .foreign_keys(true);
-                let pool = SqlitePoolOptions::new()
-                    .max_connections(opts.max_connections)
-                    .acquire_timeout(opts.connect_timeout.max(opts.busy_timeout))
-                    .connect_with(options)
-                    .await
-                    .map_err(|e| db_error(url, &e))?;
-                Pool::Sqlite(pool)
+                Pool::Sqlite(sqlite_pool(url, path, opts).await?)
             }
             CatalogUrl::Postgres(text) => {
                 // PGPASSWORD and ~/.pgpass (PGPASSFILE) are read by the driver when the URL
@@ -339,6 +364,7 @@ impl Catalog {
                     })?
                     .application_name("gyrocal")
                     .options([("statement_timeout", "30s")]);
+                crate::pg_probe::probe(url, &options, opts.connect_timeout).await?;
                 let pool = PgPoolOptions::new()
                     .max_connections(opts.max_connections)
                     .acquire_timeout(opts.connect_timeout)
@@ -352,7 +378,19 @@ impl Catalog {
             url: url.clone(),
             pool,
         };
-        catalog.migrate().await?;
+        if let Err(e) = catalog.migrate().await {
+            // a damaged file fails the migrator's reads: say so, with the repair
+            return Err(match (&catalog.pool, url) {
+                (Pool::Sqlite(p), CatalogUrl::Sqlite(path)) => match health::quick_check(p).await {
+                    Some(found) => CatalogError::Damaged {
+                        path: path.clone(),
+                        message: format!("{e}; {found}"),
+                    },
+                    None => e,
+                },
+                _ => e,
+            });
+        }
         Ok(catalog)
     }
 
@@ -375,7 +413,7 @@ impl Catalog {
                 Err(e) => {
                     tracing::debug!(attempt, error = %self.url.scrub(&e.to_string()), "migration attempt failed");
                     if let sqlx::migrate::MigrateError::Execute(inner) = &e
-                        && is_unreachable(inner)
+                        && (is_unreachable(inner) || health::says_damaged(inner))
                     {
                         return Err(db_error(&self.url, inner));
                     }
@@ -399,6 +437,50 @@ impl Catalog {
 
     fn err(&self, e: &sqlx::Error) -> CatalogError {
         db_error(&self.url, e)
+    }
+
+    /// Before a listing reads an SQLite catalog: SQLite's check of the tables it reads
+    /// against their indexes, so that a garbled row is reported instead of silently left out
+    /// (see [`crate::health`]). Nothing to do on PostgreSQL, which checksums and repairs its
+    /// own pages.
+    async fn check_listed_tables(&self) -> Result<(), CatalogError> {
+        let (Pool::Sqlite(p), CatalogUrl::Sqlite(path)) = (&self.pool, &self.url) else {
+            return Ok(());
+        };
+        match health::listed_tables_damage(p).await {
+            Ok(None) => Ok(()),
+            Ok(Some(found)) => Err(CatalogError::Damaged {
+                path: path.clone(),
+                message: found,
+            }),
+            Err(e) => Err(self.read_error(&e).await),
+        }
+    }
+
+    /// A listing's read failed: on SQLite the file is checked (`PRAGMA quick_check`), and a
+    /// damaged file is [`CatalogError::Damaged`]; any other SQLite error names the file and
+    /// the rebuild all the same, since the listing cannot be trusted either way.
+    async fn read_error(&self, e: &sqlx::Error) -> CatalogError {
+        let (Pool::Sqlite(p), CatalogUrl::Sqlite(path)) = (&self.pool, &self.url) else {
+            return self.err(e);
+        };
+        let said = e.to_string();
+        match health::quick_check(p).await {
+            Some(found) => CatalogError::Damaged {
+                path: path.clone(),
+                message: format!("{said}; {found}"),
+            },
+            None if health::says_damaged(e) => CatalogError::Damaged {
+                path: path.clone(),
+                message: said,
+            },
+            None => CatalogError::Database {
+                url: self.url.redacted(),
+                message: format!(
+                    "{said}; nothing is listed (if the file is damaged, `gyrocal catalog rebuild ROOT` rebuilds it from the run directories)"
+                ),
+            },
+        }
     }
 
     /// The catalog's URL.
@@ -579,6 +661,7 @@ impl Catalog {
         if let Some(limit) = filter.limit {
             sql.push_str(&format!(" LIMIT {}", limit.max(0)));
         }
+        self.check_listed_tables().await?;
         let result: Result<Vec<RunSummary>, sqlx::Error> = on_pool!(self, |p| {
             async {
                 let mut q = sqlx::query(&sql);
@@ -597,7 +680,10 @@ impl Catalog {
             }
             .await
         });
-        result.map_err(|e| self.err(&e))
+        match result {
+            Ok(out) => Ok(out),
+            Err(e) => Err(self.read_error(&e).await),
+        }
     }
 
     /// The complete calibrations of the gyro `serial`, oldest first, with results and
@@ -607,35 +693,46 @@ impl Catalog {
         serial: &str,
         include_simulated: bool,
     ) -> Result<Vec<Calibration>, CatalogError> {
-        let sim = if include_simulated {
-            ""
-        } else {
-            " AND NOT r.simulated"
-        };
+        // Every run of the serial is read and decoded, and the status and simulated filters
+        // applied here rather than in SQL: a row garbled on disk then fails to decode (or
+        // shows a status gyrocal never writes) instead of silently failing a WHERE clause
+        // and leaving the history one calibration short.
         let sql = format!(
             "SELECT {RUN_COLUMNS}, {RESULT_COLUMNS} FROM runs r \
              LEFT JOIN results res ON res.run_id = r.id \
-             WHERE r.dut_serial = $1 AND r.status = 'complete'{sim} \
+             WHERE r.dut_serial = $1 \
              ORDER BY r.started_utc, r.id"
         );
-        let checks_sql = format!(
-            "SELECT c.run_id, c.quantity, c.value, c.unit, c.expanded_uncertainty, c.min, \
-             c.max, c.marginal_min, c.marginal_max, c.verdict FROM checks c \
-             JOIN runs r ON r.id = c.run_id \
-             WHERE r.dut_serial = $1 AND r.status = 'complete'{sim}"
-        );
+        let checks_sql = "SELECT c.run_id, c.quantity, c.value, c.unit, \
+             c.expanded_uncertainty, c.min, c.max, c.marginal_min, c.marginal_max, c.verdict \
+             FROM checks c JOIN runs r ON r.id = c.run_id WHERE r.dut_serial = $1";
+        self.check_listed_tables().await?;
         let result: Result<Vec<Calibration>, sqlx::Error> = on_pool!(self, |p| {
             async {
                 let rows = sqlx::query(&sql).bind(serial).fetch_all(p).await?;
                 let mut out = Vec::with_capacity(rows.len());
                 for row in &rows {
+                    let run: RunRow = run_row!(row);
+                    let results = results_row!(row);
+                    if !is_status_word(&run.status) {
+                        return Err(sqlx::Error::Decode(
+                            format!(
+                                "run {} has the status {:?}, which gyrocal never writes",
+                                run.id, run.status
+                            )
+                            .into(),
+                        ));
+                    }
+                    if run.status != "complete" || (run.simulated && !include_simulated) {
+                        continue;
+                    }
                     out.push(Calibration {
-                        run: run_row!(row),
-                        results: results_row!(row),
+                        run,
+                        results,
                         checks: Vec::new(),
                     });
                 }
-                let rows = sqlx::query(&checks_sql).bind(serial).fetch_all(p).await?;
+                let rows = sqlx::query(checks_sql).bind(serial).fetch_all(p).await?;
                 let mut index = std::collections::HashMap::new();
                 for (i, c) in out.iter().enumerate() {
                     index.insert(c.run.id.clone(), i);
@@ -661,7 +758,10 @@ impl Catalog {
             }
             .await
         });
-        result.map_err(|e| self.err(&e))
+        match result {
+            Ok(out) => Ok(out),
+            Err(e) => Err(self.read_error(&e).await),
+        }
     }
 
     /// The finished steps of a run, in order.
@@ -718,10 +818,32 @@ impl Catalog {
         result.map_err(|e| self.err(&e))
     }
 
-    /// Closes the pool (waits for connections in use to come back).
+    /// Closes the pool (waits for connections in use to come back). An SQLite catalog is
+    /// checkpointed first, so that the file is whole on its own (its rows not left in the
+    /// `-wal` file) for a copy or a backup; a checkpoint another process holds up is skipped.
     pub async fn close(&self) {
+        if let Pool::Sqlite(p) = &self.pool {
+            let checkpoint = async {
+                let mut conn = p.acquire().await?;
+                // a checkpoint waits for other processes' readers: briefly, at the end
+                sqlx::query("PRAGMA busy_timeout = 200")
+                    .execute(&mut *conn)
+                    .await?;
+                sqlx::query("PRAGMA wal_checkpoint(TRUNCATE)")
+                    .execute(&mut *conn)
+                    .await
+            };
+            if let Err(e) = checkpoint.await {
+                tracing::debug!(error = %e, "no checkpoint at close");
+            }
+        }
         on_pool!(self, |p| p.close().await);
     }
+}
+
+/// A run status as gyrocal writes it (`complete`, `failed`, ...): lower-case ASCII words.
+fn is_status_word(status: &str) -> bool {
+    !status.is_empty() && status.bytes().all(|b| b.is_ascii_lowercase() || b == b'_')
 }
 
 fn is_unreachable(e: &sqlx::Error) -> bool {
@@ -735,9 +857,41 @@ fn is_unreachable(e: &sqlx::Error) -> bool {
     )
 }
 
-/// A driver error as a [`CatalogError`], its message scrubbed of the URL's password.
-fn db_error(url: &CatalogUrl, e: &sqlx::Error) -> CatalogError {
+/// The pool of an SQLite catalog (the file exists, or `opts.create` allows creating it).
+async fn sqlite_pool(
+    url: &CatalogUrl,
+    path: &Path,
+    opts: &OpenOptions,
+) -> Result<SqlitePool, CatalogError> {
+    let options = SqliteConnectOptions::new()
+        .filename(path)
+        .create_if_missing(opts.create)
+        // several gyrocal processes on one machine: readers never block the writer, and a
+        // writer waits for another's lock instead of failing
+        .journal_mode(SqliteJournalMode::Wal)
+        .synchronous(SqliteSynchronous::Normal)
+        .busy_timeout(opts.busy_timeout)
+        .foreign_keys(true);
+    SqlitePoolOptions::new()
+        .max_connections(opts.max_connections)
+        .acquire_timeout(opts.connect_timeout.max(opts.busy_timeout))
+        .connect_with(options)
+        .await
+        .map_err(|e| db_error(url, &e))
+}
+
+/// A driver error as a [`CatalogError`], its message scrubbed of the URL's password. A
+/// damaged SQLite file is [`CatalogError::Damaged`].
+pub(crate) fn db_error(url: &CatalogUrl, e: &sqlx::Error) -> CatalogError {
     let message = url.scrub(&e.to_string());
+    if let CatalogUrl::Sqlite(path) = url
+        && health::says_damaged(e)
+    {
+        return CatalogError::Damaged {
+            path: path.clone(),
+            message,
+        };
+    }
     if is_unreachable(e) {
         CatalogError::Unreachable {
             url: url.redacted(),

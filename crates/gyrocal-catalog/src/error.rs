@@ -20,6 +20,12 @@ pub enum ErrorKind {
     Migration,
     /// A local file or directory could not be read or created.
     Io,
+    /// The SQLite file is damaged (`PRAGMA quick_check` failed, or SQLite said so): nothing
+    /// is read from it; `gyrocal catalog rebuild` moves it aside and rebuilds it.
+    Damaged,
+    /// A listing command was pointed at an SQLite file that does not exist (it creates
+    /// nothing: a run or `gyrocal catalog import` does).
+    NotFound,
 }
 
 /// Everything that can go wrong with the catalog. Messages name the catalog by its URL with
@@ -76,6 +82,31 @@ pub enum CatalogError {
         /// The I/O error.
         source: std::io::Error,
     },
+    /// The SQLite file is damaged. Listing from it could show a shorter history than the
+    /// run directories hold, so nothing is read; the message names the file and the repair.
+    #[error(
+        "catalog {} is damaged ({message}); nothing is read from it, since a damaged file can \
+         hide runs. The run directories hold every run: `gyrocal catalog rebuild ROOT` (ROOT: the \
+         directory holding them) rebuilds the catalog from them, first moving the file aside \
+         (kept) when SQLite finds its pages damaged",
+        path.display()
+    )]
+    Damaged {
+        /// The database file.
+        path: PathBuf,
+        /// SQLite's own words: the error and what `PRAGMA quick_check` found.
+        message: String,
+    },
+    /// A listing command's SQLite catalog does not exist.
+    #[error(
+        "no catalog at {}: nothing has been indexed there (a run indexes itself; \
+         `gyrocal catalog import DIR` or `gyrocal catalog rebuild ROOT` creates the catalog)",
+        path.display()
+    )]
+    NotFound {
+        /// The file that is not there.
+        path: PathBuf,
+    },
 }
 
 impl CatalogError {
@@ -88,6 +119,8 @@ impl CatalogError {
             CatalogError::Database { .. } => ErrorKind::Database,
             CatalogError::Migration { .. } => ErrorKind::Migration,
             CatalogError::Io { .. } => ErrorKind::Io,
+            CatalogError::Damaged { .. } => ErrorKind::Damaged,
+            CatalogError::NotFound { .. } => ErrorKind::NotFound,
         }
     }
 }

@@ -14,6 +14,18 @@
 //! Which one: [`Catalog::resolve`] (`--catalog URL`, then `GYROCAL_CATALOG`, then the
 //! station file's `catalog` key, then the default file).
 //!
+//! Listing ([`Catalog::open_existing`], for `gyrocal runs` and `gyrocal history`) creates
+//! nothing, and never reads a damaged SQLite file as a shorter history: SQLite reads a garbled
+//! row as well as it can, and a filtering query can skip it without an error, so the tables a
+//! listing reads are first checked against their indexes (`PRAGMA integrity_check(TABLE)`),
+//! every row of a gyro is decoded, and any error is checked with `PRAGMA quick_check`; a
+//! damaged file is [`CatalogError::Damaged`], whose message names the file and the repair. The
+//! repair, `gyrocal catalog rebuild`, finds the damage ([`sqlite_damage`]), moves the file
+//! aside ([`set_aside`], kept as `catalog.sqlite.damaged-<UTC time>`) and rebuilds from the run
+//! directories. A PostgreSQL server that refuses the connection is said at once with its host
+//! and port (one direct connection before the pool, whose own retries would only say "pool
+//! timed out" after the connect timeout).
+//!
 //! The schema (versioned migrations, one set per backend, compiled in) is documented in
 //! `SCHEMA.md`, included below. A running calibration updates the catalog through
 //! [`CatalogWriter`], which never blocks or fails the run.
@@ -25,14 +37,17 @@
 
 mod db;
 mod error;
+mod health;
 mod history;
 pub mod history_html;
+mod pg_probe;
 mod record;
 mod url;
 mod writer;
 
 pub use db::{Calibration, Catalog, OpenOptions, RunFilter, RunSummary};
 pub use error::{CatalogError, ErrorKind};
+pub use health::{set_aside, sqlite_damage};
 pub use history::{Band, History, Limits, QUANTITIES, Quantity, Repeatability, Trend, TrendPoint};
 pub use record::{
     CheckRow, InstrumentRow, KIND_SCALE_FACTOR, Results, RunRecord, RunRow, StepRow, find_run_dirs,

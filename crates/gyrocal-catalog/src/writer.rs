@@ -198,6 +198,7 @@ async fn worker(url: CatalogUrl, options: WriterOptions, shared: Arc<Shared>) {
         connect_timeout: options.connect_timeout,
         busy_timeout: Duration::from_secs(5),
         max_connections: 1,
+        create: true,
     };
     let mut catalog: Option<Catalog> = None;
     let mut unreachable_warned = false;

@@ -5,21 +5,17 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a panic is a failed test
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use std::path::Path;
 use std::process::{Command, Output};
 
-fn gyrocal(data_home: &Path) -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_gyrocal"));
-    c.env_remove("RUST_LOG")
-        .env_remove("GYROCAL_CATALOG")
-        .env("XDG_DATA_HOME", data_home);
-    c
-}
+use common::config;
 
-fn config(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../configs")
-        .join(name)
+/// The binary with none of the user's files (tests/common), its default catalog in the
+/// test's own `data_home`.
+fn gyrocal(data_home: &Path) -> Command {
+    common::gyrocal_with_data_home(data_home)
 }
 
 fn ok(out: &Output) -> String {
@@ -580,4 +576,317 @@ fn a_drift_test_is_catalogued_with_its_noise_terms_on_postgres() {
     let data_home = tmp.path().join("data");
     let tag = format!("-{}", std::process::id());
     drift_history(&data_home, tmp.path(), &["--catalog", &url], &tag);
+}
+
+/// Output of a command expected to fail with `code`: its stderr.
+fn fails(out: &Output, code: i32) -> String {
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(
+        out.status.code(),
+        Some(code),
+        "{}\n{stderr}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    stderr
+}
+
+/// The offset and size of the page of the SQLite `file` that holds the `runs` rows of a
+/// serial: the first table b-tree leaf page (type 0x0D) after the schema page where `needle`
+/// occurs at least `n` times.
+fn page_of_rows(file: &[u8], needle: &[u8], n: usize) -> (usize, usize) {
+    let size = match u16::from_be_bytes([file[16], file[17]]) {
+        1 => 65536,
+        s => usize::from(s),
+    };
+    for (i, page) in file.chunks(size).enumerate().skip(1) {
+        let count = page.windows(needle.len()).filter(|w| *w == needle).count();
+        if page[0] == 0x0D && count >= n {
+            return (i * size, size);
+        }
+    }
+    panic!("no page of the catalog holds {n} rows of {needle:?}");
+}
+
+/// `len` pseudo-random bytes (xorshift64 from `seed`): the same every run.
+fn random_bytes(seed: u64, len: usize) -> Vec<u8> {
+    let mut x = seed;
+    (0..len)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x.to_le_bytes()[3]
+        })
+        .collect()
+}
+
+/// The complete calibrations `gyrocal history SERIAL` lists from `catalog`.
+fn history_len(data_home: &Path, catalog: &str, serial: &str) -> usize {
+    let h = json(
+        &gyrocal(data_home)
+            .args(["history", serial, "--json", "--include-simulated"])
+            .args(["--catalog", catalog])
+            .output()
+            .unwrap(),
+    );
+    h["calibrations"].as_array().unwrap().len()
+}
+
+/// Four simulated calibrations of `serial` under `runs`, rebuilt into the SQLite file
+/// `file`; returns the file's bytes and the offset and size of the page holding the rows.
+fn catalog_of_four(data: &Path, runs: &Path, file: &Path, serial: &str) -> (Vec<u8>, usize, usize) {
+    for i in 1..=4 {
+        calibrate(data, &runs.join(format!("c{i}")), serial);
+    }
+    let url = format!("sqlite:{}", file.display());
+    let out = ok(&gyrocal(data)
+        .args(["catalog", "rebuild", "--catalog", &url])
+        .arg(runs)
+        .output()
+        .unwrap());
+    assert!(out.contains("4 run(s) imported"), "{out}");
+    assert_eq!(history_len(data, &url, serial), 4);
+    // the catalog closed whole: its rows are in the file, not left in a -wal file
+    let mut wal = file.as_os_str().to_os_string();
+    wal.push("-wal");
+    assert!(
+        std::fs::metadata(&wal).map_or(0, |m| m.len()) == 0,
+        "rows left in {wal:?}"
+    );
+    let bytes = std::fs::read(file).unwrap();
+    let (page, size) = page_of_rows(&bytes, serial.as_bytes(), 4);
+    (bytes, page, size)
+}
+
+/// Every listing of the damaged `file` exits 1, lists nothing, and names the file, the
+/// damage and the rebuild.
+fn listings_refuse(data: &Path, file: &Path, serial: &str) {
+    let url = format!("sqlite:{}", file.display());
+    for args in [
+        vec!["history", serial, "--include-simulated"],
+        vec!["history", serial, "--json"],
+        vec!["runs"],
+        vec!["runs", "--serial", serial],
+    ] {
+        let out = gyrocal(data)
+            .args(&args)
+            .args(["--catalog", &url])
+            .output()
+            .unwrap();
+        let err = fails(&out, 1);
+        assert!(out.stdout.is_empty(), "{args:?}: nothing listed");
+        assert!(
+            err.contains(&file.display().to_string())
+                && err.contains("damaged")
+                && err.contains("gyrocal catalog rebuild"),
+            "{args:?}: {err}"
+        );
+    }
+}
+
+#[test]
+fn a_garbled_row_is_never_read_as_a_shorter_history() {
+    // The issue's case: random bytes over one run's status in the page of the rows. SQLite's
+    // own checks find nothing (the page is well formed), and a history that filtered on
+    // `complete` in SQL showed 3 of the 4 calibrations and exited 0.
+    let tmp = tempfile::tempdir().unwrap();
+    let (data, runs) = (tmp.path().join("data"), tmp.path().join("runs"));
+    let file = tmp.path().join("lab").join("catalog.sqlite");
+    let serial = "DMG-0421";
+    let (mut bytes, page, size) = catalog_of_four(&data, &runs, &file, serial);
+    let rows = &bytes[page..page + size];
+    let second = rows
+        .windows(8)
+        .enumerate()
+        .filter(|(_, w)| *w == b"complete")
+        .map(|(i, _)| page + i)
+        .nth(1)
+        .expect("four rows say complete");
+    bytes[second..second + 8].copy_from_slice(&random_bytes(0x9E37_79B9_7F4A_7C15, 8));
+    std::fs::write(&file, &bytes).unwrap();
+    listings_refuse(&data, &file, serial);
+    // the rebuild replaces every row from the run directories
+    let url = format!("sqlite:{}", file.display());
+    let out = ok(&gyrocal(&data)
+        .args(["catalog", "rebuild", "--catalog", &url])
+        .arg(&runs)
+        .output()
+        .unwrap());
+    assert!(out.contains("4 run(s) imported"), "{out}");
+    assert_eq!(history_len(&data, &url, serial), 4);
+}
+
+#[test]
+fn a_damaged_page_is_refused_and_the_rebuild_sets_it_aside_and_recovers_every_calibration() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (data, runs) = (tmp.path().join("data"), tmp.path().join("runs"));
+    let lab = tmp.path().join("lab");
+    let file = lab.join("catalog.sqlite");
+    let serial = "DMG-0777";
+    let (mut bytes, page, size) = catalog_of_four(&data, &runs, &file, serial);
+    // random bytes over the middle of the rows' cells: SQLite finds the page malformed
+    let content = match u16::from_be_bytes([bytes[page + 5], bytes[page + 6]]) {
+        0 => 65536,
+        c => usize::from(c),
+    };
+    let at = page + content + (size - content) / 2 - 128;
+    bytes[at..at + 256].copy_from_slice(&random_bytes(0x2545_F491_4F6C_DD1D, 256));
+    std::fs::write(&file, &bytes).unwrap();
+    listings_refuse(&data, &file, serial);
+
+    // the rebuild moves the damaged file aside (kept as it was) and recovers all four
+    let url = format!("sqlite:{}", file.display());
+    let out = gyrocal(&data)
+        .args(["catalog", "rebuild", "--catalog", &url])
+        .arg(&runs)
+        .output()
+        .unwrap();
+    let stdout = ok(&out);
+    assert!(stdout.contains("4 run(s) imported"), "{stdout}");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("is damaged") && stderr.contains("moved it aside to"),
+        "{stderr}"
+    );
+    let kept: Vec<_> = std::fs::read_dir(&lab)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| {
+            n.starts_with("catalog.sqlite.damaged-") && !n.ends_with("-wal") && !n.ends_with("-shm")
+        })
+        .collect();
+    assert_eq!(kept.len(), 1, "{kept:?}");
+    assert!(stderr.contains(&kept[0]), "{stderr}");
+    assert_eq!(
+        std::fs::read(lab.join(&kept[0])).unwrap(),
+        bytes,
+        "the damaged file is kept as it was"
+    );
+    assert_eq!(history_len(&data, &url, serial), 4);
+    // a sound catalog is rebuilt in place, nothing moved
+    let out = gyrocal(&data)
+        .args(["catalog", "rebuild", "--catalog", &url])
+        .arg(&runs)
+        .output()
+        .unwrap();
+    ok(&out);
+    assert!(
+        !String::from_utf8_lossy(&out.stderr).contains("damaged"),
+        "{out:?}"
+    );
+}
+
+#[test]
+fn a_listing_creates_no_catalog_and_says_there_is_none() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = tmp.path().join("data");
+    let nowhere = tmp.path().join("a").join("b").join("c.sqlite");
+    let url = format!("sqlite:{}", nowhere.display());
+    for args in [
+        vec!["runs", "--catalog", &url],
+        vec!["history", "0421", "--catalog", &url],
+        vec!["runs", "--json", "--catalog", &url],
+    ] {
+        let err = fails(&gyrocal(&data).args(&args).output().unwrap(), 2);
+        assert!(
+            err.contains(&format!("no catalog at {}", nowhere.display())),
+            "{args:?}: {err}"
+        );
+        assert!(
+            !tmp.path().join("a").exists(),
+            "{args:?} created directories"
+        );
+    }
+    // the default catalog likewise: nothing is created in the data directory
+    let err = fails(&gyrocal(&data).args(["runs"]).output().unwrap(), 2);
+    let default = data.join("gyrocal").join("catalog.sqlite");
+    assert!(
+        err.contains(&format!("no catalog at {}", default.display())),
+        "{err}"
+    );
+    assert!(!data.exists(), "runs created {}", data.display());
+    let err = fails(
+        &gyrocal(&data).args(["history", "0421"]).output().unwrap(),
+        2,
+    );
+    assert!(err.contains("no catalog at"), "{err}");
+    assert!(!data.exists(), "history created {}", data.display());
+    // a run or an import creates it; then the listing works
+    calibrate(&data, &tmp.path().join("r"), "0421");
+    ok(&gyrocal(&data)
+        .args(["catalog", "import"])
+        .arg(tmp.path().join("r"))
+        .output()
+        .unwrap());
+    let out = ok(&gyrocal(&data).args(["runs"]).output().unwrap());
+    assert!(out.contains("0421"), "{out}");
+}
+
+#[test]
+fn a_closed_postgres_port_is_said_at_once_with_host_and_port() {
+    // a port nobody listens on: bound, then released
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let tmp = tempfile::tempdir().unwrap();
+    let url = format!("postgres://gyrocal:hunter2@127.0.0.1:{port}/lab");
+    for args in [vec!["runs"], vec!["history", "0421"]] {
+        let t0 = std::time::Instant::now();
+        let out = gyrocal(tmp.path())
+            .args(&args)
+            .args(["--catalog", &url])
+            .output()
+            .unwrap();
+        let took = t0.elapsed();
+        let err = fails(&out, 1);
+        assert!(
+            err.contains("connection refused") && err.contains(&format!("127.0.0.1:{port}")),
+            "{args:?}: {err}"
+        );
+        assert!(!err.contains("pool timed out"), "{err}");
+        assert!(!err.contains("hunter2"), "{err}");
+        // the pool alone took its 5 s acquire timeout to say only "timed out"
+        assert!(
+            took < std::time::Duration::from_secs(3),
+            "{args:?} took {took:?}"
+        );
+    }
+}
+
+#[test]
+fn a_test_run_of_the_binary_sees_none_of_the_users_files() {
+    // tests/common removes every variable through which gyrocal finds a user's files, and a
+    // run indexes itself nowhere; under CI these variables point at a sentinel (.ci/run)
+    let cmd = common::gyrocal();
+    let envs: std::collections::HashMap<_, _> = cmd.get_envs().collect();
+    for (name, _) in std::env::vars_os() {
+        let text = name.to_string_lossy();
+        if text == "GYROCAL_CATALOG" {
+            continue;
+        }
+        if text == "HOME" || text.starts_with("XDG_") || text.starts_with("GYROCAL_") {
+            assert_eq!(
+                envs.get(name.as_os_str()),
+                Some(&None),
+                "{text} reaches the binary"
+            );
+        }
+    }
+    assert_eq!(
+        envs.get(std::ffi::OsStr::new("GYROCAL_CATALOG")),
+        Some(&Some(std::ffi::OsStr::new("off")))
+    );
+    let tmp = tempfile::tempdir().unwrap();
+    let out = common::gyrocal()
+        .args(["run", "--simulate", "--json", "--out"])
+        .arg(tmp.path().join("run"))
+        .arg(config("quick.toml"))
+        .output()
+        .unwrap();
+    let doc = json(&out);
+    assert_eq!(doc["status"], "complete");
+    assert!(doc["catalog"].is_null(), "the run was indexed: {doc:#}");
 }

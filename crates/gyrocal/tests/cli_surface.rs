@@ -4,11 +4,13 @@
 
 #![allow(clippy::unwrap_used)] // test helpers: a panic is a failed test
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 fn gyrocal(args: &[&str], env: &[(&str, &str)]) -> Output {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_gyrocal"));
+    let mut cmd = common::gyrocal();
     cmd.args(args)
         .env_remove("RUST_LOG")
         .env("GYROCAL_CATALOG", "off");

@@ -5,10 +5,12 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a panic is a failed test
 
+mod common;
+
 use std::io::Read;
 use std::os::fd::{AsRawFd, OwnedFd};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 fn config(name: &str) -> PathBuf {
@@ -53,7 +55,7 @@ fn the_run_display_fits_80_columns_names_the_plan_step_and_counts_time() {
     };
     let pty = nix::pty::openpty(Some(&size), None).unwrap();
     let slave: OwnedFd = pty.slave;
-    let mut child = Command::new(env!("CARGO_BIN_EXE_gyrocal"))
+    let mut child = common::gyrocal()
         .env("GYROCAL_CATALOG", "off")
         .arg("run")
         .arg(config("quick.toml"))

@@ -8,10 +8,12 @@
 //! `crates/gyrocal-run/tests/sequencer_sim.rs` and `run_cli.rs`; these prove it on a serial port.
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
+mod common;
+
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Stdio};
 use std::sync::{Arc, Mutex, mpsc};
 use std::time::{Duration, Instant};
 
@@ -20,7 +22,6 @@ use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 use serde_json::Value;
 
-const BIN: &str = env!("CARGO_BIN_EXE_gyrocal");
 /// Sim seconds per real second for the instruments.
 const TIME_SCALE: &str = "30";
 const SEED: &str = "11";
@@ -156,7 +157,7 @@ impl Sim {
 
     /// With more arguments for `gyrocal sim` (`--link prologix-tcp`, ...).
     fn start_with(plan: &Path, faults: &[&str], time_scale: &str, extra: &[&str]) -> Sim {
-        let mut cmd = Command::new(BIN);
+        let mut cmd = common::gyrocal();
         cmd.env_remove("RUST_LOG")
             .env("GYROCAL_CATALOG", "off")
             .arg("sim")
@@ -239,7 +240,7 @@ impl Run {
         log: Option<&str>,
         catalog: &str,
     ) -> Run {
-        let mut cmd = Command::new(BIN);
+        let mut cmd = common::gyrocal();
         cmd.env_remove("RUST_LOG").env("GYROCAL_CATALOG", catalog);
         if let Some(l) = log {
             cmd.env("RUST_LOG", l);
@@ -1082,7 +1083,7 @@ fn e2e_sigint_with_a_catalog_stops_the_table_and_the_catalog_has_the_abort() {
         "{}",
         end.stderr
     );
-    let out = Command::new(BIN)
+    let out = common::gyrocal()
         .env_remove("RUST_LOG")
         .args(["runs", "--json", "--catalog", &url])
         .output()
@@ -1336,7 +1337,7 @@ fn e2e_meter_over_gpib_through_a_prologix_controller_completes() {
     // the simulator says the port a plan names for it
     let dmm_port = sim.dmm().to_string();
     assert!(dmm_port.starts_with("prologix:/dev/"), "{dmm_port}");
-    let mut cmd = Command::new(BIN);
+    let mut cmd = common::gyrocal();
     let out = cmd
         .env_remove("RUST_LOG")
         .env("GYROCAL_CATALOG", "off")
@@ -1428,7 +1429,7 @@ fn e2e_check_probe_identifies_both_instruments_and_a_silent_meter_leaves_no_run_
     let tmp = tempfile::tempdir().unwrap();
     let plan = write_plan(tmp.path());
     let sim = Sim::start(&plan, &[]);
-    let out = Command::new(BIN)
+    let out = common::gyrocal()
         .env_remove("RUST_LOG")
         .env("GYROCAL_CATALOG", "off")
         .arg("check")
@@ -1458,7 +1459,7 @@ fn e2e_check_probe_identifies_both_instruments_and_a_silent_meter_leaves_no_run_
     );
     assert!(stdout.contains("(mode Off"), "{stdout}");
     // the same as one JSON document
-    let out = Command::new(BIN)
+    let out = common::gyrocal()
         .env_remove("RUST_LOG")
         .env("GYROCAL_CATALOG", "off")
         .arg("check")
@@ -1489,7 +1490,7 @@ fn e2e_check_probe_identifies_both_instruments_and_a_silent_meter_leaves_no_run_
     let pty = nix::pty::openpty(None, None).unwrap();
     let silent = nix::unistd::ttyname(&pty.slave).unwrap();
     let dir = tmp.path().join("run");
-    let out = Command::new(BIN)
+    let out = common::gyrocal()
         .env_remove("RUST_LOG")
         .env("GYROCAL_CATALOG", "off")
         .arg("run")

@@ -3,14 +3,13 @@
 // Helpers outside #[test] functions may unwrap too: a panic there is a failed test.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 fn gyrocal(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_gyrocal"))
-        .args(args)
-        .output()
-        .unwrap()
+    common::gyrocal().args(args).output().unwrap()
 }
 
 fn example() -> PathBuf {

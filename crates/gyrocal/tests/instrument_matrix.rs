@@ -9,8 +9,9 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a panic is a failed test
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 const METERS: &[(&str, &str)] = &[
     ("34401A RS-232", ""),
@@ -72,7 +73,7 @@ fn run(
     std::fs::create_dir_all(&base).unwrap();
     let plan = plan(&base, config, meter, dialect);
     let dir = base.join("run");
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_gyrocal"));
+    let mut cmd = common::gyrocal();
     cmd.arg("run")
         .arg(&plan)
         .args(["--simulate", "--no-report", "-o"])

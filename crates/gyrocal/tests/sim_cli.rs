@@ -3,8 +3,10 @@
 //! with a time scale (pseudo-terminals and virtual time do not mix).
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
+mod common;
+
 use std::io::{BufRead, BufReader};
-use std::process::{Child, Command, ExitStatus, Stdio};
+use std::process::{Child, ExitStatus, Stdio};
 use std::sync::mpsc;
 use std::time::Duration;
 
@@ -13,8 +15,6 @@ use gyrocal_hp34401a::{AutoZero, DcvConfig, DriverOptions, Hp34401a, Strategy};
 use gyrocal_link::LinkOptions;
 use gyrocal_table::{Limits, RateTable, SettleCriteria};
 use serde_json::Value;
-
-const BIN: &str = env!("CARGO_BIN_EXE_gyrocal");
 
 /// A running `gyrocal sim`; killed on drop if still running.
 struct Sim {
@@ -25,7 +25,7 @@ struct Sim {
 
 impl Sim {
     fn start(extra: &[&str]) -> Sim {
-        let mut child = Command::new(BIN)
+        let mut child = common::gyrocal()
             .args(["sim", "--time-scale", "50", "--seed", "7"])
             .args(extra)
             .stdin(Stdio::null())
@@ -351,7 +351,7 @@ fn sim_bad_fault_spec_or_config_exits_2_naming_it() {
             "/nonexistent/bench.toml",
         ),
     ] {
-        let out = Command::new(BIN).args(&args).output().unwrap();
+        let out = common::gyrocal().args(&args).output().unwrap();
         assert_eq!(out.status.code(), Some(2), "{args:?}");
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(err.contains(needle), "{args:?}: {err}");
@@ -360,7 +360,7 @@ fn sim_bad_fault_spec_or_config_exits_2_naming_it() {
     let dir = tempfile::tempdir().unwrap();
     let bad = dir.path().join("bench.toml");
     std::fs::write(&bad, "seed = 3\n[gyro]\nk9 = 1\n").unwrap();
-    let out = Command::new(BIN)
+    let out = common::gyrocal()
         .args(["sim", "--config"])
         .arg(&bad)
         .output()

@@ -1,23 +1,49 @@
 //! Helpers shared by the CLI tests that include this module (`mod common;`): the binary with
-//! a clean environment, the configs directory, and reading a run directory's JSON files.
+//! a clean environment (none of the user's files: see [`isolated`]), the configs directory,
+//! and reading a run directory's JSON files.
 
 #![allow(dead_code, clippy::unwrap_used, clippy::expect_used)] // each test file uses a subset
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// The gyrocal binary, without the caller's log filter or station file (a test names its own).
-pub fn gyrocal() -> Command {
+/// True for the environment variables through which gyrocal finds a user's own files: its
+/// catalog and station file (`GYROCAL_*`) and the directories of their defaults (`HOME`,
+/// `XDG_*`), and the caller's log filter (`RUST_LOG`).
+fn users_own(name: &std::ffi::OsStr) -> bool {
+    let name = name.to_string_lossy();
+    name == "HOME" || name == "RUST_LOG" || name.starts_with("GYROCAL_") || name.starts_with("XDG_")
+}
+
+/// The gyrocal binary with none of the user's files, whatever the environment says: no
+/// `HOME`, no `XDG_*` directories (so no default station file and no default catalog), no
+/// `GYROCAL_*` variables, no log filter. A test that wants a catalog or a station names its
+/// own (`--catalog`, `--station`, or [`gyrocal_with_data_home`]). Every test that runs the
+/// binary starts from here: a test run must never add runs to a user's catalog (one
+/// `cargo nextest run` once added four) nor read a user's station file.
+pub fn isolated() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_gyrocal"));
-    c.env_remove("RUST_LOG")
-        .env_remove("GYROCAL_STATION")
-        // no catalog unless a test names one (never the user's own)
-        .env("GYROCAL_CATALOG", "off")
-        // no default station file from the user's config directory
-        .env(
-            "XDG_CONFIG_HOME",
-            std::env::temp_dir().join("gyrocal-tests-no-config"),
-        );
+    for (name, _) in std::env::vars_os() {
+        if users_own(&name) {
+            c.env_remove(name);
+        }
+    }
+    c
+}
+
+/// [`isolated`], and no catalog unless the test names one (`--catalog` or
+/// `GYROCAL_CATALOG`): a run indexes itself nowhere.
+pub fn gyrocal() -> Command {
+    let mut c = isolated();
+    c.env("GYROCAL_CATALOG", "off");
+    c
+}
+
+/// [`isolated`], with the default catalog in `data_home` (`XDG_DATA_HOME`, a directory of
+/// the test's own): `data_home/gyrocal/catalog.sqlite`.
+pub fn gyrocal_with_data_home(data_home: &Path) -> Command {
+    let mut c = isolated();
+    c.env("XDG_DATA_HOME", data_home);
     c
 }
 
