@@ -56,6 +56,7 @@ mod lsq;
 pub mod metrics;
 mod model;
 pub mod neuron;
+pub mod nonlinearity;
 pub mod selection;
 mod surface;
 pub mod uncertainty;
