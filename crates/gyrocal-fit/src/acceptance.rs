@@ -94,9 +94,7 @@ impl Quantity {
             Quantity::BiasV => {
                 "metrics.bias_volts: K0 of the least-squares line; U from the uncertainty budget"
             }
-            Quantity::BiasDph => {
-                "metrics.bias_dph: K0/K·3600; U from the uncertainty budget"
-            }
+            Quantity::BiasDph => "metrics.bias_dph: K0/K·3600; U from the uncertainty budget",
             Quantity::NonlinearityPpm => {
                 "metrics.nonlinearity_ppm; U by Monte Carlo over the points' noise \
                  (metrics.nonlinearity_uncertainty)"
@@ -113,9 +111,7 @@ impl Quantity {
                 "metrics.repeatability_ppm: std(K per pass)/mean; the exact 95 % chi-square \
                  interval of a standard deviation of q passes"
             }
-            Quantity::K2 => {
-                "K2 of the quadratic least-squares fit; U = 2 × its standard error"
-            }
+            Quantity::K2 => "K2 of the quadratic least-squares fit; U = 2 × its standard error",
         }
     }
 

@@ -231,7 +231,11 @@ pub(crate) fn monte_carlo(
                 .map(|((y, c), s)| ((y - c) / s).powi(2))
                 .sum();
             let birge = (chi2 / dof).sqrt();
-            let scale = if birge.is_finite() { birge.max(1.0) } else { 1.0 };
+            let scale = if birge.is_finite() {
+                birge.max(1.0)
+            } else {
+                1.0
+            };
             (
                 s.iter().map(|s| s * scale).collect(),
                 scale,
@@ -339,9 +343,11 @@ mod tests {
             let prep = Prepared::new(&cols, Weighting::Auto, true).unwrap();
             assert_eq!(prep.sigmas.is_some(), sigma.is_some());
             let line = fit_prepared(&prep, Model::Linear).unwrap();
-            let m = crate::Metrics::from_fits(&prep, &line, Err(&crate::FitError::Unsupported(
-                String::new(),
-            )));
+            let m = crate::Metrics::from_fits(
+                &prep,
+                &line,
+                Err(&crate::FitError::Unsupported(String::new())),
+            );
             let mine = nonlinearity_of(&prep).unwrap();
             assert!(
                 (mine - m.nonlinearity_ppm).abs() <= 1e-9 * m.nonlinearity_ppm,

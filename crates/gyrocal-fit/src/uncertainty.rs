@@ -288,7 +288,10 @@ pub fn repeatability_interval(s: f64, passes: usize) -> Option<[f64; 2]> {
         return None;
     }
     let nu = (passes - 1) as f64;
-    let (lo_q, hi_q) = (chi_squared_quantile(nu, 0.975)?, chi_squared_quantile(nu, 0.025)?);
+    let (lo_q, hi_q) = (
+        chi_squared_quantile(nu, 0.975)?,
+        chi_squared_quantile(nu, 0.025)?,
+    );
     let s = s.abs();
     let interval = [s * (nu / lo_q).sqrt(), s * (nu / hi_q).sqrt()];
     interval
@@ -969,7 +972,10 @@ mod tests {
             (9.0, 0.975, 19.023),
         ] {
             let q = chi_squared_quantile(nu, p).unwrap();
-            assert!((q - x).abs() <= 0.001 * x.max(1.0), "ν = {nu}, p = {p}: {q}");
+            assert!(
+                (q - x).abs() <= 0.001 * x.max(1.0),
+                "ν = {nu}, p = {p}: {q}"
+            );
         }
     }
 }

@@ -56,8 +56,7 @@ impl Gyro {
                 .iter()
                 .map(|&w| Point {
                     rate_dps: w,
-                    volts: self.output(w)
-                        + rng.as_deref_mut().map_or(0.0, |r| noise.sample(r)),
+                    volts: self.output(w) + rng.as_deref_mut().map_or(0.0, |r| noise.sample(r)),
                     volts_std: Some(READING_SIGMA),
                     n: Some(N),
                     line: None,
@@ -268,11 +267,16 @@ fn an_asymmetry_limit_judges_the_unbiased_figure_and_the_gjb_key_the_two_lines()
         .into_iter()
         .collect(),
     };
-    let unbiased = a.evaluate_acceptance(&spec(Quantity::AsymmetryPpm)).unwrap();
+    let unbiased = a
+        .evaluate_acceptance(&spec(Quantity::AsymmetryPpm))
+        .unwrap();
     assert_eq!(unbiased.verdict, Verdict::Pass, "{unbiased:?}");
     assert_eq!(
         unbiased.checks[0].value,
-        a.metrics.asymmetry_common_k2.as_ref().map(|c| c.asymmetry_ppm)
+        a.metrics
+            .asymmetry_common_k2
+            .as_ref()
+            .map(|c| c.asymmetry_ppm)
     );
     let gjb = a
         .evaluate_acceptance(&spec(Quantity::AsymmetryGjbPpm))

@@ -693,7 +693,11 @@ pub(crate) fn uncertainty(html: &mut String, a: &Analysis) {
 
 /// A coverage interval that is not `value ± U`, for the U column.
 fn interval_text([lo, hi]: [f64; 2]) -> String {
-    format!("95 % interval {} .. {}", significant(lo, 3), significant(hi, 3))
+    format!(
+        "95 % interval {} .. {}",
+        significant(lo, 3),
+        significant(hi, 3)
+    )
 }
 
 /// The metrics' uncertainties: each one's value, U and the method that gave it (analytic or
@@ -761,6 +765,42 @@ pub(crate) fn end_mark(html: &mut String, id: &str) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_asymmetry_check_names_the_figure_it_judged() {
+        use gyrocal_fit::acceptance::{Limits, Measured, Rule, check};
+        let limits = Limits {
+            max: Some(500.0),
+            ..Limits::default()
+        };
+        let c = check(
+            Rule::Guarded,
+            Quantity::AsymmetryPpm,
+            &limits,
+            Measured::new(15.0, 131.0),
+        );
+        assert_eq!(check_label(&c), "asymmetry (common K2, unbiased)");
+        let g = check(
+            Rule::Guarded,
+            Quantity::AsymmetryGjbPpm,
+            &limits,
+            Measured::new(2098.0, 300.0),
+        );
+        assert!(check_label(&g).contains("GJB"));
+        // a check recorded before checks named their figure judged the GJB figure
+        let old = Check { figure: None, ..c };
+        assert!(check_label(&old).starts_with("asymmetry (GJB two lines"));
+        let mut html = String::new();
+        acceptance_table(
+            &mut html,
+            Some(&Acceptance {
+                verdict: Verdict::Fail,
+                rule: Rule::Guarded,
+                checks: vec![old, g],
+            }),
+        );
+        assert!(html.contains("recorded when asymmetry_ppm limited that figure"), "{html}");
+    }
 
     #[test]
     fn times_are_shown_in_the_zone_with_the_offset() {

@@ -71,7 +71,8 @@ bias = 0.0001
 k2 = {k2}
 k3 = 0
 asymmetry = 0
-noise_v = 0.0002
+noise_v = 0.00002
+ripple_dps = 0.0002
 latitude_deg = 45.75
 "#
     );
@@ -144,11 +145,7 @@ fn the_shipped_example_passes_a_good_gyro_and_fails_a_bad_one() {
     let html = tmp.path().join("report.html");
 
     // A good gyro of the example's nominal scale factor, one pass: PASS on every quantity.
-    let good = simulated_run(
-        tmp.path(),
-        &hrg_plan(tmp.path(), "good", 0.05, 0.0),
-        "good",
-    );
+    let good = simulated_run(tmp.path(), &hrg_plan(tmp.path(), "good", 0.05, 0.0), "good");
     let (doc, page) = report_against(&good, &example, &html);
     let checks = doc["acceptance"]["checks"].as_array().unwrap();
     for c in checks {
@@ -197,7 +194,10 @@ fn the_shipped_example_passes_a_good_gyro_and_fails_a_bad_one() {
     // the unbiased asymmetry is not fooled by the bowl: it still passes
     assert_eq!(check(&doc, "asymmetry_ppm")["verdict"], "pass", "{doc:#}");
     let verdict = between(&page, "id=\"acceptance-verdict\"", "</div>");
-    assert!(verdict.contains("FAIL") && verdict.contains("nonlinearity"), "{verdict}");
+    assert!(
+        verdict.contains("FAIL") && verdict.contains("nonlinearity"),
+        "{verdict}"
+    );
 
     // A scale factor 5 % above nominal: the scale factor FAILs.
     let steep = simulated_run(
@@ -210,7 +210,10 @@ fn the_shipped_example_passes_a_good_gyro_and_fails_a_bad_one() {
     let k = check(&doc, "scale_factor");
     assert_eq!(k["verdict"], "fail", "{k:#}");
     assert!(
-        k["reason"].as_str().unwrap().contains("wholly above max 0.051"),
+        k["reason"]
+            .as_str()
+            .unwrap()
+            .contains("wholly above max 0.051"),
         "{k:#}"
     );
 }
@@ -260,7 +263,10 @@ fn an_asymmetry_limit_judges_the_unbiased_figure_and_the_gjb_figure_only_by_its_
     assert_eq!(a["value"].as_f64().unwrap(), common);
     assert_eq!(a["verdict"], "pass", "{a:#}");
     assert!(
-        a["figure"].as_str().unwrap().contains("asymmetry_common_k2"),
+        a["figure"]
+            .as_str()
+            .unwrap()
+            .contains("asymmetry_common_k2"),
         "{a:#}"
     );
     // the nonlinearity (about 930 ppm) against 1500 ppm: decided, with its Monte Carlo U
@@ -292,5 +298,9 @@ fn an_asymmetry_limit_judges_the_unbiased_figure_and_the_gjb_figure_only_by_its_
     )
     .unwrap();
     let (doc, _) = report_against(&out, &limits, &html);
-    assert_eq!(check(&doc, "nonlinearity_ppm")["verdict"], "fail", "{doc:#}");
+    assert_eq!(
+        check(&doc, "nonlinearity_ppm")["verdict"],
+        "fail",
+        "{doc:#}"
+    );
 }
