@@ -61,6 +61,7 @@ pub mod metrics;
 mod model;
 pub mod neuron;
 pub mod nonlinearity;
+mod quantity;
 pub mod selection;
 mod surface;
 pub mod uncertainty;

@@ -69,7 +69,7 @@ pub const NONLINEARITY_MC_METHOD: &str = "Monte Carlo (JCGM 101): synthetic data
 /// ```json
 /// {"method": "Monte Carlo (JCGM 101): ...", "reference_model": "quadratic",
 ///  "reference_nonlinearity_ppm": 925.1, "noise": "...", "noise_scale": 1.0,
-///  "replicates": 2000, "seed": 7455979164862587441,
+///  "replicates": 2000, "seed": 7456116480822832177,
 ///  "standard_uncertainty_ppm": 6.3, "noise_bias_ppm": 4.1, "coverage_factor": 2.0,
 ///  "expanded_uncertainty_ppm": 16.7}
 /// ```

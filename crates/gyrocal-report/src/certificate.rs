@@ -799,7 +799,10 @@ mod tests {
                 checks: vec![old, g],
             }),
         );
-        assert!(html.contains("recorded when asymmetry_ppm limited that figure"), "{html}");
+        assert!(
+            html.contains("recorded when asymmetry_ppm limited that figure"),
+            "{html}"
+        );
     }
 
     #[test]
