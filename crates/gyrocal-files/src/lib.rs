@@ -108,7 +108,7 @@ pub fn fit_run(
             }
         }
         match failed {
-            None => analysis.metrics.repeatability_ppm = gyrocal_fit::repeatability_ppm(&ks),
+            None => analysis.metrics.set_repeatability(&ks),
             Some(reason) => {
                 tracing::warn!(%reason, "no repeatability");
                 analysis

@@ -413,19 +413,21 @@ struct RawAcceptance {
     bias_dph: Option<S<RawLimits>>,
     nonlinearity_ppm: Option<S<RawLimits>>,
     asymmetry_ppm: Option<S<RawLimits>>,
+    asymmetry_gjb_ppm: Option<S<RawLimits>>,
     repeatability_ppm: Option<S<RawLimits>>,
     k2: Option<S<RawLimits>>,
 }
 
 impl RawAcceptance {
     /// The limits tables, by quantity.
-    fn into_limits(self) -> [(Quantity, Option<S<RawLimits>>); 7] {
+    fn into_limits(self) -> [(Quantity, Option<S<RawLimits>>); 8] {
         [
             (Quantity::ScaleFactor, self.scale_factor),
             (Quantity::BiasV, self.bias_v),
             (Quantity::BiasDph, self.bias_dph),
             (Quantity::NonlinearityPpm, self.nonlinearity_ppm),
             (Quantity::AsymmetryPpm, self.asymmetry_ppm),
+            (Quantity::AsymmetryGjbPpm, self.asymmetry_gjb_ppm),
             (Quantity::RepeatabilityPpm, self.repeatability_ppm),
             (Quantity::K2, self.k2),
         ]
@@ -745,6 +747,7 @@ const ACCEPTANCE_KEYS: &[(&str, Kind, bool)] = &[
     ("bias_dph", Kind::Limits, false),
     ("nonlinearity_ppm", Kind::Limits, false),
     ("asymmetry_ppm", Kind::Limits, false),
+    ("asymmetry_gjb_ppm", Kind::Limits, false),
     ("repeatability_ppm", Kind::Limits, false),
     ("k2", Kind::Limits, false),
 ];

@@ -178,7 +178,7 @@ fn acceptance_errors_name_the_line_and_key() {
     assert!(
         e.contains(
             "scale_factor, bias_v, bias_dph, nonlinearity_ppm, asymmetry_ppm, \
-             repeatability_ppm, k2"
+             asymmetry_gjb_ppm, repeatability_ppm, k2"
         ),
         "{e}"
     );

@@ -30,97 +30,7 @@ use serde::de::{MapAccess, Visitor};
 use serde::ser::SerializeMap;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
-/// A quantity a specification can limit, named as in plan files and JSON.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Quantity {
-    /// The scale factor `K`, V/(°/s).
-    ScaleFactor,
-    /// The bias `K0` as a voltage, V.
-    BiasV,
-    /// The bias as an equivalent rate, °/h.
-    BiasDph,
-    /// The nonlinearity, ppm (of full scale, as the analysis reports it).
-    NonlinearityPpm,
-    /// The asymmetry of the two directions' scale factors, ppm.
-    AsymmetryPpm,
-    /// The repeatability of the scale factor over the passes, ppm.
-    RepeatabilityPpm,
-    /// The second-order coefficient of the quadratic model, V/(°/s)².
-    K2,
-}
-
-impl Quantity {
-    /// Every quantity, in the order checks are listed.
-    pub const ALL: [Quantity; 7] = [
-        Quantity::ScaleFactor,
-        Quantity::BiasV,
-        Quantity::BiasDph,
-        Quantity::NonlinearityPpm,
-        Quantity::AsymmetryPpm,
-        Quantity::RepeatabilityPpm,
-        Quantity::K2,
-    ];
-
-    /// The name used in plan files and JSON (`scale_factor`, `bias_v`, ...).
-    pub fn name(self) -> &'static str {
-        match self {
-            Quantity::ScaleFactor => "scale_factor",
-            Quantity::BiasV => "bias_v",
-            Quantity::BiasDph => "bias_dph",
-            Quantity::NonlinearityPpm => "nonlinearity_ppm",
-            Quantity::AsymmetryPpm => "asymmetry_ppm",
-            Quantity::RepeatabilityPpm => "repeatability_ppm",
-            Quantity::K2 => "k2",
-        }
-    }
-
-    /// The unit of the quantity's value (and of its limits).
-    pub fn unit(self) -> &'static str {
-        match self {
-            Quantity::ScaleFactor => "V/(°/s)",
-            Quantity::BiasV => "V",
-            Quantity::BiasDph => "°/h",
-            Quantity::NonlinearityPpm | Quantity::AsymmetryPpm | Quantity::RepeatabilityPpm => {
-                "ppm"
-            }
-            Quantity::K2 => "V/(°/s)²",
-        }
-    }
-
-    /// The quantity named `name` (exactly as [`Quantity::name`] spells it).
-    pub fn from_name(name: &str) -> Option<Quantity> {
-        Quantity::ALL.into_iter().find(|q| q.name() == name)
-    }
-
-    /// Every name, `scale_factor, bias_v, ...`, for error messages.
-    pub fn names() -> String {
-        Quantity::ALL.map(Quantity::name).join(", ")
-    }
-
-    /// Why a quantity can be missing from an analysis, for the `not measured: ...` reason.
-    fn missing_because(self) -> &'static str {
-        match self {
-            Quantity::RepeatabilityPpm => {
-                "the repeatability needs a line per pass of a plan with repeat >= 2"
-            }
-            Quantity::AsymmetryPpm => {
-                "the asymmetry needs two distinct rates on each side of zero (the split model)"
-            }
-            Quantity::K2 => "k2 needs the quadratic model (three distinct rates)",
-            Quantity::NonlinearityPpm => "the analysis has no nonlinearity",
-            Quantity::ScaleFactor => "the analysis has no scale factor",
-            Quantity::BiasV => "the analysis has no bias",
-            Quantity::BiasDph => "the bias as a rate needs the bias and a non-zero scale factor",
-        }
-    }
-}
-
-impl fmt::Display for Quantity {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
+pub use crate::quantity::Quantity;
 
 /// The limits of one quantity, in the quantity's unit. Every bound is optional (a one-sided
 /// specification has only `min` or only `max`), at least one must be set, and those present
@@ -396,6 +306,9 @@ pub struct Measured {
     pub value: Option<f64>,
     /// The expanded uncertainty `U` (k = 2), same unit; `None` when not known.
     pub expanded_uncertainty: Option<f64>,
+    /// The coverage interval `[low, high]` (about 95 %) when it is not `value ± U` (a skewed
+    /// distribution); the guarded rule then judges this interval.
+    pub interval: Option<[f64; 2]>,
 }
 
 impl Measured {
@@ -403,6 +316,7 @@ impl Measured {
     pub const NONE: Measured = Measured {
         value: None,
         expanded_uncertainty: None,
+        interval: None,
     };
 
     /// A value with its expanded uncertainty.
@@ -410,6 +324,17 @@ impl Measured {
         Measured {
             value: Some(value),
             expanded_uncertainty: Some(expanded_uncertainty),
+            interval: None,
+        }
+    }
+
+    /// A value with a coverage interval that is not symmetric about it; its expanded
+    /// uncertainty is the wider half.
+    pub fn with_interval(value: f64, low: f64, high: f64) -> Measured {
+        Measured {
+            value: Some(value),
+            expanded_uncertainty: Some((high - value).max(value - low)),
+            interval: Some([low, high]),
         }
     }
 
@@ -418,6 +343,7 @@ impl Measured {
         Measured {
             value: Some(value),
             expanded_uncertainty: None,
+            interval: None,
         }
     }
 }
@@ -434,6 +360,9 @@ pub struct Check {
     pub unit: String,
     /// The expanded uncertainty (k = 2), when known.
     pub expanded_uncertainty: Option<f64>,
+    /// The coverage interval judged by the guarded rule when it is not `value ± U`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub interval: Option<[f64; 2]>,
     /// Lower limit.
     pub min: Option<f64>,
     /// Upper limit.
@@ -447,6 +376,11 @@ pub struct Check {
     /// Why the outcome is not a plain pass (which limit, not measured, ...).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
+    /// Which figure of the analysis was judged and where its U comes from
+    /// ([`Quantity::figure`]). Absent in checks recorded before this field existed: their
+    /// `asymmetry_ppm` judged the GJB two-line figure.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub figure: Option<String>,
 }
 
 /// The result of checking a run against a specification.
@@ -498,12 +432,14 @@ pub fn check(rule: Rule, quantity: Quantity, limits: &Limits, measured: Measured
         value: measured.value,
         unit: quantity.unit().to_string(),
         expanded_uncertainty: measured.expanded_uncertainty,
+        interval: measured.interval,
         min: limits.min,
         max: limits.max,
         marginal_min: limits.marginal_min,
         marginal_max: limits.marginal_max,
         verdict,
         reason,
+        figure: Some(quantity.figure().to_string()),
     }
 }
 
@@ -559,6 +495,23 @@ fn decide(rule: Rule, quantity: Quantity, l: &Limits, m: Measured) -> (Verdict, 
             (Verdict::Pass, None)
         }
         Rule::Guarded => {
+            if let Some([lo, hi]) = m.interval {
+                if lo.is_finite() && hi.is_finite() && lo <= v && v <= hi {
+                    let interval = format!(
+                        "{vs} {unit} (95 % interval {} .. {})",
+                        short(lo, 3),
+                        short(hi, 3)
+                    );
+                    return guarded(l, lo, hi, &interval);
+                }
+                return (
+                    Verdict::Indeterminate,
+                    Some(format!(
+                        "the guarded rule needs a finite coverage interval about the value \
+                         (got {lo} .. {hi})"
+                    )),
+                );
+            }
             let u = match m.expanded_uncertainty {
                 Some(u) if u.is_finite() && u >= 0.0 => u,
                 Some(u) => {
@@ -580,63 +533,67 @@ fn decide(rule: Rule, quantity: Quantity, l: &Limits, m: Measured) -> (Verdict, 
                     );
                 }
             };
-            let (lo, hi) = (v - u, v + u);
             let interval = format!("{vs} ± {} {unit}", short(u, 3));
-            if let Some(max) = l.max
-                && lo > max
-            {
-                return (
-                    Verdict::Fail,
-                    Some(format!("{interval} lies wholly above max {max}")),
-                );
-            }
-            if let Some(min) = l.min
-                && hi < min
-            {
-                return (
-                    Verdict::Fail,
-                    Some(format!("{interval} lies wholly below min {min}")),
-                );
-            }
-            if let Some(min) = l.min
-                && lo < min
-            {
-                return (
-                    Verdict::Indeterminate,
-                    Some(format!(
-                        "{interval} straddles min {min}: within the uncertainty of the limit"
-                    )),
-                );
-            }
-            if let Some(max) = l.max
-                && hi > max
-            {
-                return (
-                    Verdict::Indeterminate,
-                    Some(format!(
-                        "{interval} straddles max {max}: within the uncertainty of the limit"
-                    )),
-                );
-            }
-            if let Some(mmin) = l.marginal_min
-                && lo < mmin
-            {
-                return (
-                    Verdict::Marginal,
-                    Some(format!("{interval} reaches below marginal_min {mmin}")),
-                );
-            }
-            if let Some(mmax) = l.marginal_max
-                && hi > mmax
-            {
-                return (
-                    Verdict::Marginal,
-                    Some(format!("{interval} reaches above marginal_max {mmax}")),
-                );
-            }
-            (Verdict::Pass, None)
+            guarded(l, v - u, v + u, &interval)
         }
     }
+}
+
+/// The guarded rule on the interval `[lo, hi]` (`interval` in words, for the reasons).
+fn guarded(l: &Limits, lo: f64, hi: f64, interval: &str) -> (Verdict, Option<String>) {
+    if let Some(max) = l.max
+        && lo > max
+    {
+        return (
+            Verdict::Fail,
+            Some(format!("{interval} lies wholly above max {max}")),
+        );
+    }
+    if let Some(min) = l.min
+        && hi < min
+    {
+        return (
+            Verdict::Fail,
+            Some(format!("{interval} lies wholly below min {min}")),
+        );
+    }
+    if let Some(min) = l.min
+        && lo < min
+    {
+        return (
+            Verdict::Indeterminate,
+            Some(format!(
+                "{interval} straddles min {min}: within the uncertainty of the limit"
+            )),
+        );
+    }
+    if let Some(max) = l.max
+        && hi > max
+    {
+        return (
+            Verdict::Indeterminate,
+            Some(format!(
+                "{interval} straddles max {max}: within the uncertainty of the limit"
+            )),
+        );
+    }
+    if let Some(mmin) = l.marginal_min
+        && lo < mmin
+    {
+        return (
+            Verdict::Marginal,
+            Some(format!("{interval} reaches below marginal_min {mmin}")),
+        );
+    }
+    if let Some(mmax) = l.marginal_max
+        && hi > mmax
+    {
+        return (
+            Verdict::Marginal,
+            Some(format!("{interval} reaches above marginal_max {mmax}")),
+        );
+    }
+    (Verdict::Pass, None)
 }
 
 /// `v` rounded to `digits` significant digits, written in the shortest form that reads back
@@ -907,10 +864,20 @@ mod tests {
             "{\"verdict\":\"fail\",\"rule\":\"guarded\",\"checks\":[{\"quantity\":\"scale_factor\",\
              \"value\":0.06,\"unit\":\"V/(°/s)\",\"expanded_uncertainty\":0.001,\"min\":0.049,\
              \"max\":0.051,\"marginal_min\":0.0495,\"marginal_max\":0.0505,\"verdict\":\"fail\",\
-             \"reason\":\"0.06 ± 0.001 V/(°/s) lies wholly above max 0.051\"}]}"
+             \"reason\":\"0.06 ± 0.001 V/(°/s) lies wholly above max 0.051\",\
+             \"figure\":\"metrics.scale_factor: K of the least-squares line; U from the \
+             uncertainty budget\"}]}"
         );
         let back: Acceptance = serde_json::from_str(&json).unwrap();
         assert_eq!(back, a);
+        // a check recorded before `figure` existed still reads (its figure unknown)
+        let old = json.replace(
+            ",\"figure\":\"metrics.scale_factor: K of the least-squares line; U from the \
+             uncertainty budget\"",
+            "",
+        );
+        let back: Acceptance = serde_json::from_str(&old).unwrap();
+        assert_eq!(back.checks[0].figure, None);
         let pass = evaluate(&spec, |_| Measured::new(0.05, 0.0)).unwrap();
         let json = serde_json::to_string(&pass).unwrap();
         assert!(!json.contains("reason"), "{json}");

@@ -273,7 +273,23 @@ pub fn analyze_columns(data: &Columns, opts: &Options) -> Result<Analysis, FitEr
             split_own.as_ref().map_err(Clone::clone)
         }
     };
-    let metrics = Metrics::from_fits(&prep, line, split.as_ref().map(|f| *f));
+    let mut metrics = Metrics::from_fits(&prep, line, split.as_ref().map(|f| *f));
+    // The nonlinearity's uncertainty: the chosen polynomial model is the noise-free reference
+    // (the split model's kink is not a curve to take the bias from: the line then).
+    let reference = best_model
+        .filter(|m| *m != Model::Split)
+        .and_then(find)
+        .unwrap_or(line);
+    match crate::nonlinearity::monte_carlo(&prep, reference) {
+        Ok(u) => metrics.nonlinearity_uncertainty = Some(u),
+        Err(reason) => {
+            tracing::info!(%reason, "no uncertainty of the nonlinearity");
+            metrics.not_computed.push(crate::NotComputed {
+                metric: "nonlinearity_uncertainty".to_string(),
+                reason,
+            });
+        }
+    }
     let error_surface = (opts.surface_size > 0).then(|| {
         ErrorSurface::around_columns(
             prep.rates(),
@@ -394,7 +410,7 @@ impl MultiAnalysis {
         let scale_factors: Vec<f64> = files.iter().map(|a| a.metrics.scale_factor).collect();
         let repeatability = repeatability_ppm(&scale_factors);
         for a in &mut files {
-            a.metrics.repeatability_ppm = repeatability;
+            a.metrics.set_repeatability(&scale_factors);
         }
         MultiAnalysis {
             files,

@@ -42,7 +42,11 @@
 //!   [`Analysis::model_selection`]); [`Metrics::asymmetry_common_k2`] is the asymmetry from
 //!   one joint fit with a common `K2`, free of the even-order bias of the GJB figure.
 //! * [`Analysis::attach_uncertainty`] adds the expanded uncertainty (k = 2) budget
-//!   ([`uncertainty`]) from the instruments' stated accuracies.
+//!   ([`uncertainty`]) from the instruments' stated accuracies, and the metrics' own
+//!   uncertainties (the nonlinearity's by Monte Carlo, [`nonlinearity`]).
+//! * [`Analysis::evaluate_acceptance`] judges an analysis against acceptance limits
+//!   ([`acceptance`]): every limit applies to the figure the report presents as the result,
+//!   with its uncertainty, so the guarded rule decides on evidence.
 
 #![deny(missing_docs)]
 
@@ -56,6 +60,8 @@ mod lsq;
 pub mod metrics;
 mod model;
 pub mod neuron;
+pub mod nonlinearity;
+mod quantity;
 pub mod selection;
 mod surface;
 pub mod uncertainty;

@@ -7,6 +7,7 @@ use crate::data::{Columns, Dataset, Weighting};
 use crate::error::FitError;
 use crate::lsq::{Prepared, check, fit_prepared};
 use crate::model::{Fit, Model};
+use crate::nonlinearity::NonlinearityUncertainty;
 
 /// How [`Metrics::nonlinearity_ppm`] is normalised (also written into the JSON).
 pub const NONLINEARITY_NORMALISATION: &str = "max_j |K*W_j + F0 - F_j| / max_j |F_j| (least-squares line K, F0; largest absolute output in the range)";
@@ -40,6 +41,18 @@ pub struct Metrics {
     pub bias_dph: f64,
     /// Repeatability `std(K_i, ddof=1)/mean(K_i)` over several data sets, ppm; null for one.
     pub repeatability_ppm: Option<f64>,
+    /// The number of data sets (passes) `repeatability_ppm` is computed over: the degrees of
+    /// freedom of its own uncertainty ([`Metrics::set_repeatability`]). Absent for one data
+    /// set, and in documents written before this field existed (whose repeatability then
+    /// has no uncertainty).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub repeatability_passes: Option<usize>,
+    /// The expanded uncertainty of `nonlinearity_ppm`, by Monte Carlo over the points' noise
+    /// ([`crate::nonlinearity`]). Absent when it could not be made (with a [`NotComputed`]
+    /// entry `nonlinearity_uncertainty`), from [`Metrics::compute`] (which fits the line
+    /// only), and in documents written before this field existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nonlinearity_uncertainty: Option<NonlinearityUncertainty>,
     /// The asymmetry without the even-order bias of `asymmetry_ppm`: one joint fit
     /// `K0 + K+·ω⁺ + K−·ω⁻ + K2·ω²` with its standard errors ([`AsymmetryCommonK2`]).
     /// Absent (with a [`NotComputed`] entry `asymmetry_common_k2`) when the data cannot
@@ -156,10 +169,22 @@ impl Metrics {
             bias_dps,
             bias_dph: bias_dps * SECONDS_PER_HOUR,
             repeatability_ppm: None,
+            repeatability_passes: None,
+            nonlinearity_uncertainty: None,
             asymmetry_common_k2,
             scale_factor_bias_correlation,
             not_computed,
         }
+    }
+}
+
+impl Metrics {
+    /// Sets the repeatability from the scale factors `K_i` of the passes (or data sets) and
+    /// records how many there were, so its uncertainty can be evaluated
+    /// ([`repeatability_ppm`]; `None` for fewer than two).
+    pub fn set_repeatability(&mut self, scale_factors: &[f64]) {
+        self.repeatability_ppm = repeatability_ppm(scale_factors);
+        self.repeatability_passes = self.repeatability_ppm.map(|_| scale_factors.len());
     }
 }
 

@@ -18,6 +18,13 @@
 //!   (`u = offset·range/√3`, V) and so of the bias as a rate (`·3600/|K|`, °/h), not of K.
 //! * **table rate accuracy** (ppm of rate): every rate scales by `1 + ε`, so K, K+ and K− are
 //!   off by the relative `ε`, K0 not at all, and the bias as a rate by the relative `ε`.
+//!
+//! The metrics (ratios, where the meter gain and the table scale cancel) get an expanded
+//! uncertainty each in [`MetricUncertainties`], with the method named
+//! ([`MetricUncertainty::method`]): the asymmetries analytically from their fit's
+//! covariance, the nonlinearity by Monte Carlo ([`crate::nonlinearity`]), the repeatability
+//! analytically from the passes, K2 from the quadratic fit. Every quantity an acceptance
+//! limit can name has one, so the guarded rule decides on evidence.
 
 use serde::{Deserialize, Serialize};
 
@@ -209,14 +216,88 @@ pub struct QuantityUncertainty {
 /// The expanded uncertainty of a metric.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct MetricUncertainty {
-    /// The metric's key in [`crate::Metrics`] (`asymmetry_common_k2`, `asymmetry_ppm`).
+    /// The metric's key in [`crate::Metrics`] (`asymmetry_common_k2`, `asymmetry_ppm`,
+    /// `nonlinearity_ppm`, `repeatability_ppm`) or `k2`.
     pub metric: String,
-    /// Its value, ppm.
+    /// Its value, in `unit`.
     pub value: f64,
-    /// Its expanded uncertainty (k = 2), ppm.
+    /// Its expanded uncertainty (k = 2), in `unit`.
     pub expanded_uncertainty: f64,
     /// Where it comes from and which sources it includes, in words.
     pub from: String,
+    /// How U was evaluated, in a few words (`analytic: ...`, `Monte Carlo: ...`). Empty in
+    /// documents written before this field existed.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub method: String,
+    /// Unit of `value` and `expanded_uncertainty` (absent in documents written before this
+    /// field existed: ppm).
+    #[serde(default = "ppm", skip_serializing_if = "is_ppm")]
+    pub unit: String,
+    /// The coverage interval `[low, high]` (about 95 %) when it is not `value ± U`: a
+    /// skewed distribution (the repeatability's). `expanded_uncertainty` is then its wider
+    /// half, `max(high − value, value − low)`, for display; a verdict uses the interval.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub interval: Option<[f64; 2]>,
+}
+
+fn ppm() -> String {
+    "ppm".to_string()
+}
+
+fn is_ppm(u: &str) -> bool {
+    u == "ppm"
+}
+
+/// The `p` quantile of the chi-square distribution with `nu` degrees of freedom: the root of
+/// `P(ν/2, x/2) = p` (the regularized lower incomplete gamma function) by bisection, to a
+/// relative 1e-12. `None` when it cannot be bracketed.
+fn chi_squared_quantile(nu: f64, p: f64) -> Option<f64> {
+    use statrs::function::gamma::gamma_lr;
+    let cdf = |x: f64| gamma_lr(nu / 2.0, x / 2.0);
+    let mut hi = nu.max(1.0);
+    while cdf(hi) < p {
+        hi *= 2.0;
+        if !hi.is_finite() || hi > 1e12 {
+            return None;
+        }
+    }
+    let mut lo = 0.0;
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if cdf(mid) < p {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+        if hi - lo <= 1e-12 * hi {
+            break;
+        }
+    }
+    let x = 0.5 * (lo + hi);
+    (x.is_finite() && x > 0.0).then_some(x)
+}
+
+/// The 95 % coverage interval of the true repeatability given `s` (ppm) measured over
+/// `passes` passes: the exact confidence interval of a normal standard deviation,
+/// `s·√(ν/χ²(0.975; ν)) .. s·√(ν/χ²(0.025; ν))` with `ν = q − 1`. Skewed (with 3 passes
+/// it is 0.52·s .. 6.3·s): the first-order `u(s) = s/√(2ν)` of GUM E.4.3 would cover the
+/// truth in only about 78 % of 3-pass runs. `None` for fewer than two passes or a value that
+/// is not finite.
+pub fn repeatability_interval(s: f64, passes: usize) -> Option<[f64; 2]> {
+    if passes < 2 || !s.is_finite() {
+        return None;
+    }
+    let nu = (passes - 1) as f64;
+    let (lo_q, hi_q) = (
+        chi_squared_quantile(nu, 0.975)?,
+        chi_squared_quantile(nu, 0.025)?,
+    );
+    let s = s.abs();
+    let interval = [s * (nu / lo_q).sqrt(), s * (nu / hi_q).sqrt()];
+    interval
+        .iter()
+        .all(|v| v.is_finite() && *v >= 0.0)
+        .then_some(interval)
 }
 
 /// The metrics' uncertainties, and the metrics without one (with the reason).
@@ -262,6 +343,16 @@ impl Uncertainty {
                     .find(|m| m.metric == key)
                     .map(|m| m.expanded_uncertainty)
             })
+    }
+
+    /// The coverage interval of metric `key` when it is not `value ± U`
+    /// ([`MetricUncertainty::interval`]).
+    pub fn interval(&self, key: &str) -> Option<[f64; 2]> {
+        self.metrics
+            .entries
+            .iter()
+            .find(|m| m.metric == key)
+            .and_then(|m| m.interval)
     }
 
     /// The budget of quantity `key`.
@@ -751,6 +842,9 @@ fn metric_uncertainties(analysis: &Analysis) -> MetricUncertainties {
             value: a.asymmetry_ppm,
             expanded_uncertainty: COVERAGE_FACTOR * a.asymmetry_std_error_ppm,
             from: "joint fit K0 + K+·ω⁺ + K−·ω⁻ + K2·ω², type A with the K+/K− covariance (meter gain and table rate scale K+ and K− alike and cancel)".to_string(),
+            method: "analytic: first-order propagation of the joint fit's covariance, U = 2σ".to_string(),
+            unit: ppm(),
+            interval: None,
         }),
         None => out.not_available.push(missing(
             "asymmetry_common_k2",
@@ -777,21 +871,111 @@ fn metric_uncertainties(analysis: &Analysis) -> MetricUncertainties {
             value,
             expanded_uncertainty: COVERAGE_FACTOR * u,
             from: "split fit (GJB separate lines), type A with K+ and K− taken as independent (they share the zero-rate points); it does not cover the bias from an even-order term (see asymmetry_common_k2)".to_string(),
+            method: "analytic: first-order propagation of the two lines' standard errors, U = 2σ".to_string(),
+            unit: ppm(),
+            interval: None,
         }),
         None => out.not_available.push(missing(
             "asymmetry_ppm",
             "needs the split fit with standard errors".to_string(),
         )),
     }
-    out.not_available.push(missing(
-        "nonlinearity_ppm",
-        "a maximum of residuals over the range: no uncertainty model for it here".to_string(),
-    ));
-    if m.repeatability_ppm.is_some() {
-        out.not_available.push(missing(
-            "repeatability_ppm",
-            "a standard deviation over runs: its own uncertainty is not evaluated".to_string(),
-        ));
+    match &m.nonlinearity_uncertainty {
+        Some(nl) => out.entries.push(MetricUncertainty {
+            metric: "nonlinearity_ppm".to_string(),
+            value: m.nonlinearity_ppm,
+            expanded_uncertainty: nl.expanded_uncertainty_ppm,
+            from: format!(
+                "{} replicates around the {} fit (its own nonlinearity {:.1} ppm); noise: {}; u = {:.3} ppm, noise bias b = {:+.3} ppm, U = 2u + |b|; type A only (the meter gain and the table scale leave the ratio unchanged)",
+                nl.replicates,
+                nl.reference_model,
+                nl.reference_nonlinearity_ppm,
+                nl.noise,
+                nl.standard_uncertainty_ppm,
+                nl.noise_bias_ppm
+            ),
+            method: format!(
+                "Monte Carlo (JCGM 101) over the points' noise through the line fit and the nonlinearity, seed {:#x}",
+                nl.seed
+            ),
+            unit: ppm(),
+            interval: None,
+        }),
+        None => out.not_available.push(missing(
+            "nonlinearity_ppm",
+            m.not_computed
+                .iter()
+                .find(|n| n.metric == "nonlinearity_uncertainty")
+                .map_or_else(
+                    || "the Monte Carlo was not made (a document written before it existed; `gyrocal fit RUN/steps.csv` computes it)".to_string(),
+                    |n| format!("the Monte Carlo could not be made: {}", n.reason),
+                ),
+        )),
+    }
+    if let Some(r) = m.repeatability_ppm {
+        match m
+            .repeatability_passes
+            .and_then(|q| repeatability_interval(r, q).map(|i| (q, i)))
+        {
+            Some((q, [lo, hi])) => out.entries.push(MetricUncertainty {
+                metric: "repeatability_ppm".to_string(),
+                value: r,
+                expanded_uncertainty: (hi - r).max(r - lo),
+                from: format!(
+                    "the standard deviation of {q} passes' K (ν = {}): 95 % interval {lo:.3} .. {hi:.3} ppm",
+                    q - 1
+                ),
+                method: "analytic: the exact chi-square confidence interval of a normal standard deviation (skewed; U is its wider half)"
+                    .to_string(),
+                unit: ppm(),
+                interval: Some([lo, hi]),
+            }),
+            None => out.not_available.push(missing(
+                "repeatability_ppm",
+                "the number of passes is not recorded (a document written before it was)".to_string(),
+            )),
+        }
+    }
+    let quad = analysis.fit(Method::LeastSquares, Model::Quadratic);
+    if let Some((k2, se)) = quad.and_then(|f| Some((f.coefficients.k2?, f.std_errors.k2?)))
+        && k2.is_finite()
+        && se.is_finite()
+    {
+        out.entries.push(MetricUncertainty {
+            metric: "k2".to_string(),
+            value: k2,
+            expanded_uncertainty: COVERAGE_FACTOR * se,
+            from: "quadratic least-squares fit, type A (scaled by the observed residual variance)"
+                .to_string(),
+            method: "analytic: the fit's standard error, U = 2σ".to_string(),
+            unit: "V/(°/s)²".to_string(),
+            interval: None,
+        });
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::chi_squared_quantile;
+
+    #[test]
+    fn chi_squared_quantiles_match_the_tables() {
+        // NIST/SEMATECH e-Handbook, table 1.3.6.7.4 (lower and upper 2.5 % points)
+        for (nu, p, x) in [
+            (1.0, 0.025, 0.000982),
+            (1.0, 0.975, 5.024),
+            (2.0, 0.025, 0.0506),
+            (2.0, 0.975, 7.378),
+            (9.0, 0.025, 2.700),
+            (9.0, 0.975, 19.023),
+        ] {
+            let q = chi_squared_quantile(nu, p).unwrap();
+            assert!(
+                (q - x).abs() <= 0.001 * x.max(1.0),
+                "ν = {nu}, p = {p}: {q}"
+            );
+        }
+    }
 }

@@ -13,7 +13,7 @@ use std::fmt::Write as _;
 
 use gyrocal_files::num::{significant, value_and_u};
 use gyrocal_files::{Manifest, Plan};
-use gyrocal_fit::acceptance::{Acceptance, Quantity, Verdict};
+use gyrocal_fit::acceptance::{Acceptance, Check, Quantity, Verdict};
 use gyrocal_fit::{Analysis, Method, Model};
 
 use crate::html::esc;
@@ -387,7 +387,7 @@ pub(crate) fn verdict_box(html: &mut String, acceptance: Option<&Acceptance>, so
     let deciding: Vec<String> = acc
         .deciding()
         .map(|c| {
-            let mut t = format!("<strong>{}</strong>", esc(quantity_label(c.quantity)));
+            let mut t = format!("<strong>{}</strong>", esc(check_label(c)));
             if let Some(r) = &c.reason {
                 let _ = write!(t, " ({})", esc(r));
             }
@@ -418,16 +418,29 @@ pub(crate) fn verdict_box(html: &mut String, acceptance: Option<&Acceptance>, so
     );
 }
 
-/// A quantity's name for people.
+/// A quantity's name for people: the asymmetries name their figure, as the results table
+/// does.
 pub(crate) fn quantity_label(q: Quantity) -> &'static str {
     match q {
         Quantity::ScaleFactor => "scale factor K",
         Quantity::BiasV => "bias K0",
         Quantity::BiasDph => "bias (as a rate)",
         Quantity::NonlinearityPpm => "nonlinearity",
-        Quantity::AsymmetryPpm => "asymmetry",
+        Quantity::AsymmetryPpm => "asymmetry (common K2, unbiased)",
+        Quantity::AsymmetryGjbPpm => "asymmetry (GJB two lines, biased by K2)",
         Quantity::RepeatabilityPpm => "repeatability",
         Quantity::K2 => "second-order coefficient K2",
+    }
+}
+
+/// A check's quantity for people. A check recorded before checks named their figure judged
+/// the GJB two-line figure under `asymmetry_ppm`, and is labelled so.
+pub(crate) fn check_label(c: &Check) -> &'static str {
+    match (c.quantity, &c.figure) {
+        (Quantity::AsymmetryPpm, None) => {
+            "asymmetry (GJB two lines: recorded when asymmetry_ppm limited that figure)"
+        }
+        (q, _) => quantity_label(q),
     }
 }
 
@@ -443,9 +456,10 @@ pub(crate) fn acceptance_table(html: &mut String, acceptance: Option<&Acceptance
     );
     for c in &acc.checks {
         let q = c.quantity.name();
-        let (v, u) = match c.value {
-            Some(v) => value_and_u(v, c.expanded_uncertainty),
-            None => ("not measured".to_string(), "—".to_string()),
+        let (v, u) = match (c.value, c.interval) {
+            (Some(v), Some(i)) => (value_and_u(v, c.expanded_uncertainty).0, interval_text(i)),
+            (Some(v), None) => value_and_u(v, c.expanded_uncertainty),
+            (None, _) => ("not measured".to_string(), "—".to_string()),
         };
         // limits as the specification wrote them (shortest form: 0.35, not 0.3500000)
         let range = |lo: Option<f64>, hi: Option<f64>| match (lo, hi) {
@@ -460,7 +474,7 @@ pub(crate) fn acceptance_table(html: &mut String, acceptance: Option<&Acceptance
         let _ = writeln!(
             html,
             "<tr><td>{}</td><td class=\"num\" id=\"acc-{q}\">{v}</td><td class=\"num\">{u}</td><td>{}</td><td>{}</td><td>{}</td><td id=\"acc-{q}-verdict\" class=\"v-{}\"><strong>{}</strong>{reason}</td></tr>",
-            esc(quantity_label(c.quantity)),
+            esc(check_label(c)),
             esc(&c.unit),
             range(c.min, c.max),
             range(c.marginal_min, c.marginal_max),
@@ -552,9 +566,9 @@ pub(crate) fn results(html: &mut String, a: &Analysis) {
             "asymmetry_common_k2",
             "Asymmetry (common K2)",
             Some(c.asymmetry_ppm),
-            Some(2.0 * c.asymmetry_std_error_ppm),
+            metric_u("asymmetry_common_k2").or(Some(2.0 * c.asymmetry_std_error_ppm)),
             "ppm",
-            "one fit with K2: unbiased".into(),
+            "one fit with K2: unbiased; the result (acceptance key asymmetry_ppm)".into(),
         ),
         None => row(
             "asymmetry_common_k2",
@@ -571,14 +585,14 @@ pub(crate) fn results(html: &mut String, a: &Analysis) {
         m.asymmetry_ppm,
         metric_u("asymmetry_ppm"),
         "ppm",
-        "two lines: absorbs K2·ω²".into(),
+        "two lines: absorbs K2·ω² (acceptance key asymmetry_gjb_ppm)".into(),
     );
     let quad = a.fit(Method::LeastSquares, Model::Quadratic);
     row(
         "k2",
         "Second-order coefficient K2",
         quad.and_then(|f| f.coefficients.k2),
-        quad.and_then(|f| f.std_errors.k2).map(|s| 2.0 * s),
+        metric_u("k2").or_else(|| quad.and_then(|f| f.std_errors.k2).map(|s| 2.0 * s)),
         "V/(°/s)²",
         "quadratic fit; U = 2σ".into(),
     );
@@ -663,6 +677,7 @@ pub(crate) fn uncertainty(html: &mut String, a: &Analysis) {
             significant(q.standard_uncertainty, 3)
         );
     }
+    metric_budget(html, u);
     if !u.not_included.is_empty() {
         let _ = writeln!(
             html,
@@ -674,6 +689,60 @@ pub(crate) fn uncertainty(html: &mut String, a: &Analysis) {
                 .join("; ")
         );
     }
+}
+
+/// A coverage interval that is not `value ± U`, for the U column.
+fn interval_text([lo, hi]: [f64; 2]) -> String {
+    format!(
+        "95 % interval {} .. {}",
+        significant(lo, 3),
+        significant(hi, 3)
+    )
+}
+
+/// The metrics' uncertainties: each one's value, U and the method that gave it (analytic or
+/// Monte Carlo), and the metrics without one with the reason. A verdict under the guarded
+/// rule uses exactly these figures.
+fn metric_budget(html: &mut String, u: &gyrocal_fit::Uncertainty) {
+    let m = &u.metrics;
+    if m.entries.is_empty() && m.not_available.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        html,
+        "<table class=\"budget\" id=\"budget-metrics\">\n<caption>Metrics: expanded uncertainty (k = {}) and how it was evaluated</caption>\n<tr><th>Metric</th><th>Value</th><th>U (k = {})</th><th>Unit</th><th>Method</th><th>From</th></tr>",
+        u.coverage_factor, u.coverage_factor
+    );
+    for e in &m.entries {
+        let (v, mut uu) = value_and_u(e.value, Some(e.expanded_uncertainty));
+        if let Some(i) = e.interval {
+            uu = interval_text(i);
+        }
+        let method = if e.method.is_empty() {
+            "not recorded (an earlier gyrocal version)"
+        } else {
+            e.method.as_str()
+        };
+        let _ = writeln!(
+            html,
+            "<tr id=\"budget-metric-{}\"><td>{}</td><td class=\"num\">{v}</td><td class=\"num\">{uu}</td><td>{}</td><td>{}</td><td class=\"note\">{}</td></tr>",
+            esc(&e.metric),
+            esc(&e.metric),
+            esc(&e.unit),
+            esc(method),
+            esc(&e.from)
+        );
+    }
+    for n in &m.not_available {
+        let _ = writeln!(
+            html,
+            "<tr id=\"budget-metric-{}\"><td>{}</td><td>—</td><td>—</td><td></td><td colspan=\"2\" class=\"note\">no uncertainty: {}</td></tr>",
+            esc(&n.metric),
+            esc(&n.metric),
+            esc(&n.reason)
+        );
+    }
+    html.push_str("</table>\n");
 }
 
 /// The closing statements and the signature lines.
@@ -696,6 +765,45 @@ pub(crate) fn end_mark(html: &mut String, id: &str) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_asymmetry_check_names_the_figure_it_judged() {
+        use gyrocal_fit::acceptance::{Limits, Measured, Rule, check};
+        let limits = Limits {
+            max: Some(500.0),
+            ..Limits::default()
+        };
+        let c = check(
+            Rule::Guarded,
+            Quantity::AsymmetryPpm,
+            &limits,
+            Measured::new(15.0, 131.0),
+        );
+        assert_eq!(check_label(&c), "asymmetry (common K2, unbiased)");
+        let g = check(
+            Rule::Guarded,
+            Quantity::AsymmetryGjbPpm,
+            &limits,
+            Measured::new(2098.0, 300.0),
+        );
+        assert!(check_label(&g).contains("GJB"));
+        // a check recorded before checks named their figure judged the GJB figure
+        let old = Check { figure: None, ..c };
+        assert!(check_label(&old).starts_with("asymmetry (GJB two lines"));
+        let mut html = String::new();
+        acceptance_table(
+            &mut html,
+            Some(&Acceptance {
+                verdict: Verdict::Fail,
+                rule: Rule::Guarded,
+                checks: vec![old, g],
+            }),
+        );
+        assert!(
+            html.contains("recorded when asymmetry_ppm limited that figure"),
+            "{html}"
+        );
+    }
 
     #[test]
     fn times_are_shown_in_the_zone_with_the_offset() {
