@@ -37,13 +37,15 @@ pub struct DriverOptions {
     pub reconnect_timeout: Duration,
     /// Pause between two attempts to re-establish the link. Default 1 s.
     pub reconnect_pause: Duration,
-    /// How late a reply may come and still be recognised as the late answer to the query
-    /// that timed out. After a timeout the driver waits this long for it; when it comes, it
-    /// is thrown away (never taken as the next query's answer), every later deadline is
-    /// widened by about twice the lateness seen (at most this much), and each device clear
-    /// then waits until the link has been quiet that long, so bytes still on their way (a
-    /// serial converter's deep buffer, a network bridge) are thrown away too. A reply later
-    /// than this is treated as lost. Default 5 s.
+    /// After a reply timeout, how long the driver waits for the late reply before its
+    /// recovery. When it comes it is thrown away (never taken as the next query's answer),
+    /// every later deadline is widened by about twice the lateness seen (at most
+    /// [`DriverOptions::max_reply_delay`]), and each device clear then waits until the link
+    /// has been quiet that long, so bytes still on their way (a serial converter's deep
+    /// buffer, a network bridge) are thrown away too. A reply later than this counts as lost.
+    /// It is also what every lost reply costs. Default 3 s.
+    pub late_reply_wait: Duration,
+    /// The most the deadlines are widened by for a meter seen answering late. Default 5 s.
     pub max_reply_delay: Duration,
 }
 
@@ -59,6 +61,7 @@ impl Default for DriverOptions {
             in_flight_budget: 80,
             reconnect_timeout: Duration::from_secs(30),
             reconnect_pause: Duration::from_secs(1),
+            late_reply_wait: Duration::from_secs(3),
             max_reply_delay: Duration::from_secs(5),
         }
     }
@@ -293,22 +296,27 @@ impl<T: Transport> Hp34401a<T> {
         self.reply_delay
     }
 
-    /// After a query timed out: waits up to [`DriverOptions::max_reply_delay`] for its late
+    /// After a query timed out: waits up to [`DriverOptions::late_reply_wait`] for its late
     /// reply. When something comes, the meter is alive but slow: what came is thrown away
     /// (the caller's recovery clears the rest), the deadlines are widened, and the returned
     /// note says so. `None` when nothing came (the reply was lost, or the meter is gone).
     ///
     /// Only one query is ever outstanding (see the type's protocol rules), so whatever comes
-    /// now can only be the answer to the one that timed out.
-    pub async fn await_late_reply(&mut self) -> Option<String> {
+    /// now can only be the answer to the one that timed out. `timed_out` is that timeout's
+    /// error: the unterminated bytes it held came in time and are no sign of a late reply.
+    pub async fn await_late_reply(&mut self, timed_out: &Error) -> Option<String> {
+        let already = match timed_out {
+            Error::Link(LinkError::Timeout { partial, .. }) => partial.len(),
+            _ => 0,
+        };
         let waited_from = Instant::now();
         let got = self
             .link
-            .read_field(b',', Some(self.options.max_reply_delay))
+            .read_field(b',', Some(self.options.late_reply_wait))
             .await;
         let came = match &got {
             Ok(_) => true,
-            Err(LinkError::Timeout { partial, .. }) => !partial.is_empty(),
+            Err(LinkError::Timeout { partial, .. }) => partial.len() > already,
             Err(_) => false,
         };
         if !came {
@@ -939,7 +947,7 @@ impl<T: Transport> Hp34401a<T> {
                 return Err(error);
             }
             let late = if error.kind() == ErrorKind::Timeout {
-                self.await_late_reply().await
+                self.await_late_reply(&error).await
             } else {
                 None
             };

@@ -83,7 +83,7 @@ impl<T: Transport> Hp34401aMeter<T> {
             return Err(e);
         }
         let late = if e.kind() == ErrorKind::Timeout {
-            self.driver.await_late_reply().await
+            self.driver.await_late_reply(&e).await
         } else {
             None
         };

@@ -24,7 +24,18 @@
 //!   bit: the meter was power-cycled, its memory and settings are gone: the link is
 //!   re-established and the configuration sent again, and readings it held are
 //!   [`gyrocal_meter::ErrorKind::ReadingsLost`]). Retries are counted once, here, and
-//!   reported in [`gyrocal_meter::Acquired`].
+//!   reported in [`gyrocal_meter::Acquired`];
+//! - a meter that answers late (busy, behind a network bridge) is not reconnected and
+//!   reconfigured again and again: after a reply timeout the driver waits up to
+//!   [`TruevoltOptions::late_reply_wait`] (3 s) on the same connection for the late reply,
+//!   throws it away, widens every later deadline by about twice the lateness seen (at most
+//!   [`TruevoltOptions::max_reply_delay`], 5 s), and
+//!   retries; a reply later than that counts as none, and the failure then says the meter
+//!   answers slowly. Readings lost with the memory name what cleared it (a power cycle, or
+//!   gyrocal's own reconfiguration), never "power cycle?" by default;
+//! - a LAN port that refuses connections (a meter switched off or rebooting) gets the same
+//!   come-back window ([`TruevoltOptions::reconnect_timeout`], 30 s) as a meter that accepts
+//!   the connection and stays silent.
 
 #[cfg(feature = "driver")]
 pub mod error;

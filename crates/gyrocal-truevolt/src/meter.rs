@@ -39,12 +39,14 @@ pub struct TruevoltOptions {
     pub reconnect_timeout: Duration,
     /// Pause between two reconnect attempts. Default 1 s.
     pub reconnect_pause: Duration,
-    /// How late a reply may come and still be recognised as the late answer to the query
-    /// that timed out. After a timeout the driver waits this long for it on the same
-    /// connection before the recovery's reconnect; when it comes it is thrown away (the
-    /// reconnect drops anything else owed to the old connection), and every later deadline
-    /// is widened by about twice the lateness seen (at most this much). A reply later than
-    /// this is treated as lost. Default 5 s.
+    /// After a reply timeout, how long the driver waits on the same connection for the late
+    /// reply before the recovery's reconnect. When it comes it is thrown away (the reconnect
+    /// drops anything else owed to the old connection), and every later deadline is widened
+    /// by about twice the lateness seen (at most [`TruevoltOptions::max_reply_delay`]). A
+    /// reply later than this counts as lost; it is also what every lost reply costs.
+    /// Default 3 s.
+    pub late_reply_wait: Duration,
+    /// The most the deadlines are widened by for a meter seen answering late. Default 5 s.
     pub max_reply_delay: Duration,
 }
 
@@ -63,6 +65,7 @@ impl TruevoltOptions {
             timeout_slack: Duration::from_secs(1),
             reconnect_timeout: Duration::from_secs(30),
             reconnect_pause: Duration::from_secs(1),
+            late_reply_wait: Duration::from_secs(3),
             max_reply_delay: Duration::from_secs(5),
         }
     }
@@ -159,20 +162,29 @@ impl<T: Transport> TruevoltMeter<T> {
         self.reply_delay
     }
 
-    /// After a query timed out: waits up to [`TruevoltOptions::max_reply_delay`] on the same
+    /// After a query timed out: waits up to [`TruevoltOptions::late_reply_wait`] on the same
     /// connection for its late reply. When it comes the meter is alive but slow: the reply is
     /// thrown away, the deadlines are widened, and the returned note says so. `None` when
     /// nothing came. One query at a time is outstanding, so what comes can only be its reply.
-    async fn await_late_reply(&mut self) -> Option<String> {
+    /// `timed_out` is that timeout's error: the unterminated bytes it held came in time and
+    /// are no sign of a late reply.
+    async fn await_late_reply(&mut self, timed_out: &Error) -> Option<String> {
+        let already = match timed_out {
+            Error::Link {
+                source: gyrocal_link::LinkError::Timeout { partial, .. },
+                ..
+            } => partial.len(),
+            _ => 0,
+        };
         let waited_from = Instant::now();
         let came = match self
             .link
-            .read_line(Some(self.options.max_reply_delay))
+            .read_line(Some(self.options.late_reply_wait))
             .await
         {
             Ok(_) => true,
             Err(e) => {
-                matches!(&e, gyrocal_link::LinkError::Timeout { partial, .. } if !partial.is_empty())
+                matches!(&e, gyrocal_link::LinkError::Timeout { partial, .. } if partial.len() > already)
             }
         };
         if !came {
@@ -547,14 +559,14 @@ impl<T: Transport> TruevoltMeter<T> {
     /// or `e` is not retryable.
     ///
     /// After a timeout the late reply is waited for first (see
-    /// [`TruevoltOptions::max_reply_delay`]): thrown away if it comes, and the deadlines
+    /// [`TruevoltOptions::late_reply_wait`]): thrown away if it comes, and the deadlines
     /// widened, so a meter that is slow but alive is not reconnected again and again.
     async fn recover_or(&mut self, e: Error, acc: &mut Acquired, what: &str) -> Result<(), Error> {
         if !e.is_retryable() {
             return Err(e);
         }
         let late = if gyrocal_meter::MeterError::kind(&e) == gyrocal_meter::ErrorKind::Timeout {
-            self.await_late_reply().await
+            self.await_late_reply(&e).await
         } else {
             None
         };

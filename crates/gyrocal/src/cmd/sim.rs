@@ -80,7 +80,8 @@ then, on SIGINT or SIGTERM, one more line before exiting with 0:
   {\"exit\": \"SIGINT\", \"table\": {\"mode\", \"demanded_rate\", \"actual_rate\", \"stopped\",
    \"interlock_closed\", \"fault\", \"silent\", \"demands_seen\"}, \"dmm\": {\"readings_taken\",
    \"commands_seen\", \"lines_seen\", \"queries_answered\", \"device_clears\", \"errors_raised\",
-   \"remote\", \"stopped\", \"power_cycles\", \"nplc\"}, \"faults\": [{\"spec\", \"fired\"}]}
+   \"remote\", \"stopped\", \"power_cycles\", \"nplc\", \"late_replies\"}, \"faults\": [{\"spec\",
+   \"fired\"}]}
 Clients may close a port and open the same path again; the simulators keep their state.
 
 Fault specs (--fault, repeatable):
@@ -431,6 +432,7 @@ fn final_state(signal: &str, bench: &BenchHandle, schedule: &FaultSchedule) -> V
             "stopped": d.stopped,
             "power_cycles": d.power_cycles,
             "nplc": d.nplc,
+            "late_replies": d.late_replies,
         },
         "faults": schedule.status(bench).iter().map(|s| json!({
             "spec": s.spec,
