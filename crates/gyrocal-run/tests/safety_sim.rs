@@ -8,14 +8,14 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Duration;
 
 use common::{config, new_run, plan_with_rates, table_config};
 use gyrocal_acl::AclTable;
 use gyrocal_run::{
-    Event, Phase, Plan, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status,
-    StopRequest, TableRest, load,
+    Event, Phase, Plan, RunSummary, Sequencer, SequencerOptions, Status, StopRequest, TableRest,
+    load,
 };
 use gyrocal_sim::bench::{Bench, BenchHandle};
 use gyrocal_sim::from_plan::bench_config;
@@ -26,7 +26,6 @@ use gyrocal_table::{
 };
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
-
 
 /// What the test's event hook asks for.
 type Hook = Box<dyn FnMut(&Event) -> Option<StopRequest> + Send>;

@@ -8,15 +8,15 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Duration;
 
 use common::{new_run, plan_from, plan_with_rates, table_config};
 use gyrocal_acl::AclTable;
 use gyrocal_aerosmith::{AerosmithConfig, AerosmithTable};
 use gyrocal_run::{
-    Event, Phase, Plan, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status,
-    StopRequest, TableRest, load,
+    Event, Phase, Plan, RunSummary, Sequencer, SequencerOptions, Status, StopRequest, TableRest,
+    load,
 };
 use gyrocal_sim::bench::Bench;
 use gyrocal_sim::from_plan::bench_config;
@@ -24,7 +24,6 @@ use gyrocal_sim::table::{SimMode, TableHandle};
 use gyrocal_table::RateTable;
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
-
 
 type Hook = Box<dyn FnMut(&Event, &TableHandle) -> Option<StopRequest> + Send>;
 
@@ -145,7 +144,10 @@ fn assert_stopping_rate_measured(events: &[Event], top: f64) {
         _ => None,
     });
     if let Some(Some(from)) = from {
-        assert!((-0.05..top + 0.05).contains(&from), "decelerating from {from}");
+        assert!(
+            (-0.05..top + 0.05).contains(&from),
+            "decelerating from {from}"
+        );
     }
 }
 
