@@ -121,6 +121,19 @@ pub const QUANTITIES: [Quantity; 14] = [
     },
 ];
 
+/// The acceptance check whose limits belong on a series. `asymmetry_ppm` limits the unbiased
+/// common-K2 asymmetry (the figure a report presents as the result), and the GJB two-line figure,
+/// stored as `asymmetry_ppm` in the catalog, has its own key, `asymmetry_gjb_ppm`; the other
+/// quantities share their check's name. (A check recorded before the keys were split judged
+/// the GJB figure: its limits then stand on the common-K2 series.)
+fn limited_by(series: &str) -> &str {
+    match series {
+        "asymmetry_ppm" => "asymmetry_gjb_ppm",
+        "asymmetry_common_k2_ppm" => "asymmetry_ppm",
+        other => other,
+    }
+}
+
 /// Day-to-day repeatability over the calibrations.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct Repeatability {
@@ -263,7 +276,7 @@ impl History {
                 continue;
             }
             let limits = calibrations.iter().rev().find_map(|c| {
-                let check = c.checks.iter().find(|k| k.quantity == q.name)?;
+                let check = c.checks.iter().find(|k| k.quantity == limited_by(q.name))?;
                 (check.min.is_some() || check.max.is_some()).then_some(Limits {
                     min: check.min,
                     max: check.max,

@@ -9,8 +9,11 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a panic is a failed test
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::Command;
+
+use common::{config, gyrocal};
 
 const METERS: &[(&str, &str)] = &[
     ("34401A RS-232", ""),
@@ -28,8 +31,7 @@ const MODES: &[&str] = &["stream", "memory"];
 
 /// quick.toml with the meter's keys and the acquisition mode.
 fn plan(dir: &Path, meter: &str, mode: &str) -> PathBuf {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/quick.toml");
-    let mut text = std::fs::read_to_string(path).unwrap();
+    let mut text = std::fs::read_to_string(config("quick.toml")).unwrap();
     assert!(text.contains("acquisition = \"auto\""));
     text = text.replace(
         "acquisition = \"auto\"",
@@ -55,13 +57,12 @@ fn run(tmp: &Path, name: &str, meter: &str, mode: &str, faults: &[&str]) -> Outc
     std::fs::create_dir_all(&base).unwrap();
     let plan = plan(&base, meter, mode);
     let dir = base.join("run");
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_gyrocal"));
+    // none of the user's files (station, catalog) and no catalog
+    let mut cmd = gyrocal();
     cmd.arg("run")
         .arg(&plan)
         .args(["--simulate", "--no-report", "-o"])
-        .arg(&dir)
-        .env_remove("RUST_LOG")
-        .env("GYROCAL_CATALOG", "off");
+        .arg(&dir);
     for f in faults {
         cmd.args(["--sim-fault", f]);
     }
