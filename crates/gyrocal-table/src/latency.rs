@@ -77,7 +77,7 @@ impl ReplyLatency {
     }
 
     /// A query's whole deadline: `timeout`, or more for a table seen to answer slowly
-    /// ([`DEADLINE_FACTOR`] × its slowest reply), never more than the limit unless `timeout`
+    /// (six times its slowest reply), never more than the limit unless `timeout`
     /// itself is.
     pub fn deadline(&self, timeout: Duration) -> Duration {
         match self.slowest() {

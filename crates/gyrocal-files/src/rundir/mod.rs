@@ -32,7 +32,7 @@
 //! `steps.csv` when the run completes, `fit.json` in its `fit_summary`, every result file when
 //! it is written. [`verify`] checks them all and fails a complete run whose record is missing;
 //! [`check_files`] is what `gyrocal report` checks before it uses a run's files. See
-//! [`integrity`](self::integrity) for the rules and why they are strict.
+//! `integrity` (a private module) for the rules and why they are strict.
 //!
 //! ## Times
 //!
