@@ -262,7 +262,7 @@ impl<T: Transport + 'static> Acl<T> {
         if forgotten > 0 {
             tracing::debug!(device = %self.device, "{forgotten} owed replies older than the slow-reply limit: lost");
         }
-        if link.pending.is_clear() {
+        if link.pending.is_empty() {
             return Ok(());
         }
         let owed = link.pending.len() - link.pending.markers();
@@ -299,7 +299,7 @@ impl<T: Transport + 'static> Acl<T> {
                     // an earlier marker, itself late: it tells the latency as well
                     self.note_latency(latency, None);
                 }
-                if link.pending.is_clear() {
+                if link.pending.is_empty() {
                     break Ok(());
                 }
                 // the reply read was the popped marker's: the newest (this resync's) follows
@@ -378,7 +378,7 @@ impl<T: Transport + 'static> Acl<T> {
             tracing::debug!(device = %self.device, "cleared {dropped} stale bytes");
             link.dirty = false;
         }
-        if !link.pending.is_clear() {
+        if !link.pending.is_empty() {
             self.resync(&mut link, deadline).await?;
         }
         // an owed `*IDN?` is answered like a marker: its reply has the marker's form

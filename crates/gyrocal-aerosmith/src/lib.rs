@@ -304,7 +304,7 @@ impl<T: Transport + 'static> Aerosmith<T> {
     async fn catch_up(&self, link: &mut Link<T>, deadline: Instant) -> Result<(), LinkError> {
         link.pending
             .forget_older_than(self.latency.limit(), Instant::now());
-        while !link.pending.is_clear() {
+        while !link.pending.is_empty() {
             let left = deadline.saturating_duration_since(Instant::now());
             let body = link.transport.read_until(PROMPT, Some(left)).await?;
             if let Late::Reply { query, latency } = link.pending.late_line(Instant::now()) {

@@ -172,17 +172,12 @@ pub enum Late {
 }
 
 impl Pending {
-    /// Nothing owed: the next reply is the next query's.
-    pub fn is_clear(&self) -> bool {
-        self.owed.is_empty()
-    }
-
     /// Owed replies.
     pub fn len(&self) -> usize {
         self.owed.len()
     }
 
-    /// Whether nothing is owed (same as [`Pending::is_clear`]).
+    /// Nothing owed: the next reply is the next query's.
     pub fn is_empty(&self) -> bool {
         self.owed.is_empty()
     }
@@ -247,11 +242,6 @@ impl Pending {
         before - self.owed.len()
     }
 
-    /// The oldest owed query.
-    pub fn oldest(&self) -> Option<&Owed> {
-        self.owed.front()
-    }
-
     /// Forgets everything owed (a fresh connection).
     pub fn clear(&mut self) {
         self.owed.clear();
@@ -281,7 +271,7 @@ mod tests {
         let (lost, latency) = p.marker_line(Instant::now());
         assert_eq!(lost, vec![":Mode? 1".to_string()]);
         assert_eq!(latency, Some(Duration::from_millis(900)));
-        assert!(p.is_clear());
+        assert!(p.is_empty());
         assert_eq!(p.late_line(Instant::now()), Late::Unexpected);
     }
 

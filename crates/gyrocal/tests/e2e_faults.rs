@@ -1778,6 +1778,10 @@ fn slow_table_completes(real_s: f64, count: u32) {
         "{}",
         end.stderr
     );
+    // asked on its own port the moment gyrocal has exited (the held-back replies are used up)
+    let (mode, rate) = probe_table(sim.table());
+    assert_eq!(mode, "OFF", "{spec}");
+    assert!(rate.abs() < 0.05, "{spec}: table at {rate} °/s");
     let last = sim.finish();
     assert!(fault_fired(&last, &spec), "{last}");
     assert_table_parked(&last);
