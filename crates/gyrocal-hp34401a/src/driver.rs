@@ -3,6 +3,7 @@
 use std::time::Duration;
 
 use gyrocal_link::{LinkError, Transport};
+use gyrocal_meter::LateReplies;
 use tokio::time::Instant;
 
 use crate::timing::{MAX_SAMPLE_COUNT, MEMORY_READINGS, Strategy, Timing};
@@ -265,16 +266,18 @@ pub struct Hp34401a<T: Transport> {
     /// Why the link was last re-established (what cleared the memory, for
     /// [`Error::ReadingsLost`]).
     last_loss: Option<LinkLoss>,
-    /// Added to every reply deadline once the meter was seen answering late (see
-    /// [`DriverOptions::max_reply_delay`]).
-    reply_delay: Duration,
-    /// The latest a late reply came after its deadline, if one did.
-    latest_seen: Option<Duration>,
+    /// The widening of the reply deadlines after late replies.
+    late: LateReplies,
 }
 
 impl<T: Transport> Hp34401a<T> {
     /// Wraps a link. Nothing is sent until [`Hp34401a::connect`].
     pub fn new(link: T, options: DriverOptions) -> Self {
+        let late = LateReplies::new(
+            options.max_reply_delay,
+            options.timeout_slack,
+            "DriverOptions::max_reply_delay",
+        );
         Hp34401a {
             link,
             options,
@@ -285,15 +288,14 @@ impl<T: Transport> Hp34401a<T> {
             epoch: 0,
             sample_count: None,
             last_loss: None,
-            reply_delay: Duration::ZERO,
-            latest_seen: None,
+            late,
         }
     }
 
     /// What every reply deadline has been widened by, after replies came late (zero for a
     /// meter that answers in time).
     pub fn reply_delay(&self) -> Duration {
-        self.reply_delay
+        self.late.reply_delay()
     }
 
     /// After a query timed out: waits up to [`DriverOptions::late_reply_wait`] for its late
@@ -323,38 +325,19 @@ impl<T: Transport> Hp34401a<T> {
             return None;
         }
         let late = waited_from.elapsed();
-        self.latest_seen = Some(self.latest_seen.map_or(late, |l| l.max(late)));
-        // the deadline missed already held the slack and the widening so far: twice what
-        // came on top of them covers the meter's delay with a margin
-        let widened = ((self.reply_delay + late + self.options.timeout_slack) * 2)
-            .min(self.options.max_reply_delay);
-        self.reply_delay = self.reply_delay.max(widened);
+        let note = self.late.saw(late);
         tracing::warn!(
             device = self.device(),
             late_s = late.as_secs_f64(),
-            reply_delay_s = self.reply_delay.as_secs_f64(),
+            reply_delay_s = self.late.reply_delay().as_secs_f64(),
             "the multimeter answers late; its late reply is thrown away and deadlines widened"
         );
-        Some(format!(
-            "the meter answers slowly: the reply came {:.1} s after its deadline and was thrown \
-             away; reply deadlines widened by {:.1} s",
-            late.as_secs_f64(),
-            self.reply_delay.as_secs_f64()
-        ))
+        Some(note)
     }
 
     /// For [`Error::GaveUp`]: what was seen of a slow meter, or nothing.
     pub fn slow_note(&self) -> String {
-        match self.latest_seen {
-            Some(late) => format!(
-                "; the meter answers slowly: a reply came {:.1} s after its deadline, and \
-                 deadlines were widened by {:.1} s (at most {:.1} s, DriverOptions::max_reply_delay)",
-                late.as_secs_f64(),
-                self.reply_delay.as_secs_f64(),
-                self.options.max_reply_delay.as_secs_f64()
-            ),
-            None => String::new(),
-        }
+        self.late.note()
     }
 
     /// The link's description.
@@ -791,7 +774,7 @@ impl<T: Transport> Hp34401a<T> {
         let timeout = deadline
             .saturating_duration_since(Instant::now())
             .max(self.options.timeout_slack)
-            + self.reply_delay;
+            + self.late.reply_delay();
         let reply = self.link.read_line(Some(timeout)).await?;
         self.in_flight = 0;
         if reply.trim() != "1" {
@@ -884,7 +867,7 @@ impl<T: Transport> Hp34401a<T> {
         total: usize,
     ) -> Result<Vec<Reading>, Error> {
         let mut out = Vec::with_capacity(k);
-        let mut timeout = first + self.reply_delay;
+        let mut timeout = first + self.late.reply_delay();
         loop {
             let field = self.link.read_field(b',', Some(timeout)).await?;
             for piece in field.text.split(',') {
@@ -991,8 +974,8 @@ impl<T: Transport> Hp34401a<T> {
         self.in_flight = 0;
         tokio::time::sleep(self.options.clear_settle).await;
         let mut dropped = self.link.discard_input().await?;
-        if !self.reply_delay.is_zero() {
-            dropped += self.drain_until_quiet(self.reply_delay).await?;
+        if !self.late.reply_delay().is_zero() {
+            dropped += self.drain_until_quiet(self.late.reply_delay()).await?;
         }
         if dropped > 0 {
             tracing::debug!(
@@ -1028,7 +1011,7 @@ impl<T: Transport> Hp34401a<T> {
             self.link.send_line("*OPC?").await?;
             let reply = self
                 .link
-                .read_line(Some(self.options.query_timeout + self.reply_delay))
+                .read_line(Some(self.options.query_timeout + self.late.reply_delay()))
                 .await?;
             self.in_flight = 0;
             if reply.trim() != "1" {
@@ -1064,7 +1047,7 @@ impl<T: Transport> Hp34401a<T> {
         self.link.send_line(line).await?;
         let reply = self
             .link
-            .read_line(Some(timeout + self.reply_delay))
+            .read_line(Some(timeout + self.late.reply_delay()))
             .await?;
         self.in_flight = 0;
         Ok(reply)

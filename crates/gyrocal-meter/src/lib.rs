@@ -14,6 +14,10 @@
 //! `Error::kind()`: generic code decides on kinds (retry a [`ErrorKind::Timeout`], measure again
 //! after [`ErrorKind::ReadingsLost`]) without knowing the backend.
 
+mod late;
+
+pub use late::LateReplies;
+
 use std::future::Future;
 use std::time::Duration;
 

@@ -4,8 +4,8 @@ use std::time::Duration;
 
 use gyrocal_link::Transport;
 use gyrocal_meter::{
-    Acquired, DcVolts, Identity, Measured, MeterError, Multimeter, OVERLOAD, ProgressFn, Reading,
-    TimingModel,
+    Acquired, DcVolts, Identity, LateReplies, Measured, MeterError, Multimeter, OVERLOAD,
+    ProgressFn, Reading, TimingModel,
 };
 use tokio::time::Instant;
 
@@ -108,10 +108,8 @@ pub struct TruevoltMeter<T: Transport> {
     /// What cleared the memory the last time the link was re-established (for
     /// [`Error::ReadingsLost`]).
     loss_cause: Option<String>,
-    /// Added to every reply deadline once the meter was seen answering late.
-    reply_delay: Duration,
-    /// The latest a late reply came after its deadline, if one did.
-    latest_seen: Option<Duration>,
+    /// The widening of the reply deadlines after late replies.
+    late: LateReplies,
 }
 
 /// Parses one reading (`+1.00010310E+01`; ±9.9E37 is an overload).
@@ -142,6 +140,11 @@ fn fmt_num(v: f64) -> String {
 impl<T: Transport> TruevoltMeter<T> {
     /// The meter on `link`. Nothing is sent until [`Multimeter::connect`].
     pub fn new(link: T, options: TruevoltOptions) -> Self {
+        let late = LateReplies::new(
+            options.max_reply_delay,
+            options.timeout_slack,
+            "TruevoltOptions::max_reply_delay",
+        );
         TruevoltMeter {
             link,
             options,
@@ -151,15 +154,14 @@ impl<T: Transport> TruevoltMeter<T> {
             progress: None,
             epoch: 0,
             loss_cause: None,
-            reply_delay: Duration::ZERO,
-            latest_seen: None,
+            late,
         }
     }
 
     /// What every reply deadline has been widened by, after replies came late (zero for a
     /// meter that answers in time).
     pub fn reply_delay(&self) -> Duration {
-        self.reply_delay
+        self.late.reply_delay()
     }
 
     /// After a query timed out: waits up to [`TruevoltOptions::late_reply_wait`] on the same
@@ -191,37 +193,19 @@ impl<T: Transport> TruevoltMeter<T> {
             return None;
         }
         let late = waited_from.elapsed();
-        self.latest_seen = Some(self.latest_seen.map_or(late, |l| l.max(late)));
-        let widened = ((self.reply_delay + late + self.options.timeout_slack) * 2)
-            .min(self.options.max_reply_delay);
-        self.reply_delay = self.reply_delay.max(widened);
+        let note = self.late.saw(late);
         tracing::warn!(
             device = %self.device(),
             late_s = late.as_secs_f64(),
-            reply_delay_s = self.reply_delay.as_secs_f64(),
+            reply_delay_s = self.late.reply_delay().as_secs_f64(),
             "the multimeter answers late; its late reply is thrown away and deadlines widened"
         );
-        Some(format!(
-            "the meter answers slowly: the reply came {:.1} s after its deadline and was thrown \
-             away; reply deadlines widened by {:.1} s",
-            late.as_secs_f64(),
-            self.reply_delay.as_secs_f64()
-        ))
+        Some(note)
     }
 
     /// For [`Error::GaveUp`]: what was seen of a slow meter, or nothing.
     fn slow_note(&self) -> String {
-        match self.latest_seen {
-            Some(late) => format!(
-                "; the meter answers slowly: a reply came {:.1} s after its deadline, and \
-                 deadlines were widened by {:.1} s (at most {:.1} s, \
-                 TruevoltOptions::max_reply_delay)",
-                late.as_secs_f64(),
-                self.reply_delay.as_secs_f64(),
-                self.options.max_reply_delay.as_secs_f64()
-            ),
-            None => String::new(),
-        }
+        self.late.note()
     }
 
     /// The options.
@@ -264,7 +248,7 @@ impl<T: Transport> TruevoltMeter<T> {
     async fn query(&mut self, command: &str, timeout: Duration) -> Result<String, Error> {
         self.send(command).await?;
         self.link
-            .read_line(Some(timeout + self.reply_delay))
+            .read_line(Some(timeout + self.late.reply_delay()))
             .await
             .map_err(|source| Error::Link {
                 command: command.to_string(),
@@ -339,7 +323,7 @@ impl<T: Transport> TruevoltMeter<T> {
         // a Truevolt posing as an older meter answers SYST:IDEN? with that personality; the
         // older meter itself does not know the command (-113) and answers nothing
         self.send("SYST:IDEN?").await?;
-        let iden_timeout = self.options.iden_timeout + self.reply_delay;
+        let iden_timeout = self.options.iden_timeout + self.late.reply_delay();
         match self.link.read_line(Some(iden_timeout)).await {
             Ok(reply) if reply.trim().trim_matches('"').ends_with(said.as_str()) => {
                 tracing::info!(device = %self.device(), idn = %raw, model = %want,
@@ -423,7 +407,7 @@ impl<T: Transport> TruevoltMeter<T> {
         total: usize,
     ) -> Result<Vec<Reading>, Error> {
         let mut out = Vec::with_capacity(expected);
-        let mut timeout = first + self.reply_delay;
+        let mut timeout = first + self.late.reply_delay();
         loop {
             let field = self
                 .link
