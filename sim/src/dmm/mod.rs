@@ -54,35 +54,37 @@
 //! window, plus seeded gaussian noise. Faults can be scheduled in [`DmmConfig::faults`] or
 //! injected at run time through [`DmmHandle::inject`].
 
-mod scpi;
+mod parse;
 
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use rand::SeedableRng;
-use rand::rngs::StdRng;
-use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::sync::mpsc;
-use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
 use crate::SignalSource;
+use crate::scpi::{
+    ArmedFaults, Ctl, ErrorQueue, EventStatus, Noise, ReplyFault, SlowReplies, clip, format_nr3,
+    garbled, slow_delay,
+};
 pub use gyrocal_link::Framing;
-use scpi::{Cmd, Unit, parse_line};
+use parse::{Cmd, Unit, parse_line};
+
+/// The fault grammar, the handle and the counters are every simulated meter's
+/// ([`crate::scpi`]); they keep their names here.
+pub use crate::scpi::{
+    DmmHandle, DmmInjector, DmmStats, ERROR_QUEUE_SIZE, Fault, OVERLOAD, format_reading,
+};
 
 /// What a real unit answers to `*IDN?` (firmware 11-5-2; 7-5-2 and 10-5-2 exist too).
 pub const DEFAULT_IDENTITY: &str = "HEWLETT-PACKARD,34401A,0,11-5-2";
 /// Readings the internal memory holds.
 pub const MEMORY_SIZE: usize = 512;
-/// Entries the error queue holds.
-pub const ERROR_QUEUE_SIZE: usize = 20;
 /// Time to enter wait-for-trigger (`INIT`, `READ?`), before scaling.
 pub const ARM_TIME: Duration = Duration::from_millis(20);
-/// The overload value.
-pub const OVERLOAD: f64 = 9.9e37;
 /// GPIB mode: the in-band byte for Selected Device Clear (the RS-232 device clear byte).
 pub const GPIB_SDC: u8 = gyrocal_link::DEVICE_CLEAR;
 /// GPIB mode: the in-band byte that addresses the meter to talk (MTA on a real bus).
@@ -104,54 +106,6 @@ pub enum Interface {
     Rs232,
     /// GPIB behind a controller (see the module documentation).
     Gpib,
-}
-
-/// A fault to inject.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case", tag = "kind", deny_unknown_fields)]
-pub enum Fault {
-    /// The next reply (the output of the next line that produces any) is never sent.
-    NoReply,
-    /// The next reply has a character replaced by `#`.
-    Garble,
-    /// The next reply stops halfway, without its terminator (the rest of that line's output,
-    /// readings included, is lost).
-    Truncate,
-    /// The meter drops the connection: the simulator closes its end and stops.
-    Disconnect,
-    /// The next `readings` readings are overloads.
-    Overload {
-        /// How many.
-        readings: u32,
-    },
-    /// The meter is switched off and on again: dead (deaf and mute) for `off_s` sim seconds
-    /// (`None`: [`DmmConfig::power_off_s`]), then back in LOCAL with the power-on state (see
-    /// the module documentation). Armed at a reading, the meter dies instead of taking it.
-    PowerCycle {
-        /// Off time in sim seconds; default [`DmmConfig::power_off_s`].
-        #[serde(default)]
-        off_s: Option<f64>,
-    },
-    /// Replies held back: every byte the meter sends from now on reaches the host `delay_s`
-    /// sim seconds after it was sent, for the next `replies` replies (lines), or for good.
-    /// The meter itself is alive and obeys at once. On the 34401A the held bytes are already
-    /// on their way (a serial converter's deep buffer, a network bridge): a device clear does
-    /// not recall them. On a Truevolt the reply is sent late on the connection its query came
-    /// on, and a reconnect drops it (see [`crate::truevolt`]).
-    Slow {
-        /// How late each reply is, sim seconds.
-        delay_s: f64,
-        /// Replies held back; `None`: every reply from now on.
-        #[serde(default)]
-        replies: Option<u32>,
-    },
-    /// An entry pushed into the error queue.
-    PushError {
-        /// The code.
-        code: i32,
-        /// The message.
-        message: String,
-    },
 }
 
 /// A fault from the configuration, injected once `after_commands` commands have been seen.
@@ -267,163 +221,6 @@ pub enum LocalMode {
     Obey,
 }
 
-/// Counters and state a test can read through [`DmmHandle::stats`].
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct DmmStats {
-    /// Readings taken (to memory or to the output).
-    pub readings_taken: u64,
-    /// Commands (program message units) seen, refused ones included.
-    pub commands_seen: u64,
-    /// Lines seen.
-    pub lines_seen: u64,
-    /// Queries answered.
-    pub queries_answered: u64,
-    /// Device clears (Ctrl-C) received.
-    pub device_clears: u64,
-    /// Errors raised into the queue (also those lost to an overflow).
-    pub errors_raised: u64,
-    /// Largest number of characters waiting in the input at once (the real meter's input
-    /// buffer holds about 100).
-    pub max_input_backlog: usize,
-    /// Whether the meter is in remote.
-    pub remote: bool,
-    /// Power cycles so far ([`Fault::PowerCycle`]).
-    pub power_cycles: u64,
-    /// Whether the meter is switched on (false during a power cycle's off time).
-    pub powered: bool,
-    /// The integration time now in force (`VOLT:DC:NPLC`), for tests that check a
-    /// reconfiguration.
-    pub nplc: f64,
-    /// Readings in the internal memory now.
-    pub memory_points: usize,
-    /// The error queue now, oldest first.
-    pub error_queue: Vec<(i32, String)>,
-    /// True once the simulator has stopped (stop, disconnect, or the host closed the link).
-    pub stopped: bool,
-    /// Replies held back by a [`Fault::Slow`] (sent late).
-    pub late_replies: u64,
-}
-
-pub(crate) enum Ctl {
-    Fault(Fault),
-    AtReading(u64, Fault),
-    Stop,
-}
-
-/// Controls a running simulated meter.
-pub struct DmmHandle {
-    ctl: mpsc::UnboundedSender<Ctl>,
-    stats: Arc<Mutex<DmmStats>>,
-    task: JoinHandle<()>,
-}
-
-impl DmmHandle {
-    /// A handle on another simulated meter's task (the Truevolt's), driven by the same
-    /// control messages, so the fault grammar and the counters work for every meter.
-    pub(crate) fn from_parts(
-        ctl: mpsc::UnboundedSender<Ctl>,
-        stats: Arc<Mutex<DmmStats>>,
-        task: JoinHandle<()>,
-    ) -> Self {
-        DmmHandle { ctl, stats, task }
-    }
-
-    /// Injects a fault now.
-    pub fn inject(&self, fault: Fault) {
-        let _ = self.ctl.send(Ctl::Fault(fault));
-    }
-
-    /// A snapshot of the counters.
-    pub fn stats(&self) -> DmmStats {
-        self.stats
-            .lock()
-            .map(|s| s.clone())
-            .unwrap_or_else(|e| e.into_inner().clone())
-    }
-
-    /// Arms `fault` for the `n`-th reading the meter takes (counted from 1 since the start,
-    /// like [`DmmStats::readings_taken`]); injected just before that reading is taken, so:
-    ///
-    /// - a reply fault (no reply, garble, truncate) hits the reply that carries reading `n`:
-    ///   when readings stream (`READ?`) the reply it is part of, from that reading on (a garble
-    ///   lands in reading `n`'s own characters); when they go to memory, the `FETC?` reply
-    ///   (a garble lands in reading `n`'s characters there);
-    /// - an overload makes reading `n` (and the following ones, as many as asked) overloads;
-    /// - a disconnect drops the link instead of taking reading `n`.
-    ///
-    /// A reading number already passed fires at the next reading.
-    pub fn inject_at_reading(&self, n: u64, fault: Fault) {
-        let _ = self.ctl.send(Ctl::AtReading(n, fault));
-    }
-
-    /// Readings taken so far.
-    pub fn readings_taken(&self) -> u64 {
-        self.stats().readings_taken
-    }
-
-    /// Commands seen so far.
-    pub fn commands_seen(&self) -> u64 {
-        self.stats().commands_seen
-    }
-
-    /// A cloneable handle that injects faults and reads the counters (for other tasks).
-    pub fn injector(&self) -> DmmInjector {
-        DmmInjector {
-            ctl: self.ctl.clone(),
-            stats: self.stats.clone(),
-        }
-    }
-
-    /// Whether the simulator task has ended.
-    pub fn is_finished(&self) -> bool {
-        self.task.is_finished()
-    }
-
-    /// Stops the simulator (its end of the stream is closed) and waits for it.
-    pub async fn stop(self) {
-        let _ = self.ctl.send(Ctl::Stop);
-        let _ = self.task.await;
-    }
-}
-
-/// A cloneable part of a [`DmmHandle`]: fault injection and counters, without the task.
-#[derive(Clone)]
-pub struct DmmInjector {
-    ctl: mpsc::UnboundedSender<Ctl>,
-    stats: Arc<Mutex<DmmStats>>,
-}
-
-impl std::fmt::Debug for DmmInjector {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("DmmInjector").finish_non_exhaustive()
-    }
-}
-
-impl DmmInjector {
-    /// See [`DmmHandle::inject`].
-    pub fn inject(&self, fault: Fault) {
-        let _ = self.ctl.send(Ctl::Fault(fault));
-    }
-
-    /// See [`DmmHandle::inject_at_reading`].
-    pub fn inject_at_reading(&self, n: u64, fault: Fault) {
-        let _ = self.ctl.send(Ctl::AtReading(n, fault));
-    }
-
-    /// A snapshot of the counters.
-    pub fn stats(&self) -> DmmStats {
-        self.stats
-            .lock()
-            .map(|s| s.clone())
-            .unwrap_or_else(|e| e.into_inner().clone())
-    }
-
-    /// Readings taken so far.
-    pub fn readings_taken(&self) -> u64 {
-        self.stats().readings_taken
-    }
-}
-
 /// The simulated 34401A.
 pub struct SimDmm;
 
@@ -445,11 +242,7 @@ impl SimDmm {
         let stats = Arc::new(Mutex::new(DmmStats::default()));
         let meter = Meter::new(config, source, seed, stats.clone());
         let task = tokio::spawn(meter.run(stream, rx));
-        DmmHandle {
-            ctl: tx,
-            stats,
-            task,
-        }
+        DmmHandle::from_parts(tx, stats, task)
     }
 }
 
@@ -495,13 +288,6 @@ enum TrigSource {
 enum Dest {
     Memory,
     Output,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum ReplyFault {
-    NoReply,
-    Garble,
-    Truncate,
 }
 
 /// The settings `*RST` restores.
@@ -568,13 +354,12 @@ struct Meas {
 struct Meter {
     cfg: DmmConfig,
     source: Box<dyn SignalSource>,
-    rng: StdRng,
-    noise: Option<Normal<f64>>,
+    noise: Noise,
     stats: Arc<Mutex<DmmStats>>,
     counters: DmmStats,
     remote: bool,
     set: Settings,
-    errors: VecDeque<(i32, String)>,
+    errors: ErrorQueue,
     memory: Vec<f64>,
     inbuf: Vec<u8>,
     lines: VecDeque<Line>,
@@ -595,16 +380,16 @@ struct Meter {
     stop: bool,
     faults: Vec<ScheduledFault>,
     /// Faults armed for a reading number (see [`DmmHandle::inject_at_reading`]).
-    at_reading: Vec<(u64, Fault)>,
+    at_reading: ArmedFaults,
     /// A reply fault for the reading at this index of the memory, applied by `FETC?`.
     memory_fault: Option<(usize, ReplyFault)>,
     /// Standard Event register (only the Power On bit is modelled).
-    esr: u8,
+    esr: EventStatus,
     /// Switched off until then (a power cycle).
     off_until: Option<Instant>,
     /// A [`Fault::Slow`] in force: the delay, and the replies it still holds back (`None`:
     /// every one).
-    slow: Option<(Duration, Option<u32>)>,
+    slow: SlowReplies,
     /// Bytes on their way to the host, with the instant they arrive (in order).
     delayed: VecDeque<(Vec<u8>, Instant)>,
     /// GPIB mode: addressed to talk.
@@ -613,9 +398,6 @@ struct Meter {
     /// is a -420 is decided once they have run.
     talk_check: bool,
 }
-
-/// The Standard Event register's Power On bit.
-const ESR_PON: u8 = 128;
 
 fn scaled(cfg: &DmmConfig, d: Duration) -> Duration {
     d.div_f64(cfg.time_scale)
@@ -628,11 +410,7 @@ impl Meter {
         seed: u64,
         stats: Arc<Mutex<DmmStats>>,
     ) -> Self {
-        let noise = if cfg.noise_v > 0.0 {
-            Normal::new(0.0, cfg.noise_v).ok()
-        } else {
-            None
-        };
+        let noise = Noise::new(cfg.noise_v, seed);
         let now = Instant::now();
         let mut faults = cfg.faults.clone();
         faults.sort_by_key(|f| std::cmp::Reverse(f.after_commands));
@@ -642,12 +420,11 @@ impl Meter {
             talk_check: false,
             cfg,
             source,
-            rng: StdRng::seed_from_u64(seed),
             noise,
             stats,
             counters: DmmStats::default(),
             set: Settings::default(),
-            errors: VecDeque::new(),
+            errors: ErrorQueue::default(),
             memory: Vec::new(),
             inbuf: Vec::new(),
             lines: VecDeque::new(),
@@ -664,11 +441,11 @@ impl Meter {
             disconnect: false,
             stop: false,
             faults,
-            at_reading: Vec::new(),
+            at_reading: ArmedFaults::default(),
             memory_fault: None,
-            esr: ESR_PON,
+            esr: EventStatus::powered_on(),
             off_until: None,
-            slow: None,
+            slow: SlowReplies::default(),
             delayed: VecDeque::new(),
         }
     }
@@ -687,7 +464,7 @@ impl Meter {
                 && let Some((bytes, due)) = self.tx.take_if(|(_, due)| *due <= now)
             {
                 let _ = due;
-                if self.slow.is_some() || !self.delayed.is_empty() {
+                if self.slow.is_active() || !self.delayed.is_empty() {
                     // held back (or behind bytes that are): they arrive later, in order
                     if self.gpib() && bytes.last() == Some(&b'\n') {
                         self.talk = false;
@@ -721,7 +498,7 @@ impl Meter {
                 biased;
                 c = ctl.recv(), if ctl_open => match c {
                     Some(Ctl::Fault(f)) => self.inject(f),
-                    Some(Ctl::AtReading(n, f)) => self.at_reading.push((n, f)),
+                    Some(Ctl::AtReading(n, f)) => self.at_reading.arm(n, f),
                     Some(Ctl::Stop) => self.stop = true,
                     None => ctl_open = false,
                 },
@@ -743,7 +520,7 @@ impl Meter {
         self.counters.powered = self.off_until.is_none();
         self.counters.nplc = self.set.nplc;
         self.counters.memory_points = self.memory.len();
-        self.counters.error_queue = self.errors.iter().cloned().collect();
+        self.counters.error_queue = self.errors.snapshot();
         if let Ok(mut s) = self.stats.lock() {
             *s = self.counters.clone();
         }
@@ -771,21 +548,18 @@ impl Meter {
     /// Puts bytes the meter sent at `now` on their way with the [`Fault::Slow`] delay in
     /// force (none when it ran out: they still wait behind the earlier ones).
     fn hold_back(&mut self, bytes: Vec<u8>, now: Instant) {
-        let delay = self.slow.map_or(Duration::ZERO, |(d, _)| d);
+        let lines = bytes.iter().filter(|&&b| b == b'\n').count() as u64;
+        let delay = match self.slow.hold(lines) {
+            Some(delay) => {
+                self.counters.late_replies += lines;
+                delay
+            }
+            None => Duration::ZERO,
+        };
         let at = self
             .delayed
             .back()
             .map_or(now + delay, |(_, last)| (*last).max(now + delay));
-        if self.slow.is_some() {
-            let lines = bytes.iter().filter(|&&b| b == b'\n').count() as u64;
-            self.counters.late_replies += lines;
-            if let Some((_, Some(left))) = self.slow.as_mut() {
-                *left = left.saturating_sub(u32::try_from(lines).unwrap_or(u32::MAX));
-                if *left == 0 {
-                    self.slow = None;
-                }
-            }
-        }
         self.delayed.push_back((bytes, at));
     }
 
@@ -942,17 +716,19 @@ impl Meter {
 
     fn inject(&mut self, f: Fault) {
         tracing::debug!(fault = ?f, "simulated 34401A: fault injected");
+        if let Some(reply_fault) = ReplyFault::of(&f) {
+            self.pending_reply_fault.push_back(reply_fault);
+            return;
+        }
         match f {
-            Fault::NoReply => self.pending_reply_fault.push_back(ReplyFault::NoReply),
-            Fault::Garble => self.pending_reply_fault.push_back(ReplyFault::Garble),
-            Fault::Truncate => self.pending_reply_fault.push_back(ReplyFault::Truncate),
+            Fault::NoReply | Fault::Garble | Fault::Truncate => {}
             Fault::Disconnect => self.disconnect = true,
             Fault::PowerCycle { off_s } => self.power_off(off_s),
             Fault::Overload { readings } => self.overloads_left += readings,
             Fault::PushError { code, message } => self.raise(code, &message),
             Fault::Slow { delay_s, replies } => {
-                let delay = Duration::from_secs_f64(delay_s.clamp(0.0, 1e6));
-                self.slow = (replies != Some(0)).then(|| (scaled(&self.cfg, delay), replies));
+                self.slow
+                    .set(scaled(&self.cfg, slow_delay(delay_s)), replies);
             }
         }
     }
@@ -989,7 +765,7 @@ impl Meter {
         self.errors.clear();
         self.memory.clear();
         self.memory_fault = None;
-        self.esr = ESR_PON;
+        self.esr = EventStatus::powered_on();
         self.meas = None;
         self.exec = None;
         self.out.clear();
@@ -1006,25 +782,11 @@ impl Meter {
     /// disconnected or was switched off instead.
     fn reading_faults(&mut self, dest: Dest) -> bool {
         let next = self.counters.readings_taken + 1;
-        let mut due = Vec::new();
-        self.at_reading.retain(|(n, f)| {
-            if *n <= next {
-                due.push(f.clone());
-                false
-            } else {
-                true
-            }
-        });
-        for f in due {
+        for f in self.at_reading.due(next) {
             tracing::debug!(fault = ?f, reading = next, "simulated 34401A: fault at reading");
-            let reply_fault = match f {
-                Fault::NoReply => ReplyFault::NoReply,
-                Fault::Garble => ReplyFault::Garble,
-                Fault::Truncate => ReplyFault::Truncate,
-                other => {
-                    self.inject(other);
-                    continue;
-                }
+            let Some(reply_fault) = ReplyFault::of(&f) else {
+                self.inject(f);
+                continue;
             };
             if self.off_until.is_some() {
                 continue;
@@ -1057,11 +819,7 @@ impl Meter {
     fn raise(&mut self, code: i32, message: &str) {
         self.counters.errors_raised += 1;
         tracing::debug!(code, message, "simulated 34401A: error");
-        if self.errors.len() < ERROR_QUEUE_SIZE {
-            self.errors.push_back((code, message.to_string()));
-        } else if let Some(last) = self.errors.back_mut() {
-            *last = (-350, "Queue overflow".to_string());
-        }
+        self.errors.raise(code, message);
     }
 
     // ---- time --------------------------------------------------------------------------
@@ -1169,20 +927,10 @@ impl Meter {
 
     fn sample(&mut self, window_start: Instant) -> f64 {
         let v = self.source.volts(window_start, self.integration());
-        let noise = match &self.noise {
-            Some(n) => n.sample(&mut self.rng),
-            None => 0.0,
-        };
-        let v = v + noise;
-        let limit = 1.2 * self.set.range.unwrap_or(1000.0);
-        if self.overloads_left > 0 {
-            self.overloads_left -= 1;
-            return if v < 0.0 { -OVERLOAD } else { OVERLOAD };
-        }
-        if !v.is_finite() || v.abs() > limit {
-            return if v < 0.0 { -OVERLOAD } else { OVERLOAD };
-        }
-        v
+        let v = self.noise.add(v);
+        let forced = self.overloads_left > 0;
+        self.overloads_left = self.overloads_left.saturating_sub(1);
+        clip(v, self.set.range, forced)
     }
 
     fn complete_reading(&mut self) {
@@ -1254,12 +1002,10 @@ impl Meter {
         }
         match exec.fault.take() {
             None => self.out.extend(bytes),
-            Some(ReplyFault::NoReply) => exec.muted = true,
-            Some(ReplyFault::Garble) => self.out.extend(garbled(bytes).into_bytes()),
-            Some(ReplyFault::Truncate) => {
-                let half = bytes.len().div_ceil(2);
-                self.out.extend(&bytes[..half]);
-                exec.muted = true;
+            Some(fault) => {
+                let (sent, muted) = fault.apply(bytes);
+                self.out.extend(sent);
+                exec.muted = muted;
             }
         }
     }
@@ -1370,13 +1116,13 @@ impl Meter {
             (Cmd::Cls, false) => {
                 no_params()?;
                 self.errors.clear();
-                self.esr = 0;
+                self.esr.clear();
             }
             (Cmd::Opc, true) => self.reply("1"),
             (Cmd::Opc | Cmd::Ese | Cmd::Sre, false) => {}
             (Cmd::Esr, true) => {
-                let v = std::mem::take(&mut self.esr);
-                self.reply(&format!("{v:+}"));
+                let v = self.esr.read();
+                self.reply(&v);
             }
             (Cmd::Stb | Cmd::Ese | Cmd::Sre | Cmd::Tst, true) => self.reply("+0"),
             (Cmd::Trg, false) => return Err((-211, "Trigger ignored")),
@@ -1384,16 +1130,8 @@ impl Meter {
             (Cmd::Rwlock, false) => self.remote = true,
             (Cmd::Local, false) => self.remote = false,
             (Cmd::Error, true) => {
-                let (code, msg) = self
-                    .errors
-                    .pop_front()
-                    .unwrap_or((0, "No error".to_string()));
-                let code = if code < 0 {
-                    code.to_string()
-                } else {
-                    format!("+{code}")
-                };
-                self.reply(&format!("{code},\"{msg}\""));
+                let entry = self.errors.next_reply();
+                self.reply(&entry);
             }
             (Cmd::Version, true) => self.reply("1992.0"),
             (Cmd::Configure, false) => self.configure(p)?,
@@ -1605,53 +1343,11 @@ impl Meter {
     }
 }
 
-/// `bytes` with the second digit (or the first, or the first byte) replaced by `#`.
-pub(crate) fn garbled(bytes: &[u8]) -> String {
-    let mut b = bytes.to_vec();
-    let mut digits = b
-        .iter()
-        .enumerate()
-        .filter(|(_, c)| c.is_ascii_digit())
-        .map(|(i, _)| i);
-    let first = digits.next();
-    let i = digits.next().or(first).unwrap_or(0);
-    if let Some(c) = b.get_mut(i) {
-        *c = b'#';
-    }
-    String::from_utf8_lossy(&b).into_owned()
-}
-
 async fn sleep_until_opt(t: Option<Instant>) {
     match t {
         Some(t) => tokio::time::sleep_until(t).await,
         None => std::future::pending().await,
     }
-}
-
-/// Formats a reading the way the 34401A sends it: `SD.DDDDDDDDESDD` (15 characters).
-pub fn format_reading(v: f64) -> String {
-    if !v.is_finite() || v.abs() >= OVERLOAD {
-        return if v < 0.0 {
-            "-9.90000000E+37".into()
-        } else {
-            "+9.90000000E+37".into()
-        };
-    }
-    format_nr3(v)
-}
-
-/// NR3 with 8 decimals and a signed two-digit exponent: `+1.00010310E+01`.
-fn format_nr3(v: f64) -> String {
-    let s = format!("{:.8E}", v.abs());
-    let (mant, exp) = s.split_once('E').unwrap_or((s.as_str(), "0"));
-    let exp: i32 = exp.parse().unwrap_or(0);
-    let sign = if v.is_sign_negative() && v != 0.0 {
-        '-'
-    } else {
-        '+'
-    };
-    let esign = if exp < 0 { '-' } else { '+' };
-    format!("{sign}{mant}E{esign}{:02}", exp.abs())
 }
 
 fn keyword(s: &str) -> String {
@@ -1723,18 +1419,6 @@ fn nplc_for_resolution(ratio: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn reading_format() {
-        assert_eq!(format_reading(10.001031), "+1.00010310E+01");
-        assert_eq!(format_reading(0.0), "+0.00000000E+00");
-        assert_eq!(format_reading(-1.5e-3), "-1.50000000E-03");
-        assert_eq!(format_reading(OVERLOAD), "+9.90000000E+37");
-        assert_eq!(format_reading(-OVERLOAD), "-9.90000000E+37");
-        for v in [1.0, -123.456, 9.99999999e-9, 1000.0] {
-            assert_eq!(format_reading(v).len(), 15, "{v}");
-        }
-    }
 
     #[test]
     fn config_defaults_and_toml() {

@@ -53,23 +53,19 @@ use std::time::Duration;
 
 use gyrocal_link::{Connector, DynStream, LinkError};
 use gyrocal_truevolt::{Model, TimingDefaults, TruevoltTiming};
-use rand::SeedableRng;
-use rand::rngs::StdRng;
-use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 use tokio::io::{AsyncReadExt, AsyncWriteExt, ReadHalf, WriteHalf};
 use tokio::sync::mpsc;
 use tokio::time::Instant;
 
 use crate::SignalSource;
-use crate::dmm::{Ctl, DmmHandle, DmmStats, Fault, format_reading, garbled};
+use crate::scpi::{
+    ArmedFaults, Ctl, DmmHandle, DmmStats, ErrorQueue, EventStatus, Fault, Noise, ReplyFault,
+    SlowReplies, clip, format_reading, slow_delay,
+};
 
-/// Entries the error queue holds.
-const ERROR_QUEUE_SIZE: usize = 20;
 /// Questionable Data register: memory overflow.
 const QUES_MEMORY_OVERFLOW: u16 = 1 << 14;
-/// Standard Event register: Power On.
-const ESR_PON: u8 = 128;
 
 /// What `*IDN?` answers as (`SYSTem:IDENtify`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -192,13 +188,6 @@ impl SimTruevolt {
     }
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum ReplyFault {
-    NoReply,
-    Garble,
-    Truncate,
-}
-
 #[derive(Debug, Clone, PartialEq)]
 struct Settings {
     range: Option<f64>,
@@ -249,17 +238,16 @@ type Conn = (ReadHalf<DynStream>, WriteHalf<DynStream>);
 struct Meter {
     cfg: TruevoltConfig,
     source: Box<dyn SignalSource>,
-    rng: StdRng,
-    noise: Option<Normal<f64>>,
+    noise: Noise,
     stats: Arc<Mutex<DmmStats>>,
     counters: DmmStats,
     set: Settings,
     personality: Personality,
-    errors: VecDeque<(i32, String)>,
+    errors: ErrorQueue,
     /// (value, reading number from 1)
     memory: VecDeque<(f64, u64)>,
     ques: u16,
-    esr: u8,
+    esr: EventStatus,
     meas: Option<Meas>,
     waiting: Option<Waiting>,
     lines: VecDeque<String>,
@@ -268,17 +256,13 @@ struct Meter {
     out: Option<(Vec<u8>, Instant)>,
     next_reply_fault: VecDeque<ReplyFault>,
     marked: HashMap<u64, ReplyFault>,
-    at_reading: Vec<(u64, Fault)>,
+    at_reading: ArmedFaults,
     overloads_left: u32,
     off_until: Option<Instant>,
     /// A [`Fault::Slow`] in force: the delay, and the replies it still holds back.
-    slow: Option<(Duration, Option<u32>)>,
+    slow: SlowReplies,
     gone: bool,
     stop: bool,
-}
-
-fn scpi_err(code: i32, msg: &str) -> (i32, String) {
-    (code, msg.to_string())
 }
 
 /// Canonical header: short forms, upper case, optional nodes dropped.
@@ -363,14 +347,11 @@ impl Meter {
         seed: u64,
         stats: Arc<Mutex<DmmStats>>,
     ) -> Self {
-        let noise = (cfg.noise_v > 0.0)
-            .then(|| Normal::new(0.0, cfg.noise_v).ok())
-            .flatten();
+        let noise = Noise::new(cfg.noise_v, seed);
         Meter {
             personality: cfg.personality,
             cfg,
             source,
-            rng: StdRng::seed_from_u64(seed),
             noise,
             stats,
             counters: DmmStats {
@@ -380,10 +361,10 @@ impl Meter {
                 ..DmmStats::default()
             },
             set: Settings::default(),
-            errors: VecDeque::new(),
+            errors: ErrorQueue::default(),
             memory: VecDeque::new(),
             ques: 0,
-            esr: ESR_PON,
+            esr: EventStatus::powered_on(),
             meas: None,
             waiting: None,
             lines: VecDeque::new(),
@@ -391,10 +372,10 @@ impl Meter {
             out: None,
             next_reply_fault: VecDeque::new(),
             marked: HashMap::new(),
-            at_reading: Vec::new(),
+            at_reading: ArmedFaults::default(),
             overloads_left: 0,
             off_until: None,
-            slow: None,
+            slow: SlowReplies::default(),
             gone: false,
             stop: false,
         }
@@ -471,7 +452,7 @@ impl Meter {
                 biased;
                 c = ctl.recv(), if ctl_open => match c {
                     Some(Ctl::Fault(f)) => self.inject(f, Instant::now()),
-                    Some(Ctl::AtReading(n, f)) => self.at_reading.push((n, f)),
+                    Some(Ctl::AtReading(n, f)) => self.at_reading.arm(n, f),
                     Some(Ctl::Stop) => self.stop = true,
                     None => ctl_open = false,
                 },
@@ -521,7 +502,7 @@ impl Meter {
         self.counters.powered = self.off_until.is_none();
         self.counters.nplc = self.set.nplc;
         self.counters.memory_points = self.memory.len();
-        self.counters.error_queue = self.errors.iter().cloned().collect();
+        self.counters.error_queue = self.errors.snapshot();
         if let Ok(mut s) = self.stats.lock() {
             *s = self.counters.clone();
         }
@@ -555,13 +536,7 @@ impl Meter {
 
     fn raise(&mut self, code: i32, message: &str) {
         self.counters.errors_raised += 1;
-        if self.errors.len() >= ERROR_QUEUE_SIZE {
-            if let Some(last) = self.errors.back_mut() {
-                *last = scpi_err(-350, "Queue overflow");
-            }
-        } else {
-            self.errors.push_back(scpi_err(code, message));
-        }
+        self.errors.raise(code, message);
     }
 
     // ---- measurement -------------------------------------------------------------------
@@ -588,47 +563,33 @@ impl Meter {
 
     fn take_reading(&mut self, done: Instant, window: Duration) {
         let number = self.counters.readings_taken + 1;
-        // faults armed for this reading
-        let mut i = 0;
-        while i < self.at_reading.len() {
-            if self.at_reading[i].0 <= number {
-                let (_, f) = self.at_reading.remove(i);
-                match f {
-                    Fault::PowerCycle { off_s } => {
-                        self.power_off(off_s, done);
-                        return;
-                    }
-                    Fault::Disconnect => {
-                        self.gone = true;
-                        return;
-                    }
-                    Fault::NoReply => {
-                        self.marked.insert(number, ReplyFault::NoReply);
-                    }
-                    Fault::Garble => {
-                        self.marked.insert(number, ReplyFault::Garble);
-                    }
-                    Fault::Truncate => {
-                        self.marked.insert(number, ReplyFault::Truncate);
-                    }
-                    f => self.inject(f, done),
+        // faults armed for this reading; a power cycle or a disconnect takes the reading's
+        // place, and the faults after it stay armed
+        let mut due = self.at_reading.due(number).into_iter();
+        while let Some(f) = due.next() {
+            if let Some(reply_fault) = ReplyFault::of(&f) {
+                self.marked.insert(number, reply_fault);
+                continue;
+            }
+            match f {
+                Fault::PowerCycle { off_s } => {
+                    self.at_reading.put_back(number, due);
+                    self.power_off(off_s, done);
+                    return;
                 }
-            } else {
-                i += 1;
+                Fault::Disconnect => {
+                    self.at_reading.put_back(number, due);
+                    self.gone = true;
+                    return;
+                }
+                f => self.inject(f, done),
             }
         }
         let start = done.checked_sub(window).unwrap_or(done);
-        let mut v = self.source.volts(start, window);
-        if let Some(n) = &self.noise {
-            v += n.sample(&mut self.rng);
-        }
-        let limit = self.set.range.unwrap_or(1000.0) * 1.2;
-        if self.overloads_left > 0 {
-            self.overloads_left -= 1;
-            v = 9.9e37;
-        } else if v.abs() > limit {
-            v = 9.9e37 * v.signum();
-        }
+        let v = self.noise.add(self.source.volts(start, window));
+        let forced = self.overloads_left > 0;
+        self.overloads_left = self.overloads_left.saturating_sub(1);
+        let v = clip(v, self.set.range, forced);
         self.counters.readings_taken = number;
         if self.memory.len() >= self.capacity() {
             self.memory.pop_front();
@@ -677,22 +638,23 @@ impl Meter {
         self.memory.clear();
         self.errors.clear();
         self.ques = 0;
-        self.esr = ESR_PON;
+        self.esr = EventStatus::powered_on();
         tracing::info!("simulated Truevolt back on");
     }
 
     fn inject(&mut self, f: Fault, at: Instant) {
+        if let Some(reply_fault) = ReplyFault::of(&f) {
+            self.next_reply_fault.push_back(reply_fault);
+            return;
+        }
         match f {
-            Fault::NoReply => self.next_reply_fault.push_back(ReplyFault::NoReply),
-            Fault::Garble => self.next_reply_fault.push_back(ReplyFault::Garble),
-            Fault::Truncate => self.next_reply_fault.push_back(ReplyFault::Truncate),
+            Fault::NoReply | Fault::Garble | Fault::Truncate => {}
             Fault::Disconnect => self.gone = true,
             Fault::Overload { readings } => self.overloads_left += readings,
             Fault::PowerCycle { off_s } => self.power_off(off_s, at),
             Fault::PushError { code, message } => self.raise(code, &message),
             Fault::Slow { delay_s, replies } => {
-                let delay = Duration::from_secs_f64(delay_s.clamp(0.0, 1e6));
-                self.slow = (replies != Some(0)).then(|| (self.scaled(delay), replies));
+                self.slow.set(self.scaled(slow_delay(delay_s)), replies);
             }
         }
     }
@@ -714,22 +676,14 @@ impl Meter {
         let bytes = match fault {
             None => bytes,
             Some(ReplyFault::NoReply) => return,
-            Some(ReplyFault::Garble) => garbled(&bytes).into_bytes(),
-            Some(ReplyFault::Truncate) => bytes[..bytes.len().div_ceil(2)].to_vec(),
+            Some(fault) => fault.apply(&bytes).0,
         };
         let transfer = self.scaled(self.cfg.timing.transfer_per_reading)
             * u32::try_from(numbers.len()).unwrap_or(u32::MAX);
         // a slow meter sends its reply late, and executes nothing meanwhile
-        let late = match self.slow.as_mut() {
-            Some((delay, left)) => {
-                let delay = *delay;
+        let late = match self.slow.hold(1) {
+            Some(delay) => {
                 self.counters.late_replies += 1;
-                if let Some(n) = left {
-                    *n = n.saturating_sub(1);
-                    if *n == 0 {
-                        self.slow = None;
-                    }
-                }
                 delay
             }
             None => Duration::ZERO,
@@ -858,21 +812,17 @@ impl Meter {
             }
             "*CLS" => {
                 self.errors.clear();
-                self.esr = 0;
+                self.esr.clear();
                 self.ques = 0;
             }
             "*OPC?" => self.waiting = Some(Waiting::Opc),
             "*ESR?" => {
-                let v = self.esr;
-                self.esr = 0;
-                self.reply(format!("+{v}"), &[], now);
+                let v = self.esr.read();
+                self.reply(v, &[], now);
             }
             "SYST:ERR?" => {
-                let (c, m) = self
-                    .errors
-                    .pop_front()
-                    .unwrap_or_else(|| scpi_err(0, "No error"));
-                self.reply(format!("{c:+},\"{m}\""), &[], now);
+                let entry = self.errors.next_reply();
+                self.reply(entry, &[], now);
             }
             "SYST:IDEN" => {
                 self.personality = match first.to_ascii_uppercase().as_str() {
