@@ -53,22 +53,32 @@
 //! The input voltage comes from a [`SignalSource`] sampled over each reading's integration
 //! window, plus seeded gaussian noise. Faults can be scheduled in [`DmmConfig::faults`] or
 //! injected at run time through [`DmmHandle::inject`].
+//!
+//! Where it lives: this module holds the meter's state, its wire (RS-232 or GPIB), timing and
+//! output; `config` its configuration, `parse` the SCPI program-message parser, `commands`
+//! what each command does, `faults` injected faults and the power cycle. What it shares with
+//! the simulated Truevolt (the error queue, the fault grammar and handle, reply faults,
+//! reading format) is in [`crate::scpi`].
 
+mod commands;
+mod config;
+mod faults;
 mod parse;
+
+use config::sanitize;
+pub use config::{DmmConfig, Interface, LocalMode, ScheduledFault};
 
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use serde::{Deserialize, Serialize};
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::sync::mpsc;
 use tokio::time::Instant;
 
 use crate::SignalSource;
 use crate::scpi::{
-    ArmedFaults, Ctl, ErrorQueue, EventStatus, Noise, ReplyFault, SlowReplies, clip, format_nr3,
-    garbled, slow_delay,
+    ArmedFaults, Ctl, ErrorQueue, EventStatus, Noise, ReplyFault, SlowReplies, clip,
 };
 pub use gyrocal_link::Framing;
 use parse::{Cmd, Unit, parse_line};
@@ -96,131 +106,6 @@ pub const GPIB_UNTALK: u8 = 0x06;
 /// simulated bus agree.
 pub const GPIB_CHAR_TIME: Duration = gyrocal_hp34401a::timing::GPIB_CHAR_TIME;
 
-/// Which remote interface the simulated meter serves.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Interface {
-    /// The RS-232 port (the default): `SYST:REM` first, replies end CR LF, 11-bit characters
-    /// at the configured baud, Ctrl-C device clear.
-    #[default]
-    Rs232,
-    /// GPIB behind a controller (see the module documentation).
-    Gpib,
-}
-
-/// A fault from the configuration, injected once `after_commands` commands have been seen.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ScheduledFault {
-    /// Commands (program message units, from the first) seen before the fault is injected.
-    pub after_commands: u64,
-    /// The fault.
-    pub fault: Fault,
-}
-
-/// The simulated meter's configuration. Every field has a default; TOML or JSON may give any.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct DmmConfig {
-    /// `*IDN?` reply. Default [`DEFAULT_IDENTITY`].
-    pub identity: String,
-    /// Require `SYST:REM` (or `SYST:RWL`) before other commands take effect. Default true.
-    /// False is the same as `local_mode = "obey"`: the meter also starts (and comes back from a
-    /// power cycle) in remote.
-    pub strict_remote: bool,
-    /// What the meter does with commands and queries received over RS-232 in LOCAL (before
-    /// `SYST:REM`, after `SYST:LOC` or a power cycle) when `strict_remote` is true. The manual
-    /// only says the results are then unpredictable; default `refuse`.
-    pub local_mode: LocalMode,
-    /// Off time of a power cycle ([`Fault::PowerCycle`] without its own), in sim seconds.
-    /// Default 5.
-    pub power_off_s: f64,
-    /// Baud rate for the wire timing. Default 9600 (factory setting).
-    pub baud: u32,
-    /// Framing; every framing is 11 bits per character, so it does not change the timing.
-    /// Default 8N2.
-    pub framing: Framing,
-    /// Power-line frequency (50 or 60 Hz) setting the integration time. Default 50.
-    pub line_hz: u32,
-    /// Standard deviation of the gaussian reading noise, volts. Default 1 µV.
-    pub noise_v: f64,
-    /// Output buffer for `READ?`, in characters: measuring pauses while a reading does not fit.
-    /// Unconfirmed in the manual; default 512 (32 readings).
-    pub output_buffer: usize,
-    /// 1.0 = real instrument timing; 10.0 runs everything ten times faster (for pseudo-terminal
-    /// tests in real time). Default 1.0.
-    pub time_scale: f64,
-    /// Faults injected when the command count reaches their mark. Default none.
-    pub faults: Vec<ScheduledFault>,
-    /// The remote interface served. Default `rs232`.
-    pub interface: Interface,
-}
-
-impl Default for DmmConfig {
-    fn default() -> Self {
-        DmmConfig {
-            identity: DEFAULT_IDENTITY.to_string(),
-            strict_remote: true,
-            local_mode: LocalMode::Refuse,
-            power_off_s: 5.0,
-            baud: 9600,
-            framing: Framing::EightNone,
-            line_hz: 50,
-            noise_v: 1e-6,
-            output_buffer: 512,
-            time_scale: 1.0,
-            faults: Vec::new(),
-            interface: Interface::Rs232,
-        }
-    }
-}
-
-impl DmmConfig {
-    /// Checks the values [`SimDmm::spawn`] needs.
-    pub fn validate(&self) -> Result<(), String> {
-        if !gyrocal_link::SUPPORTED_BAUDS.contains(&self.baud) {
-            return Err(format!("baud {} not supported", self.baud));
-        }
-        if self.line_hz != 50 && self.line_hz != 60 {
-            return Err(format!("line_hz {} is neither 50 nor 60", self.line_hz));
-        }
-        if !(self.time_scale.is_finite() && self.time_scale > 0.0) {
-            return Err(format!("time_scale {} must be positive", self.time_scale));
-        }
-        if !(self.noise_v.is_finite() && self.noise_v >= 0.0) {
-            return Err(format!("noise_v {} must be >= 0", self.noise_v));
-        }
-        if !(self.power_off_s.is_finite() && self.power_off_s >= 0.0) {
-            return Err(format!("power_off_s {} must be >= 0", self.power_off_s));
-        }
-        if self.output_buffer < 17 {
-            return Err(format!(
-                "output_buffer {} cannot hold a reading",
-                self.output_buffer
-            ));
-        }
-        Ok(())
-    }
-}
-
-/// What the simulated meter does in LOCAL with everything but `SYST:REM` and `SYST:RWL`.
-///
-/// The User's Guide says `SYST:REM` must be sent first over RS-232, otherwise "results are
-/// unpredictable", and lists error 550 "Command not allowed in local" for a `READ?` received
-/// in local over RS-232. `refuse` applies that error to every command.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum LocalMode {
-    /// Every command and query is refused with error 550 "Command not allowed in local"
-    /// queued; queries are not answered (so `SYST:ERR?` cannot read it before `SYST:REM`).
-    #[default]
-    Refuse,
-    /// Everything is ignored: nothing executed, nothing answered, nothing queued.
-    Ignore,
-    /// Everything is executed as in remote (only the remote flag differs).
-    Obey,
-}
-
 /// The simulated 34401A.
 pub struct SimDmm;
 
@@ -244,30 +129,6 @@ impl SimDmm {
         let task = tokio::spawn(meter.run(stream, rx));
         DmmHandle::from_parts(tx, stats, task)
     }
-}
-
-fn sanitize(mut c: DmmConfig) -> DmmConfig {
-    if let Err(e) = c.validate() {
-        tracing::warn!(error = %e, "simulated 34401A: invalid configuration, using defaults for bad values");
-        let d = DmmConfig::default();
-        if !gyrocal_link::SUPPORTED_BAUDS.contains(&c.baud) {
-            c.baud = d.baud;
-        }
-        if c.line_hz != 50 && c.line_hz != 60 {
-            c.line_hz = d.line_hz;
-        }
-        if !(c.time_scale.is_finite() && c.time_scale > 0.0) {
-            c.time_scale = 1.0;
-        }
-        if !(c.noise_v.is_finite() && c.noise_v >= 0.0) {
-            c.noise_v = d.noise_v;
-        }
-        c.output_buffer = c.output_buffer.max(17);
-        if !(c.power_off_s.is_finite() && c.power_off_s >= 0.0) {
-            c.power_off_s = d.power_off_s;
-        }
-    }
-    c
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -712,110 +573,6 @@ impl Meter {
             || self.lines.iter().any(|l| l.text.contains('?'))
     }
 
-    // ---- faults ------------------------------------------------------------------------
-
-    fn inject(&mut self, f: Fault) {
-        tracing::debug!(fault = ?f, "simulated 34401A: fault injected");
-        if let Some(reply_fault) = ReplyFault::of(&f) {
-            self.pending_reply_fault.push_back(reply_fault);
-            return;
-        }
-        match f {
-            Fault::NoReply | Fault::Garble | Fault::Truncate => {}
-            Fault::Disconnect => self.disconnect = true,
-            Fault::PowerCycle { off_s } => self.power_off(off_s),
-            Fault::Overload { readings } => self.overloads_left += readings,
-            Fault::PushError { code, message } => self.raise(code, &message),
-            Fault::Slow { delay_s, replies } => {
-                self.slow
-                    .set(scaled(&self.cfg, slow_delay(delay_s)), replies);
-            }
-        }
-    }
-
-    /// Switches the meter off for `off_s` sim seconds (default `power_off_s`): the
-    /// measurement, the line being executed, everything buffered in and out is lost.
-    fn power_off(&mut self, off_s: Option<f64>) {
-        let off = off_s
-            .filter(|s| s.is_finite() && *s >= 0.0)
-            .unwrap_or(self.cfg.power_off_s);
-        let now = Instant::now().max(self.clock);
-        let until = now + scaled(&self.cfg, Duration::from_secs_f64(off.min(1e9)));
-        tracing::debug!(off_s = off, "simulated 34401A: power off");
-        // a power cycle while off restarts the off time
-        self.off_until = Some(self.off_until.map_or(until, |u| u.max(until)));
-        self.meas = None;
-        self.exec = None;
-        self.out.clear();
-        self.tx = None;
-        self.lines.clear();
-        self.inbuf.clear();
-    }
-
-    /// Back on at `t`, as after power-on: LOCAL (unless `strict_remote` is off), the `*RST`
-    /// settings, memory, buffers and error queue empty, the Power On event bit set.
-    fn power_on(&mut self, t: Instant) {
-        tracing::debug!("simulated 34401A: power on");
-        self.off_until = None;
-        self.counters.power_cycles += 1;
-        self.remote = !self.cfg.strict_remote || self.gpib();
-        self.talk = false;
-        self.talk_check = false;
-        self.set = Settings::default();
-        self.errors.clear();
-        self.memory.clear();
-        self.memory_fault = None;
-        self.esr = EventStatus::powered_on();
-        self.meas = None;
-        self.exec = None;
-        self.out.clear();
-        self.tx = None;
-        self.lines.clear();
-        self.inbuf.clear();
-        self.clock = self.clock.max(t);
-        self.in_wire_free = t;
-        self.out_wire_free = t;
-        self.out_time = t;
-    }
-
-    /// Fires the faults armed for the reading about to be taken; true when the meter
-    /// disconnected or was switched off instead.
-    fn reading_faults(&mut self, dest: Dest) -> bool {
-        let next = self.counters.readings_taken + 1;
-        for f in self.at_reading.due(next) {
-            tracing::debug!(fault = ?f, reading = next, "simulated 34401A: fault at reading");
-            let Some(reply_fault) = ReplyFault::of(&f) else {
-                self.inject(f);
-                continue;
-            };
-            if self.off_until.is_some() {
-                continue;
-            }
-            match dest {
-                Dest::Memory => self.memory_fault = Some((self.memory.len(), reply_fault)),
-                Dest::Output => match self.exec.as_mut() {
-                    // the reply has begun: the fault lands on this reading's characters
-                    Some(e) if e.has_output && !e.muted => e.fault = Some(reply_fault),
-                    // the reply begins with this reading
-                    _ => self.pending_reply_fault.push_front(reply_fault),
-                },
-            }
-        }
-        self.disconnect || self.off_until.is_some()
-    }
-
-    fn scheduled_faults(&mut self) {
-        while self
-            .faults
-            .last()
-            .is_some_and(|f| f.after_commands <= self.counters.commands_seen)
-        {
-            if let Some(f) = self.faults.pop() {
-                self.inject(f.fault);
-            }
-        }
-    }
-
     fn raise(&mut self, code: i32, message: &str) {
         self.counters.errors_raised += 1;
         tracing::debug!(code, message, "simulated 34401A: error");
@@ -1085,352 +842,12 @@ impl Meter {
             self.raise(code, msg);
         }
     }
-
-    fn command(&mut self, cmd: Cmd, u: &Unit, now: Instant) -> Result<(), (i32, &'static str)> {
-        let q = u.query;
-        let p = &u.params;
-        let no_params = || {
-            if p.is_empty() {
-                Ok(())
-            } else {
-                Err((-108, "Parameter not allowed"))
-            }
-        };
-        let one = || match p.as_slice() {
-            [x] => Ok(x.as_str()),
-            [] => Err((-109, "Missing parameter")),
-            _ => Err((-108, "Parameter not allowed")),
-        };
-        match (cmd, q) {
-            (Cmd::Idn, true) => {
-                no_params()?;
-                let id = self.cfg.identity.clone();
-                self.reply(&id);
-            }
-            (Cmd::Rst, false) => {
-                no_params()?;
-                self.set = Settings::default();
-                self.memory.clear();
-                self.memory_fault = None;
-            }
-            (Cmd::Cls, false) => {
-                no_params()?;
-                self.errors.clear();
-                self.esr.clear();
-            }
-            (Cmd::Opc, true) => self.reply("1"),
-            (Cmd::Opc | Cmd::Ese | Cmd::Sre, false) => {}
-            (Cmd::Esr, true) => {
-                let v = self.esr.read();
-                self.reply(&v);
-            }
-            (Cmd::Stb | Cmd::Ese | Cmd::Sre | Cmd::Tst, true) => self.reply("+0"),
-            (Cmd::Trg, false) => return Err((-211, "Trigger ignored")),
-            (Cmd::Remote, false) => self.remote = true,
-            (Cmd::Rwlock, false) => self.remote = true,
-            (Cmd::Local, false) => self.remote = false,
-            (Cmd::Error, true) => {
-                let entry = self.errors.next_reply();
-                self.reply(&entry);
-            }
-            (Cmd::Version, true) => self.reply("1992.0"),
-            (Cmd::Configure, false) => self.configure(p)?,
-            (Cmd::Configure, true) => {
-                let r = self.set.range.unwrap_or(10.0);
-                let res = r * resolution_ratio(self.set.nplc);
-                self.reply(&format!("\"VOLT {},{}\"", format_nr3(r), format_nr3(res)));
-            }
-            (Cmd::Measure, true) => {
-                self.configure(p)?;
-                self.start_read(now);
-            }
-            (Cmd::Function, false) => {
-                let f = one()?.trim_matches(['"', '\'']).to_ascii_uppercase();
-                if !matches!(f.as_str(), "VOLT" | "VOLT:DC" | "VOLTAGE" | "VOLTAGE:DC") {
-                    return Err((-224, "Illegal parameter value"));
-                }
-            }
-            (Cmd::Function, true) => self.reply("\"VOLT\""),
-            (Cmd::Range, false) => {
-                self.set.range = Some(match keyword(one()?).as_str() {
-                    "MIN" => 0.1,
-                    "MAX" => 1000.0,
-                    "DEF" => 10.0,
-                    _ => pick_range(number(one()?)?)?,
-                });
-            }
-            (Cmd::Range, true) => {
-                let r = self.set.range.unwrap_or(10.0);
-                self.reply(&format_nr3(r));
-            }
-            (Cmd::RangeAuto, false) => {
-                if boolean(one()?)? {
-                    self.set.range = None;
-                } else if self.set.range.is_none() {
-                    self.set.range = Some(10.0);
-                }
-            }
-            (Cmd::RangeAuto, true) => self.reply(bool01(self.set.range.is_none())),
-            (Cmd::Nplc, false) => {
-                let v = match keyword(one()?).as_str() {
-                    "MIN" => 0.02,
-                    "MAX" => 100.0,
-                    "DEF" => 10.0,
-                    _ => number(one()?)?,
-                };
-                if ![0.02, 0.2, 1.0, 10.0, 100.0].contains(&v) {
-                    return Err((-222, "Data out of range"));
-                }
-                self.set.nplc = v;
-            }
-            (Cmd::Nplc, true) => {
-                let v = self.set.nplc;
-                self.reply(&format_nr3(v));
-            }
-            (Cmd::Resolution, false) => {
-                let r = number(one()?)?;
-                self.set.nplc = nplc_for_resolution(r / self.set.range.unwrap_or(10.0));
-            }
-            (Cmd::Resolution, true) => {
-                let r = self.set.range.unwrap_or(10.0) * resolution_ratio(self.set.nplc);
-                self.reply(&format_nr3(r));
-            }
-            (Cmd::ZeroAuto, false) => {
-                self.set.zero = match keyword(one()?).as_str() {
-                    "ON" | "1" => Zero::On,
-                    "OFF" | "0" => Zero::Off,
-                    "ONCE" => Zero::Once,
-                    _ => return Err((-224, "Illegal parameter value")),
-                };
-            }
-            (Cmd::ZeroAuto, true) => self.reply(bool01(self.set.zero == Zero::On)),
-            (Cmd::ImpedanceAuto, false) => self.set.imp_auto = boolean(one()?)?,
-            (Cmd::ImpedanceAuto, true) => self.reply(bool01(self.set.imp_auto)),
-            (Cmd::TrigSource, false) => {
-                self.set.trig_source = match keyword(one()?).as_str() {
-                    "IMM" | "IMMEDIATE" => TrigSource::Imm,
-                    "BUS" => TrigSource::Bus,
-                    "EXT" | "EXTERNAL" => TrigSource::Ext,
-                    _ => return Err((-224, "Illegal parameter value")),
-                };
-            }
-            (Cmd::TrigSource, true) => {
-                let s = match self.set.trig_source {
-                    TrigSource::Imm => "IMM",
-                    TrigSource::Bus => "BUS",
-                    TrigSource::Ext => "EXT",
-                };
-                self.reply(s);
-            }
-            (Cmd::TrigDelay, false) => {
-                let d = match keyword(one()?).as_str() {
-                    "MIN" => 0.0,
-                    "MAX" => 3600.0,
-                    _ => number(one()?)?,
-                };
-                if !(0.0..=3600.0).contains(&d) {
-                    return Err((-222, "Data out of range"));
-                }
-                self.set.trig_delay = Some(d);
-            }
-            (Cmd::TrigDelay, true) => {
-                let d = self
-                    .trigger_delay()
-                    .mul_f64(self.cfg.time_scale)
-                    .as_secs_f64();
-                self.reply(&format_nr3(d));
-            }
-            (Cmd::TrigDelayAuto, false) => {
-                if boolean(one()?)? {
-                    self.set.trig_delay = None;
-                } else if self.set.trig_delay.is_none() {
-                    let d = self
-                        .trigger_delay()
-                        .mul_f64(self.cfg.time_scale)
-                        .as_secs_f64();
-                    self.set.trig_delay = Some(d);
-                }
-            }
-            (Cmd::TrigDelayAuto, true) => self.reply(bool01(self.set.trig_delay.is_none())),
-            (Cmd::TrigCount, false) => self.set.trig_count = count(one()?)?,
-            (Cmd::TrigCount, true) => self.reply(&format!("{:+}", self.set.trig_count)),
-            (Cmd::SampleCount, false) => self.set.samp_count = count(one()?)?,
-            (Cmd::SampleCount, true) => self.reply(&format!("{:+}", self.set.samp_count)),
-            (Cmd::Init, false) => {
-                no_params()?;
-                let total = u64::from(self.set.samp_count) * u64::from(self.set.trig_count);
-                if total > MEMORY_SIZE as u64 {
-                    return Err((531, "Insufficient memory"));
-                }
-                self.begin_measurement(Dest::Memory, now);
-            }
-            (Cmd::Read, true) => {
-                no_params()?;
-                self.start_read(now);
-            }
-            (Cmd::Fetch, true) => {
-                no_params()?;
-                if self.memory.is_empty() {
-                    return Err((-230, "Data stale"));
-                }
-                let mut fields: Vec<String> =
-                    self.memory.iter().map(|&v| format_reading(v)).collect();
-                match self.memory_fault.take() {
-                    Some((i, ReplyFault::Garble)) => {
-                        if let Some(f) = fields.get_mut(i) {
-                            *f = garbled(f.as_bytes());
-                        }
-                    }
-                    Some((_, other)) if !self.exec.as_ref().is_some_and(|e| e.has_output) => {
-                        self.pending_reply_fault.push_front(other);
-                    }
-                    Some(_) | None => {}
-                }
-                self.reply(&fields.join(","));
-            }
-            (Cmd::DataPoints, true) => {
-                let n = self.memory.len();
-                self.reply(&format!("{n:+}"));
-            }
-            (Cmd::Display, false) => self.set.display = boolean(one()?)?,
-            (Cmd::Display, true) => self.reply(bool01(self.set.display)),
-            (Cmd::DisplayText, false) => {
-                let t = one()?.trim_matches(['"', '\'']);
-                if t.len() > 12 {
-                    return Err((-223, "Too much data"));
-                }
-            }
-            (Cmd::DisplayText, true) => self.reply("\"\""),
-            (Cmd::DisplayTextClear, false) => {}
-            _ => return Err((-113, "Undefined header")),
-        }
-        Ok(())
-    }
-
-    fn start_read(&mut self, now: Instant) {
-        self.counters.queries_answered += 1;
-        self.begin_measurement(Dest::Output, now);
-    }
-
-    /// `CONFigure:VOLTage:DC [range[,resolution]]` and its presets.
-    fn configure(&mut self, p: &[String]) -> Result<(), (i32, &'static str)> {
-        if p.len() > 2 {
-            return Err((-108, "Parameter not allowed"));
-        }
-        let range = match p.first().map(|s| keyword(s)) {
-            None => None,
-            Some(k) if k == "DEF" || k == "AUTO" => None,
-            Some(k) if k == "MIN" => Some(0.1),
-            Some(k) if k == "MAX" => Some(1000.0),
-            Some(_) => Some(pick_range(number(&p[0])?)?),
-        };
-        let nplc = match p.get(1).map(|s| keyword(s)) {
-            None => 10.0,
-            Some(k) if k == "DEF" => 10.0,
-            Some(k) if k == "MIN" => 100.0,
-            Some(k) if k == "MAX" => 0.02,
-            Some(_) => nplc_for_resolution(number(&p[1])? / range.unwrap_or(10.0)),
-        };
-        self.set.range = range;
-        self.set.nplc = nplc;
-        self.set.samp_count = 1;
-        self.set.trig_count = 1;
-        self.set.trig_source = TrigSource::Imm;
-        self.set.trig_delay = None;
-        self.set.zero = if nplc >= 1.0 { Zero::On } else { Zero::Off };
-        self.set.imp_auto = false;
-        Ok(())
-    }
 }
 
 async fn sleep_until_opt(t: Option<Instant>) {
     match t {
         Some(t) => tokio::time::sleep_until(t).await,
         None => std::future::pending().await,
-    }
-}
-
-fn keyword(s: &str) -> String {
-    s.trim().to_ascii_uppercase()
-}
-
-fn number(s: &str) -> Result<f64, (i32, &'static str)> {
-    let t = s.trim();
-    // the 34401A accepts an optional unit suffix on voltages
-    let t = t.strip_suffix(['V', 'v']).unwrap_or(t);
-    match t.parse::<f64>() {
-        Ok(v) if v.is_finite() => Ok(v),
-        _ => Err((-104, "Data type error")),
-    }
-}
-
-fn boolean(s: &str) -> Result<bool, (i32, &'static str)> {
-    match keyword(s).as_str() {
-        "ON" | "1" => Ok(true),
-        "OFF" | "0" => Ok(false),
-        _ => Err((-224, "Illegal parameter value")),
-    }
-}
-
-fn count(s: &str) -> Result<u32, (i32, &'static str)> {
-    let k = keyword(s);
-    let v = match k.as_str() {
-        "MIN" => 1.0,
-        "MAX" => 50_000.0,
-        _ => number(s)?,
-    };
-    if !(1.0..=50_000.0).contains(&v) || v.fract() != 0.0 {
-        return Err((-222, "Data out of range"));
-    }
-    Ok(v as u32)
-}
-
-fn bool01(b: bool) -> &'static str {
-    if b { "1" } else { "0" }
-}
-
-/// The smallest range that holds `v` volts.
-fn pick_range(v: f64) -> Result<f64, (i32, &'static str)> {
-    let v = v.abs();
-    [0.1, 1.0, 10.0, 100.0, 1000.0]
-        .into_iter()
-        .find(|&r| v <= r * 1.2)
-        .ok_or((-222, "Data out of range"))
-}
-
-/// Resolution as a fraction of the range for each NPLC (User's Guide, resolution table).
-fn resolution_ratio(nplc: f64) -> f64 {
-    match nplc {
-        n if n <= 0.02 => 1e-4,
-        n if n <= 0.2 => 1e-5,
-        n if n <= 1.0 => 3e-6,
-        n if n <= 10.0 => 1e-6,
-        _ => 3e-7,
-    }
-}
-
-fn nplc_for_resolution(ratio: f64) -> f64 {
-    [(1e-4, 0.02), (1e-5, 0.2), (3e-6, 1.0), (1e-6, 10.0)]
-        .into_iter()
-        .find(|&(r, _)| ratio >= r * 0.999)
-        .map_or(100.0, |(_, n)| n)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn config_defaults_and_toml() {
-        let c: DmmConfig = toml::from_str("").unwrap();
-        assert_eq!(c, DmmConfig::default());
-        let c: DmmConfig = toml::from_str(
-            "baud = 1200\nframing = \"7E2\"\ntime_scale = 10.0\n[[faults]]\nafter_commands = 5\nfault = { kind = \"overload\", readings = 3 }\n",
-        )
-        .unwrap();
-        assert_eq!(c.baud, 1200);
-        assert_eq!(c.faults[0].fault, Fault::Overload { readings: 3 });
-        assert!(toml::from_str::<DmmConfig>("bogus = 1").is_err());
     }
 }
 
