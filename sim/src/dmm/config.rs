@@ -86,7 +86,7 @@ impl Default for DmmConfig {
 }
 
 impl DmmConfig {
-    /// Checks the values [`SimDmm::spawn`] needs.
+    /// Checks the values [`super::SimDmm::spawn`] needs.
     pub fn validate(&self) -> Result<(), String> {
         if !gyrocal_link::SUPPORTED_BAUDS.contains(&self.baud) {
             return Err(format!("baud {} not supported", self.baud));

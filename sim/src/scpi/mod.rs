@@ -6,7 +6,7 @@
 //!   reading number;
 //! - `queue`: the 20-entry error queue with its -350 overflow and the `SYST:ERR?` reply, the
 //!   Standard Event register's Power On bit and the `*ESR?` reply;
-//! - `reply`: reply faults (no reply, garbled, truncated: [`garbled`]), a slow meter's held
+//! - `reply`: reply faults (no reply, garbled, truncated: `garbled`), a slow meter's held
 //!   replies, the seeded reading noise and overload clipping, and readings formatted as the
 //!   meters send them ([`format_reading`]).
 //!

@@ -61,7 +61,7 @@ pub struct Burst {
 
 impl<T: Transport> Hp34401a<T> {
     /// Acquires `n` readings with `strategy`, retrying each step (the stream, a memory burst, a
-    /// polled reading) after a timeout or garbled reply up to [`DriverOptions::retries`] times
+    /// polled reading) after a timeout or garbled reply up to [`crate::DriverOptions::retries`] times
     /// in all, with [`Hp34401a::recover`] before each retry.
     pub async fn acquire(&mut self, n: usize, strategy: Strategy) -> Result<Acquisition, Error> {
         let timing = self.acquisition_timing()?;

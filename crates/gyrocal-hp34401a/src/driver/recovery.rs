@@ -127,8 +127,8 @@ impl<T: Transport> Hp34401a<T> {
     ///    re-established as at connect: device clear, `SYST:REM` (or `SYST:RWL`), `*CLS`,
     ///    `*IDN?` checked to be a 34401A, the configuration of [`Hp34401a::configure`] sent
     ///    again, the error queue drained (it must be empty). A meter that does not answer is
-    ///    tried again every [`DriverOptions::reconnect_pause`] until
-    ///    [`DriverOptions::reconnect_timeout`] after the start of the recovery, then
+    ///    tried again every [`crate::DriverOptions::reconnect_pause`] until
+    ///    [`crate::DriverOptions::reconnect_timeout`] after the start of the recovery, then
     ///    [`Error::NotBack`].
     ///
     /// Why not always the full sequence: a plain recovery costs two short exchanges and keeps
