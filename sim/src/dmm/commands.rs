@@ -7,7 +7,7 @@ use tokio::time::Instant;
 
 use super::parse::{Cmd, Unit};
 use super::{Dest, MEMORY_SIZE, Meter, Settings, TrigSource, Zero};
-use crate::scpi::{ReplyFault, format_nr3, format_reading, garbled};
+use crate::scpi::{ReplyFault, boolean, format_nr3, format_reading, garbled, keyword, number};
 
 impl Meter {
     pub(super) fn command(
@@ -269,28 +269,6 @@ impl Meter {
         self.set.zero = if nplc >= 1.0 { Zero::On } else { Zero::Off };
         self.set.imp_auto = false;
         Ok(())
-    }
-}
-
-fn keyword(s: &str) -> String {
-    s.trim().to_ascii_uppercase()
-}
-
-fn number(s: &str) -> Result<f64, (i32, &'static str)> {
-    let t = s.trim();
-    // the 34401A accepts an optional unit suffix on voltages
-    let t = t.strip_suffix(['V', 'v']).unwrap_or(t);
-    match t.parse::<f64>() {
-        Ok(v) if v.is_finite() => Ok(v),
-        _ => Err((-104, "Data type error")),
-    }
-}
-
-fn boolean(s: &str) -> Result<bool, (i32, &'static str)> {
-    match keyword(s).as_str() {
-        "ON" | "1" => Ok(true),
-        "OFF" | "0" => Ok(false),
-        _ => Err((-224, "Illegal parameter value")),
     }
 }
 

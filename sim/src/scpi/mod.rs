@@ -6,6 +6,7 @@
 //!   reading number;
 //! - `queue`: the 20-entry error queue with its -350 overflow and the `SYST:ERR?` reply, the
 //!   Standard Event register's Power On bit and the `*ESR?` reply;
+//! - `params`: numeric and boolean parameters and the SCPI errors their violations queue;
 //! - `reply`: reply faults (no reply, garbled, truncated: `garbled`), a slow meter's held
 //!   replies, the seeded reading noise and overload clipping, and readings formatted as the
 //!   meters send them ([`format_reading`]).
@@ -15,11 +16,13 @@
 //! shared SCPI behaviour is made once.
 
 pub mod control;
+mod params;
 mod queue;
 mod reply;
 
 pub(crate) use control::{ArmedFaults, Ctl};
 pub use control::{DmmHandle, DmmInjector, DmmStats, Fault};
+pub(crate) use params::{boolean, keyword, number};
 pub use queue::{ERROR_QUEUE_SIZE, ESR_PON};
 pub(crate) use queue::{ErrorQueue, EventStatus};
 pub(crate) use reply::{Noise, ReplyFault, SlowReplies, clip, format_nr3, garbled, slow_delay};

@@ -5,7 +5,7 @@
 use tokio::time::Instant;
 
 use super::{Meter, Personality, Settings, Waiting};
-use crate::scpi::format_reading;
+use crate::scpi::{boolean, format_reading, number};
 
 impl Meter {
     pub(super) fn run_command(
@@ -15,7 +15,6 @@ impl Meter {
         now: Instant,
     ) -> Result<(), (i32, &'static str)> {
         let first = p.first().copied().unwrap_or("");
-        let nr = |s: &str| parse_number(s).ok_or((-104, "Data type error"));
         match h {
             "*IDN?" => {
                 let text = match self.personality {
@@ -65,22 +64,22 @@ impl Meter {
                 self.set = Settings::default();
                 self.set.range = match first.to_ascii_uppercase().as_str() {
                     "" | "AUTO" | "DEF" => None,
-                    r => Some(self.check_range(nr(r)?)?),
+                    r => Some(self.check_range(number(r)?)?),
                 };
                 self.config_changed();
             }
             "VOLT:RANG" => {
-                self.set.range = Some(self.check_range(nr(first)?)?);
+                self.set.range = Some(self.check_range(number(first)?)?);
                 self.config_changed();
             }
             "VOLT:RANG:AUTO" => {
-                if parse_bool(first).ok_or((-224, "Illegal parameter value"))? {
+                if boolean(first)? {
                     self.set.range = None;
                 }
                 self.config_changed();
             }
             "VOLT:NPLC" => {
-                let v = nr(first)?;
+                let v = number(first)?;
                 if !self.cfg.model.nplc_values().contains(&v) {
                     return Err((-222, "Data out of range"));
                 }
@@ -88,7 +87,7 @@ impl Meter {
                 self.config_changed();
             }
             "VOLT:ZERO:AUTO" => {
-                self.set.autozero = parse_bool(first).ok_or((-224, "Illegal parameter value"))?;
+                self.set.autozero = boolean(first)?;
                 self.config_changed();
             }
             "TRIG:SOUR" => {
@@ -97,7 +96,7 @@ impl Meter {
                 }
             }
             "TRIG:DEL" => {
-                let d = nr(first)?;
+                let d = number(first)?;
                 if !(0.0..=3600.0).contains(&d) {
                     return Err((-222, "Data out of range"));
                 }
@@ -105,18 +104,18 @@ impl Meter {
                 self.config_changed();
             }
             "TRIG:DEL:AUTO" => {
-                if parse_bool(first).ok_or((-224, "Illegal parameter value"))? {
+                if boolean(first)? {
                     self.set.trig_delay = None;
                 }
                 self.config_changed();
             }
             "TRIG:COUN" => {
-                if nr(first)? != 1.0 {
+                if number(first)? != 1.0 {
                     return Err((-221, "Settings conflict"));
                 }
             }
             "SAMP:COUN" => {
-                let n = nr(first)?;
+                let n = number(first)?;
                 if !(1.0..=1e6).contains(&n) || n.fract() != 0.0 {
                     return Err((-222, "Data out of range"));
                 }
@@ -141,7 +140,7 @@ impl Meter {
             }
             "FETC?" => self.waiting = Some(Waiting::Fetch),
             "DATA:REM?" => {
-                let n = nr(first)?;
+                let n = number(first)?;
                 let wait = p.get(1).is_some_and(|w| w.eq_ignore_ascii_case("WAIT"));
                 if n < 1.0 || n.fract() != 0.0 || n > self.capacity() as f64 {
                     return Err((-222, "Data out of range"));
@@ -157,7 +156,7 @@ impl Meter {
                 let max = if first.is_empty() {
                     self.memory.len()
                 } else {
-                    let m = nr(first)?;
+                    let m = number(first)?;
                     if m < 1.0 {
                         return Err((-222, "Data out of range"));
                     }
@@ -264,20 +263,6 @@ pub(super) fn canonical(header: &str) -> String {
         }
     }
     format!("{}{query}", out.join(":"))
-}
-
-fn parse_number(s: &str) -> Option<f64> {
-    let t = s.trim();
-    let t = t.strip_suffix(['V', 'v']).unwrap_or(t);
-    t.parse::<f64>().ok().filter(|v| v.is_finite())
-}
-
-fn parse_bool(s: &str) -> Option<bool> {
-    match s.trim().to_ascii_uppercase().as_str() {
-        "ON" | "1" => Some(true),
-        "OFF" | "0" => Some(false),
-        _ => None,
-    }
 }
 
 #[cfg(test)]
