@@ -11,7 +11,9 @@
 //! keeps its time on tokio's clock, so a whole calibration runs in virtual time in seconds.
 //!
 //! Fidelity follows `shared/docs/hp34401a.md` and `shared/docs/rate-table.md`; what those leave
-//! open is configurable, with the default documented on the configuration field.
+//! open is configurable, with the default documented on the configuration field. What the
+//! simulated SCPI meters share (the error queue, faults and their handle, reply formatting)
+//! is written once, in [`scpi`].
 
 pub mod bench;
 pub mod dmm;
@@ -19,6 +21,7 @@ pub mod faults;
 pub mod from_plan;
 pub mod gyro;
 pub mod prologix;
+pub mod scpi;
 pub mod signal;
 pub mod table;
 pub mod truevolt;

@@ -1,46 +1,10 @@
-//! Driver errors, with a small [`ErrorKind`] so the sequencer can decide what to do.
+//! Driver errors, with the meter role's [`ErrorKind`] so the sequencer can decide what to do.
+//! The error-queue entry ([`InstrumentError`]) and the kinds are the role's (`gyrocal-meter`),
+//! shared with the Truevolt driver.
 
 use gyrocal_link::{LinkError, show_bytes};
-
-/// One entry of the meter's error queue (`SYST:ERR?`), such as `-222,"Data out of range"`.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct InstrumentError {
-    /// The SCPI or device-specific code (negative for standard SCPI errors).
-    pub code: i32,
-    /// The meter's message.
-    pub message: String,
-}
-
-impl std::fmt::Display for InstrumentError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{},\"{}\"", self.code, self.message)
-    }
-}
-
-/// What went wrong, independent of the details.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum ErrorKind {
-    /// No (complete) reply in time. Retryable.
-    Timeout,
-    /// The link went away. Not retryable without reopening it.
-    Disconnected,
-    /// A reply that is not what the protocol allows (bad reading, wrong count). Retryable.
-    Garbled,
-    /// An operating-system error on the link.
-    Io,
-    /// The meter reported errors in its queue.
-    Instrument,
-    /// The device is not an HP 34401A.
-    Identity,
-    /// The configuration or the request is invalid (nothing was sent).
-    Config,
-    /// The meter stopped answering and did not come back within
-    /// [`crate::DriverOptions::reconnect_timeout`]. Not retryable.
-    Unreachable,
-    /// The readings of a memory burst were lost with the meter's memory (a power cycle, or the
-    /// link re-established since the burst was armed): the burst must be measured again.
-    ReadingsLost,
-}
+use gyrocal_meter::scpi::list;
+pub use gyrocal_meter::{ErrorKind, InstrumentError};
 
 /// An error from the driver.
 #[derive(Debug, thiserror::Error)]
@@ -153,16 +117,11 @@ fn seconds(d: std::time::Duration) -> String {
     }
 }
 
-fn list(errors: &[InstrumentError]) -> String {
-    errors
-        .iter()
-        .map(ToString::to_string)
-        .collect::<Vec<_>>()
-        .join("; ")
-}
-
 impl Error {
-    /// The kind of this error (for [`Error::GaveUp`], the kind of the last attempt's error).
+    /// The kind of this error (for [`Error::GaveUp`], the kind of the last attempt's error),
+    /// with the driver's detail: [`ErrorKind::Identity`], [`ErrorKind::Config`] and
+    /// [`ErrorKind::Io`] are told apart here (the role reports them as
+    /// [`ErrorKind::Other`]: [`gyrocal_meter::MeterError::kind`]).
     pub fn kind(&self) -> ErrorKind {
         match self {
             Error::Link(e) => match e.kind() {
@@ -192,20 +151,51 @@ impl Error {
 }
 
 impl gyrocal_meter::MeterError for Error {
-    fn kind(&self) -> gyrocal_meter::ErrorKind {
-        use gyrocal_meter::ErrorKind as K;
+    fn kind(&self) -> ErrorKind {
         match self {
             // the driver already retried: not retryable again, whatever the last failure was
-            Error::GaveUp { .. } => K::Other,
-            _ => match Error::kind(self) {
-                ErrorKind::Timeout => K::Timeout,
-                ErrorKind::Disconnected => K::Disconnected,
-                ErrorKind::Garbled => K::Garbled,
-                ErrorKind::Instrument => K::Instrument,
-                ErrorKind::Unreachable => K::Unreachable,
-                ErrorKind::ReadingsLost => K::ReadingsLost,
-                ErrorKind::Io | ErrorKind::Identity | ErrorKind::Config => K::Other,
-            },
+            Error::GaveUp { .. } => ErrorKind::Other,
+            _ => Error::kind(self).in_role(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use gyrocal_meter::MeterError;
+
+    /// The driver's detail and the role's view of the same errors: identity, configuration
+    /// and I/O are `Other` to a run, and a give-up is never retryable again.
+    #[test]
+    fn the_role_sees_the_drivers_kinds_coarser() {
+        let identity = Error::NotA34401A {
+            device: "sim".into(),
+            reply: "X".into(),
+        };
+        assert_eq!(identity.kind(), ErrorKind::Identity);
+        assert_eq!(MeterError::kind(&identity), ErrorKind::Other);
+        let config = Error::Config("nplc".into());
+        assert_eq!(config.kind(), ErrorKind::Config);
+        assert_eq!(MeterError::kind(&config), ErrorKind::Other);
+        let lost = Error::ReadingsLost {
+            device: "sim".into(),
+            count: 3,
+            cause: "a power cycle".into(),
+        };
+        assert_eq!(MeterError::kind(&lost), ErrorKind::ReadingsLost);
+        let gave_up = Error::GaveUp {
+            device: "sim".into(),
+            attempts: 3,
+            slow: String::new(),
+            last: Box::new(Error::WrongCount {
+                device: "sim".into(),
+                expected: 3,
+                got: 2,
+            }),
+        };
+        assert_eq!(gave_up.kind(), ErrorKind::Garbled);
+        assert!(!gave_up.is_retryable());
+        assert_eq!(MeterError::kind(&gave_up), ErrorKind::Other);
     }
 }

@@ -66,11 +66,13 @@ pub mod timing;
 pub use config::{AutoZero, DcvConfig, TriggerSource};
 #[cfg(feature = "driver")]
 pub use driver::{
-    Acquisition, Burst, DriverOptions, Hp34401a, Identity, LinkLoss, Progress, ProgressFn,
-    Recovery, parse_error,
+    Acquisition, Burst, DriverOptions, Hp34401a, Identity, LinkLoss, Progress, ProgressFn, Recovery,
 };
 #[cfg(feature = "driver")]
 pub use error::{Error, ErrorKind, InstrumentError};
+/// The SCPI error-queue parser is the meter role's (one copy for every SCPI meter).
+#[cfg(feature = "driver")]
+pub use gyrocal_meter::parse_error;
 #[cfg(feature = "driver")]
 pub use meter::{Hp34401aMeter, PendingBurst};
 #[cfg(feature = "driver")]

@@ -533,3 +533,37 @@ async fn connect_and_close_over_a_prologix_controller() {
     dmm.connect().await.unwrap();
     dmm.close().await.unwrap().into_inner().done();
 }
+
+/// A meter whose error queue never empties (a fault that refills it) is asked a bounded number
+/// of times: 24 `SYST:ERR?` (the 20-entry queue and a few arriving meanwhile), every entry
+/// kept, nothing more sent.
+#[tokio::test(start_paused = true)]
+async fn an_error_queue_that_never_empties_is_read_a_bounded_number_of_times() {
+    let mut t = connect_script();
+    for _ in 0..24 {
+        t = t.query("SYST:ERR?", "-350,\"Queue overflow\"");
+    }
+    let mut dmm = Hp34401a::new(t, DriverOptions::default());
+    dmm.connect().await.unwrap();
+    let errors = dmm.drain_errors().await.unwrap();
+    assert_eq!(errors.len(), 24);
+    assert_eq!(errors[0].to_string(), "-350,\"Queue overflow\"");
+    dmm.into_inner().done();
+}
+
+/// A garbled error-queue entry is an error that names the device and the bytes received.
+#[tokio::test(start_paused = true)]
+async fn a_garbled_error_queue_entry_names_the_bytes() {
+    let t = connect_script().query("SYST:ERR?", "+#,\"No error\"");
+    let mut dmm = Hp34401a::new(t, DriverOptions::default());
+    dmm.connect().await.unwrap();
+    let err = dmm.drain_errors().await.unwrap_err();
+    assert_eq!(err.kind(), ErrorKind::Garbled);
+    let text = err.to_string();
+    assert!(
+        text.starts_with("dmm: expected an error-queue entry"),
+        "{text}"
+    );
+    assert!(text.contains("+#,"), "{text}");
+    dmm.into_inner().done();
+}

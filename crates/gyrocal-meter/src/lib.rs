@@ -12,11 +12,19 @@
 //!
 //! Errors expose a [`ErrorKind`] through [`MeterError::kind`], in the manner of embedded-hal's
 //! `Error::kind()`: generic code decides on kinds (retry a [`ErrorKind::Timeout`], measure again
-//! after [`ErrorKind::ReadingsLost`]) without knowing the backend.
+//! after [`ErrorKind::ReadingsLost`]) without knowing the backend. The one [`ErrorKind`] is
+//! every meter driver's: a driver's own `kind()` (the 34401A's) tells more apart
+//! ([`ErrorKind::Identity`], [`ErrorKind::Config`], [`ErrorKind::Io`]) than the role reports
+//! ([`ErrorKind::in_role`]).
+//!
+//! The SCPI basics the SCPI meters share (an error-queue entry, its parser, reading the queue
+//! until it is empty) are in [`scpi`], written once and without I/O.
 
 mod late;
+pub mod scpi;
 
 pub use late::LateReplies;
+pub use scpi::{InstrumentError, parse_error};
 
 use std::future::Future;
 use std::time::Duration;
@@ -53,7 +61,8 @@ impl Reading {
     }
 }
 
-/// What kind of failure, for callers that decide without knowing the meter.
+/// What kind of failure, for callers that decide without knowing the meter. One enum for
+/// every meter: a driver maps its errors onto it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[non_exhaustive]
 pub enum ErrorKind {
@@ -69,11 +78,31 @@ pub enum ErrorKind {
     ReadingsLost,
     /// The meter stopped answering and did not come back in time.
     Unreachable,
-    /// Anything else (configuration refused before sending, identity, I/O).
+    /// An operating-system error on the link. The role reports it as [`ErrorKind::Other`].
+    Io,
+    /// The device is not the meter the plan names. The role reports it as
+    /// [`ErrorKind::Other`].
+    Identity,
+    /// Settings or a request refused before anything was sent (or an acquisition before the
+    /// configuration). The role reports it as [`ErrorKind::Other`].
+    Config,
+    /// Anything else: a failure after the driver's own retries (it gave up), a refused
+    /// identity or configuration, an I/O error, a bug.
     Other,
 }
 
 impl ErrorKind {
+    /// The kind as the role reports it ([`MeterError::kind`]): a run stops alike on a refused
+    /// identity, a refused configuration and an I/O error, so they are [`ErrorKind::Other`];
+    /// the other kinds are themselves. Drivers map their errors onto the detailed kind and
+    /// report it through this, so both meters classify alike.
+    pub fn in_role(self) -> ErrorKind {
+        match self {
+            ErrorKind::Io | ErrorKind::Identity | ErrorKind::Config => ErrorKind::Other,
+            k => k,
+        }
+    }
+
     /// Whether a recovery and a retry of the same exchange may succeed.
     pub fn is_retryable(self) -> bool {
         matches!(self, ErrorKind::Timeout | ErrorKind::Garbled)
@@ -82,7 +111,8 @@ impl ErrorKind {
 
 /// A meter's error: a message naming the device, and a kind.
 pub trait MeterError: std::error::Error + Send + Sync + 'static {
-    /// The kind of failure.
+    /// The kind of failure, as the role reports it (see [`ErrorKind::in_role`]); a failure
+    /// after the driver's own retries is [`ErrorKind::Other`] (not retryable again).
     fn kind(&self) -> ErrorKind;
 }
 

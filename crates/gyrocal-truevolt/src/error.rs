@@ -4,36 +4,10 @@
 
 use gyrocal_link::{LinkError, show_bytes};
 use gyrocal_meter::ErrorKind;
-
-/// One entry of the SCPI error queue (`SYST:ERR?`), such as `-222,"Data out of range"`.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct InstrumentError {
-    /// The code (negative for standard SCPI errors).
-    pub code: i32,
-    /// The meter's message.
-    pub message: String,
-}
-
-impl std::fmt::Display for InstrumentError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{},\"{}\"", self.code, self.message)
-    }
-}
-
-/// Parses a `SYST:ERR?` reply (`+0,"No error"`, `-113,"Undefined header"`).
-pub fn parse_error(reply: &str) -> Option<InstrumentError> {
-    let (code, message) = reply.trim().split_once(',')?;
-    let code: i32 = code.trim().trim_start_matches('+').parse().ok()?;
-    let message = message.trim();
-    let message = message
-        .strip_prefix('"')
-        .and_then(|m| m.strip_suffix('"'))
-        .unwrap_or(message);
-    Some(InstrumentError {
-        code,
-        message: message.to_string(),
-    })
-}
+use gyrocal_meter::scpi::list;
+/// The SCPI error-queue entry and its parser are the meter role's (one copy for every SCPI
+/// meter).
+pub use gyrocal_meter::{InstrumentError, parse_error};
 
 /// An error from the Truevolt driver.
 #[derive(Debug, thiserror::Error)]
@@ -148,14 +122,6 @@ pub enum Error {
     },
 }
 
-fn list(errors: &[InstrumentError]) -> String {
-    errors
-        .iter()
-        .map(ToString::to_string)
-        .collect::<Vec<_>>()
-        .join("; ")
-}
-
 impl Error {
     /// Whether a recovery (reconnect, `ABOR`) and another attempt may help: timeouts,
     /// garbled replies, and a socket that went away (reconnecting is the recovery).
@@ -167,24 +133,34 @@ impl Error {
     }
 }
 
-impl gyrocal_meter::MeterError for Error {
-    fn kind(&self) -> ErrorKind {
+impl Error {
+    /// The kind of this error with the driver's detail (identity, configuration and I/O told
+    /// apart); for [`Error::GaveUp`], the kind of the last failure.
+    fn detailed_kind(&self) -> ErrorKind {
         match self {
             Error::Link { source, .. } => match source.kind() {
                 gyrocal_link::ErrorKind::Timeout => ErrorKind::Timeout,
                 gyrocal_link::ErrorKind::Disconnected => ErrorKind::Disconnected,
                 gyrocal_link::ErrorKind::Garbled => ErrorKind::Garbled,
-                gyrocal_link::ErrorKind::Io => ErrorKind::Other,
+                gyrocal_link::ErrorKind::Io => ErrorKind::Io,
             },
             Error::InvalidReply { .. } | Error::WrongCount { .. } => ErrorKind::Garbled,
             Error::Instrument { .. } => ErrorKind::Instrument,
             Error::ReadingsLost { .. } => ErrorKind::ReadingsLost,
             Error::NotBack { .. } => ErrorKind::Unreachable,
+            Error::GaveUp { last, .. } => last.detailed_kind(),
+            Error::Identity { .. } => ErrorKind::Identity,
+            Error::Config { .. } | Error::NotConfigured { .. } => ErrorKind::Config,
+        }
+    }
+}
+
+impl gyrocal_meter::MeterError for Error {
+    fn kind(&self) -> ErrorKind {
+        match self {
             // the meter already retried: not retryable again, whatever the last failure was
             Error::GaveUp { .. } => ErrorKind::Other,
-            Error::Identity { .. } | Error::Config { .. } | Error::NotConfigured { .. } => {
-                ErrorKind::Other
-            }
+            _ => self.detailed_kind().in_role(),
         }
     }
 }
@@ -192,17 +168,39 @@ impl gyrocal_meter::MeterError for Error {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use gyrocal_meter::MeterError;
 
+    /// Both meter drivers classify onto the role's one `ErrorKind` alike: identity and
+    /// configuration are `Other` to a run, a give-up is never retryable again.
     #[test]
-    fn error_queue_entries() {
-        assert_eq!(
-            parse_error("-113,\"Undefined header\""),
-            Some(InstrumentError {
-                code: -113,
-                message: "Undefined header".into()
-            })
-        );
-        assert_eq!(parse_error("+0,\"No error\"").map(|e| e.code), Some(0));
-        assert_eq!(parse_error("garbage"), None);
+    fn kinds_as_the_role_reports_them() {
+        let identity = Error::Identity {
+            device: "tcp://lab-dmm:5025".into(),
+            message: "a 34401A answered".into(),
+        };
+        assert_eq!(identity.detailed_kind(), ErrorKind::Identity);
+        assert_eq!(identity.kind(), ErrorKind::Other);
+        let config = Error::NotConfigured {
+            device: "tcp://lab-dmm:5025".into(),
+        };
+        assert_eq!(config.detailed_kind(), ErrorKind::Config);
+        assert_eq!(config.kind(), ErrorKind::Other);
+        let garbled = Error::WrongCount {
+            device: "tcp://lab-dmm:5025".into(),
+            command: "FETC?".into(),
+            expected: 3,
+            got: 2,
+        };
+        assert_eq!(garbled.kind(), ErrorKind::Garbled);
+        assert!(garbled.is_retryable());
+        let gave_up = Error::GaveUp {
+            device: "tcp://lab-dmm:5025".into(),
+            attempts: 3,
+            slow: String::new(),
+            last: Box::new(garbled),
+        };
+        assert_eq!(gave_up.detailed_kind(), ErrorKind::Garbled);
+        assert_eq!(gave_up.kind(), ErrorKind::Other);
+        assert!(!gave_up.is_retryable());
     }
 }

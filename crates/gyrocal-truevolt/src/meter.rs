@@ -9,9 +9,10 @@ use gyrocal_meter::{
 };
 use tokio::time::Instant;
 
-use crate::error::{Error, InstrumentError, parse_error};
+use crate::error::{Error, InstrumentError};
 use crate::facts::{self, MAX_SAMPLE_COUNT, Model};
 use crate::timing::{Acquisition, TimingDefaults, TruevoltTiming};
+use gyrocal_meter::scpi::{ErrorQueue, NotAnEntry};
 
 /// What the plan (and the lab) choose for the meter, beside its measurement settings.
 #[derive(Debug, Clone, PartialEq)]
@@ -257,22 +258,21 @@ impl<T: Transport> TruevoltMeter<T> {
     }
 
     /// Reads the whole error queue (until `+0,"No error"`), oldest first.
+    /// At most [`gyrocal_meter::scpi::ERROR_QUEUE_READS`] queries (the role's [`ErrorQueue`]).
     async fn drain_errors(&mut self) -> Result<Vec<InstrumentError>, Error> {
-        let mut out = Vec::new();
-        for _ in 0..24 {
-            let reply = self.query("SYST:ERR?", self.options.query_timeout).await?;
-            let e = parse_error(&reply).ok_or_else(|| Error::InvalidReply {
-                device: self.device(),
-                command: "SYST:ERR?".into(),
-                expected: "an error-queue entry",
-                bytes: reply.clone().into_bytes(),
-            })?;
-            if e.code == 0 {
-                break;
-            }
-            out.push(e);
+        let mut queue = ErrorQueue::new();
+        while let Some(q) = queue.next_query() {
+            let reply = self.query(q, self.options.query_timeout).await?;
+            queue
+                .accept(&reply)
+                .map_err(|NotAnEntry(reply)| Error::InvalidReply {
+                    device: self.device(),
+                    command: q.into(),
+                    expected: NotAnEntry::EXPECTED,
+                    bytes: reply.into_bytes(),
+                })?;
         }
-        Ok(out)
+        Ok(queue.into_entries())
     }
 
     async fn expect_no_errors(&mut self, context: &str) -> Result<(), Error> {

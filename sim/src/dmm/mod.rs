@@ -53,36 +53,48 @@
 //! The input voltage comes from a [`SignalSource`] sampled over each reading's integration
 //! window, plus seeded gaussian noise. Faults can be scheduled in [`DmmConfig::faults`] or
 //! injected at run time through [`DmmHandle::inject`].
+//!
+//! Where it lives: this module holds the meter's state, its wire (RS-232 or GPIB), timing and
+//! output; `config` its configuration, `parse` the SCPI program-message parser, `commands`
+//! what each command does, `faults` injected faults and the power cycle. What it shares with
+//! the simulated Truevolt (the error queue, the fault grammar and handle, reply faults,
+//! reading format) is in [`crate::scpi`].
 
-mod scpi;
+mod commands;
+mod config;
+mod faults;
+mod parse;
+
+use config::sanitize;
+pub use config::{DmmConfig, Interface, LocalMode, ScheduledFault};
 
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use rand::SeedableRng;
-use rand::rngs::StdRng;
-use rand_distr::{Distribution, Normal};
-use serde::{Deserialize, Serialize};
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::sync::mpsc;
-use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
 use crate::SignalSource;
+use crate::scpi::{
+    ArmedFaults, Ctl, ErrorQueue, EventStatus, Noise, ReplyFault, SlowReplies, clip,
+};
 pub use gyrocal_link::Framing;
-use scpi::{Cmd, Unit, parse_line};
+use parse::{Cmd, Unit, parse_line};
+
+/// The fault grammar, the handle and the counters are every simulated meter's
+/// ([`crate::scpi`]); they keep their names here.
+pub use crate::scpi::{
+    DmmHandle, DmmInjector, DmmStats, ERROR_QUEUE_SIZE, Fault, OVERLOAD, format_reading,
+};
 
 /// What a real unit answers to `*IDN?` (firmware 11-5-2; 7-5-2 and 10-5-2 exist too).
 pub const DEFAULT_IDENTITY: &str = "HEWLETT-PACKARD,34401A,0,11-5-2";
 /// Readings the internal memory holds.
 pub const MEMORY_SIZE: usize = 512;
-/// Entries the error queue holds.
-pub const ERROR_QUEUE_SIZE: usize = 20;
 /// Time to enter wait-for-trigger (`INIT`, `READ?`), before scaling.
 pub const ARM_TIME: Duration = Duration::from_millis(20);
-/// The overload value.
-pub const OVERLOAD: f64 = 9.9e37;
 /// GPIB mode: the in-band byte for Selected Device Clear (the RS-232 device clear byte).
 pub const GPIB_SDC: u8 = gyrocal_link::DEVICE_CLEAR;
 /// GPIB mode: the in-band byte that addresses the meter to talk (MTA on a real bus).
@@ -93,336 +105,6 @@ pub const GPIB_UNTALK: u8 = 0x06;
 /// through a Prologix controller, an assumption), so the driver's timing model and the
 /// simulated bus agree.
 pub const GPIB_CHAR_TIME: Duration = gyrocal_hp34401a::timing::GPIB_CHAR_TIME;
-
-/// Which remote interface the simulated meter serves.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Interface {
-    /// The RS-232 port (the default): `SYST:REM` first, replies end CR LF, 11-bit characters
-    /// at the configured baud, Ctrl-C device clear.
-    #[default]
-    Rs232,
-    /// GPIB behind a controller (see the module documentation).
-    Gpib,
-}
-
-/// A fault to inject.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case", tag = "kind", deny_unknown_fields)]
-pub enum Fault {
-    /// The next reply (the output of the next line that produces any) is never sent.
-    NoReply,
-    /// The next reply has a character replaced by `#`.
-    Garble,
-    /// The next reply stops halfway, without its terminator (the rest of that line's output,
-    /// readings included, is lost).
-    Truncate,
-    /// The meter drops the connection: the simulator closes its end and stops.
-    Disconnect,
-    /// The next `readings` readings are overloads.
-    Overload {
-        /// How many.
-        readings: u32,
-    },
-    /// The meter is switched off and on again: dead (deaf and mute) for `off_s` sim seconds
-    /// (`None`: [`DmmConfig::power_off_s`]), then back in LOCAL with the power-on state (see
-    /// the module documentation). Armed at a reading, the meter dies instead of taking it.
-    PowerCycle {
-        /// Off time in sim seconds; default [`DmmConfig::power_off_s`].
-        #[serde(default)]
-        off_s: Option<f64>,
-    },
-    /// Replies held back: every byte the meter sends from now on reaches the host `delay_s`
-    /// sim seconds after it was sent, for the next `replies` replies (lines), or for good.
-    /// The meter itself is alive and obeys at once. On the 34401A the held bytes are already
-    /// on their way (a serial converter's deep buffer, a network bridge): a device clear does
-    /// not recall them. On a Truevolt the reply is sent late on the connection its query came
-    /// on, and a reconnect drops it (see [`crate::truevolt`]).
-    Slow {
-        /// How late each reply is, sim seconds.
-        delay_s: f64,
-        /// Replies held back; `None`: every reply from now on.
-        #[serde(default)]
-        replies: Option<u32>,
-    },
-    /// An entry pushed into the error queue.
-    PushError {
-        /// The code.
-        code: i32,
-        /// The message.
-        message: String,
-    },
-}
-
-/// A fault from the configuration, injected once `after_commands` commands have been seen.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ScheduledFault {
-    /// Commands (program message units, from the first) seen before the fault is injected.
-    pub after_commands: u64,
-    /// The fault.
-    pub fault: Fault,
-}
-
-/// The simulated meter's configuration. Every field has a default; TOML or JSON may give any.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct DmmConfig {
-    /// `*IDN?` reply. Default [`DEFAULT_IDENTITY`].
-    pub identity: String,
-    /// Require `SYST:REM` (or `SYST:RWL`) before other commands take effect. Default true.
-    /// False is the same as `local_mode = "obey"`: the meter also starts (and comes back from a
-    /// power cycle) in remote.
-    pub strict_remote: bool,
-    /// What the meter does with commands and queries received over RS-232 in LOCAL (before
-    /// `SYST:REM`, after `SYST:LOC` or a power cycle) when `strict_remote` is true. The manual
-    /// only says the results are then unpredictable; default `refuse`.
-    pub local_mode: LocalMode,
-    /// Off time of a power cycle ([`Fault::PowerCycle`] without its own), in sim seconds.
-    /// Default 5.
-    pub power_off_s: f64,
-    /// Baud rate for the wire timing. Default 9600 (factory setting).
-    pub baud: u32,
-    /// Framing; every framing is 11 bits per character, so it does not change the timing.
-    /// Default 8N2.
-    pub framing: Framing,
-    /// Power-line frequency (50 or 60 Hz) setting the integration time. Default 50.
-    pub line_hz: u32,
-    /// Standard deviation of the gaussian reading noise, volts. Default 1 µV.
-    pub noise_v: f64,
-    /// Output buffer for `READ?`, in characters: measuring pauses while a reading does not fit.
-    /// Unconfirmed in the manual; default 512 (32 readings).
-    pub output_buffer: usize,
-    /// 1.0 = real instrument timing; 10.0 runs everything ten times faster (for pseudo-terminal
-    /// tests in real time). Default 1.0.
-    pub time_scale: f64,
-    /// Faults injected when the command count reaches their mark. Default none.
-    pub faults: Vec<ScheduledFault>,
-    /// The remote interface served. Default `rs232`.
-    pub interface: Interface,
-}
-
-impl Default for DmmConfig {
-    fn default() -> Self {
-        DmmConfig {
-            identity: DEFAULT_IDENTITY.to_string(),
-            strict_remote: true,
-            local_mode: LocalMode::Refuse,
-            power_off_s: 5.0,
-            baud: 9600,
-            framing: Framing::EightNone,
-            line_hz: 50,
-            noise_v: 1e-6,
-            output_buffer: 512,
-            time_scale: 1.0,
-            faults: Vec::new(),
-            interface: Interface::Rs232,
-        }
-    }
-}
-
-impl DmmConfig {
-    /// Checks the values [`SimDmm::spawn`] needs.
-    pub fn validate(&self) -> Result<(), String> {
-        if !gyrocal_link::SUPPORTED_BAUDS.contains(&self.baud) {
-            return Err(format!("baud {} not supported", self.baud));
-        }
-        if self.line_hz != 50 && self.line_hz != 60 {
-            return Err(format!("line_hz {} is neither 50 nor 60", self.line_hz));
-        }
-        if !(self.time_scale.is_finite() && self.time_scale > 0.0) {
-            return Err(format!("time_scale {} must be positive", self.time_scale));
-        }
-        if !(self.noise_v.is_finite() && self.noise_v >= 0.0) {
-            return Err(format!("noise_v {} must be >= 0", self.noise_v));
-        }
-        if !(self.power_off_s.is_finite() && self.power_off_s >= 0.0) {
-            return Err(format!("power_off_s {} must be >= 0", self.power_off_s));
-        }
-        if self.output_buffer < 17 {
-            return Err(format!(
-                "output_buffer {} cannot hold a reading",
-                self.output_buffer
-            ));
-        }
-        Ok(())
-    }
-}
-
-/// What the simulated meter does in LOCAL with everything but `SYST:REM` and `SYST:RWL`.
-///
-/// The User's Guide says `SYST:REM` must be sent first over RS-232, otherwise "results are
-/// unpredictable", and lists error 550 "Command not allowed in local" for a `READ?` received
-/// in local over RS-232. `refuse` applies that error to every command.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum LocalMode {
-    /// Every command and query is refused with error 550 "Command not allowed in local"
-    /// queued; queries are not answered (so `SYST:ERR?` cannot read it before `SYST:REM`).
-    #[default]
-    Refuse,
-    /// Everything is ignored: nothing executed, nothing answered, nothing queued.
-    Ignore,
-    /// Everything is executed as in remote (only the remote flag differs).
-    Obey,
-}
-
-/// Counters and state a test can read through [`DmmHandle::stats`].
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct DmmStats {
-    /// Readings taken (to memory or to the output).
-    pub readings_taken: u64,
-    /// Commands (program message units) seen, refused ones included.
-    pub commands_seen: u64,
-    /// Lines seen.
-    pub lines_seen: u64,
-    /// Queries answered.
-    pub queries_answered: u64,
-    /// Device clears (Ctrl-C) received.
-    pub device_clears: u64,
-    /// Errors raised into the queue (also those lost to an overflow).
-    pub errors_raised: u64,
-    /// Largest number of characters waiting in the input at once (the real meter's input
-    /// buffer holds about 100).
-    pub max_input_backlog: usize,
-    /// Whether the meter is in remote.
-    pub remote: bool,
-    /// Power cycles so far ([`Fault::PowerCycle`]).
-    pub power_cycles: u64,
-    /// Whether the meter is switched on (false during a power cycle's off time).
-    pub powered: bool,
-    /// The integration time now in force (`VOLT:DC:NPLC`), for tests that check a
-    /// reconfiguration.
-    pub nplc: f64,
-    /// Readings in the internal memory now.
-    pub memory_points: usize,
-    /// The error queue now, oldest first.
-    pub error_queue: Vec<(i32, String)>,
-    /// True once the simulator has stopped (stop, disconnect, or the host closed the link).
-    pub stopped: bool,
-    /// Replies held back by a [`Fault::Slow`] (sent late).
-    pub late_replies: u64,
-}
-
-pub(crate) enum Ctl {
-    Fault(Fault),
-    AtReading(u64, Fault),
-    Stop,
-}
-
-/// Controls a running simulated meter.
-pub struct DmmHandle {
-    ctl: mpsc::UnboundedSender<Ctl>,
-    stats: Arc<Mutex<DmmStats>>,
-    task: JoinHandle<()>,
-}
-
-impl DmmHandle {
-    /// A handle on another simulated meter's task (the Truevolt's), driven by the same
-    /// control messages, so the fault grammar and the counters work for every meter.
-    pub(crate) fn from_parts(
-        ctl: mpsc::UnboundedSender<Ctl>,
-        stats: Arc<Mutex<DmmStats>>,
-        task: JoinHandle<()>,
-    ) -> Self {
-        DmmHandle { ctl, stats, task }
-    }
-
-    /// Injects a fault now.
-    pub fn inject(&self, fault: Fault) {
-        let _ = self.ctl.send(Ctl::Fault(fault));
-    }
-
-    /// A snapshot of the counters.
-    pub fn stats(&self) -> DmmStats {
-        self.stats
-            .lock()
-            .map(|s| s.clone())
-            .unwrap_or_else(|e| e.into_inner().clone())
-    }
-
-    /// Arms `fault` for the `n`-th reading the meter takes (counted from 1 since the start,
-    /// like [`DmmStats::readings_taken`]); injected just before that reading is taken, so:
-    ///
-    /// - a reply fault (no reply, garble, truncate) hits the reply that carries reading `n`:
-    ///   when readings stream (`READ?`) the reply it is part of, from that reading on (a garble
-    ///   lands in reading `n`'s own characters); when they go to memory, the `FETC?` reply
-    ///   (a garble lands in reading `n`'s characters there);
-    /// - an overload makes reading `n` (and the following ones, as many as asked) overloads;
-    /// - a disconnect drops the link instead of taking reading `n`.
-    ///
-    /// A reading number already passed fires at the next reading.
-    pub fn inject_at_reading(&self, n: u64, fault: Fault) {
-        let _ = self.ctl.send(Ctl::AtReading(n, fault));
-    }
-
-    /// Readings taken so far.
-    pub fn readings_taken(&self) -> u64 {
-        self.stats().readings_taken
-    }
-
-    /// Commands seen so far.
-    pub fn commands_seen(&self) -> u64 {
-        self.stats().commands_seen
-    }
-
-    /// A cloneable handle that injects faults and reads the counters (for other tasks).
-    pub fn injector(&self) -> DmmInjector {
-        DmmInjector {
-            ctl: self.ctl.clone(),
-            stats: self.stats.clone(),
-        }
-    }
-
-    /// Whether the simulator task has ended.
-    pub fn is_finished(&self) -> bool {
-        self.task.is_finished()
-    }
-
-    /// Stops the simulator (its end of the stream is closed) and waits for it.
-    pub async fn stop(self) {
-        let _ = self.ctl.send(Ctl::Stop);
-        let _ = self.task.await;
-    }
-}
-
-/// A cloneable part of a [`DmmHandle`]: fault injection and counters, without the task.
-#[derive(Clone)]
-pub struct DmmInjector {
-    ctl: mpsc::UnboundedSender<Ctl>,
-    stats: Arc<Mutex<DmmStats>>,
-}
-
-impl std::fmt::Debug for DmmInjector {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("DmmInjector").finish_non_exhaustive()
-    }
-}
-
-impl DmmInjector {
-    /// See [`DmmHandle::inject`].
-    pub fn inject(&self, fault: Fault) {
-        let _ = self.ctl.send(Ctl::Fault(fault));
-    }
-
-    /// See [`DmmHandle::inject_at_reading`].
-    pub fn inject_at_reading(&self, n: u64, fault: Fault) {
-        let _ = self.ctl.send(Ctl::AtReading(n, fault));
-    }
-
-    /// A snapshot of the counters.
-    pub fn stats(&self) -> DmmStats {
-        self.stats
-            .lock()
-            .map(|s| s.clone())
-            .unwrap_or_else(|e| e.into_inner().clone())
-    }
-
-    /// Readings taken so far.
-    pub fn readings_taken(&self) -> u64 {
-        self.stats().readings_taken
-    }
-}
 
 /// The simulated 34401A.
 pub struct SimDmm;
@@ -445,36 +127,8 @@ impl SimDmm {
         let stats = Arc::new(Mutex::new(DmmStats::default()));
         let meter = Meter::new(config, source, seed, stats.clone());
         let task = tokio::spawn(meter.run(stream, rx));
-        DmmHandle {
-            ctl: tx,
-            stats,
-            task,
-        }
+        DmmHandle::from_parts(tx, stats, task)
     }
-}
-
-fn sanitize(mut c: DmmConfig) -> DmmConfig {
-    if let Err(e) = c.validate() {
-        tracing::warn!(error = %e, "simulated 34401A: invalid configuration, using defaults for bad values");
-        let d = DmmConfig::default();
-        if !gyrocal_link::SUPPORTED_BAUDS.contains(&c.baud) {
-            c.baud = d.baud;
-        }
-        if c.line_hz != 50 && c.line_hz != 60 {
-            c.line_hz = d.line_hz;
-        }
-        if !(c.time_scale.is_finite() && c.time_scale > 0.0) {
-            c.time_scale = 1.0;
-        }
-        if !(c.noise_v.is_finite() && c.noise_v >= 0.0) {
-            c.noise_v = d.noise_v;
-        }
-        c.output_buffer = c.output_buffer.max(17);
-        if !(c.power_off_s.is_finite() && c.power_off_s >= 0.0) {
-            c.power_off_s = d.power_off_s;
-        }
-    }
-    c
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -495,13 +149,6 @@ enum TrigSource {
 enum Dest {
     Memory,
     Output,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum ReplyFault {
-    NoReply,
-    Garble,
-    Truncate,
 }
 
 /// The settings `*RST` restores.
@@ -568,13 +215,12 @@ struct Meas {
 struct Meter {
     cfg: DmmConfig,
     source: Box<dyn SignalSource>,
-    rng: StdRng,
-    noise: Option<Normal<f64>>,
+    noise: Noise,
     stats: Arc<Mutex<DmmStats>>,
     counters: DmmStats,
     remote: bool,
     set: Settings,
-    errors: VecDeque<(i32, String)>,
+    errors: ErrorQueue,
     memory: Vec<f64>,
     inbuf: Vec<u8>,
     lines: VecDeque<Line>,
@@ -595,16 +241,16 @@ struct Meter {
     stop: bool,
     faults: Vec<ScheduledFault>,
     /// Faults armed for a reading number (see [`DmmHandle::inject_at_reading`]).
-    at_reading: Vec<(u64, Fault)>,
+    at_reading: ArmedFaults,
     /// A reply fault for the reading at this index of the memory, applied by `FETC?`.
     memory_fault: Option<(usize, ReplyFault)>,
     /// Standard Event register (only the Power On bit is modelled).
-    esr: u8,
+    esr: EventStatus,
     /// Switched off until then (a power cycle).
     off_until: Option<Instant>,
     /// A [`Fault::Slow`] in force: the delay, and the replies it still holds back (`None`:
     /// every one).
-    slow: Option<(Duration, Option<u32>)>,
+    slow: SlowReplies,
     /// Bytes on their way to the host, with the instant they arrive (in order).
     delayed: VecDeque<(Vec<u8>, Instant)>,
     /// GPIB mode: addressed to talk.
@@ -613,9 +259,6 @@ struct Meter {
     /// is a -420 is decided once they have run.
     talk_check: bool,
 }
-
-/// The Standard Event register's Power On bit.
-const ESR_PON: u8 = 128;
 
 fn scaled(cfg: &DmmConfig, d: Duration) -> Duration {
     d.div_f64(cfg.time_scale)
@@ -628,11 +271,7 @@ impl Meter {
         seed: u64,
         stats: Arc<Mutex<DmmStats>>,
     ) -> Self {
-        let noise = if cfg.noise_v > 0.0 {
-            Normal::new(0.0, cfg.noise_v).ok()
-        } else {
-            None
-        };
+        let noise = Noise::new(cfg.noise_v, seed);
         let now = Instant::now();
         let mut faults = cfg.faults.clone();
         faults.sort_by_key(|f| std::cmp::Reverse(f.after_commands));
@@ -642,12 +281,11 @@ impl Meter {
             talk_check: false,
             cfg,
             source,
-            rng: StdRng::seed_from_u64(seed),
             noise,
             stats,
             counters: DmmStats::default(),
             set: Settings::default(),
-            errors: VecDeque::new(),
+            errors: ErrorQueue::default(),
             memory: Vec::new(),
             inbuf: Vec::new(),
             lines: VecDeque::new(),
@@ -664,11 +302,11 @@ impl Meter {
             disconnect: false,
             stop: false,
             faults,
-            at_reading: Vec::new(),
+            at_reading: ArmedFaults::default(),
             memory_fault: None,
-            esr: ESR_PON,
+            esr: EventStatus::powered_on(),
             off_until: None,
-            slow: None,
+            slow: SlowReplies::default(),
             delayed: VecDeque::new(),
         }
     }
@@ -687,7 +325,7 @@ impl Meter {
                 && let Some((bytes, due)) = self.tx.take_if(|(_, due)| *due <= now)
             {
                 let _ = due;
-                if self.slow.is_some() || !self.delayed.is_empty() {
+                if self.slow.is_active() || !self.delayed.is_empty() {
                     // held back (or behind bytes that are): they arrive later, in order
                     if self.gpib() && bytes.last() == Some(&b'\n') {
                         self.talk = false;
@@ -721,7 +359,7 @@ impl Meter {
                 biased;
                 c = ctl.recv(), if ctl_open => match c {
                     Some(Ctl::Fault(f)) => self.inject(f),
-                    Some(Ctl::AtReading(n, f)) => self.at_reading.push((n, f)),
+                    Some(Ctl::AtReading(n, f)) => self.at_reading.arm(n, f),
                     Some(Ctl::Stop) => self.stop = true,
                     None => ctl_open = false,
                 },
@@ -743,7 +381,7 @@ impl Meter {
         self.counters.powered = self.off_until.is_none();
         self.counters.nplc = self.set.nplc;
         self.counters.memory_points = self.memory.len();
-        self.counters.error_queue = self.errors.iter().cloned().collect();
+        self.counters.error_queue = self.errors.snapshot();
         if let Ok(mut s) = self.stats.lock() {
             *s = self.counters.clone();
         }
@@ -771,21 +409,18 @@ impl Meter {
     /// Puts bytes the meter sent at `now` on their way with the [`Fault::Slow`] delay in
     /// force (none when it ran out: they still wait behind the earlier ones).
     fn hold_back(&mut self, bytes: Vec<u8>, now: Instant) {
-        let delay = self.slow.map_or(Duration::ZERO, |(d, _)| d);
+        let lines = bytes.iter().filter(|&&b| b == b'\n').count() as u64;
+        let delay = match self.slow.hold(lines) {
+            Some(delay) => {
+                self.counters.late_replies += lines;
+                delay
+            }
+            None => Duration::ZERO,
+        };
         let at = self
             .delayed
             .back()
             .map_or(now + delay, |(_, last)| (*last).max(now + delay));
-        if self.slow.is_some() {
-            let lines = bytes.iter().filter(|&&b| b == b'\n').count() as u64;
-            self.counters.late_replies += lines;
-            if let Some((_, Some(left))) = self.slow.as_mut() {
-                *left = left.saturating_sub(u32::try_from(lines).unwrap_or(u32::MAX));
-                if *left == 0 {
-                    self.slow = None;
-                }
-            }
-        }
         self.delayed.push_back((bytes, at));
     }
 
@@ -938,130 +573,10 @@ impl Meter {
             || self.lines.iter().any(|l| l.text.contains('?'))
     }
 
-    // ---- faults ------------------------------------------------------------------------
-
-    fn inject(&mut self, f: Fault) {
-        tracing::debug!(fault = ?f, "simulated 34401A: fault injected");
-        match f {
-            Fault::NoReply => self.pending_reply_fault.push_back(ReplyFault::NoReply),
-            Fault::Garble => self.pending_reply_fault.push_back(ReplyFault::Garble),
-            Fault::Truncate => self.pending_reply_fault.push_back(ReplyFault::Truncate),
-            Fault::Disconnect => self.disconnect = true,
-            Fault::PowerCycle { off_s } => self.power_off(off_s),
-            Fault::Overload { readings } => self.overloads_left += readings,
-            Fault::PushError { code, message } => self.raise(code, &message),
-            Fault::Slow { delay_s, replies } => {
-                let delay = Duration::from_secs_f64(delay_s.clamp(0.0, 1e6));
-                self.slow = (replies != Some(0)).then(|| (scaled(&self.cfg, delay), replies));
-            }
-        }
-    }
-
-    /// Switches the meter off for `off_s` sim seconds (default `power_off_s`): the
-    /// measurement, the line being executed, everything buffered in and out is lost.
-    fn power_off(&mut self, off_s: Option<f64>) {
-        let off = off_s
-            .filter(|s| s.is_finite() && *s >= 0.0)
-            .unwrap_or(self.cfg.power_off_s);
-        let now = Instant::now().max(self.clock);
-        let until = now + scaled(&self.cfg, Duration::from_secs_f64(off.min(1e9)));
-        tracing::debug!(off_s = off, "simulated 34401A: power off");
-        // a power cycle while off restarts the off time
-        self.off_until = Some(self.off_until.map_or(until, |u| u.max(until)));
-        self.meas = None;
-        self.exec = None;
-        self.out.clear();
-        self.tx = None;
-        self.lines.clear();
-        self.inbuf.clear();
-    }
-
-    /// Back on at `t`, as after power-on: LOCAL (unless `strict_remote` is off), the `*RST`
-    /// settings, memory, buffers and error queue empty, the Power On event bit set.
-    fn power_on(&mut self, t: Instant) {
-        tracing::debug!("simulated 34401A: power on");
-        self.off_until = None;
-        self.counters.power_cycles += 1;
-        self.remote = !self.cfg.strict_remote || self.gpib();
-        self.talk = false;
-        self.talk_check = false;
-        self.set = Settings::default();
-        self.errors.clear();
-        self.memory.clear();
-        self.memory_fault = None;
-        self.esr = ESR_PON;
-        self.meas = None;
-        self.exec = None;
-        self.out.clear();
-        self.tx = None;
-        self.lines.clear();
-        self.inbuf.clear();
-        self.clock = self.clock.max(t);
-        self.in_wire_free = t;
-        self.out_wire_free = t;
-        self.out_time = t;
-    }
-
-    /// Fires the faults armed for the reading about to be taken; true when the meter
-    /// disconnected or was switched off instead.
-    fn reading_faults(&mut self, dest: Dest) -> bool {
-        let next = self.counters.readings_taken + 1;
-        let mut due = Vec::new();
-        self.at_reading.retain(|(n, f)| {
-            if *n <= next {
-                due.push(f.clone());
-                false
-            } else {
-                true
-            }
-        });
-        for f in due {
-            tracing::debug!(fault = ?f, reading = next, "simulated 34401A: fault at reading");
-            let reply_fault = match f {
-                Fault::NoReply => ReplyFault::NoReply,
-                Fault::Garble => ReplyFault::Garble,
-                Fault::Truncate => ReplyFault::Truncate,
-                other => {
-                    self.inject(other);
-                    continue;
-                }
-            };
-            if self.off_until.is_some() {
-                continue;
-            }
-            match dest {
-                Dest::Memory => self.memory_fault = Some((self.memory.len(), reply_fault)),
-                Dest::Output => match self.exec.as_mut() {
-                    // the reply has begun: the fault lands on this reading's characters
-                    Some(e) if e.has_output && !e.muted => e.fault = Some(reply_fault),
-                    // the reply begins with this reading
-                    _ => self.pending_reply_fault.push_front(reply_fault),
-                },
-            }
-        }
-        self.disconnect || self.off_until.is_some()
-    }
-
-    fn scheduled_faults(&mut self) {
-        while self
-            .faults
-            .last()
-            .is_some_and(|f| f.after_commands <= self.counters.commands_seen)
-        {
-            if let Some(f) = self.faults.pop() {
-                self.inject(f.fault);
-            }
-        }
-    }
-
     fn raise(&mut self, code: i32, message: &str) {
         self.counters.errors_raised += 1;
         tracing::debug!(code, message, "simulated 34401A: error");
-        if self.errors.len() < ERROR_QUEUE_SIZE {
-            self.errors.push_back((code, message.to_string()));
-        } else if let Some(last) = self.errors.back_mut() {
-            *last = (-350, "Queue overflow".to_string());
-        }
+        self.errors.raise(code, message);
     }
 
     // ---- time --------------------------------------------------------------------------
@@ -1169,20 +684,10 @@ impl Meter {
 
     fn sample(&mut self, window_start: Instant) -> f64 {
         let v = self.source.volts(window_start, self.integration());
-        let noise = match &self.noise {
-            Some(n) => n.sample(&mut self.rng),
-            None => 0.0,
-        };
-        let v = v + noise;
-        let limit = 1.2 * self.set.range.unwrap_or(1000.0);
-        if self.overloads_left > 0 {
-            self.overloads_left -= 1;
-            return if v < 0.0 { -OVERLOAD } else { OVERLOAD };
-        }
-        if !v.is_finite() || v.abs() > limit {
-            return if v < 0.0 { -OVERLOAD } else { OVERLOAD };
-        }
-        v
+        let v = self.noise.add(v);
+        let forced = self.overloads_left > 0;
+        self.overloads_left = self.overloads_left.saturating_sub(1);
+        clip(v, self.set.range, forced)
     }
 
     fn complete_reading(&mut self) {
@@ -1254,12 +759,10 @@ impl Meter {
         }
         match exec.fault.take() {
             None => self.out.extend(bytes),
-            Some(ReplyFault::NoReply) => exec.muted = true,
-            Some(ReplyFault::Garble) => self.out.extend(garbled(bytes).into_bytes()),
-            Some(ReplyFault::Truncate) => {
-                let half = bytes.len().div_ceil(2);
-                self.out.extend(&bytes[..half]);
-                exec.muted = true;
+            Some(fault) => {
+                let (sent, muted) = fault.apply(bytes);
+                self.out.extend(sent);
+                exec.muted = muted;
             }
         }
     }
@@ -1339,414 +842,12 @@ impl Meter {
             self.raise(code, msg);
         }
     }
-
-    fn command(&mut self, cmd: Cmd, u: &Unit, now: Instant) -> Result<(), (i32, &'static str)> {
-        let q = u.query;
-        let p = &u.params;
-        let no_params = || {
-            if p.is_empty() {
-                Ok(())
-            } else {
-                Err((-108, "Parameter not allowed"))
-            }
-        };
-        let one = || match p.as_slice() {
-            [x] => Ok(x.as_str()),
-            [] => Err((-109, "Missing parameter")),
-            _ => Err((-108, "Parameter not allowed")),
-        };
-        match (cmd, q) {
-            (Cmd::Idn, true) => {
-                no_params()?;
-                let id = self.cfg.identity.clone();
-                self.reply(&id);
-            }
-            (Cmd::Rst, false) => {
-                no_params()?;
-                self.set = Settings::default();
-                self.memory.clear();
-                self.memory_fault = None;
-            }
-            (Cmd::Cls, false) => {
-                no_params()?;
-                self.errors.clear();
-                self.esr = 0;
-            }
-            (Cmd::Opc, true) => self.reply("1"),
-            (Cmd::Opc | Cmd::Ese | Cmd::Sre, false) => {}
-            (Cmd::Esr, true) => {
-                let v = std::mem::take(&mut self.esr);
-                self.reply(&format!("{v:+}"));
-            }
-            (Cmd::Stb | Cmd::Ese | Cmd::Sre | Cmd::Tst, true) => self.reply("+0"),
-            (Cmd::Trg, false) => return Err((-211, "Trigger ignored")),
-            (Cmd::Remote, false) => self.remote = true,
-            (Cmd::Rwlock, false) => self.remote = true,
-            (Cmd::Local, false) => self.remote = false,
-            (Cmd::Error, true) => {
-                let (code, msg) = self
-                    .errors
-                    .pop_front()
-                    .unwrap_or((0, "No error".to_string()));
-                let code = if code < 0 {
-                    code.to_string()
-                } else {
-                    format!("+{code}")
-                };
-                self.reply(&format!("{code},\"{msg}\""));
-            }
-            (Cmd::Version, true) => self.reply("1992.0"),
-            (Cmd::Configure, false) => self.configure(p)?,
-            (Cmd::Configure, true) => {
-                let r = self.set.range.unwrap_or(10.0);
-                let res = r * resolution_ratio(self.set.nplc);
-                self.reply(&format!("\"VOLT {},{}\"", format_nr3(r), format_nr3(res)));
-            }
-            (Cmd::Measure, true) => {
-                self.configure(p)?;
-                self.start_read(now);
-            }
-            (Cmd::Function, false) => {
-                let f = one()?.trim_matches(['"', '\'']).to_ascii_uppercase();
-                if !matches!(f.as_str(), "VOLT" | "VOLT:DC" | "VOLTAGE" | "VOLTAGE:DC") {
-                    return Err((-224, "Illegal parameter value"));
-                }
-            }
-            (Cmd::Function, true) => self.reply("\"VOLT\""),
-            (Cmd::Range, false) => {
-                self.set.range = Some(match keyword(one()?).as_str() {
-                    "MIN" => 0.1,
-                    "MAX" => 1000.0,
-                    "DEF" => 10.0,
-                    _ => pick_range(number(one()?)?)?,
-                });
-            }
-            (Cmd::Range, true) => {
-                let r = self.set.range.unwrap_or(10.0);
-                self.reply(&format_nr3(r));
-            }
-            (Cmd::RangeAuto, false) => {
-                if boolean(one()?)? {
-                    self.set.range = None;
-                } else if self.set.range.is_none() {
-                    self.set.range = Some(10.0);
-                }
-            }
-            (Cmd::RangeAuto, true) => self.reply(bool01(self.set.range.is_none())),
-            (Cmd::Nplc, false) => {
-                let v = match keyword(one()?).as_str() {
-                    "MIN" => 0.02,
-                    "MAX" => 100.0,
-                    "DEF" => 10.0,
-                    _ => number(one()?)?,
-                };
-                if ![0.02, 0.2, 1.0, 10.0, 100.0].contains(&v) {
-                    return Err((-222, "Data out of range"));
-                }
-                self.set.nplc = v;
-            }
-            (Cmd::Nplc, true) => {
-                let v = self.set.nplc;
-                self.reply(&format_nr3(v));
-            }
-            (Cmd::Resolution, false) => {
-                let r = number(one()?)?;
-                self.set.nplc = nplc_for_resolution(r / self.set.range.unwrap_or(10.0));
-            }
-            (Cmd::Resolution, true) => {
-                let r = self.set.range.unwrap_or(10.0) * resolution_ratio(self.set.nplc);
-                self.reply(&format_nr3(r));
-            }
-            (Cmd::ZeroAuto, false) => {
-                self.set.zero = match keyword(one()?).as_str() {
-                    "ON" | "1" => Zero::On,
-                    "OFF" | "0" => Zero::Off,
-                    "ONCE" => Zero::Once,
-                    _ => return Err((-224, "Illegal parameter value")),
-                };
-            }
-            (Cmd::ZeroAuto, true) => self.reply(bool01(self.set.zero == Zero::On)),
-            (Cmd::ImpedanceAuto, false) => self.set.imp_auto = boolean(one()?)?,
-            (Cmd::ImpedanceAuto, true) => self.reply(bool01(self.set.imp_auto)),
-            (Cmd::TrigSource, false) => {
-                self.set.trig_source = match keyword(one()?).as_str() {
-                    "IMM" | "IMMEDIATE" => TrigSource::Imm,
-                    "BUS" => TrigSource::Bus,
-                    "EXT" | "EXTERNAL" => TrigSource::Ext,
-                    _ => return Err((-224, "Illegal parameter value")),
-                };
-            }
-            (Cmd::TrigSource, true) => {
-                let s = match self.set.trig_source {
-                    TrigSource::Imm => "IMM",
-                    TrigSource::Bus => "BUS",
-                    TrigSource::Ext => "EXT",
-                };
-                self.reply(s);
-            }
-            (Cmd::TrigDelay, false) => {
-                let d = match keyword(one()?).as_str() {
-                    "MIN" => 0.0,
-                    "MAX" => 3600.0,
-                    _ => number(one()?)?,
-                };
-                if !(0.0..=3600.0).contains(&d) {
-                    return Err((-222, "Data out of range"));
-                }
-                self.set.trig_delay = Some(d);
-            }
-            (Cmd::TrigDelay, true) => {
-                let d = self
-                    .trigger_delay()
-                    .mul_f64(self.cfg.time_scale)
-                    .as_secs_f64();
-                self.reply(&format_nr3(d));
-            }
-            (Cmd::TrigDelayAuto, false) => {
-                if boolean(one()?)? {
-                    self.set.trig_delay = None;
-                } else if self.set.trig_delay.is_none() {
-                    let d = self
-                        .trigger_delay()
-                        .mul_f64(self.cfg.time_scale)
-                        .as_secs_f64();
-                    self.set.trig_delay = Some(d);
-                }
-            }
-            (Cmd::TrigDelayAuto, true) => self.reply(bool01(self.set.trig_delay.is_none())),
-            (Cmd::TrigCount, false) => self.set.trig_count = count(one()?)?,
-            (Cmd::TrigCount, true) => self.reply(&format!("{:+}", self.set.trig_count)),
-            (Cmd::SampleCount, false) => self.set.samp_count = count(one()?)?,
-            (Cmd::SampleCount, true) => self.reply(&format!("{:+}", self.set.samp_count)),
-            (Cmd::Init, false) => {
-                no_params()?;
-                let total = u64::from(self.set.samp_count) * u64::from(self.set.trig_count);
-                if total > MEMORY_SIZE as u64 {
-                    return Err((531, "Insufficient memory"));
-                }
-                self.begin_measurement(Dest::Memory, now);
-            }
-            (Cmd::Read, true) => {
-                no_params()?;
-                self.start_read(now);
-            }
-            (Cmd::Fetch, true) => {
-                no_params()?;
-                if self.memory.is_empty() {
-                    return Err((-230, "Data stale"));
-                }
-                let mut fields: Vec<String> =
-                    self.memory.iter().map(|&v| format_reading(v)).collect();
-                match self.memory_fault.take() {
-                    Some((i, ReplyFault::Garble)) => {
-                        if let Some(f) = fields.get_mut(i) {
-                            *f = garbled(f.as_bytes());
-                        }
-                    }
-                    Some((_, other)) if !self.exec.as_ref().is_some_and(|e| e.has_output) => {
-                        self.pending_reply_fault.push_front(other);
-                    }
-                    Some(_) | None => {}
-                }
-                self.reply(&fields.join(","));
-            }
-            (Cmd::DataPoints, true) => {
-                let n = self.memory.len();
-                self.reply(&format!("{n:+}"));
-            }
-            (Cmd::Display, false) => self.set.display = boolean(one()?)?,
-            (Cmd::Display, true) => self.reply(bool01(self.set.display)),
-            (Cmd::DisplayText, false) => {
-                let t = one()?.trim_matches(['"', '\'']);
-                if t.len() > 12 {
-                    return Err((-223, "Too much data"));
-                }
-            }
-            (Cmd::DisplayText, true) => self.reply("\"\""),
-            (Cmd::DisplayTextClear, false) => {}
-            _ => return Err((-113, "Undefined header")),
-        }
-        Ok(())
-    }
-
-    fn start_read(&mut self, now: Instant) {
-        self.counters.queries_answered += 1;
-        self.begin_measurement(Dest::Output, now);
-    }
-
-    /// `CONFigure:VOLTage:DC [range[,resolution]]` and its presets.
-    fn configure(&mut self, p: &[String]) -> Result<(), (i32, &'static str)> {
-        if p.len() > 2 {
-            return Err((-108, "Parameter not allowed"));
-        }
-        let range = match p.first().map(|s| keyword(s)) {
-            None => None,
-            Some(k) if k == "DEF" || k == "AUTO" => None,
-            Some(k) if k == "MIN" => Some(0.1),
-            Some(k) if k == "MAX" => Some(1000.0),
-            Some(_) => Some(pick_range(number(&p[0])?)?),
-        };
-        let nplc = match p.get(1).map(|s| keyword(s)) {
-            None => 10.0,
-            Some(k) if k == "DEF" => 10.0,
-            Some(k) if k == "MIN" => 100.0,
-            Some(k) if k == "MAX" => 0.02,
-            Some(_) => nplc_for_resolution(number(&p[1])? / range.unwrap_or(10.0)),
-        };
-        self.set.range = range;
-        self.set.nplc = nplc;
-        self.set.samp_count = 1;
-        self.set.trig_count = 1;
-        self.set.trig_source = TrigSource::Imm;
-        self.set.trig_delay = None;
-        self.set.zero = if nplc >= 1.0 { Zero::On } else { Zero::Off };
-        self.set.imp_auto = false;
-        Ok(())
-    }
-}
-
-/// `bytes` with the second digit (or the first, or the first byte) replaced by `#`.
-pub(crate) fn garbled(bytes: &[u8]) -> String {
-    let mut b = bytes.to_vec();
-    let mut digits = b
-        .iter()
-        .enumerate()
-        .filter(|(_, c)| c.is_ascii_digit())
-        .map(|(i, _)| i);
-    let first = digits.next();
-    let i = digits.next().or(first).unwrap_or(0);
-    if let Some(c) = b.get_mut(i) {
-        *c = b'#';
-    }
-    String::from_utf8_lossy(&b).into_owned()
 }
 
 async fn sleep_until_opt(t: Option<Instant>) {
     match t {
         Some(t) => tokio::time::sleep_until(t).await,
         None => std::future::pending().await,
-    }
-}
-
-/// Formats a reading the way the 34401A sends it: `SD.DDDDDDDDESDD` (15 characters).
-pub fn format_reading(v: f64) -> String {
-    if !v.is_finite() || v.abs() >= OVERLOAD {
-        return if v < 0.0 {
-            "-9.90000000E+37".into()
-        } else {
-            "+9.90000000E+37".into()
-        };
-    }
-    format_nr3(v)
-}
-
-/// NR3 with 8 decimals and a signed two-digit exponent: `+1.00010310E+01`.
-fn format_nr3(v: f64) -> String {
-    let s = format!("{:.8E}", v.abs());
-    let (mant, exp) = s.split_once('E').unwrap_or((s.as_str(), "0"));
-    let exp: i32 = exp.parse().unwrap_or(0);
-    let sign = if v.is_sign_negative() && v != 0.0 {
-        '-'
-    } else {
-        '+'
-    };
-    let esign = if exp < 0 { '-' } else { '+' };
-    format!("{sign}{mant}E{esign}{:02}", exp.abs())
-}
-
-fn keyword(s: &str) -> String {
-    s.trim().to_ascii_uppercase()
-}
-
-fn number(s: &str) -> Result<f64, (i32, &'static str)> {
-    let t = s.trim();
-    // the 34401A accepts an optional unit suffix on voltages
-    let t = t.strip_suffix(['V', 'v']).unwrap_or(t);
-    match t.parse::<f64>() {
-        Ok(v) if v.is_finite() => Ok(v),
-        _ => Err((-104, "Data type error")),
-    }
-}
-
-fn boolean(s: &str) -> Result<bool, (i32, &'static str)> {
-    match keyword(s).as_str() {
-        "ON" | "1" => Ok(true),
-        "OFF" | "0" => Ok(false),
-        _ => Err((-224, "Illegal parameter value")),
-    }
-}
-
-fn count(s: &str) -> Result<u32, (i32, &'static str)> {
-    let k = keyword(s);
-    let v = match k.as_str() {
-        "MIN" => 1.0,
-        "MAX" => 50_000.0,
-        _ => number(s)?,
-    };
-    if !(1.0..=50_000.0).contains(&v) || v.fract() != 0.0 {
-        return Err((-222, "Data out of range"));
-    }
-    Ok(v as u32)
-}
-
-fn bool01(b: bool) -> &'static str {
-    if b { "1" } else { "0" }
-}
-
-/// The smallest range that holds `v` volts.
-fn pick_range(v: f64) -> Result<f64, (i32, &'static str)> {
-    let v = v.abs();
-    [0.1, 1.0, 10.0, 100.0, 1000.0]
-        .into_iter()
-        .find(|&r| v <= r * 1.2)
-        .ok_or((-222, "Data out of range"))
-}
-
-/// Resolution as a fraction of the range for each NPLC (User's Guide, resolution table).
-fn resolution_ratio(nplc: f64) -> f64 {
-    match nplc {
-        n if n <= 0.02 => 1e-4,
-        n if n <= 0.2 => 1e-5,
-        n if n <= 1.0 => 3e-6,
-        n if n <= 10.0 => 1e-6,
-        _ => 3e-7,
-    }
-}
-
-fn nplc_for_resolution(ratio: f64) -> f64 {
-    [(1e-4, 0.02), (1e-5, 0.2), (3e-6, 1.0), (1e-6, 10.0)]
-        .into_iter()
-        .find(|&(r, _)| ratio >= r * 0.999)
-        .map_or(100.0, |(_, n)| n)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn reading_format() {
-        assert_eq!(format_reading(10.001031), "+1.00010310E+01");
-        assert_eq!(format_reading(0.0), "+0.00000000E+00");
-        assert_eq!(format_reading(-1.5e-3), "-1.50000000E-03");
-        assert_eq!(format_reading(OVERLOAD), "+9.90000000E+37");
-        assert_eq!(format_reading(-OVERLOAD), "-9.90000000E+37");
-        for v in [1.0, -123.456, 9.99999999e-9, 1000.0] {
-            assert_eq!(format_reading(v).len(), 15, "{v}");
-        }
-    }
-
-    #[test]
-    fn config_defaults_and_toml() {
-        let c: DmmConfig = toml::from_str("").unwrap();
-        assert_eq!(c, DmmConfig::default());
-        let c: DmmConfig = toml::from_str(
-            "baud = 1200\nframing = \"7E2\"\ntime_scale = 10.0\n[[faults]]\nafter_commands = 5\nfault = { kind = \"overload\", readings = 3 }\n",
-        )
-        .unwrap();
-        assert_eq!(c.baud, 1200);
-        assert_eq!(c.faults[0].fault, Fault::Overload { readings: 3 });
-        assert!(toml::from_str::<DmmConfig>("bogus = 1").is_err());
     }
 }
 

@@ -46,6 +46,13 @@
 //! `Slow` sends each reply its delay late (the meter executes nothing meanwhile, as a busy
 //! instrument), on the connection the query came on: a reconnect drops it with the rest of
 //! what the old connection was owed.
+//!
+//! Where it lives: this module holds the instrument's state, its connections, measurement and
+//! replies; `commands` the command set. What it shares with the simulated 34401A (the error
+//! queue, the fault grammar and [`DmmHandle`], reply faults, noise, reading format) is in
+//! [`crate::scpi`].
+
+mod commands;
 
 use std::collections::{HashMap, VecDeque};
 use std::sync::{Arc, Mutex};
@@ -53,23 +60,20 @@ use std::time::Duration;
 
 use gyrocal_link::{Connector, DynStream, LinkError};
 use gyrocal_truevolt::{Model, TimingDefaults, TruevoltTiming};
-use rand::SeedableRng;
-use rand::rngs::StdRng;
-use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 use tokio::io::{AsyncReadExt, AsyncWriteExt, ReadHalf, WriteHalf};
 use tokio::sync::mpsc;
 use tokio::time::Instant;
 
 use crate::SignalSource;
-use crate::dmm::{Ctl, DmmHandle, DmmStats, Fault, format_reading, garbled};
+use crate::scpi::{
+    ArmedFaults, Ctl, DmmHandle, DmmStats, ErrorQueue, EventStatus, Fault, Noise, ReplyFault,
+    SlowReplies, clip, format_reading, slow_delay,
+};
+use commands::canonical;
 
-/// Entries the error queue holds.
-const ERROR_QUEUE_SIZE: usize = 20;
 /// Questionable Data register: memory overflow.
 const QUES_MEMORY_OVERFLOW: u16 = 1 << 14;
-/// Standard Event register: Power On.
-const ESR_PON: u8 = 128;
 
 /// What `*IDN?` answers as (`SYSTem:IDENtify`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -192,13 +196,6 @@ impl SimTruevolt {
     }
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum ReplyFault {
-    NoReply,
-    Garble,
-    Truncate,
-}
-
 #[derive(Debug, Clone, PartialEq)]
 struct Settings {
     range: Option<f64>,
@@ -249,17 +246,16 @@ type Conn = (ReadHalf<DynStream>, WriteHalf<DynStream>);
 struct Meter {
     cfg: TruevoltConfig,
     source: Box<dyn SignalSource>,
-    rng: StdRng,
-    noise: Option<Normal<f64>>,
+    noise: Noise,
     stats: Arc<Mutex<DmmStats>>,
     counters: DmmStats,
     set: Settings,
     personality: Personality,
-    errors: VecDeque<(i32, String)>,
+    errors: ErrorQueue,
     /// (value, reading number from 1)
     memory: VecDeque<(f64, u64)>,
     ques: u16,
-    esr: u8,
+    esr: EventStatus,
     meas: Option<Meas>,
     waiting: Option<Waiting>,
     lines: VecDeque<String>,
@@ -268,92 +264,13 @@ struct Meter {
     out: Option<(Vec<u8>, Instant)>,
     next_reply_fault: VecDeque<ReplyFault>,
     marked: HashMap<u64, ReplyFault>,
-    at_reading: Vec<(u64, Fault)>,
+    at_reading: ArmedFaults,
     overloads_left: u32,
     off_until: Option<Instant>,
     /// A [`Fault::Slow`] in force: the delay, and the replies it still holds back.
-    slow: Option<(Duration, Option<u32>)>,
+    slow: SlowReplies,
     gone: bool,
     stop: bool,
-}
-
-fn scpi_err(code: i32, msg: &str) -> (i32, String) {
-    (code, msg.to_string())
-}
-
-/// Canonical header: short forms, upper case, optional nodes dropped.
-fn canonical(header: &str) -> String {
-    const WORDS: [(&str, &str); 29] = [
-        ("CONF", "CONFIGURE"),
-        ("VOLT", "VOLTAGE"),
-        ("RANG", "RANGE"),
-        ("NPLC", "NPLCYCLES"),
-        ("ZERO", "ZERO"),
-        ("AUTO", "AUTO"),
-        ("TRIG", "TRIGGER"),
-        ("SOUR", "SOURCE"),
-        ("DEL", "DELAY"),
-        ("COUN", "COUNT"),
-        ("SAMP", "SAMPLE"),
-        ("INIT", "INITIATE"),
-        ("ABOR", "ABORT"),
-        ("READ", "READ"),
-        ("FETC", "FETCH"),
-        ("DATA", "DATA"),
-        ("REM", "REMOVE"),
-        ("POIN", "POINTS"),
-        ("LAST", "LAST"),
-        ("SYST", "SYSTEM"),
-        ("ERR", "ERROR"),
-        ("IDEN", "IDENTIFY"),
-        ("STAT", "STATUS"),
-        ("QUES", "QUESTIONABLE"),
-        ("COND", "CONDITION"),
-        ("EVEN", "EVENT"),
-        ("NEXT", "NEXT"),
-        ("SENS", "SENSE"),
-        ("IMM", "IMMEDIATE"),
-    ];
-    let h = header.trim().trim_start_matches(':').to_ascii_uppercase();
-    let (h, query) = match h.strip_suffix('?') {
-        Some(h) => (h.to_string(), "?"),
-        None => (h, ""),
-    };
-    if h.starts_with('*') {
-        return format!("{h}{query}");
-    }
-    let mut out: Vec<String> = Vec::new();
-    for seg in h.split(':') {
-        let word = WORDS
-            .iter()
-            .find(|(s, l)| seg == *s || seg == *l)
-            .map(|(s, _)| s.to_string())
-            .unwrap_or_else(|| seg.to_string());
-        let prev = out.last().map(String::as_str);
-        let optional = (word == "SENS" && out.is_empty())
-            || (word == "DC" && prev == Some("VOLT"))
-            || (word == "NEXT" && prev == Some("ERR"))
-            || (word == "EVEN" && prev == Some("QUES"))
-            || (word == "IMM" && prev == Some("INIT"));
-        if !optional {
-            out.push(word);
-        }
-    }
-    format!("{}{query}", out.join(":"))
-}
-
-fn parse_number(s: &str) -> Option<f64> {
-    let t = s.trim();
-    let t = t.strip_suffix(['V', 'v']).unwrap_or(t);
-    t.parse::<f64>().ok().filter(|v| v.is_finite())
-}
-
-fn parse_bool(s: &str) -> Option<bool> {
-    match s.trim().to_ascii_uppercase().as_str() {
-        "ON" | "1" => Some(true),
-        "OFF" | "0" => Some(false),
-        _ => None,
-    }
 }
 
 impl Meter {
@@ -363,14 +280,11 @@ impl Meter {
         seed: u64,
         stats: Arc<Mutex<DmmStats>>,
     ) -> Self {
-        let noise = (cfg.noise_v > 0.0)
-            .then(|| Normal::new(0.0, cfg.noise_v).ok())
-            .flatten();
+        let noise = Noise::new(cfg.noise_v, seed);
         Meter {
             personality: cfg.personality,
             cfg,
             source,
-            rng: StdRng::seed_from_u64(seed),
             noise,
             stats,
             counters: DmmStats {
@@ -380,10 +294,10 @@ impl Meter {
                 ..DmmStats::default()
             },
             set: Settings::default(),
-            errors: VecDeque::new(),
+            errors: ErrorQueue::default(),
             memory: VecDeque::new(),
             ques: 0,
-            esr: ESR_PON,
+            esr: EventStatus::powered_on(),
             meas: None,
             waiting: None,
             lines: VecDeque::new(),
@@ -391,10 +305,10 @@ impl Meter {
             out: None,
             next_reply_fault: VecDeque::new(),
             marked: HashMap::new(),
-            at_reading: Vec::new(),
+            at_reading: ArmedFaults::default(),
             overloads_left: 0,
             off_until: None,
-            slow: None,
+            slow: SlowReplies::default(),
             gone: false,
             stop: false,
         }
@@ -471,7 +385,7 @@ impl Meter {
                 biased;
                 c = ctl.recv(), if ctl_open => match c {
                     Some(Ctl::Fault(f)) => self.inject(f, Instant::now()),
-                    Some(Ctl::AtReading(n, f)) => self.at_reading.push((n, f)),
+                    Some(Ctl::AtReading(n, f)) => self.at_reading.arm(n, f),
                     Some(Ctl::Stop) => self.stop = true,
                     None => ctl_open = false,
                 },
@@ -521,7 +435,7 @@ impl Meter {
         self.counters.powered = self.off_until.is_none();
         self.counters.nplc = self.set.nplc;
         self.counters.memory_points = self.memory.len();
-        self.counters.error_queue = self.errors.iter().cloned().collect();
+        self.counters.error_queue = self.errors.snapshot();
         if let Ok(mut s) = self.stats.lock() {
             *s = self.counters.clone();
         }
@@ -555,13 +469,7 @@ impl Meter {
 
     fn raise(&mut self, code: i32, message: &str) {
         self.counters.errors_raised += 1;
-        if self.errors.len() >= ERROR_QUEUE_SIZE {
-            if let Some(last) = self.errors.back_mut() {
-                *last = scpi_err(-350, "Queue overflow");
-            }
-        } else {
-            self.errors.push_back(scpi_err(code, message));
-        }
+        self.errors.raise(code, message);
     }
 
     // ---- measurement -------------------------------------------------------------------
@@ -588,47 +496,33 @@ impl Meter {
 
     fn take_reading(&mut self, done: Instant, window: Duration) {
         let number = self.counters.readings_taken + 1;
-        // faults armed for this reading
-        let mut i = 0;
-        while i < self.at_reading.len() {
-            if self.at_reading[i].0 <= number {
-                let (_, f) = self.at_reading.remove(i);
-                match f {
-                    Fault::PowerCycle { off_s } => {
-                        self.power_off(off_s, done);
-                        return;
-                    }
-                    Fault::Disconnect => {
-                        self.gone = true;
-                        return;
-                    }
-                    Fault::NoReply => {
-                        self.marked.insert(number, ReplyFault::NoReply);
-                    }
-                    Fault::Garble => {
-                        self.marked.insert(number, ReplyFault::Garble);
-                    }
-                    Fault::Truncate => {
-                        self.marked.insert(number, ReplyFault::Truncate);
-                    }
-                    f => self.inject(f, done),
+        // faults armed for this reading; a power cycle or a disconnect takes the reading's
+        // place, and the faults after it stay armed
+        let mut due = self.at_reading.due(number).into_iter();
+        while let Some(f) = due.next() {
+            if let Some(reply_fault) = ReplyFault::of(&f) {
+                self.marked.insert(number, reply_fault);
+                continue;
+            }
+            match f {
+                Fault::PowerCycle { off_s } => {
+                    self.at_reading.put_back(number, due);
+                    self.power_off(off_s, done);
+                    return;
                 }
-            } else {
-                i += 1;
+                Fault::Disconnect => {
+                    self.at_reading.put_back(number, due);
+                    self.gone = true;
+                    return;
+                }
+                f => self.inject(f, done),
             }
         }
         let start = done.checked_sub(window).unwrap_or(done);
-        let mut v = self.source.volts(start, window);
-        if let Some(n) = &self.noise {
-            v += n.sample(&mut self.rng);
-        }
-        let limit = self.set.range.unwrap_or(1000.0) * 1.2;
-        if self.overloads_left > 0 {
-            self.overloads_left -= 1;
-            v = 9.9e37;
-        } else if v.abs() > limit {
-            v = 9.9e37 * v.signum();
-        }
+        let v = self.noise.add(self.source.volts(start, window));
+        let forced = self.overloads_left > 0;
+        self.overloads_left = self.overloads_left.saturating_sub(1);
+        let v = clip(v, self.set.range, forced);
         self.counters.readings_taken = number;
         if self.memory.len() >= self.capacity() {
             self.memory.pop_front();
@@ -677,22 +571,23 @@ impl Meter {
         self.memory.clear();
         self.errors.clear();
         self.ques = 0;
-        self.esr = ESR_PON;
+        self.esr = EventStatus::powered_on();
         tracing::info!("simulated Truevolt back on");
     }
 
     fn inject(&mut self, f: Fault, at: Instant) {
+        if let Some(reply_fault) = ReplyFault::of(&f) {
+            self.next_reply_fault.push_back(reply_fault);
+            return;
+        }
         match f {
-            Fault::NoReply => self.next_reply_fault.push_back(ReplyFault::NoReply),
-            Fault::Garble => self.next_reply_fault.push_back(ReplyFault::Garble),
-            Fault::Truncate => self.next_reply_fault.push_back(ReplyFault::Truncate),
+            Fault::NoReply | Fault::Garble | Fault::Truncate => {}
             Fault::Disconnect => self.gone = true,
             Fault::Overload { readings } => self.overloads_left += readings,
             Fault::PowerCycle { off_s } => self.power_off(off_s, at),
             Fault::PushError { code, message } => self.raise(code, &message),
             Fault::Slow { delay_s, replies } => {
-                let delay = Duration::from_secs_f64(delay_s.clamp(0.0, 1e6));
-                self.slow = (replies != Some(0)).then(|| (self.scaled(delay), replies));
+                self.slow.set(self.scaled(slow_delay(delay_s)), replies);
             }
         }
     }
@@ -714,22 +609,14 @@ impl Meter {
         let bytes = match fault {
             None => bytes,
             Some(ReplyFault::NoReply) => return,
-            Some(ReplyFault::Garble) => garbled(&bytes).into_bytes(),
-            Some(ReplyFault::Truncate) => bytes[..bytes.len().div_ceil(2)].to_vec(),
+            Some(fault) => fault.apply(&bytes).0,
         };
         let transfer = self.scaled(self.cfg.timing.transfer_per_reading)
             * u32::try_from(numbers.len()).unwrap_or(u32::MAX);
         // a slow meter sends its reply late, and executes nothing meanwhile
-        let late = match self.slow.as_mut() {
-            Some((delay, left)) => {
-                let delay = *delay;
+        let late = match self.slow.hold(1) {
+            Some(delay) => {
                 self.counters.late_replies += 1;
-                if let Some(n) = left {
-                    *n = n.saturating_sub(1);
-                    if *n == 0 {
-                        self.slow = None;
-                    }
-                }
                 delay
             }
             None => Duration::ZERO,
@@ -830,221 +717,5 @@ impl Meter {
         if let Err((code, msg)) = self.run_command(&canonical(header), &params, now) {
             self.raise(code, msg);
         }
-    }
-
-    fn run_command(
-        &mut self,
-        h: &str,
-        p: &[&str],
-        now: Instant,
-    ) -> Result<(), (i32, &'static str)> {
-        let first = p.first().copied().unwrap_or("");
-        let nr = |s: &str| parse_number(s).ok_or((-104, "Data type error"));
-        match h {
-            "*IDN?" => {
-                let text = match self.personality {
-                    Personality::Hp34401a => "HEWLETT-PACKARD,34401A,0,11-5-2".to_string(),
-                    Personality::Def => format!(
-                        "Keysight Technologies,{},{},A.03.01-03.15-03.01-00.52-03-02",
-                        self.cfg.model.name(),
-                        self.cfg.serial
-                    ),
-                };
-                self.reply(text, &[], now);
-            }
-            "*RST" => {
-                self.set = Settings::default();
-                self.config_changed();
-            }
-            "*CLS" => {
-                self.errors.clear();
-                self.esr = 0;
-                self.ques = 0;
-            }
-            "*OPC?" => self.waiting = Some(Waiting::Opc),
-            "*ESR?" => {
-                let v = self.esr;
-                self.esr = 0;
-                self.reply(format!("+{v}"), &[], now);
-            }
-            "SYST:ERR?" => {
-                let (c, m) = self
-                    .errors
-                    .pop_front()
-                    .unwrap_or_else(|| scpi_err(0, "No error"));
-                self.reply(format!("{c:+},\"{m}\""), &[], now);
-            }
-            "SYST:IDEN" => {
-                self.personality = match first.to_ascii_uppercase().as_str() {
-                    "DEF" | "DEFAULT" => Personality::Def,
-                    "HP34401A" => Personality::Hp34401a,
-                    _ => return Err((-224, "Illegal parameter value")),
-                };
-            }
-            "SYST:IDEN?" => {
-                let text = match self.personality {
-                    Personality::Def => "DEF",
-                    Personality::Hp34401a => "HP34401A",
-                };
-                self.reply(text.into(), &[], now);
-            }
-            "CONF:VOLT" => {
-                // CONFigure sets every measurement parameter to its default
-                self.set = Settings::default();
-                self.set.range = match first.to_ascii_uppercase().as_str() {
-                    "" | "AUTO" | "DEF" => None,
-                    r => Some(self.check_range(nr(r)?)?),
-                };
-                self.config_changed();
-            }
-            "VOLT:RANG" => {
-                self.set.range = Some(self.check_range(nr(first)?)?);
-                self.config_changed();
-            }
-            "VOLT:RANG:AUTO" => {
-                if parse_bool(first).ok_or((-224, "Illegal parameter value"))? {
-                    self.set.range = None;
-                }
-                self.config_changed();
-            }
-            "VOLT:NPLC" => {
-                let v = nr(first)?;
-                if !self.cfg.model.nplc_values().contains(&v) {
-                    return Err((-222, "Data out of range"));
-                }
-                self.set.nplc = v;
-                self.config_changed();
-            }
-            "VOLT:ZERO:AUTO" => {
-                self.set.autozero = parse_bool(first).ok_or((-224, "Illegal parameter value"))?;
-                self.config_changed();
-            }
-            "TRIG:SOUR" => {
-                if !matches!(first.to_ascii_uppercase().as_str(), "IMM" | "IMMEDIATE") {
-                    return Err((-221, "Settings conflict"));
-                }
-            }
-            "TRIG:DEL" => {
-                let d = nr(first)?;
-                if !(0.0..=3600.0).contains(&d) {
-                    return Err((-222, "Data out of range"));
-                }
-                self.set.trig_delay = Some(d);
-                self.config_changed();
-            }
-            "TRIG:DEL:AUTO" => {
-                if parse_bool(first).ok_or((-224, "Illegal parameter value"))? {
-                    self.set.trig_delay = None;
-                }
-                self.config_changed();
-            }
-            "TRIG:COUN" => {
-                if nr(first)? != 1.0 {
-                    return Err((-221, "Settings conflict"));
-                }
-            }
-            "SAMP:COUN" => {
-                let n = nr(first)?;
-                if !(1.0..=1e6).contains(&n) || n.fract() != 0.0 {
-                    return Err((-222, "Data out of range"));
-                }
-                #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-                {
-                    self.set.samp_count = n as usize;
-                }
-                self.config_changed();
-            }
-            "INIT" => {
-                if self.meas.is_some() {
-                    return Err((-213, "Init ignored"));
-                }
-                self.start_measurement(now);
-            }
-            "ABOR" => self.meas = None,
-            "READ?" => {
-                if self.meas.is_none() {
-                    self.start_measurement(now);
-                }
-                self.waiting = Some(Waiting::Fetch);
-            }
-            "FETC?" => self.waiting = Some(Waiting::Fetch),
-            "DATA:REM?" => {
-                let n = nr(first)?;
-                let wait = p.get(1).is_some_and(|w| w.eq_ignore_ascii_case("WAIT"));
-                if n < 1.0 || n.fract() != 0.0 || n > self.capacity() as f64 {
-                    return Err((-222, "Data out of range"));
-                }
-                #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-                let n = n as usize;
-                if !wait && self.memory.len() < n {
-                    return Err((-222, "Data out of range"));
-                }
-                self.waiting = Some(Waiting::Remove(n));
-            }
-            "R?" => {
-                let max = if first.is_empty() {
-                    self.memory.len()
-                } else {
-                    let m = nr(first)?;
-                    if m < 1.0 {
-                        return Err((-222, "Data out of range"));
-                    }
-                    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-                    {
-                        (m as usize).min(self.memory.len())
-                    }
-                };
-                let items: Vec<(f64, u64)> = self.memory.drain(..max).collect();
-                let numbers: Vec<u64> = items.iter().map(|i| i.1).collect();
-                let data = Self::readings_text(&items);
-                let len = data.len().to_string();
-                self.reply(format!("#{}{len}{data}", len.len()), &numbers, now);
-            }
-            "DATA:POIN?" => {
-                let n = self.memory.len();
-                self.reply(format!("{n:+}"), &[], now);
-            }
-            "DATA:LAST?" => match self.memory.back().copied() {
-                Some((v, number)) => {
-                    self.reply(format!("{} VDC", format_reading(v)), &[number], now)
-                }
-                None => self.reply("9.91000000E+37".into(), &[], now),
-            },
-            "STAT:QUES:COND?" => {
-                let q = self.ques;
-                self.reply(format!("{q:+}"), &[], now);
-            }
-            "STAT:QUES?" => {
-                let q = self.ques;
-                self.ques = 0;
-                self.reply(format!("{q:+}"), &[], now);
-            }
-            _ => return Err((-113, "Undefined header")),
-        }
-        Ok(())
-    }
-
-    fn check_range(&self, r: f64) -> Result<f64, (i32, &'static str)> {
-        gyrocal_truevolt::facts::RANGES_V
-            .iter()
-            .copied()
-            .find(|&x| r <= x * 1.2 && r > 0.0)
-            .ok_or((-222, "Data out of range"))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn headers_are_canonical() {
-        assert_eq!(canonical(":SENSe:VOLTage:DC:NPLCycles"), "VOLT:NPLC");
-        assert_eq!(canonical("volt:dc:nplc"), "VOLT:NPLC");
-        assert_eq!(canonical("DATA:REMove?"), "DATA:REM?");
-        assert_eq!(canonical("SYSTem:ERRor:NEXT?"), "SYST:ERR?");
-        assert_eq!(canonical("*idn?"), "*IDN?");
-        assert_eq!(canonical("CONF:VOLT:DC"), "CONF:VOLT");
-        assert_eq!(canonical("STAT:QUES:EVEN?"), "STAT:QUES?");
     }
 }
