@@ -16,7 +16,7 @@ use gyrocal_files::{Manifest, Plan};
 use gyrocal_fit::acceptance::{Acceptance, Check, Quantity, Verdict};
 use gyrocal_fit::{Analysis, Method, Model};
 
-use crate::html::esc;
+use crate::page::esc;
 use crate::input::Input;
 
 /// Prefix of report ids.

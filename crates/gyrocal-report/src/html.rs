@@ -1,5 +1,5 @@
-//! The HTML document: inline CSS (screen and print), inline SVG, tables. Every string that came
-//! from a file goes through [`esc`].
+//! The calibration report's document on the shared [`crate::page`] skeleton and stylesheet:
+//! inline SVG, tables. Every string that came from a file goes through [`esc`].
 
 use std::fmt::Write as _;
 
@@ -7,82 +7,13 @@ use gyrocal_files::Status;
 use gyrocal_fit::{Analysis, Fit, Method, Model, MultiAnalysis, NeuronStatus};
 
 use crate::input::{FitSource, Input};
+use crate::page::Page;
+/// The escaper, from [`crate::page`] (kept at this path for the drift page's `use`).
+pub(crate) use crate::page::esc;
 use crate::{Report, ReportError, certificate, plots};
-
-const CSS: &str = r#"
-:root { color-scheme: light; }
-body { font-family: system-ui, -apple-system, "Segoe UI", Roboto, Helvetica, Arial, sans-serif;
-  color: #1a1a1a; background: #fff; margin: 0 auto; padding: 1rem 1.5rem 3rem; max-width: 64rem;
-  line-height: 1.45; }
-h1 { font-size: 1.6rem; margin: 0.5rem 0 0.25rem; }
-h2 { font-size: 1.3rem; border-bottom: 1px solid #ccc; padding-bottom: 0.2rem; margin-top: 2rem; }
-h3 { font-size: 1.1rem; margin-top: 1.5rem; }
-.sub { color: #555; margin: 0 0 1rem; }
-.banner { border: 2px solid #b00020; background: #fdecee; color: #6b0012; padding: 0.75rem 1rem;
-  border-radius: 4px; font-weight: 600; margin: 1rem 0; }
-.banner.simulated { border-color: #7a4d00; background: #fff4d6; color: #4a2f00; font-weight: 400; }
-.banner.simulated strong { font-size: 1.15rem; letter-spacing: 0.05em; }
-.banner.plans { border-color: #7a4d00; background: #fff4d6; color: #4a2f00; }
-.note { color: #444; font-size: 0.95rem; }
-table { border-collapse: collapse; margin: 0.5rem 0 1rem; font-size: 0.92rem; }
-th, td { border: 1px solid #ccc; padding: 0.25rem 0.6rem; text-align: left; vertical-align: top; }
-th { background: #f2f2f2; }
-td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
-tr.best td { font-weight: 600; }
-figure { margin: 1rem 0 1.5rem; }
-figure svg { display: block; width: 100%; max-width: 800px; height: auto; border: 1px solid #e3e3e3; }
-figcaption { font-size: 0.92rem; color: #333; max-width: 800px; margin-top: 0.35rem; }
-code { font-size: 0.9em; word-break: break-all; }
-@media print {
-  body { max-width: none; padding: 0; font-size: 10pt; }
-  h2 { break-after: avoid; }
-  figure, table, .banner { break-inside: avoid; }
-  figure svg { max-width: 100%; border: none; }
-  .banner { background: #fff; color: #000; border: 3px solid #000; }
-  th { background: #fff; }
-  #conditions, #uncertainty, #fit { break-before: page; }
-  .verdict { background: #fff; border-width: 3px; }
-  table.cert td, table.cert th, table.results td { padding: 0.12rem 0.45rem; }
-  h1 { margin-top: 0; }
-  .signatures { break-inside: avoid; }
-}
-table.cert th { width: 11rem; background: #f7f7f7; }
-table.signatures { width: 100%; margin-top: 2rem; }
-table.signatures td { height: 2.2rem; min-width: 12rem; }
-.statement { margin-top: 2rem; font-style: italic; }
-.verdict { border: 2px solid #555; border-radius: 4px; padding: 0.6rem 1rem; margin: 1rem 0; }
-.verdict-word { font-size: 1.25rem; font-weight: 700; letter-spacing: 0.04em; margin-right: 0.3rem; }
-.verdict-fail { border-color: #b00020; background: #fdecee; }
-.verdict-pass { border-color: #1b6e20; background: #eaf6ea; }
-.verdict-marginal, .verdict-indeterminate { border-color: #7a4d00; background: #fff4d6; }
-td.v-fail { color: #b00020; }
-td.v-pass { color: #1b6e20; }
-caption { text-align: left; font-weight: 600; padding: 0.2rem 0; }
-table.results td.note { font-size: 0.85em; }
-table.budget { font-size: 0.85em; width: 100%; }
-table.budget td:first-child { min-width: 16rem; }
-#instruments-table td { overflow-wrap: anywhere; }
-.end { text-align: center; margin-top: 2rem; font-weight: 600; letter-spacing: 0.05em; }
-"#;
 
 /// Side of the error-surface grid the report draws.
 const SURFACE_GRID: usize = 81;
-
-/// HTML-escapes text (element content and attribute values).
-pub(crate) fn esc(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    for c in s.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&#39;"),
-            _ => out.push(c),
-        }
-    }
-    out
-}
 
 fn opt(v: Option<f64>, f: impl Fn(f64) -> String) -> String {
     v.filter(|v| v.is_finite())
@@ -168,7 +99,6 @@ pub(crate) fn render(inputs: &[Input]) -> Result<Report, ReportError> {
     let simulated = inputs
         .iter()
         .any(|i| i.manifest.as_ref().is_some_and(|m| m.simulated));
-    doc.html.push_str("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n");
     let title = match inputs {
         [one] => match &one.manifest {
             Some(m) => format!("Calibration report: {}", m.plan.name()),
@@ -197,17 +127,14 @@ pub(crate) fn render(inputs: &[Input]) -> Result<Report, ReportError> {
     let page_css = cert
         .as_ref()
         .map_or_else(String::new, |(_, _, id)| certificate::page_css(id));
-    let _ = write!(
-        doc.html,
-        "<title>{}</title>\n<style>{CSS}{page_css}</style>\n</head>\n<body>\n<h1>Gyro scale-factor calibration report</h1>\n",
-        esc(&title)
-    );
-    let _ = writeln!(
-        doc.html,
-        "<p class=\"sub\">{} · gyrocal-report {}</p>",
-        esc(&title),
-        env!("CARGO_PKG_VERSION")
-    );
+    Page::new(&title, "Gyro scale-factor calibration report")
+        .sub(format!(
+            "{} · gyrocal-report {}",
+            esc(&title),
+            env!("CARGO_PKG_VERSION")
+        ))
+        .extra_css(page_css)
+        .open(&mut doc.html);
     // The gyro under test and who ran it: on the first page, before any number (a
     // certificate's head says it in full, below the banners).
     if cert.is_none() {
@@ -267,7 +194,7 @@ pub(crate) fn render(inputs: &[Input]) -> Result<Report, ReportError> {
         certificate::closing(&mut doc.html);
         certificate::end_mark(&mut doc.html, id);
     }
-    doc.html.push_str("</body>\n</html>\n");
+    Page::close(&mut doc.html, None);
     let acceptance = match inputs {
         [one] => one
             .analysis

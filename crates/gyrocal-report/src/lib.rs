@@ -36,6 +36,7 @@ pub mod allan;
 mod certificate;
 mod html;
 mod input;
+pub mod page;
 mod plots;
 
 use std::fs;
@@ -238,7 +239,7 @@ pub fn apply_acceptance(
         a.acceptance = a.evaluate_acceptance(spec);
         input.acceptance_from = Some(format!(
             "from <code>{}</code>, re-evaluated when this report was made (the run's own verdict, if any, is in its fit.json)",
-            html::esc(source)
+            page::esc(source)
         ));
     }
 }
