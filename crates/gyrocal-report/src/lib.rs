@@ -34,6 +34,7 @@
 
 pub mod allan;
 mod certificate;
+pub mod history;
 mod html;
 mod input;
 pub mod page;
