@@ -39,7 +39,7 @@ pub fn render(h: &History) -> String {
     let mut out = String::new();
     let title = format!("Calibration history of gyro {}", h.serial);
     Page::new(&title, &title)
-        .sub(format!(
+        .with_sub(format!(
             "{} complete calibration(s){}.",
             h.calibrations.len(),
             if h.include_simulated {

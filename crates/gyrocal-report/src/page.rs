@@ -155,14 +155,14 @@ impl<'a> Page<'a> {
 
     /// The `.sub` line (HTML, escaped by the caller).
     #[must_use]
-    pub fn sub(mut self, html: String) -> Self {
+    pub fn with_sub(mut self, html: String) -> Self {
         self.sub = Some(html);
         self
     }
 
     /// Extra CSS for this document only.
     #[must_use]
-    pub fn extra_css(mut self, css: String) -> Self {
+    pub fn with_css(mut self, css: String) -> Self {
         self.extra_css = css;
         self
     }
@@ -209,8 +209,8 @@ mod tests {
     fn the_skeleton_escapes_title_and_heading_and_closes_the_document() {
         let mut html = String::new();
         Page::new("SIMULATED · <run>", "Report & co")
-            .sub("<code>runs/r1</code>".into())
-            .extra_css("@page { size: A4; }".into())
+            .with_sub("<code>runs/r1</code>".into())
+            .with_css("@page { size: A4; }".into())
             .open(&mut html);
         Page::close(&mut html, Some("made by gyrocal"));
         assert!(html.starts_with("<!DOCTYPE html>\n<html lang=\"en\">"));
@@ -219,6 +219,8 @@ mod tests {
         assert!(html.contains("<p class=\"sub\"><code>runs/r1</code></p>"));
         assert!(html.contains("@page { size: A4; }</style>"));
         assert_eq!(html.matches("<style>").count(), 1, "one stylesheet");
-        assert!(html.ends_with("<footer class=\"note\">made by gyrocal</footer>\n</body>\n</html>\n"));
+        assert!(
+            html.ends_with("<footer class=\"note\">made by gyrocal</footer>\n</body>\n</html>\n")
+        );
     }
 }
