@@ -936,7 +936,9 @@ mod tests {
                 ],
                 Backend::Postgres => [
                     include_str!("../tests/fixtures/migrations-0.1/postgres/0001_catalog.sql"),
-                    include_str!("../tests/fixtures/migrations-0.1/postgres/0002_drift_results.sql"),
+                    include_str!(
+                        "../tests/fixtures/migrations-0.1/postgres/0002_drift_results.sql"
+                    ),
                 ],
             }
         };
@@ -945,7 +947,11 @@ mod tests {
             assert_eq!(new.len(), 2, "{backend:?}");
             for (i, (version, _, sql)) in new.iter().enumerate() {
                 assert_eq!(*version, i as i64 + 1);
-                assert_eq!(sql.as_ref(), old(backend)[i], "{backend:?} version {version}");
+                assert_eq!(
+                    sql.as_ref(),
+                    old(backend)[i],
+                    "{backend:?} version {version}"
+                );
             }
         }
     }

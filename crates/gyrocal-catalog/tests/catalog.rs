@@ -408,16 +408,25 @@ async fn a_catalog_made_with_the_per_backend_migrations_opens() {
     let url = CatalogUrl::Sqlite(file.clone());
     let catalog = Catalog::open(&url).await.unwrap();
     catalog.import_dir(&old_run).await.unwrap();
-    assert_eq!(catalog.calibrations("LAYOUT-1", true).await.unwrap().len(), 1);
+    assert_eq!(
+        catalog.calibrations("LAYOUT-1", true).await.unwrap().len(),
+        1
+    );
     catalog.close().await;
     // opened again (listing opens existing catalogs only): no mismatch either
     let catalog = Catalog::open_existing(&url).await.unwrap();
-    assert_eq!(catalog.calibrations("LAYOUT-1", true).await.unwrap().len(), 1);
+    assert_eq!(
+        catalog.calibrations("LAYOUT-1", true).await.unwrap().len(),
+        1
+    );
     catalog.close().await;
-    let pool = sqlx::SqlitePool::connect_with(
-        sqlx::sqlite::SqliteConnectOptions::new().filename(&file),
-    )
-    .await
-    .unwrap();
-    assert_eq!(recorded(pool).await, before, "the record of migrations is untouched");
+    let pool =
+        sqlx::SqlitePool::connect_with(sqlx::sqlite::SqliteConnectOptions::new().filename(&file))
+            .await
+            .unwrap();
+    assert_eq!(
+        recorded(pool).await,
+        before,
+        "the record of migrations is untouched"
+    );
 }
