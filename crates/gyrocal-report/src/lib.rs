@@ -24,6 +24,9 @@
 //!   [`Report::write`] writes it. [`render_run`] and [`render_steps_csv`] are the one-input
 //!   shortcuts.
 //!
+//! Every page (this report, the drift page of [`allan`], a gyro's [`history`]) is built on
+//! [`page`]: one skeleton, one stylesheet, one HTML escaper.
+//!
 //! # What it is not
 //!
 //! No numerics of its own beyond plotting (contour levels, axis ranges): every number comes from
