@@ -44,7 +44,7 @@ use std::fmt::Write as _;
 ///   `table.results`, `table.budget`, `#instruments-table`, `.end`, and the print rules that
 ///   start `#conditions`, `#uncertainty` and `#fit` on a new page;
 /// * the drift (Allan) page: `tr.beyond` (curve points past the fitted range, greyed);
-/// * the history page: `table.history` (smaller type for its wide tables).
+/// * the history page: `table.history` (smaller type and padding for its wide tables).
 pub const STYLESHEET: &str = r#"
 :root { color-scheme: light; }
 body { font-family: system-ui, -apple-system, "Segoe UI", Roboto, Helvetica, Arial, sans-serif;
@@ -64,6 +64,7 @@ h3 { font-size: 1.1rem; margin-top: 1.5rem; }
 .warn { color: #b00020; font-weight: 600; }
 table { border-collapse: collapse; margin: 0.5rem 0 1rem; font-size: 0.92rem; }
 table.history { font-size: 0.85rem; }
+table.history th, table.history td { padding: 0.2rem 0.4rem; }
 th, td { border: 1px solid #ccc; padding: 0.25rem 0.6rem; text-align: left; vertical-align: top; }
 th { background: #f2f2f2; }
 td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
