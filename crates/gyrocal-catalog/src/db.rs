@@ -22,36 +22,51 @@ use crate::health;
 use crate::record::{CheckRow, InstrumentRow, Results, RunRecord, RunRow, StepRow};
 use crate::url::CatalogUrl;
 
-/// The SQLite migrations, oldest first (version, description, SQL).
-const SQLITE_MIGRATIONS: &[(i64, &str, &str)] = &[
-    (
-        1,
-        "catalog",
-        include_str!("../migrations/sqlite/0001_catalog.sql"),
-    ),
-    (
-        2,
-        "drift results",
-        include_str!("../migrations/sqlite/0002_drift_results.sql"),
-    ),
-];
-/// The PostgreSQL migrations, oldest first.
-const POSTGRES_MIGRATIONS: &[(i64, &str, &str)] = &[
-    (
-        1,
-        "catalog",
-        include_str!("../migrations/postgres/0001_catalog.sql"),
-    ),
-    (
-        2,
-        "drift results",
-        include_str!("../migrations/postgres/0002_drift_results.sql"),
-    ),
-];
+// The migrations: one folder (`migrations/`) for both backends, compiled in.
+//
+// Why the headers below: sqlx records each applied migration's checksum (SHA-384 of its SQL
+// text) in `_sqlx_migrations` and refuses to open a database whose recorded checksum differs
+// from the program's. Releases up to 0.1 kept one copy of version 1 per backend, identical but
+// for a two-line comment naming the backend; a catalog they created recorded the checksum of
+// that text. So version 1 is its shared body (`migrations/0001_catalog.sql`) behind the
+// backend's original comment, byte for byte the text those releases ran, and such a catalog
+// opens without a migration mismatch (tests/catalog.rs,
+// `a_catalog_made_with_the_per_backend_migrations_opens`; the old files are kept in
+// tests/fixtures/migrations-0.1). Versions 2 on were always the same text for both backends:
+// no header. A new migration is one file in `migrations/`, listed once in `migrations()`.
+
+/// The comment that opened version 1 of the SQLite migrations up to release 0.1 (part of the
+/// checksum recorded in catalogs created by them).
+const SQLITE_V1_HEADER: &str = "-- gyrocal catalog, schema version 1 (SQLite). Documented in SCHEMA.md; keep the PostgreSQL\n-- twin (migrations/postgres/0001_catalog.sql) in step.\n";
+/// The same for PostgreSQL.
+const POSTGRES_V1_HEADER: &str = "-- gyrocal catalog, schema version 1 (PostgreSQL). Documented in SCHEMA.md; keep the SQLite\n-- twin (migrations/sqlite/0001_catalog.sql) in step.\n";
+/// Version 1's statements, shared by both backends.
+const V1_CATALOG: &str = include_str!("../migrations/0001_catalog.sql");
+/// Version 2: a drift test's figures.
+const V2_DRIFT_RESULTS: &str = include_str!("../migrations/0002_drift_results.sql");
+
+/// Which backend a set of migrations is for (only version 1's leading comment differs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Backend {
+    Sqlite,
+    Postgres,
+}
+
+/// The migrations of `backend`, oldest first: (version, description, SQL text as checksummed).
+fn migrations(backend: Backend) -> Vec<(i64, &'static str, Cow<'static, str>)> {
+    let header = match backend {
+        Backend::Sqlite => SQLITE_V1_HEADER,
+        Backend::Postgres => POSTGRES_V1_HEADER,
+    };
+    vec![
+        (1, "catalog", Cow::Owned(format!("{header}{V1_CATALOG}"))),
+        (2, "drift results", Cow::Borrowed(V2_DRIFT_RESULTS)),
+    ]
+}
 
 /// The migrations compiled into the program (no migration files at run time).
 #[derive(Debug)]
-struct Embedded(&'static [(i64, &'static str, &'static str)]);
+struct Embedded(Backend);
 
 impl<'s> MigrationSource<'s> for Embedded {
     fn resolve(
@@ -64,15 +79,14 @@ impl<'s> MigrationSource<'s> for Embedded {
         >,
     > {
         Box::pin(async move {
-            Ok(self
-                .0
-                .iter()
+            Ok(migrations(self.0)
+                .into_iter()
                 .map(|(version, description, sql)| {
                     Migration::new(
-                        *version,
-                        Cow::Borrowed(*description),
+                        version,
+                        Cow::Borrowed(description),
                         MigrationType::Simple,
-                        Cow::Borrowed(*sql),
+                        sql,
                         false,
                     )
                 })
@@ -396,8 +410,8 @@ impl Catalog {
 
     async fn migrate(&self) -> Result<(), CatalogError> {
         let source = match self.pool {
-            Pool::Sqlite(_) => Embedded(SQLITE_MIGRATIONS),
-            Pool::Postgres(_) => Embedded(POSTGRES_MIGRATIONS),
+            Pool::Sqlite(_) => Embedded(Backend::Sqlite),
+            Pool::Postgres(_) => Embedded(Backend::Postgres),
         };
         let migrator = Migrator::new(source)
             .await
@@ -901,6 +915,44 @@ pub(crate) fn db_error(url: &CatalogUrl, e: &sqlx::Error) -> CatalogError {
         CatalogError::Database {
             url: url.redacted(),
             message,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Backend, migrations};
+
+    /// Each backend's migrations are, byte for byte, the text releases up to 0.1 ran from their
+    /// per-backend folders (kept in tests/fixtures/migrations-0.1): so the checksums sqlx
+    /// recorded in their catalogs match.
+    #[test]
+    fn each_backend_runs_the_text_the_per_backend_folders_held() {
+        let old = |backend: Backend| -> [&str; 2] {
+            match backend {
+                Backend::Sqlite => [
+                    include_str!("../tests/fixtures/migrations-0.1/sqlite/0001_catalog.sql"),
+                    include_str!("../tests/fixtures/migrations-0.1/sqlite/0002_drift_results.sql"),
+                ],
+                Backend::Postgres => [
+                    include_str!("../tests/fixtures/migrations-0.1/postgres/0001_catalog.sql"),
+                    include_str!(
+                        "../tests/fixtures/migrations-0.1/postgres/0002_drift_results.sql"
+                    ),
+                ],
+            }
+        };
+        for backend in [Backend::Sqlite, Backend::Postgres] {
+            let new = migrations(backend);
+            assert_eq!(new.len(), 2, "{backend:?}");
+            for (i, (version, _, sql)) in new.iter().enumerate() {
+                assert_eq!(*version, i as i64 + 1);
+                assert_eq!(
+                    sql.as_ref(),
+                    old(backend)[i],
+                    "{backend:?} version {version}"
+                );
+            }
         }
     }
 }

@@ -26,7 +26,7 @@
 //! and port (one direct connection before the pool, whose own retries would only say "pool
 //! timed out" after the connect timeout).
 //!
-//! The schema (versioned migrations, one set per backend, compiled in) is documented in
+//! The schema (versioned migrations, one folder for both backends, compiled in) is documented in
 //! `SCHEMA.md`, included below. A running calibration updates the catalog through
 //! [`CatalogWriter`], which never blocks or fails the run.
 //!
@@ -39,7 +39,6 @@ mod db;
 mod error;
 mod health;
 mod history;
-pub mod history_html;
 mod pg_probe;
 mod record;
 mod url;

@@ -16,8 +16,8 @@ use gyrocal_files::{Manifest, Plan};
 use gyrocal_fit::acceptance::{Acceptance, Check, Quantity, Verdict};
 use gyrocal_fit::{Analysis, Method, Model};
 
-use crate::html::esc;
 use crate::input::Input;
+use crate::page::esc;
 
 /// Prefix of report ids.
 const REPORT_ID_PREFIX: &str = "GC";

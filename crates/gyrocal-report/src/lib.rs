@@ -24,6 +24,9 @@
 //!   [`Report::write`] writes it. [`render_run`] and [`render_steps_csv`] are the one-input
 //!   shortcuts.
 //!
+//! Every page (this report, the drift page of [`allan`], a gyro's [`history`]) is built on
+//! [`page`]: one skeleton, one stylesheet, one HTML escaper.
+//!
 //! # What it is not
 //!
 //! No numerics of its own beyond plotting (contour levels, axis ranges): every number comes from
@@ -34,8 +37,10 @@
 
 pub mod allan;
 mod certificate;
+pub mod history;
 mod html;
 mod input;
+pub mod page;
 mod plots;
 
 use std::fs;
@@ -238,7 +243,7 @@ pub fn apply_acceptance(
         a.acceptance = a.evaluate_acceptance(spec);
         input.acceptance_from = Some(format!(
             "from <code>{}</code>, re-evaluated when this report was made (the run's own verdict, if any, is in its fit.json)",
-            html::esc(source)
+            page::esc(source)
         ));
     }
 }

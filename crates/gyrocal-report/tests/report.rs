@@ -566,3 +566,18 @@ fn a_run_report_is_a_certificate_with_an_id_on_every_page_and_an_end() {
     let again = fs::read_to_string(write_run_report(&dir).unwrap()).unwrap();
     assert!(again.contains(&format!("End of report {id_text}")));
 }
+
+/// The report is on the shared page: the one stylesheet (the page module's, once, with the
+/// certificate's `@page` header after it), its title and heading, and the document closed.
+#[test]
+fn report_is_on_the_shared_page_with_one_stylesheet() {
+    let (_tmp, dir) = complete_run();
+    let html = fs::read_to_string(write_run_report(&dir).unwrap()).unwrap();
+    assert!(html.starts_with("<!DOCTYPE html>"));
+    assert_eq!(html.matches("<style>").count(), 1, "one stylesheet");
+    assert!(html.contains(gyrocal_report::page::STYLESHEET));
+    let style = &html[html.find("<style>").unwrap()..html.find("</style>").unwrap()];
+    assert!(style.contains("@page"), "the certificate's page header");
+    assert!(html.contains("<h1>Gyro scale-factor calibration report</h1>"));
+    assert!(html.ends_with("</body>\n</html>\n"));
+}

@@ -50,7 +50,7 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<u8> {
         eprintln!("gyrocal: warning: {w}");
     }
     if let Some(path) = &args.output {
-        let html = gyrocal_catalog::history_html::render(&h);
+        let html = gyrocal_report::history::render(&h);
         std::fs::write(path, html)
             .map_err(|e| anyhow::anyhow!("{}: cannot write: {e}", path.display()))?;
     }

@@ -1,25 +1,23 @@
 //! A gyro's history as one self-contained HTML page: the calibrations with their results and
 //! uncertainties, the day-to-day repeatability, and a trend plot (SVG, plotters) per quantity
 //! with its acceptance limits and control band.
+//!
+//! The catalog stores and queries ([`gyrocal_catalog::Catalog::history`] computes the
+//! repeatability, trends and control bands into a typed [`History`]); this module only renders
+//! it, on the shared [`crate::page`] skeleton, stylesheet and escaper (`gyrocal history -o`).
 
 use gyrocal_files::num::{significant, value_and_u};
 use std::fmt::Write as _;
 
 use plotters::prelude::*;
 
-use crate::history::{History, Trend};
+use gyrocal_catalog::{History, Trend};
+
+use crate::page::{Page, esc};
 
 const WIDTH: u32 = 860;
 const HEIGHT: u32 = 320;
 const FONT: &str = "sans-serif";
-
-/// HTML-escapes text.
-fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
-}
 
 fn num(v: Option<f64>) -> String {
     v.map_or_else(|| "—".to_string(), |x| significant(x, 7))
@@ -36,29 +34,21 @@ fn with_u(v: Option<f64>, u: Option<f64>) -> String {
     }
 }
 
-/// The page.
+/// The history page of `h` (`gyrocal history SERIAL -o FILE.html`).
 pub fn render(h: &History) -> String {
     let mut out = String::new();
     let title = format!("Calibration history of gyro {}", h.serial);
-    let _ = write!(
-        out,
-        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{t}</title>\
-         <style>body{{font-family:sans-serif;margin:2em;max-width:1000px}}\
-         table{{border-collapse:collapse;font-size:0.85em}}td,th{{border:1px solid #bbb;padding:2px 6px;text-align:right}}\
-         th{{background:#eee}}td.l{{text-align:left}}.warn{{color:#a00;font-weight:bold}}</style></head><body>\
-         <h1>{t}</h1>",
-        t = esc(&title)
-    );
-    let _ = write!(
-        out,
-        "<p>{} complete calibration(s){}.</p>",
-        h.calibrations.len(),
-        if h.include_simulated {
-            ", simulated runs included"
-        } else {
-            "; simulated runs excluded"
-        }
-    );
+    Page::new(&title, &title)
+        .with_sub(format!(
+            "{} complete calibration(s){}.",
+            h.calibrations.len(),
+            if h.include_simulated {
+                ", simulated runs included"
+            } else {
+                "; simulated runs excluded"
+            }
+        ))
+        .open(&mut out);
     for w in &h.warnings {
         let _ = write!(out, "<p class=\"warn\">Warning: {}</p>", esc(w));
     }
@@ -87,7 +77,7 @@ pub fn render(h: &History) -> String {
             num(r.bias_dph),
         );
         out.push_str(
-            "<h2>Calibrations</h2><table><tr><th>started (UTC)</th><th>run</th><th>station</th>\
+            "<h2>Calibrations</h2><table class=\"history\"><tr><th>started (UTC)</th><th>run</th><th>station</th>\
              <th>plan</th><th>K ± U (V/(°/s))</th><th>bias ± U (°/h)</th><th>nonlinearity (ppm)</th>\
              <th>asymmetry (ppm)</th><th>verdict</th><th>sim.</th></tr>",
         );
@@ -95,8 +85,8 @@ pub fn render(h: &History) -> String {
             let res = c.results.clone().unwrap_or_default();
             let _ = write!(
                 out,
-                "<tr><td class=\"l\">{}</td><td class=\"l\" title=\"{}\">{}</td><td class=\"l\">{}</td>\
-                 <td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td class=\"l\">{}</td><td>{}</td></tr>",
+                "<tr><td>{}</td><td title=\"{}\">{}</td><td>{}</td>\
+                 <td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td>{}</td><td>{}</td></tr>",
                 esc(&c.run.started_utc),
                 esc(&c.run.directory),
                 esc(&c.run.id.chars().take(12).collect::<String>()),
@@ -114,7 +104,7 @@ pub fn render(h: &History) -> String {
     }
     if !drifts.is_empty() {
         out.push_str(
-            "<h2>Drift tests</h2><table><tr><th>started (UTC)</th><th>run</th><th>station</th>\
+            "<h2>Drift tests</h2><table class=\"history\"><tr><th>started (UTC)</th><th>run</th><th>station</th>\
              <th>plan</th><th>N ± U (°/√h)</th><th>B ± U (°/h)</th><th>K ± U (°/h/√h)</th>\
              <th>bias ± U (°/h)</th><th>record (h)</th><th>sim.</th></tr>",
         );
@@ -122,8 +112,8 @@ pub fn render(h: &History) -> String {
             let res = c.results.clone().unwrap_or_default();
             let _ = write!(
                 out,
-                "<tr><td class=\"l\">{}</td><td class=\"l\" title=\"{}\">{}</td><td class=\"l\">{}</td>\
-                 <td class=\"l\">{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                "<tr><td>{}</td><td title=\"{}\">{}</td><td>{}</td>\
+                 <td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td>{}</td></tr>",
                 esc(&c.run.started_utc),
                 esc(&c.run.directory),
                 esc(&c.run.id.chars().take(12).collect::<String>()),
@@ -163,7 +153,7 @@ pub fn render(h: &History) -> String {
             );
         }
     }
-    out.push_str("</body></html>\n");
+    Page::close(&mut out, None);
     out
 }
 
