@@ -8,15 +8,9 @@
 mod common;
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
-use common::config;
-
-/// The binary with none of the user's files (tests/common), its default catalog in the
-/// test's own `data_home`.
-fn gyrocal(data_home: &Path) -> Command {
-    common::gyrocal_with_data_home(data_home)
-}
+use common::{config, gyrocal_with_data_home};
 
 fn ok(out: &Output) -> String {
     let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
@@ -27,7 +21,7 @@ fn ok(out: &Output) -> String {
 
 /// A simulated calibration that is not indexed by the run itself (the tests import it).
 fn calibrate(data_home: &Path, dir: &Path, serial: &str) {
-    ok(&gyrocal(data_home)
+    ok(&gyrocal_with_data_home(data_home)
         .args([
             "run",
             "--simulate",
@@ -59,7 +53,7 @@ fn exercise(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
     let not_a_run = root.join("empty");
     std::fs::create_dir_all(&not_a_run).unwrap();
 
-    let out = gyrocal(data_home)
+    let out = gyrocal_with_data_home(data_home)
         .args(["catalog", "import"])
         .args(extra)
         .arg(runs.join("a1"))
@@ -75,13 +69,13 @@ fn exercise(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
         "{stderr}"
     );
     // rebuild finds all three (and importing again duplicates nothing)
-    ok(&gyrocal(data_home)
+    ok(&gyrocal_with_data_home(data_home)
         .args(["catalog", "rebuild"])
         .args(extra)
         .arg(&runs)
         .output()
         .unwrap());
-    ok(&gyrocal(data_home)
+    ok(&gyrocal_with_data_home(data_home)
         .args(["catalog", "import"])
         .args(extra)
         .arg(runs.join("b1"))
@@ -89,7 +83,7 @@ fn exercise(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
         .unwrap());
 
     let list = json(
-        &gyrocal(data_home)
+        &gyrocal_with_data_home(data_home)
             .args(["runs", "--json"])
             .args(extra)
             .output()
@@ -116,7 +110,7 @@ fn exercise(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
     assert!(ours[0]["started_utc"].as_str() >= ours[1]["started_utc"].as_str());
 
     let only = json(
-        &gyrocal(data_home)
+        &gyrocal_with_data_home(data_home)
             .args(["runs", "--json", "--serial", &s2])
             .args(extra)
             .output()
@@ -125,7 +119,7 @@ fn exercise(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
     assert_eq!(only.as_array().unwrap().len(), 1);
 
     let h = json(
-        &gyrocal(data_home)
+        &gyrocal_with_data_home(data_home)
             .args(["history", &s1, "--json", "--include-simulated"])
             .args(extra)
             .output()
@@ -141,7 +135,7 @@ fn exercise(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
     assert!(h["repeatability"]["scale_factor_ppm"].is_number(), "{h}");
     // simulated runs are left out unless asked for
     let h = json(
-        &gyrocal(data_home)
+        &gyrocal_with_data_home(data_home)
             .args(["history", &s1, "--json"])
             .args(extra)
             .output()
@@ -150,7 +144,7 @@ fn exercise(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
     assert_eq!(h["calibrations"].as_array().unwrap().len(), 0);
     // the HTML page with its plots
     let html = root.join("h.html");
-    ok(&gyrocal(data_home)
+    ok(&gyrocal_with_data_home(data_home)
         .args(["history", &s1, "--include-simulated", "-o"])
         .arg(&html)
         .args(extra)
@@ -167,7 +161,10 @@ fn runs_and_history_on_the_default_sqlite_catalog() {
     exercise(&data_home, tmp.path(), &[], "");
     assert!(data_home.join("gyrocal/catalog.sqlite").is_file());
     // the table
-    let out = ok(&gyrocal(&data_home).args(["runs"]).output().unwrap());
+    let out = ok(&gyrocal_with_data_home(&data_home)
+        .args(["runs"])
+        .output()
+        .unwrap());
     assert!(out.contains("0421") && out.contains("0777"), "{out}");
 }
 
@@ -185,7 +182,7 @@ fn runs_and_history_on_postgres() {
     // a run indexes itself in the lab's PostgreSQL as it goes
     let serial = format!("0999{tag}");
     let doc = json(
-        &gyrocal(&data_home)
+        &gyrocal_with_data_home(&data_home)
             .args(["run", "--simulate", "--json", "--dut-serial", &serial])
             .args(["--catalog", &url, "--out"])
             .arg(tmp.path().join("live"))
@@ -195,7 +192,7 @@ fn runs_and_history_on_postgres() {
     );
     assert_eq!(doc["catalog"]["updated"], true, "{doc:#}");
     let list = json(
-        &gyrocal(&data_home)
+        &gyrocal_with_data_home(&data_home)
             .args(["runs", "--json", "--catalog", &url, "--serial", &serial])
             .output()
             .unwrap(),
@@ -208,7 +205,7 @@ fn runs_and_history_on_postgres() {
 #[test]
 fn a_bad_catalog_url_is_bad_input_and_hides_the_password() {
     let tmp = tempfile::tempdir().unwrap();
-    let out = gyrocal(tmp.path())
+    let out = gyrocal_with_data_home(tmp.path())
         .args(["runs", "--catalog", "mysql://lab:topsecret@db/x"])
         .output()
         .unwrap();
@@ -225,7 +222,7 @@ fn a_run_indexes_itself_and_a_dead_catalog_never_stops_it() {
     let url = format!("sqlite:{}", tmp.path().join("lab.sqlite").display());
     let dir = tmp.path().join("r1");
     let doc = json(
-        &gyrocal(&data)
+        &gyrocal_with_data_home(&data)
             .args(["run", "--simulate", "--json", "--dut-serial", "0421"])
             .args(["--catalog", &url, "--out"])
             .arg(&dir)
@@ -236,7 +233,7 @@ fn a_run_indexes_itself_and_a_dead_catalog_never_stops_it() {
     assert_eq!(doc["catalog"]["updated"], true, "{doc:#}");
     // in the catalog without an import, with its final state and results
     let list = json(
-        &gyrocal(&data)
+        &gyrocal_with_data_home(&data)
             .args(["runs", "--json", "--catalog", &url])
             .output()
             .unwrap(),
@@ -251,7 +248,7 @@ fn a_run_indexes_itself_and_a_dead_catalog_never_stops_it() {
     let dead = "postgres://gyrocal@127.0.0.1:1/nowhere";
     let dir2 = tmp.path().join("r2");
     let t0 = std::time::Instant::now();
-    let out = gyrocal(&data)
+    let out = gyrocal_with_data_home(&data)
         .args(["run", "--simulate", "--json", "--dut-serial", "0421"])
         .args(["--catalog", dead, "--out"])
         .arg(&dir2)
@@ -270,13 +267,13 @@ fn a_run_indexes_itself_and_a_dead_catalog_never_stops_it() {
         "bounded wait at the end: {took:?}"
     );
     // an import brings the catalog up to date from the run directory
-    ok(&gyrocal(&data)
+    ok(&gyrocal_with_data_home(&data)
         .args(["catalog", "import", "--catalog", &url])
         .arg(&dir2)
         .output()
         .unwrap());
     let list = json(
-        &gyrocal(&data)
+        &gyrocal_with_data_home(&data)
             .args(["runs", "--json", "--catalog", &url, "--serial", "0421"])
             .output()
             .unwrap(),
@@ -289,7 +286,7 @@ fn concurrent_runs(data_home: &Path, root: &Path, url: &str, serials: &[String])
     let children: Vec<_> = serials
         .iter()
         .map(|s| {
-            gyrocal(data_home)
+            gyrocal_with_data_home(data_home)
                 .args(["run", "--simulate", "--json", "--dut-serial", s])
                 .args(["--catalog", url, "--out"])
                 .arg(root.join(s))
@@ -306,7 +303,7 @@ fn concurrent_runs(data_home: &Path, root: &Path, url: &str, serials: &[String])
     }
     for s in serials {
         let list = json(
-            &gyrocal(data_home)
+            &gyrocal_with_data_home(data_home)
                 .args(["runs", "--json", "--catalog", url, "--serial", s])
                 .output()
                 .unwrap(),
@@ -328,7 +325,7 @@ fn two_gyrocal_processes_index_one_sqlite_catalog() {
     let serials: Vec<String> = (1..=2).map(|i| format!("SQ-{i}")).collect();
     concurrent_runs(&tmp.path().join("data"), tmp.path(), &url, &serials);
     let all = json(
-        &gyrocal(&tmp.path().join("data"))
+        &gyrocal_with_data_home(&tmp.path().join("data"))
             .args(["runs", "--json", "--catalog", &url])
             .output()
             .unwrap(),
@@ -419,7 +416,7 @@ fn a_catalog_killed_during_a_run_lets_it_complete_and_an_import_catches_up() {
     let serial = format!("KILL-{}", std::process::id());
     let dir = tmp.path().join("run");
     // paced, so the run lasts a few seconds of wall time
-    let child = gyrocal(&data)
+    let child = gyrocal_with_data_home(&data)
         .args(["run", "--simulate", "--sim-time-scale", "40", "--json"])
         .args(["--dut-serial", &serial, "--catalog", &via, "--out"])
         .arg(&dir)
@@ -432,7 +429,7 @@ fn a_catalog_killed_during_a_run_lets_it_complete_and_an_import_catches_up() {
     let t0 = std::time::Instant::now();
     let seen_running = loop {
         let list = json(
-            &gyrocal(&data)
+            &gyrocal_with_data_home(&data)
                 .args(["runs", "--json", "--catalog", &url, "--serial", &serial])
                 .output()
                 .unwrap(),
@@ -457,7 +454,7 @@ fn a_catalog_killed_during_a_run_lets_it_complete_and_an_import_catches_up() {
     assert_eq!(doc["table"]["at_rest"], true, "{doc:#}");
     assert_eq!(doc["catalog"]["updated"], false, "{doc:#}");
     let list = json(
-        &gyrocal(&data)
+        &gyrocal_with_data_home(&data)
             .args(["runs", "--json", "--catalog", &url, "--serial", &serial])
             .output()
             .unwrap(),
@@ -467,13 +464,13 @@ fn a_catalog_killed_during_a_run_lets_it_complete_and_an_import_catches_up() {
         "the catalog missed the end: {list}"
     );
     // the run directory is the source of truth: an import brings the row up to date
-    ok(&gyrocal(&data)
+    ok(&gyrocal_with_data_home(&data)
         .args(["catalog", "import", "--catalog", &url])
         .arg(&dir)
         .output()
         .unwrap());
     let list = json(
-        &gyrocal(&data)
+        &gyrocal_with_data_home(&data)
             .args(["runs", "--json", "--catalog", &url, "--serial", &serial])
             .output()
             .unwrap(),
@@ -497,7 +494,7 @@ fn drift_history(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
     )
     .unwrap();
     let doc = json(
-        &gyrocal(data_home)
+        &gyrocal_with_data_home(data_home)
             .args(["run", "--simulate", "--json", "--dut-serial", &serial])
             .args(extra)
             .arg("--out")
@@ -508,7 +505,7 @@ fn drift_history(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
     );
     assert_eq!(doc["catalog"]["updated"], true, "{doc:#}");
     let h = json(
-        &gyrocal(data_home)
+        &gyrocal_with_data_home(data_home)
             .args(["history", &serial, "--include-simulated", "--json"])
             .args(extra)
             .output()
@@ -538,14 +535,14 @@ fn drift_history(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
         .filter_map(|t| t["quantity"].as_str().or_else(|| t["name"].as_str()))
         .collect();
     assert!(trends.contains(&"arw_deg_rt_h"), "{trends:?}");
-    let text = ok(&gyrocal(data_home)
+    let text = ok(&gyrocal_with_data_home(data_home)
         .args(["history", &serial, "--include-simulated"])
         .args(extra)
         .output()
         .unwrap());
     assert!(text.contains("drift tests:"), "{text}");
     let page = root.join("history.html");
-    ok(&gyrocal(data_home)
+    ok(&gyrocal_with_data_home(data_home)
         .args(["history", &serial, "--include-simulated", "-o"])
         .arg(&page)
         .args(extra)
@@ -624,7 +621,7 @@ fn random_bytes(seed: u64, len: usize) -> Vec<u8> {
 /// The complete calibrations `gyrocal history SERIAL` lists from `catalog`.
 fn history_len(data_home: &Path, catalog: &str, serial: &str) -> usize {
     let h = json(
-        &gyrocal(data_home)
+        &gyrocal_with_data_home(data_home)
             .args(["history", serial, "--json", "--include-simulated"])
             .args(["--catalog", catalog])
             .output()
@@ -640,7 +637,7 @@ fn catalog_of_four(data: &Path, runs: &Path, file: &Path, serial: &str) -> (Vec<
         calibrate(data, &runs.join(format!("c{i}")), serial);
     }
     let url = format!("sqlite:{}", file.display());
-    let out = ok(&gyrocal(data)
+    let out = ok(&gyrocal_with_data_home(data)
         .args(["catalog", "rebuild", "--catalog", &url])
         .arg(runs)
         .output()
@@ -669,7 +666,7 @@ fn listings_refuse(data: &Path, file: &Path, serial: &str) {
         vec!["runs"],
         vec!["runs", "--serial", serial],
     ] {
-        let out = gyrocal(data)
+        let out = gyrocal_with_data_home(data)
             .args(&args)
             .args(["--catalog", &url])
             .output()
@@ -708,7 +705,7 @@ fn a_garbled_row_is_never_read_as_a_shorter_history() {
     listings_refuse(&data, &file, serial);
     // the rebuild replaces every row from the run directories
     let url = format!("sqlite:{}", file.display());
-    let out = ok(&gyrocal(&data)
+    let out = ok(&gyrocal_with_data_home(&data)
         .args(["catalog", "rebuild", "--catalog", &url])
         .arg(&runs)
         .output()
@@ -737,7 +734,7 @@ fn a_damaged_page_is_refused_and_the_rebuild_sets_it_aside_and_recovers_every_ca
 
     // the rebuild moves the damaged file aside (kept as it was) and recovers all four
     let url = format!("sqlite:{}", file.display());
-    let out = gyrocal(&data)
+    let out = gyrocal_with_data_home(&data)
         .args(["catalog", "rebuild", "--catalog", &url])
         .arg(&runs)
         .output()
@@ -765,7 +762,7 @@ fn a_damaged_page_is_refused_and_the_rebuild_sets_it_aside_and_recovers_every_ca
     );
     assert_eq!(history_len(&data, &url, serial), 4);
     // a sound catalog is rebuilt in place, nothing moved
-    let out = gyrocal(&data)
+    let out = gyrocal_with_data_home(&data)
         .args(["catalog", "rebuild", "--catalog", &url])
         .arg(&runs)
         .output()
@@ -788,7 +785,10 @@ fn a_listing_creates_no_catalog_and_says_there_is_none() {
         vec!["history", "0421", "--catalog", &url],
         vec!["runs", "--json", "--catalog", &url],
     ] {
-        let err = fails(&gyrocal(&data).args(&args).output().unwrap(), 2);
+        let err = fails(
+            &gyrocal_with_data_home(&data).args(&args).output().unwrap(),
+            2,
+        );
         assert!(
             err.contains(&format!("no catalog at {}", nowhere.display())),
             "{args:?}: {err}"
@@ -799,7 +799,13 @@ fn a_listing_creates_no_catalog_and_says_there_is_none() {
         );
     }
     // the default catalog likewise: nothing is created in the data directory
-    let err = fails(&gyrocal(&data).args(["runs"]).output().unwrap(), 2);
+    let err = fails(
+        &gyrocal_with_data_home(&data)
+            .args(["runs"])
+            .output()
+            .unwrap(),
+        2,
+    );
     let default = data.join("gyrocal").join("catalog.sqlite");
     assert!(
         err.contains(&format!("no catalog at {}", default.display())),
@@ -807,19 +813,25 @@ fn a_listing_creates_no_catalog_and_says_there_is_none() {
     );
     assert!(!data.exists(), "runs created {}", data.display());
     let err = fails(
-        &gyrocal(&data).args(["history", "0421"]).output().unwrap(),
+        &gyrocal_with_data_home(&data)
+            .args(["history", "0421"])
+            .output()
+            .unwrap(),
         2,
     );
     assert!(err.contains("no catalog at"), "{err}");
     assert!(!data.exists(), "history created {}", data.display());
     // a run or an import creates it; then the listing works
     calibrate(&data, &tmp.path().join("r"), "0421");
-    ok(&gyrocal(&data)
+    ok(&gyrocal_with_data_home(&data)
         .args(["catalog", "import"])
         .arg(tmp.path().join("r"))
         .output()
         .unwrap());
-    let out = ok(&gyrocal(&data).args(["runs"]).output().unwrap());
+    let out = ok(&gyrocal_with_data_home(&data)
+        .args(["runs"])
+        .output()
+        .unwrap());
     assert!(out.contains("0421"), "{out}");
 }
 
@@ -835,7 +847,7 @@ fn a_closed_postgres_port_is_said_at_once_with_host_and_port() {
     let url = format!("postgres://gyrocal:hunter2@127.0.0.1:{port}/lab");
     for args in [vec!["runs"], vec!["history", "0421"]] {
         let t0 = std::time::Instant::now();
-        let out = gyrocal(tmp.path())
+        let out = gyrocal_with_data_home(tmp.path())
             .args(&args)
             .args(["--catalog", &url])
             .output()

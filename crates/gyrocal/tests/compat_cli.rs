@@ -39,7 +39,9 @@ fn samples(dir: &Path) -> Vec<((u64, u64), f64)> {
 /// The `step` column of steps.csv, in file order.
 fn steps(dir: &Path) -> Vec<u64> {
     let mut r = csv::Reader::from_path(dir.join("steps.csv")).unwrap();
-    r.records().map(|rec| rec.unwrap()[0].parse().unwrap()).collect()
+    r.records()
+        .map(|rec| rec.unwrap()[0].parse().unwrap())
+        .collect()
 }
 
 /// The fixture's `file` is kept byte for byte at the start of the resumed run's `file`.
@@ -133,7 +135,10 @@ fn an_interrupted_sweep_of_the_earlier_release_resumes_verifies_and_reports() {
     assert_eq!(out.doc["steps_recorded_this_session"], 3, "{}", out.doc);
     let m = json(&dir, "manifest.json");
     assert_eq!(m["status"], "complete");
-    assert_eq!(m["plan_hash"], before["plan_hash"], "the plan's hash is kept");
+    assert_eq!(
+        m["plan_hash"], before["plan_hash"],
+        "the plan's hash is kept"
+    );
     assert_eq!(m["dut"]["serial"], "FIXTURE-S1");
     let resumes = m["resumes"].as_array().unwrap();
     assert_eq!(resumes.len(), 1, "{m}");
@@ -148,8 +153,14 @@ fn an_interrupted_sweep_of_the_earlier_release_resumes_verifies_and_reports() {
     let doc = report(&dir);
     assert!(doc["warnings"].as_array().unwrap().is_empty(), "{doc}");
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
-    assert!(html.contains("Fixture sweep"), "the plan's name on the report");
-    assert!(html.contains("FIXTURE-S1"), "the gyro's serial on the report");
+    assert!(
+        html.contains("Fixture sweep"),
+        "the plan's name on the report"
+    );
+    assert!(
+        html.contains("FIXTURE-S1"),
+        "the gyro's serial on the report"
+    );
 }
 
 #[test]
@@ -170,7 +181,10 @@ fn an_interrupted_drift_record_of_the_earlier_release_resumes_verifies_and_repor
     assert_eq!(out.doc["steps_recorded_this_session"], 5, "{}", out.doc);
     let m = json(&dir, "manifest.json");
     assert_eq!(m["status"], "complete");
-    assert_eq!(m["plan_hash"], before["plan_hash"], "the plan's hash is kept");
+    assert_eq!(
+        m["plan_hash"], before["plan_hash"],
+        "the plan's hash is kept"
+    );
     let resumes = m["resumes"].as_array().unwrap();
     assert_eq!(resumes.len(), 1, "{m}");
     assert_eq!(resumes[0]["from_step"], 3);
@@ -182,13 +196,19 @@ fn an_interrupted_drift_record_of_the_earlier_release_resumes_verifies_and_repor
     assert_eq!(allan["unit"], "deg/h", "{allan}");
     assert_eq!(allan["earth_rate"]["axis"], "up", "{allan}");
 
-    verify_passes(&dir, &["samples.csv", "steps.csv", "allan.json", "allan.html"]);
+    verify_passes(
+        &dir,
+        &["samples.csv", "steps.csv", "allan.json", "allan.html"],
+    );
     std::fs::remove_file(dir.join("allan.html")).unwrap();
     let doc = report(&dir);
     assert_eq!(doc["kind"], "drift", "{doc}");
     assert!(doc["warnings"].as_array().unwrap().is_empty(), "{doc}");
     let html = std::fs::read_to_string(dir.join("allan.html")).unwrap();
-    assert!(html.contains("Fixture drift record"), "the plan's name on the page");
+    assert!(
+        html.contains("Fixture drift record"),
+        "the plan's name on the page"
+    );
 }
 
 /// Every value of `refit` (what `gyrocal fit --json` computes now) is in `kept` (the run's
@@ -243,14 +263,25 @@ fn a_complete_sweep_of_the_earlier_release_verifies_reports_and_keeps_its_fit() 
     let out = run_json(&[&"--simulate", &"--resume", &dir]);
     assert_eq!(out.code, Some(2), "{}", out.stderr);
     assert!(out.stderr.contains("already complete"), "{}", out.stderr);
-    assert_eq!(std::fs::read(dir.join("samples.csv")).unwrap(), samples_before);
-    assert!(json(&dir, "manifest.json")["resumes"].as_array().unwrap().is_empty());
+    assert_eq!(
+        std::fs::read(dir.join("samples.csv")).unwrap(),
+        samples_before
+    );
+    assert!(
+        json(&dir, "manifest.json")["resumes"]
+            .as_array()
+            .unwrap()
+            .is_empty()
+    );
 
     std::fs::remove_file(dir.join("report.html")).unwrap();
     let doc = report(&dir);
     assert!(doc["warnings"].as_array().unwrap().is_empty(), "{doc}");
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
-    assert!(html.contains("FIXTURE-S2"), "the gyro's serial on the report");
+    assert!(
+        html.contains("FIXTURE-S2"),
+        "the gyro's serial on the report"
+    );
 
     // the kept fit is the fit of the kept steps, as gyrocal fits them today
     let o = gyrocal()

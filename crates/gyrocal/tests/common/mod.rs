@@ -70,6 +70,18 @@ pub fn config(name: &str) -> PathBuf {
     plans::config(name)
 }
 
+/// A run directory's manifest.json.
+pub fn manifest(dir: &Path) -> serde_json::Value {
+    json(dir, "manifest.json")
+}
+
+/// How many steps (a drift record's segments) `dir/steps.csv` records; 0 before it exists.
+pub fn steps_done(dir: &Path) -> usize {
+    std::fs::read_to_string(dir.join("steps.csv"))
+        .map(|s| s.lines().skip(1).filter(|l| !l.trim().is_empty()).count())
+        .unwrap_or(0)
+}
+
 /// A JSON file of a run directory.
 pub fn json(dir: &Path, name: &str) -> serde_json::Value {
     let text = std::fs::read_to_string(dir.join(name))
