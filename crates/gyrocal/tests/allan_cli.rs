@@ -10,7 +10,8 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
-use common::gyrocal_output;
+/// `gyrocal ARGS` run to its end, through tests/common.
+use common::gyrocal_output as gyrocal;
 
 use gyrocal_allan::sim::{GyroNoise, generate};
 
@@ -71,7 +72,7 @@ fn json(out: &Output) -> serde_json::Value {
 fn simulated_terms_are_recovered_within_their_uncertainty() {
     let dir = tempfile::tempdir().unwrap();
     let csv = write_record(dir.path(), "drift.csv", 108_000, 1, None);
-    let v = json(&gyrocal_output(&[
+    let v = json(&gyrocal(&[
         "allan",
         csv.to_str().unwrap(),
         "--scale-factor",
@@ -130,7 +131,7 @@ fn simulated_terms_are_recovered_within_their_uncertainty() {
 fn without_a_scale_factor_the_curve_is_in_volts_and_the_terms_are_not_given() {
     let dir = tempfile::tempdir().unwrap();
     let csv = write_record(dir.path(), "drift.csv", 6_000, 2, None);
-    let out = gyrocal_output(&["allan", csv.to_str().unwrap()]);
+    let out = gyrocal(&["allan", csv.to_str().unwrap()]);
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
         out.status.success(),
@@ -142,7 +143,7 @@ fn without_a_scale_factor_the_curve_is_in_volts_and_the_terms_are_not_given() {
         text.contains("need --scale-factor") || text.contains("give --scale-factor"),
         "{text}"
     );
-    let v = json(&gyrocal_output(&["allan", csv.to_str().unwrap(), "--json"]));
+    let v = json(&gyrocal(&["allan", csv.to_str().unwrap(), "--json"]));
     assert!(v["noise_terms"].is_null());
     assert_eq!(v["unit"], "V");
 }
@@ -152,7 +153,7 @@ fn a_gap_splits_the_record_and_the_longest_segment_is_analysed() {
     let dir = tempfile::tempdir().unwrap();
     // 3000 samples, then the recording stops for 100 s and resumes for 9000 more
     let csv = write_record(dir.path(), "gap.csv", 12_000, 3, Some((3_000, 100.0)));
-    let v = json(&gyrocal_output(&[
+    let v = json(&gyrocal(&[
         "allan",
         csv.to_str().unwrap(),
         "--scale-factor",
@@ -173,7 +174,7 @@ fn a_gap_splits_the_record_and_the_longest_segment_is_analysed() {
     assert_eq!(v["analysed"]["samples"], 9_000);
     assert_eq!(v["curve"]["n_samples"], 9_000);
     assert!(v["warmup"].is_null());
-    let out = gyrocal_output(&["allan", csv.to_str().unwrap(), "--scale-factor", "0.05"]);
+    let out = gyrocal(&["allan", csv.to_str().unwrap(), "--scale-factor", "0.05"]);
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
         text.contains("only the longest is analysed: segment 2 of 2, lines 3002–12001"),
@@ -182,7 +183,7 @@ fn a_gap_splits_the_record_and_the_longest_segment_is_analysed() {
 }
 
 fn bad(args: &[&str]) -> String {
-    let out = gyrocal_output(args);
+    let out = gyrocal(args);
     assert_eq!(out.status.code(), Some(2), "{out:?}");
     let err = String::from_utf8_lossy(&out.stderr).to_string();
     assert_eq!(err.lines().count(), 1, "{err}");
@@ -228,7 +229,7 @@ fn bad_input_exits_2_naming_the_file_and_the_line() {
     std::fs::write(&no_time, "value\n1\n2\n3\n4\n").unwrap();
     let err = bad(&["allan", no_time.to_str().unwrap()]);
     assert!(err.contains("--tau0"), "{err}");
-    let out = gyrocal_output(&["allan", no_time.to_str().unwrap(), "--tau0", "1", "--json"]);
+    let out = gyrocal(&["allan", no_time.to_str().unwrap(), "--tau0", "1", "--json"]);
     assert!(out.status.success(), "{out:?}");
 
     let ragged = dir.path().join("ragged.csv");
@@ -242,7 +243,7 @@ fn the_page_has_the_plot_and_the_noise_term_table() {
     let dir = tempfile::tempdir().unwrap();
     let csv = write_record(dir.path(), "drift.csv", 36_000, 4, None);
     let page = dir.path().join("out/page.html");
-    let out = gyrocal_output(&[
+    let out = gyrocal(&[
         "allan",
         csv.to_str().unwrap(),
         "--scale-factor",
@@ -279,7 +280,7 @@ fn streaming_prints_the_same_figures_and_says_the_bounded_path_ran() {
     let run = |extra: &[&str]| {
         let mut args = vec!["allan", csv, "--scale-factor", "0.05", "--temp-dir", tmp];
         args.extend_from_slice(extra);
-        let out = gyrocal_output(&args);
+        let out = gyrocal(&args);
         assert!(
             out.status.success(),
             "{}",
@@ -318,7 +319,7 @@ fn streaming_prints_the_same_figures_and_says_the_bounded_path_ran() {
     assert!(figures(&mem).len() > 30);
 
     // the JSON, every figure; a budget below the record's 16 bytes a sample switches by itself
-    let a = json(&gyrocal_output(&[
+    let a = json(&gyrocal(&[
         "allan",
         csv,
         "--scale-factor",
@@ -327,7 +328,7 @@ fn streaming_prints_the_same_figures_and_says_the_bounded_path_ran() {
         "--estimator",
         "mdev",
     ]));
-    let mut b = json(&gyrocal_output(&[
+    let mut b = json(&gyrocal(&[
         "allan",
         csv,
         "--scale-factor",

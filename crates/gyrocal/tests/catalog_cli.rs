@@ -10,7 +10,9 @@ mod common;
 use std::path::Path;
 use std::process::Output;
 
-use common::{config, gyrocal_with_data_home};
+use common::config;
+/// The binary with none of the user's files, its default catalog in the test's `data_home`.
+use common::gyrocal_with_data_home as gyrocal;
 
 fn ok(out: &Output) -> String {
     let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
@@ -21,7 +23,7 @@ fn ok(out: &Output) -> String {
 
 /// A simulated calibration that is not indexed by the run itself (the tests import it).
 fn calibrate(data_home: &Path, dir: &Path, serial: &str) {
-    ok(&gyrocal_with_data_home(data_home)
+    ok(&gyrocal(data_home)
         .args([
             "run",
             "--simulate",
@@ -53,7 +55,7 @@ fn exercise(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
     let not_a_run = root.join("empty");
     std::fs::create_dir_all(&not_a_run).unwrap();
 
-    let out = gyrocal_with_data_home(data_home)
+    let out = gyrocal(data_home)
         .args(["catalog", "import"])
         .args(extra)
         .arg(runs.join("a1"))
@@ -69,13 +71,13 @@ fn exercise(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
         "{stderr}"
     );
     // rebuild finds all three (and importing again duplicates nothing)
-    ok(&gyrocal_with_data_home(data_home)
+    ok(&gyrocal(data_home)
         .args(["catalog", "rebuild"])
         .args(extra)
         .arg(&runs)
         .output()
         .unwrap());
-    ok(&gyrocal_with_data_home(data_home)
+    ok(&gyrocal(data_home)
         .args(["catalog", "import"])
         .args(extra)
         .arg(runs.join("b1"))
@@ -83,7 +85,7 @@ fn exercise(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
         .unwrap());
 
     let list = json(
-        &gyrocal_with_data_home(data_home)
+        &gyrocal(data_home)
             .args(["runs", "--json"])
             .args(extra)
             .output()
@@ -110,7 +112,7 @@ fn exercise(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
     assert!(ours[0]["started_utc"].as_str() >= ours[1]["started_utc"].as_str());
 
     let only = json(
-        &gyrocal_with_data_home(data_home)
+        &gyrocal(data_home)
             .args(["runs", "--json", "--serial", &s2])
             .args(extra)
             .output()
@@ -119,7 +121,7 @@ fn exercise(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
     assert_eq!(only.as_array().unwrap().len(), 1);
 
     let h = json(
-        &gyrocal_with_data_home(data_home)
+        &gyrocal(data_home)
             .args(["history", &s1, "--json", "--include-simulated"])
             .args(extra)
             .output()
@@ -135,7 +137,7 @@ fn exercise(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
     assert!(h["repeatability"]["scale_factor_ppm"].is_number(), "{h}");
     // simulated runs are left out unless asked for
     let h = json(
-        &gyrocal_with_data_home(data_home)
+        &gyrocal(data_home)
             .args(["history", &s1, "--json"])
             .args(extra)
             .output()
@@ -144,7 +146,7 @@ fn exercise(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
     assert_eq!(h["calibrations"].as_array().unwrap().len(), 0);
     // the HTML page with its plots
     let html = root.join("h.html");
-    ok(&gyrocal_with_data_home(data_home)
+    ok(&gyrocal(data_home)
         .args(["history", &s1, "--include-simulated", "-o"])
         .arg(&html)
         .args(extra)
@@ -161,10 +163,7 @@ fn runs_and_history_on_the_default_sqlite_catalog() {
     exercise(&data_home, tmp.path(), &[], "");
     assert!(data_home.join("gyrocal/catalog.sqlite").is_file());
     // the table
-    let out = ok(&gyrocal_with_data_home(&data_home)
-        .args(["runs"])
-        .output()
-        .unwrap());
+    let out = ok(&gyrocal(&data_home).args(["runs"]).output().unwrap());
     assert!(out.contains("0421") && out.contains("0777"), "{out}");
 }
 
@@ -182,7 +181,7 @@ fn runs_and_history_on_postgres() {
     // a run indexes itself in the lab's PostgreSQL as it goes
     let serial = format!("0999{tag}");
     let doc = json(
-        &gyrocal_with_data_home(&data_home)
+        &gyrocal(&data_home)
             .args(["run", "--simulate", "--json", "--dut-serial", &serial])
             .args(["--catalog", &url, "--out"])
             .arg(tmp.path().join("live"))
@@ -192,7 +191,7 @@ fn runs_and_history_on_postgres() {
     );
     assert_eq!(doc["catalog"]["updated"], true, "{doc:#}");
     let list = json(
-        &gyrocal_with_data_home(&data_home)
+        &gyrocal(&data_home)
             .args(["runs", "--json", "--catalog", &url, "--serial", &serial])
             .output()
             .unwrap(),
@@ -205,7 +204,7 @@ fn runs_and_history_on_postgres() {
 #[test]
 fn a_bad_catalog_url_is_bad_input_and_hides_the_password() {
     let tmp = tempfile::tempdir().unwrap();
-    let out = gyrocal_with_data_home(tmp.path())
+    let out = gyrocal(tmp.path())
         .args(["runs", "--catalog", "mysql://lab:topsecret@db/x"])
         .output()
         .unwrap();
@@ -222,7 +221,7 @@ fn a_run_indexes_itself_and_a_dead_catalog_never_stops_it() {
     let url = format!("sqlite:{}", tmp.path().join("lab.sqlite").display());
     let dir = tmp.path().join("r1");
     let doc = json(
-        &gyrocal_with_data_home(&data)
+        &gyrocal(&data)
             .args(["run", "--simulate", "--json", "--dut-serial", "0421"])
             .args(["--catalog", &url, "--out"])
             .arg(&dir)
@@ -233,7 +232,7 @@ fn a_run_indexes_itself_and_a_dead_catalog_never_stops_it() {
     assert_eq!(doc["catalog"]["updated"], true, "{doc:#}");
     // in the catalog without an import, with its final state and results
     let list = json(
-        &gyrocal_with_data_home(&data)
+        &gyrocal(&data)
             .args(["runs", "--json", "--catalog", &url])
             .output()
             .unwrap(),
@@ -248,7 +247,7 @@ fn a_run_indexes_itself_and_a_dead_catalog_never_stops_it() {
     let dead = "postgres://gyrocal@127.0.0.1:1/nowhere";
     let dir2 = tmp.path().join("r2");
     let t0 = std::time::Instant::now();
-    let out = gyrocal_with_data_home(&data)
+    let out = gyrocal(&data)
         .args(["run", "--simulate", "--json", "--dut-serial", "0421"])
         .args(["--catalog", dead, "--out"])
         .arg(&dir2)
@@ -267,13 +266,13 @@ fn a_run_indexes_itself_and_a_dead_catalog_never_stops_it() {
         "bounded wait at the end: {took:?}"
     );
     // an import brings the catalog up to date from the run directory
-    ok(&gyrocal_with_data_home(&data)
+    ok(&gyrocal(&data)
         .args(["catalog", "import", "--catalog", &url])
         .arg(&dir2)
         .output()
         .unwrap());
     let list = json(
-        &gyrocal_with_data_home(&data)
+        &gyrocal(&data)
             .args(["runs", "--json", "--catalog", &url, "--serial", "0421"])
             .output()
             .unwrap(),
@@ -286,7 +285,7 @@ fn concurrent_runs(data_home: &Path, root: &Path, url: &str, serials: &[String])
     let children: Vec<_> = serials
         .iter()
         .map(|s| {
-            gyrocal_with_data_home(data_home)
+            gyrocal(data_home)
                 .args(["run", "--simulate", "--json", "--dut-serial", s])
                 .args(["--catalog", url, "--out"])
                 .arg(root.join(s))
@@ -303,7 +302,7 @@ fn concurrent_runs(data_home: &Path, root: &Path, url: &str, serials: &[String])
     }
     for s in serials {
         let list = json(
-            &gyrocal_with_data_home(data_home)
+            &gyrocal(data_home)
                 .args(["runs", "--json", "--catalog", url, "--serial", s])
                 .output()
                 .unwrap(),
@@ -325,7 +324,7 @@ fn two_gyrocal_processes_index_one_sqlite_catalog() {
     let serials: Vec<String> = (1..=2).map(|i| format!("SQ-{i}")).collect();
     concurrent_runs(&tmp.path().join("data"), tmp.path(), &url, &serials);
     let all = json(
-        &gyrocal_with_data_home(&tmp.path().join("data"))
+        &gyrocal(&tmp.path().join("data"))
             .args(["runs", "--json", "--catalog", &url])
             .output()
             .unwrap(),
@@ -416,7 +415,7 @@ fn a_catalog_killed_during_a_run_lets_it_complete_and_an_import_catches_up() {
     let serial = format!("KILL-{}", std::process::id());
     let dir = tmp.path().join("run");
     // paced, so the run lasts a few seconds of wall time
-    let child = gyrocal_with_data_home(&data)
+    let child = gyrocal(&data)
         .args(["run", "--simulate", "--sim-time-scale", "40", "--json"])
         .args(["--dut-serial", &serial, "--catalog", &via, "--out"])
         .arg(&dir)
@@ -429,7 +428,7 @@ fn a_catalog_killed_during_a_run_lets_it_complete_and_an_import_catches_up() {
     let t0 = std::time::Instant::now();
     let seen_running = loop {
         let list = json(
-            &gyrocal_with_data_home(&data)
+            &gyrocal(&data)
                 .args(["runs", "--json", "--catalog", &url, "--serial", &serial])
                 .output()
                 .unwrap(),
@@ -454,7 +453,7 @@ fn a_catalog_killed_during_a_run_lets_it_complete_and_an_import_catches_up() {
     assert_eq!(doc["table"]["at_rest"], true, "{doc:#}");
     assert_eq!(doc["catalog"]["updated"], false, "{doc:#}");
     let list = json(
-        &gyrocal_with_data_home(&data)
+        &gyrocal(&data)
             .args(["runs", "--json", "--catalog", &url, "--serial", &serial])
             .output()
             .unwrap(),
@@ -464,13 +463,13 @@ fn a_catalog_killed_during_a_run_lets_it_complete_and_an_import_catches_up() {
         "the catalog missed the end: {list}"
     );
     // the run directory is the source of truth: an import brings the row up to date
-    ok(&gyrocal_with_data_home(&data)
+    ok(&gyrocal(&data)
         .args(["catalog", "import", "--catalog", &url])
         .arg(&dir)
         .output()
         .unwrap());
     let list = json(
-        &gyrocal_with_data_home(&data)
+        &gyrocal(&data)
             .args(["runs", "--json", "--catalog", &url, "--serial", &serial])
             .output()
             .unwrap(),
@@ -494,7 +493,7 @@ fn drift_history(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
     )
     .unwrap();
     let doc = json(
-        &gyrocal_with_data_home(data_home)
+        &gyrocal(data_home)
             .args(["run", "--simulate", "--json", "--dut-serial", &serial])
             .args(extra)
             .arg("--out")
@@ -505,7 +504,7 @@ fn drift_history(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
     );
     assert_eq!(doc["catalog"]["updated"], true, "{doc:#}");
     let h = json(
-        &gyrocal_with_data_home(data_home)
+        &gyrocal(data_home)
             .args(["history", &serial, "--include-simulated", "--json"])
             .args(extra)
             .output()
@@ -535,14 +534,14 @@ fn drift_history(data_home: &Path, root: &Path, extra: &[&str], tag: &str) {
         .filter_map(|t| t["quantity"].as_str().or_else(|| t["name"].as_str()))
         .collect();
     assert!(trends.contains(&"arw_deg_rt_h"), "{trends:?}");
-    let text = ok(&gyrocal_with_data_home(data_home)
+    let text = ok(&gyrocal(data_home)
         .args(["history", &serial, "--include-simulated"])
         .args(extra)
         .output()
         .unwrap());
     assert!(text.contains("drift tests:"), "{text}");
     let page = root.join("history.html");
-    ok(&gyrocal_with_data_home(data_home)
+    ok(&gyrocal(data_home)
         .args(["history", &serial, "--include-simulated", "-o"])
         .arg(&page)
         .args(extra)
@@ -621,7 +620,7 @@ fn random_bytes(seed: u64, len: usize) -> Vec<u8> {
 /// The complete calibrations `gyrocal history SERIAL` lists from `catalog`.
 fn history_len(data_home: &Path, catalog: &str, serial: &str) -> usize {
     let h = json(
-        &gyrocal_with_data_home(data_home)
+        &gyrocal(data_home)
             .args(["history", serial, "--json", "--include-simulated"])
             .args(["--catalog", catalog])
             .output()
@@ -637,7 +636,7 @@ fn catalog_of_four(data: &Path, runs: &Path, file: &Path, serial: &str) -> (Vec<
         calibrate(data, &runs.join(format!("c{i}")), serial);
     }
     let url = format!("sqlite:{}", file.display());
-    let out = ok(&gyrocal_with_data_home(data)
+    let out = ok(&gyrocal(data)
         .args(["catalog", "rebuild", "--catalog", &url])
         .arg(runs)
         .output()
@@ -666,7 +665,7 @@ fn listings_refuse(data: &Path, file: &Path, serial: &str) {
         vec!["runs"],
         vec!["runs", "--serial", serial],
     ] {
-        let out = gyrocal_with_data_home(data)
+        let out = gyrocal(data)
             .args(&args)
             .args(["--catalog", &url])
             .output()
@@ -705,7 +704,7 @@ fn a_garbled_row_is_never_read_as_a_shorter_history() {
     listings_refuse(&data, &file, serial);
     // the rebuild replaces every row from the run directories
     let url = format!("sqlite:{}", file.display());
-    let out = ok(&gyrocal_with_data_home(&data)
+    let out = ok(&gyrocal(&data)
         .args(["catalog", "rebuild", "--catalog", &url])
         .arg(&runs)
         .output()
@@ -734,7 +733,7 @@ fn a_damaged_page_is_refused_and_the_rebuild_sets_it_aside_and_recovers_every_ca
 
     // the rebuild moves the damaged file aside (kept as it was) and recovers all four
     let url = format!("sqlite:{}", file.display());
-    let out = gyrocal_with_data_home(&data)
+    let out = gyrocal(&data)
         .args(["catalog", "rebuild", "--catalog", &url])
         .arg(&runs)
         .output()
@@ -762,7 +761,7 @@ fn a_damaged_page_is_refused_and_the_rebuild_sets_it_aside_and_recovers_every_ca
     );
     assert_eq!(history_len(&data, &url, serial), 4);
     // a sound catalog is rebuilt in place, nothing moved
-    let out = gyrocal_with_data_home(&data)
+    let out = gyrocal(&data)
         .args(["catalog", "rebuild", "--catalog", &url])
         .arg(&runs)
         .output()
@@ -785,10 +784,7 @@ fn a_listing_creates_no_catalog_and_says_there_is_none() {
         vec!["history", "0421", "--catalog", &url],
         vec!["runs", "--json", "--catalog", &url],
     ] {
-        let err = fails(
-            &gyrocal_with_data_home(&data).args(&args).output().unwrap(),
-            2,
-        );
+        let err = fails(&gyrocal(&data).args(&args).output().unwrap(), 2);
         assert!(
             err.contains(&format!("no catalog at {}", nowhere.display())),
             "{args:?}: {err}"
@@ -799,13 +795,7 @@ fn a_listing_creates_no_catalog_and_says_there_is_none() {
         );
     }
     // the default catalog likewise: nothing is created in the data directory
-    let err = fails(
-        &gyrocal_with_data_home(&data)
-            .args(["runs"])
-            .output()
-            .unwrap(),
-        2,
-    );
+    let err = fails(&gyrocal(&data).args(["runs"]).output().unwrap(), 2);
     let default = data.join("gyrocal").join("catalog.sqlite");
     assert!(
         err.contains(&format!("no catalog at {}", default.display())),
@@ -813,25 +803,19 @@ fn a_listing_creates_no_catalog_and_says_there_is_none() {
     );
     assert!(!data.exists(), "runs created {}", data.display());
     let err = fails(
-        &gyrocal_with_data_home(&data)
-            .args(["history", "0421"])
-            .output()
-            .unwrap(),
+        &gyrocal(&data).args(["history", "0421"]).output().unwrap(),
         2,
     );
     assert!(err.contains("no catalog at"), "{err}");
     assert!(!data.exists(), "history created {}", data.display());
     // a run or an import creates it; then the listing works
     calibrate(&data, &tmp.path().join("r"), "0421");
-    ok(&gyrocal_with_data_home(&data)
+    ok(&gyrocal(&data)
         .args(["catalog", "import"])
         .arg(tmp.path().join("r"))
         .output()
         .unwrap());
-    let out = ok(&gyrocal_with_data_home(&data)
-        .args(["runs"])
-        .output()
-        .unwrap());
+    let out = ok(&gyrocal(&data).args(["runs"]).output().unwrap());
     assert!(out.contains("0421"), "{out}");
 }
 
@@ -847,7 +831,7 @@ fn a_closed_postgres_port_is_said_at_once_with_host_and_port() {
     let url = format!("postgres://gyrocal:hunter2@127.0.0.1:{port}/lab");
     for args in [vec!["runs"], vec!["history", "0421"]] {
         let t0 = std::time::Instant::now();
-        let out = gyrocal_with_data_home(tmp.path())
+        let out = gyrocal(tmp.path())
             .args(&args)
             .args(["--catalog", &url])
             .output()

@@ -7,7 +7,8 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::gyrocal_output;
+/// `gyrocal ARGS` run to its end, through tests/common.
+use common::gyrocal_output as gyrocal;
 
 fn example() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/paper-shaped.csv")
@@ -21,7 +22,7 @@ fn write(dir: &tempfile::TempDir, name: &str, text: &str) -> String {
 
 #[test]
 fn json_is_one_document_with_every_fit_and_the_metrics() {
-    let out = gyrocal_output(&["fit", "--json", example().to_str().unwrap()]);
+    let out = gyrocal(&["fit", "--json", example().to_str().unwrap()]);
     assert!(
         out.status.success(),
         "{}",
@@ -61,7 +62,7 @@ fn json_is_one_document_with_every_fit_and_the_metrics() {
 
 #[test]
 fn human_report_has_the_table_and_an_honest_comparison() {
-    let out = gyrocal_output(&["fit", example().to_str().unwrap()]);
+    let out = gyrocal(&["fit", example().to_str().unwrap()]);
     assert!(out.status.success());
     let text = String::from_utf8(out.stdout).unwrap();
     assert!(
@@ -82,7 +83,7 @@ fn human_report_has_the_table_and_an_honest_comparison() {
 
 #[test]
 fn selected_model_and_method_only() {
-    let out = gyrocal_output(&[
+    let out = gyrocal(&[
         "fit",
         "--json",
         "--model",
@@ -101,7 +102,7 @@ fn selected_model_and_method_only() {
 
 #[test]
 fn huge_learning_rate_says_diverged() {
-    let out = gyrocal_output(&[
+    let out = gyrocal(&[
         "fit",
         "--method",
         "neuron",
@@ -128,7 +129,7 @@ fn several_files_report_repeatability() {
         "b.csv",
         "rate_dps,volts\n-10,-3.6042\n0,0.0088\n10,3.6218\n",
     );
-    let out = gyrocal_output(&["fit", "--json", &a, &b]);
+    let out = gyrocal(&["fit", "--json", &a, &b]);
     assert!(
         out.status.success(),
         "{}",
@@ -149,7 +150,7 @@ fn bad(text: &str, extra: &[&str], line: u64, needle: &str) {
     let mut args = vec!["fit"];
     args.extend_from_slice(extra);
     args.push(&path);
-    let out = gyrocal_output(&args);
+    let out = gyrocal(&args);
     let err = String::from_utf8(out.stderr).unwrap();
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(out.stdout.is_empty());
@@ -161,7 +162,7 @@ fn bad(text: &str, extra: &[&str], line: u64, needle: &str) {
 
 #[test]
 fn missing_file() {
-    let out = gyrocal_output(&["fit", "/nonexistent/gyro.csv"]);
+    let out = gyrocal(&["fit", "/nonexistent/gyro.csv"]);
     let err = String::from_utf8(out.stderr).unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert_eq!(err.trim_end().lines().count(), 1);
@@ -246,7 +247,7 @@ fn three_rates_skip_the_cubic_model_with_the_reason_and_exit_0() {
         "three.csv",
         "rate_dps,volts\n0,0.0088\n10,3.6208\n-10,-3.6032\n10,3.6211\n-10,-3.6030\n0,0.0091\n",
     );
-    let out = gyrocal_output(&["fit", "--json", &csv]);
+    let out = gyrocal(&["fit", "--json", &csv]);
     assert!(
         out.status.success(),
         "{}",
@@ -268,7 +269,7 @@ fn three_rates_skip_the_cubic_model_with_the_reason_and_exit_0() {
         .map(|f| f["model"].as_str().unwrap())
         .collect();
     assert!(!models.contains(&"cubic"), "{models:?}");
-    let out = gyrocal_output(&["fit", &csv]);
+    let out = gyrocal(&["fit", &csv]);
     assert!(out.status.success());
     let text = String::from_utf8(out.stdout).unwrap();
     assert!(
@@ -285,7 +286,7 @@ fn one_direction_skips_split_and_says_why_asymmetry_is_missing() {
         "up.csv",
         "rate_dps,volts\n0,0.0088\n1,0.3700\n5,1.8148\n10,3.6208\n20,7.2328\n",
     );
-    let out = gyrocal_output(&["fit", "--json", &csv]);
+    let out = gyrocal(&["fit", "--json", &csv]);
     assert!(
         out.status.success(),
         "{}",
@@ -306,7 +307,7 @@ fn one_direction_skips_split_and_says_why_asymmetry_is_missing() {
             && n["reason"].as_str().unwrap().contains("turning directions")),
         "{nc:?}"
     );
-    let out = gyrocal_output(&["fit", &csv]);
+    let out = gyrocal(&["fit", &csv]);
     let text = String::from_utf8(out.stdout).unwrap();
     assert!(text.contains("not fitted: split — "), "{text}");
     assert!(
@@ -339,7 +340,7 @@ fn a_duplicated_column_exits_2_naming_both() {
 fn endless_and_huge_inputs_exit_2_quickly() {
     let started = std::time::Instant::now();
     // a device is refused before it is read
-    let out = gyrocal_output(&["fit", "/dev/zero"]);
+    let out = gyrocal(&["fit", "/dev/zero"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(
@@ -351,7 +352,7 @@ fn endless_and_huge_inputs_exit_2_quickly() {
     let path = tmp.path().join("huge.csv");
     let f = std::fs::File::create(&path).unwrap();
     f.set_len(64 * 1024 * 1024 + 1).unwrap();
-    let out = gyrocal_output(&["fit", path.to_str().unwrap()]);
+    let out = gyrocal(&["fit", path.to_str().unwrap()]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("huge.csv: line 1: longer than"), "{err}");
@@ -376,7 +377,7 @@ fn many_points_get_per_rate_summaries_unless_residuals_is_given() {
         ));
     }
     let path = write(&tmp, "many.csv", &text);
-    let out = gyrocal_output(&["fit", "--json", &path]);
+    let out = gyrocal(&["fit", "--json", &path]);
     assert!(
         out.status.success(),
         "{}",
@@ -405,12 +406,12 @@ fn many_points_get_per_rate_summaries_unless_residuals_is_given() {
     );
     assert!((nsse - ls).abs() <= 1e-9 * ls, "{nsse} vs {ls}");
 
-    let out = gyrocal_output(&["fit", "--json", "--residuals", &path]);
+    let out = gyrocal(&["fit", "--json", "--residuals", &path]);
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["residual_detail"], "per-point");
     assert_eq!(v["fits"][0]["residuals"].as_array().unwrap().len(), 14_000);
 
-    let out = gyrocal_output(&["fit", &path]);
+    let out = gyrocal(&["fit", &path]);
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
         text.contains("online passes on the means of the 7 rates"),

@@ -9,7 +9,8 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
-use common::gyrocal_output;
+/// `gyrocal ARGS` run to its end, through tests/common.
+use common::gyrocal_output as gyrocal;
 
 use gyrocal_run::{Plan, RunDir, RunMeta, Sample, Status, StepRecord};
 
@@ -90,7 +91,7 @@ fn report_of_a_steps_csv_writes_the_html_and_the_plots() {
     let tmp = tempfile::tempdir().unwrap();
     let out_path = tmp.path().join("out").join("cal.html");
     std::fs::create_dir_all(out_path.parent().unwrap()).unwrap();
-    let out = gyrocal_output(&[
+    let out = gyrocal(&[
         "report",
         example().to_str().unwrap(),
         "--out",
@@ -116,7 +117,7 @@ fn report_of_a_run_directory_defaults_to_report_html_in_it() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("run");
     small_run(&dir);
-    let out = gyrocal_output(&["report", dir.to_str().unwrap()]);
+    let out = gyrocal(&["report", dir.to_str().unwrap()]);
     assert!(out.status.success(), "{}", stderr(&out));
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
     assert!(html.contains("cli test"));
@@ -125,7 +126,7 @@ fn report_of_a_run_directory_defaults_to_report_html_in_it() {
 
 #[test]
 fn missing_input_exits_2_naming_it() {
-    let out = gyrocal_output(&["report", "/nonexistent/run-7"]);
+    let out = gyrocal(&["report", "/nonexistent/run-7"]);
     assert_user_error(&out, "/nonexistent/run-7");
 }
 
@@ -134,7 +135,7 @@ fn malformed_csv_exits_2_naming_the_file_and_line() {
     let tmp = tempfile::tempdir().unwrap();
     let path = tmp.path().join("bad-steps.csv");
     std::fs::write(&path, "rate_dps,volts\n0,0.0088\n1,oops\n-1,-0.35\n").unwrap();
-    let out = gyrocal_output(&[
+    let out = gyrocal(&[
         "report",
         path.to_str().unwrap(),
         "--out",
@@ -151,7 +152,7 @@ fn run_directory_without_steps_csv_exits_2_naming_it() {
     let dir = tmp.path().join("run");
     small_run(&dir);
     std::fs::remove_file(dir.join("steps.csv")).unwrap();
-    let out = gyrocal_output(&["report", dir.to_str().unwrap()]);
+    let out = gyrocal(&["report", dir.to_str().unwrap()]);
     assert_user_error(&out, "steps.csv");
 }
 
@@ -164,7 +165,7 @@ fn plan_with_rates(dir: &Path, rates: &str) -> PathBuf {
 /// complete with exit 0) and returns the run directory.
 fn run_skipping(tmp: &Path, rates: &str, model: &str) -> PathBuf {
     let plan = plan_with_rates(tmp, rates);
-    let out = gyrocal_output(&["check", plan.to_str().unwrap()]);
+    let out = gyrocal(&["check", plan.to_str().unwrap()]);
     assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
     let err = stderr(&out);
     assert!(
@@ -174,7 +175,7 @@ fn run_skipping(tmp: &Path, rates: &str, model: &str) -> PathBuf {
         "{err}"
     );
     let dir = tmp.join("run");
-    let out = gyrocal_output(&[
+    let out = gyrocal(&[
         "run",
         plan.to_str().unwrap(),
         "--simulate",
@@ -203,7 +204,7 @@ fn a_complete_run_with_three_rates_fits_reports_and_names_the_skipped_cubic() {
         "report.html does not name the skipped model"
     );
     // The same data as a bare CSV, through the report's own fit.
-    let out = gyrocal_output(&[
+    let out = gyrocal(&[
         "report",
         dir.join("steps.csv").to_str().unwrap(),
         "--out",
@@ -244,7 +245,7 @@ fn a_run_directory_left_half_created_is_reused_by_out_and_by_resume() {
     };
     for (name, flag) in [("again", "--out"), ("resumed", "--resume")] {
         let dir = half(name);
-        let out = gyrocal_output(&[
+        let out = gyrocal(&[
             "run",
             plan.to_str().unwrap(),
             "--simulate",
@@ -263,7 +264,7 @@ fn a_run_directory_left_half_created_is_reused_by_out_and_by_resume() {
 #[test]
 fn check_refuses_endless_and_out_of_range_plans_with_exit_2() {
     let started = std::time::Instant::now();
-    let out = gyrocal_output(&["check", "/dev/zero"]);
+    let out = gyrocal(&["check", "/dev/zero"]);
     assert_user_error(&out, "/dev/zero: cannot read the plan");
     assert!(stderr(&out).contains("a device"), "{}", stderr(&out));
     assert!(started.elapsed() < std::time::Duration::from_secs(20));
@@ -273,7 +274,7 @@ fn check_refuses_endless_and_out_of_range_plans_with_exit_2() {
         .unwrap()
         .replace("samples_per_rate = 50", "samples_per_rate = 1000000000000");
     std::fs::write(&plan, text).unwrap();
-    let out = gyrocal_output(&["check", plan.to_str().unwrap()]);
+    let out = gyrocal(&["check", plan.to_str().unwrap()]);
     assert_user_error(
         &out,
         "[plan] samples_per_rate = 1000000000000 is out of range: write a whole number from 1 to 1000000",
@@ -284,7 +285,7 @@ fn check_refuses_endless_and_out_of_range_plans_with_exit_2() {
 #[test]
 fn report_of_an_endless_input_exits_2_at_once() {
     let started = std::time::Instant::now();
-    let out = gyrocal_output(&["report", "/dev/zero", "--out", "/nonexistent/r.html"]);
+    let out = gyrocal(&["report", "/dev/zero", "--out", "/nonexistent/r.html"]);
     assert_user_error(&out, "/dev/zero: not a run directory or a regular file");
     assert!(started.elapsed() < std::time::Duration::from_secs(20));
 }
@@ -294,7 +295,7 @@ fn report_input_with_a_duplicated_column_exits_2_naming_both() {
     let tmp = tempfile::tempdir().unwrap();
     let path = tmp.path().join("dup.csv");
     std::fs::write(&path, "rate_dps,volts,rate_dps\n0,0.0088,0\n1,0.37,1\n").unwrap();
-    let out = gyrocal_output(&[
+    let out = gyrocal(&[
         "report",
         path.to_str().unwrap(),
         "--out",
@@ -319,7 +320,7 @@ fn a_run_whose_directory_fails_half_way_leaves_nothing_behind() {
     }
     let rest = 4080 - dir.as_os_str().len() - 1;
     dir.push("r".repeat(rest));
-    let out = gyrocal_output(&[
+    let out = gyrocal(&[
         "run",
         plan.to_str().unwrap(),
         "--simulate",
