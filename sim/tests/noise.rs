@@ -3,6 +3,8 @@
 //! Allan deviation, and bit-for-bit absent when off.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod common;
+
 use std::time::Duration;
 
 use gyrocal_sim::SignalSource;
@@ -363,11 +365,9 @@ async fn warm_up_decays_with_its_time_constant() {
 fn plan_keys_reach_the_gyro_and_are_validated() {
     use gyrocal_files::{Plan, PlanError};
     use std::path::Path;
-    const GOOD: &str = "[plan]\nname = \"t\"\nrates_dps = [0, 1, -1]\nsamples_per_rate = 10\n\
-        [table]\nport = \"/dev/ttyUSB1\"\nmax_rate_dps = 20\nacceleration_dps2 = 10\n\
-        [dmm]\nport = \"/dev/ttyUSB0\"\n";
+    let good = common::plans::sweep("t", &[0.0, 1.0, -1.0], 10);
     let parse = |extra: &str| {
-        Plan::from_toml_str(&format!("{GOOD}[simulation]\n{extra}"), Path::new("p.toml"))
+        Plan::from_toml_str(&format!("{good}[simulation]\n{extra}"), Path::new("p.toml"))
     };
     let base = parse("").unwrap();
     let s = base.simulation();

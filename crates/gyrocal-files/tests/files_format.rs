@@ -5,6 +5,8 @@
 // Test helpers outside #[test] functions may unwrap too: a panic is a failed test.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod common;
+
 use std::fs;
 use std::path::Path;
 use std::time::{Duration, SystemTime};
@@ -15,20 +17,13 @@ use gyrocal_files::{
     load_samples, parse_rfc3339_utc,
 };
 
-const PLAN: &str = r#"[plan]
-name = "format test"
-rates_dps = [0, 1, -1, 2, -2]
-samples_per_rate = 4
-[table]
-port = "/dev/ttyUSB1"
-max_rate_dps = 20
-acceleration_dps2 = 10
-[dmm]
-port = "/dev/ttyUSB0"
-"#;
+/// The plan of these tests' run directories (5 rates, 4 readings).
+fn plan_text() -> String {
+    common::plans::sweep("format test", &[0.0, 1.0, -1.0, 2.0, -2.0], 4)
+}
 
 fn plan() -> Plan {
-    Plan::from_toml_str(PLAN, Path::new("test.toml")).unwrap()
+    Plan::from_toml_str(&plan_text(), Path::new("test.toml")).unwrap()
 }
 
 fn meta() -> RunMeta {
@@ -418,7 +413,8 @@ fn a_refused_resume_of_a_finished_run_leaves_no_lock() {
         !dir.join(LOCK_FILE).exists(),
         "a refused resume left a .lock"
     );
-    let other = Plan::from_toml_str(&PLAN.replace("= 4", "= 5"), Path::new("other.toml")).unwrap();
+    let other =
+        Plan::from_toml_str(&plan_text().replace("= 4", "= 5"), Path::new("other.toml")).unwrap();
     let err = RunDir::open_for_resume(&dir, &other).unwrap_err();
     assert!(matches!(err, RunError::PlanChanged { .. }), "{err}");
     assert!(

@@ -4,6 +4,8 @@
 // Test helpers outside #[test] functions may unwrap too: a panic is a failed test.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod common;
+
 use std::path::Path;
 
 use gyrocal_files::plan::{
@@ -12,17 +14,10 @@ use gyrocal_files::plan::{
 use gyrocal_files::rundir::{RunDir, RunMeta};
 use gyrocal_fit::acceptance::{Limits, Quantity, Rule};
 
-const GOOD: &str = r#"[plan]
-name = "t"
-rates_dps = [0, 1, -1]
-samples_per_rate = 10
-[table]
-port = "/dev/ttyUSB1"
-max_rate_dps = 20
-acceleration_dps2 = 10
-[dmm]
-port = "/dev/ttyUSB0"
-"#;
+/// A valid plan without `[dut]` or `[acceptance]` (3 rates, 10 readings).
+fn good() -> String {
+    common::plans::sweep("t", &[0.0, 1.0, -1.0], 10)
+}
 
 const RECORDS: &str = r#"
 [dut]
@@ -56,7 +51,8 @@ fn err(src: &str) -> String {
 
 #[test]
 fn dut_and_acceptance_parse() {
-    let plan = parse(&format!("{GOOD}{RECORDS}")).unwrap();
+    let good = good();
+    let plan = parse(&format!("{good}{RECORDS}")).unwrap();
     let dut = plan.dut().unwrap();
     assert_eq!(dut.serial.as_deref(), Some("HRG-0042"));
     assert_eq!(dut.model.as_deref(), Some("HRG-50"));
@@ -80,23 +76,24 @@ fn dut_and_acceptance_parse() {
     assert_eq!(a.limits[&Quantity::NonlinearityPpm].min, None);
 
     // neither is required; the rule defaults to simple; inline tables work too
-    let plain = parse(GOOD).unwrap();
+    let plain = parse(&good).unwrap();
     assert!(plain.dut().is_none() && plain.acceptance().is_none());
     let inline = parse(&format!(
-        "{GOOD}[acceptance]\nbias_v = {{ min = -0.02, max = 0.02 }}\n"
+        "{good}[acceptance]\nbias_v = {{ min = -0.02, max = 0.02 }}\n"
     ))
     .unwrap();
     assert_eq!(inline.acceptance().unwrap().rule, Rule::Simple);
     // an empty [dut] is no [dut]
-    assert!(parse(&format!("{GOOD}[dut]\n")).unwrap().dut().is_none());
+    assert!(parse(&format!("{good}[dut]\n")).unwrap().dut().is_none());
 }
 
 #[test]
 fn hash_ignores_dut_and_acceptance() {
-    let plain = parse(GOOD).unwrap();
-    let with = parse(&format!("{GOOD}{RECORDS}")).unwrap();
+    let good = good();
+    let plain = parse(&good).unwrap();
+    let with = parse(&format!("{good}{RECORDS}")).unwrap();
     let other = parse(&format!(
-        "{GOOD}{}",
+        "{good}{}",
         RECORDS
             .replace("HRG-0042", "HRG-0043")
             .replace("max = 0.051", "max = 0.052")
@@ -109,7 +106,7 @@ fn hash_ignores_dut_and_acceptance() {
     // but a rate still changes it
     let rate = parse(&format!(
         "{}{RECORDS}",
-        GOOD.replace("[0, 1, -1]", "[0, 2, -2]")
+        good.replace("[0, 1, -1]", "[0, 2, -2]")
     ))
     .unwrap();
     assert_ne!(rate.hash(), with.hash());
@@ -117,9 +114,10 @@ fn hash_ignores_dut_and_acceptance() {
 
 #[test]
 fn the_manifest_keeps_both_and_a_resume_accepts_other_records() {
+    let good = good();
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("run");
-    let plan = parse(&format!("{GOOD}{RECORDS}")).unwrap();
+    let plan = parse(&format!("{good}{RECORDS}")).unwrap();
     let run = RunDir::create(&dir, &plan, RunMeta::default()).unwrap();
     drop(run);
     let manifest: serde_json::Value =
@@ -131,7 +129,7 @@ fn the_manifest_keeps_both_and_a_resume_accepts_other_records() {
     assert_eq!(back, plan);
     // another gyro's serial and other limits: the same method, the run resumes
     let other = parse(&format!(
-        "{GOOD}{}",
+        "{good}{}",
         RECORDS.replace("max = 200", "max = 100")
     ))
     .unwrap();
@@ -141,7 +139,8 @@ fn the_manifest_keeps_both_and_a_resume_accepts_other_records() {
 
 #[test]
 fn dut_errors_name_the_line_and_key() {
-    let e = err(&format!("{GOOD}[dut]\nserial = \"A1\"\ncolour = \"red\"\n"));
+    let good = good();
+    let e = err(&format!("{good}[dut]\nserial = \"A1\"\ncolour = \"red\"\n"));
     assert!(
         e.starts_with("configs/bad.toml:13:1: [dut] unknown key `colour`"),
         "{e}"
@@ -150,25 +149,26 @@ fn dut_errors_name_the_line_and_key() {
         e.contains("serial, model, manufacturer, condition and notes"),
         "{e}"
     );
-    let e = err(&format!("{GOOD}[dut]\nserial = 42\n"));
+    let e = err(&format!("{good}[dut]\nserial = 42\n"));
     assert!(
         e.starts_with("configs/bad.toml:12:10: [dut] serial = 42 is a whole number"),
         "{e}"
     );
-    let e = err(&format!("{GOOD}[dut]\nserial = \" \"\n"));
+    let e = err(&format!("{good}[dut]\nserial = \" \"\n"));
     assert_eq!(
         e,
         "configs/bad.toml:12:10: [dut] serial must not be empty: leave the key out when it is \
          not known"
     );
-    let e = err(&format!("{GOOD}[dut]\nseriel = \"x\"\n"));
+    let e = err(&format!("{good}[dut]\nseriel = \"x\"\n"));
     assert!(e.contains("did you mean `serial`?"), "{e}");
 }
 
 #[test]
 fn acceptance_errors_name_the_line_and_key() {
+    let good = good();
     // unknown quantity: named, with the valid ones
-    let e = err(&format!("{GOOD}[acceptance.scale]\nmax = 1\n"));
+    let e = err(&format!("{good}[acceptance.scale]\nmax = 1\n"));
     assert!(
         e.starts_with(
             "configs/bad.toml:11:13: [acceptance] unknown key `scale`: did you mean `scale_factor`?"
@@ -183,11 +183,11 @@ fn acceptance_errors_name_the_line_and_key() {
         "{e}"
     );
     let e = err(&format!(
-        "{GOOD}[acceptance]\ntemperature = {{ max = 1 }}\n"
+        "{good}[acceptance]\ntemperature = {{ max = 1 }}\n"
     ));
     assert!(e.starts_with("configs/bad.toml:12:1: [acceptance] unknown key `temperature`: the keys of [acceptance] are decision_rule and the quantities scale_factor"), "{e}");
     // unknown key in a limits table
-    let e = err(&format!("{GOOD}[acceptance.k2]\nmaximum = 1\n"));
+    let e = err(&format!("{good}[acceptance.k2]\nmaximum = 1\n"));
     assert!(
         e.starts_with(
             "configs/bad.toml:12:1: [acceptance.k2] unknown key `maximum`: did you mean `max`?"
@@ -195,13 +195,13 @@ fn acceptance_errors_name_the_line_and_key() {
         "{e}"
     );
     // a limit that is not a number
-    let e = err(&format!("{GOOD}[acceptance.k2]\nmax = \"1\"\n"));
+    let e = err(&format!("{good}[acceptance.k2]\nmax = \"1\"\n"));
     assert!(
         e.starts_with("configs/bad.toml:12:7: [acceptance.k2] max = \"1\" is text, not a number"),
         "{e}"
     );
     // a quantity that is not a table
-    let e = err(&format!("{GOOD}[acceptance]\nk2 = 1\n"));
+    let e = err(&format!("{good}[acceptance]\nk2 = 1\n"));
     assert!(
         e.starts_with(
             "configs/bad.toml:12:6: [acceptance] k2 = 1 is a whole number: write a table of limits"
@@ -210,7 +210,7 @@ fn acceptance_errors_name_the_line_and_key() {
     );
     // limits out of order: at the later key
     let e = err(&format!(
-        "{GOOD}[acceptance.scale_factor]\nmin = 0.051\nmax = 0.049\n"
+        "{good}[acceptance.scale_factor]\nmin = 0.051\nmax = 0.049\n"
     ));
     assert_eq!(
         e,
@@ -218,7 +218,7 @@ fn acceptance_errors_name_the_line_and_key() {
          (the limits ascend: min <= marginal_min <= marginal_max <= max)"
     );
     let e = err(&format!(
-        "{GOOD}[acceptance.scale_factor]\nmin = 0.049\nmax = 0.051\nmarginal_max = 0.06\n"
+        "{good}[acceptance.scale_factor]\nmin = 0.049\nmax = 0.051\nmarginal_max = 0.06\n"
     ));
     assert!(
         e.starts_with(
@@ -227,26 +227,26 @@ fn acceptance_errors_name_the_line_and_key() {
         "{e}"
     );
     // not finite
-    let e = err(&format!("{GOOD}[acceptance.bias_v]\nmax = nan\n"));
+    let e = err(&format!("{good}[acceptance.bias_v]\nmax = nan\n"));
     assert_eq!(
         e,
         "configs/bad.toml:12:7: [acceptance.bias_v] max must be a finite number (got NaN)"
     );
     // no limit at all
-    let e = err(&format!("{GOOD}[acceptance.bias_v]\n"));
+    let e = err(&format!("{good}[acceptance.bias_v]\n"));
     assert!(
         e.starts_with("configs/bad.toml:11:1: [acceptance] bias_v sets no limit"),
         "{e}"
     );
     // the decision rule
-    let e = err(&format!("{GOOD}[acceptance]\ndecision_rule = \"strict\"\n"));
+    let e = err(&format!("{good}[acceptance]\ndecision_rule = \"strict\"\n"));
     assert_eq!(
         e,
         "configs/bad.toml:12:17: [acceptance] decision_rule = \"strict\" is not a decision rule: \
          write \"simple\" or \"guarded\""
     );
     assert_eq!(
-        parse(&format!("{GOOD}[acceptance]\ndecision_rule = 1\n"))
+        parse(&format!("{good}[acceptance]\ndecision_rule = 1\n"))
             .unwrap_err()
             .kind(),
         PlanErrorKind::Invalid
@@ -255,6 +255,7 @@ fn acceptance_errors_name_the_line_and_key() {
 
 #[test]
 fn a_standalone_acceptance_file() {
+    let good = good();
     let text = r#"# limits for HRG-50
 decision_rule = "guarded"
 
@@ -300,7 +301,7 @@ max = 50
     let e = bad("[k2\n");
     assert!(e.starts_with("limits.toml:1:"), "{e}");
     // a whole plan is not an acceptance file
-    let e = bad(GOOD);
+    let e = bad(&good);
     assert!(e.contains("unknown key `plan`"), "{e}");
 
     // reading: the document is named, the size is capped

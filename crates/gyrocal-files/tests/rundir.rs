@@ -3,6 +3,8 @@
 // Test helpers outside #[test] functions may unwrap too: a panic is a failed test.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod common;
+
 use std::fs::{self, OpenOptions};
 use std::io::Write;
 use std::path::Path;
@@ -13,20 +15,13 @@ use gyrocal_files::{
     load_samples,
 };
 
-const PLAN: &str = r#"[plan]
-name = "rundir test"
-rates_dps = [0, 1, -1, 2, -2]
-samples_per_rate = 7
-[table]
-port = "/dev/ttyUSB1"
-max_rate_dps = 20
-acceleration_dps2 = 10
-[dmm]
-port = "/dev/ttyUSB0"
-"#;
+/// The plan of these tests' run directories (5 rates, 7 readings).
+fn plan_text() -> String {
+    common::plans::sweep("rundir test", &[0.0, 1.0, -1.0, 2.0, -2.0], 7)
+}
 
 fn plan() -> Plan {
-    Plan::from_toml_str(PLAN, Path::new("test.toml")).unwrap()
+    Plan::from_toml_str(&plan_text(), Path::new("test.toml")).unwrap()
 }
 
 fn meta() -> RunMeta {
@@ -302,7 +297,7 @@ fn resume_with_a_changed_plan_is_refused() {
         .unwrap();
     drop(rd);
     let changed = Plan::from_toml_str(
-        &PLAN.replace("[0, 1, -1, 2, -2]", "[0, 1, -1, 3, -3]"),
+        &plan_text().replace("[0, 1, -1, 2, -2]", "[0, 1, -1, 3, -3]"),
         Path::new("c"),
     )
     .unwrap();

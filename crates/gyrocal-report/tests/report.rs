@@ -4,6 +4,8 @@
 // Test helpers outside #[test] functions may unwrap too: a panic is a failed test.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod common;
+
 use std::fs;
 use std::path::{Path, PathBuf};
 
@@ -19,11 +21,7 @@ const RATES: [f64; 19] = [
 const N: u64 = 50;
 
 fn plan(name: &str) -> Plan {
-    let rates: Vec<String> = RATES.iter().map(|r| r.to_string()).collect();
-    let toml = format!(
-        "[plan]\nname = \"{name}\"\nrates_dps = [{}]\nsamples_per_rate = {N}\n[table]\nport = \"/dev/ttyUSB1\"\nmax_rate_dps = 20\nacceleration_dps2 = 10\n[dmm]\nport = \"/dev/ttyUSB0\"\n",
-        rates.join(", ")
-    );
+    let toml = common::plans::sweep(name, &RATES, N);
     Plan::from_toml_str(&toml, Path::new("test.toml")).unwrap()
 }
 

@@ -10,16 +10,15 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
+/// `gyrocal ARGS` run to its end, through tests/common.
+use common::gyrocal_output as gyrocal;
+
 use gyrocal_allan::sim::{GyroNoise, generate};
 
 /// Scale factor of the simulated gyro, V/(°/s).
 const K: f64 = 0.05;
 /// Sample interval, s.
 const TAU0: f64 = 0.1;
-
-fn gyrocal(args: &[&str]) -> Output {
-    common::gyrocal().args(args).output().unwrap()
-}
 
 fn noise() -> GyroNoise {
     GyroNoise {

@@ -8,15 +8,11 @@
 mod common;
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 use common::config;
-
-/// The binary with none of the user's files (tests/common), its default catalog in the
-/// test's own `data_home`.
-fn gyrocal(data_home: &Path) -> Command {
-    common::gyrocal_with_data_home(data_home)
-}
+/// The binary with none of the user's files, its default catalog in the test's `data_home`.
+use common::gyrocal_with_data_home as gyrocal;
 
 fn ok(out: &Output) -> String {
     let stdout = String::from_utf8_lossy(&out.stdout).into_owned();

@@ -9,21 +9,17 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
+use common::config;
+
+/// `gyrocal ARGS` (through tests/common: no log filter, no catalog, none of the user's
+/// files) with the variables `env` set.
 fn gyrocal(args: &[&str], env: &[(&str, &str)]) -> Output {
     let mut cmd = common::gyrocal();
-    cmd.args(args)
-        .env_remove("RUST_LOG")
-        .env("GYROCAL_CATALOG", "off");
+    cmd.args(args);
     for (k, v) in env {
         cmd.env(k, v);
     }
     cmd.output().unwrap()
-}
-
-fn config(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../configs")
-        .join(name)
 }
 
 fn text(b: &[u8]) -> String {

@@ -8,26 +8,12 @@ mod common;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
+use common::steps_done as segments_done;
 use common::{RunOutput, config, gyrocal, json, run_json};
 
 /// configs/drift.toml, shortened to `segments` segments of `readings` readings.
 fn short_drift(dir: &Path, segments: u32, readings: u32) -> std::path::PathBuf {
-    let text = std::fs::read_to_string(config("drift.toml"))
-        .unwrap()
-        .replace(
-            "samples_per_rate = 3000",
-            &format!("samples_per_rate = {readings}"),
-        )
-        .replace("repeat = 167", &format!("repeat = {segments}"));
-    let path = dir.join("drift.toml");
-    std::fs::write(&path, text).unwrap();
-    path
-}
-
-fn segments_done(dir: &Path) -> usize {
-    std::fs::read_to_string(dir.join("steps.csv"))
-        .map(|s| s.lines().skip(1).filter(|l| !l.trim().is_empty()).count())
-        .unwrap_or(0)
+    common::plans::write(dir, "drift.toml", &common::plans::drift(segments, readings))
 }
 
 /// `t_s` of every reading, in file order.

@@ -10,6 +10,8 @@
 
 mod common;
 
+use common::manifest;
+
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
@@ -312,10 +314,6 @@ impl Run {
 
 // ---------------------------------------------------------------------------------------------
 // The run directory
-
-fn manifest(dir: &Path) -> Value {
-    serde_json::from_str(&std::fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap()
-}
 
 /// Complete lines of a CSV file (a line torn by a killed writer is not one), header excluded.
 fn csv_rows(path: &Path) -> Vec<BTreeMap<String, String>> {

@@ -10,7 +10,7 @@ mod common;
 use std::path::Path;
 use std::process::Output;
 
-use common::{config, gyrocal};
+use common::{config, gyrocal, manifest};
 
 fn text(out: &Output) -> String {
     format!(
@@ -18,10 +18,6 @@ fn text(out: &Output) -> String {
         String::from_utf8_lossy(&out.stdout),
         String::from_utf8_lossy(&out.stderr)
     )
-}
-
-fn manifest(dir: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap()
 }
 
 /// `gyrocal run PLAN --simulate --out DIR` plus `extra`; the output.

@@ -6,11 +6,9 @@
 mod common;
 
 use std::path::{Path, PathBuf};
-use std::process::Output;
 
-fn gyrocal(args: &[&str]) -> Output {
-    common::gyrocal().args(args).output().unwrap()
-}
+/// `gyrocal ARGS` run to its end, through tests/common.
+use common::gyrocal_output as gyrocal;
 
 fn example() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/paper-shaped.csv")

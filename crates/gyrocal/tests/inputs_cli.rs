@@ -69,14 +69,10 @@ fn gyrocal_limited(mib: u64, args: &[&std::ffi::OsStr]) -> Command {
     c.arg("-c")
         .arg(format!("ulimit -v {} && exec \"$0\" \"$@\"", mib * 1024))
         .arg(env!("CARGO_BIN_EXE_gyrocal"))
-        .args(args)
-        .env_remove("RUST_LOG")
-        .env_remove("GYROCAL_STATION")
-        .env("GYROCAL_CATALOG", "off")
-        .env(
-            "XDG_CONFIG_HOME",
-            std::env::temp_dir().join("gyrocal-tests-no-config"),
-        );
+        .args(args);
+    // the same clean environment as every other run of the binary (tests/common)
+    common::remove_users_own(&mut c);
+    c.env("GYROCAL_CATALOG", "off");
     c
 }
 

@@ -11,6 +11,9 @@
 
 mod common;
 
+use common::final_table_state as table_at_end;
+use common::manifest;
+
 use std::path::{Path, PathBuf};
 
 const METERS: &[(&str, &str)] = &[
@@ -91,10 +94,6 @@ fn run(
     }
 }
 
-fn manifest(dir: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap()
-}
-
 /// (step, n + overloads, retries) of each row of steps.csv.
 fn steps(dir: &Path) -> Vec<(usize, u64, u64)> {
     let mut r = csv::Reader::from_path(dir.join("steps.csv")).unwrap();
@@ -108,30 +107,6 @@ fn steps(dir: &Path) -> Vec<(usize, u64, u64)> {
             (num(s) as usize, num(n) + num(o), num(re))
         })
         .collect()
-}
-
-/// The simulated table's state at the end of a run, from gyrocal's closing line
-/// `simulated table at the end: mode Off, demand +0 °/s, at rest`.
-fn table_at_end(stderr: &str) -> serde_json::Value {
-    let line = stderr
-        .lines()
-        .find_map(|l| l.strip_prefix("simulated table at the end: "))
-        .unwrap_or_else(|| panic!("no final table state in:\n{stderr}"));
-    let mode = line
-        .strip_prefix("mode ")
-        .and_then(|r| r.split(',').next())
-        .unwrap_or_else(|| panic!("no mode in {line:?}"));
-    let demand: f64 = line
-        .split("demand ")
-        .nth(1)
-        .and_then(|r| r.split(' ').next())
-        .and_then(|v| v.parse().ok())
-        .unwrap_or_else(|| panic!("no demand in {line:?}"));
-    serde_json::json!({
-        "mode": mode,
-        "demanded_dps": demand,
-        "stopped": line.ends_with(", at rest"),
-    })
 }
 
 /// Every combination on quick.toml, in parallel threads (each run is its own process).

@@ -9,11 +9,10 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
-use gyrocal_run::{Plan, RunDir, RunMeta, Sample, Status, StepRecord};
+/// `gyrocal ARGS` run to its end, through tests/common.
+use common::gyrocal_output as gyrocal;
 
-fn gyrocal(args: &[&str]) -> Output {
-    common::gyrocal().args(args).output().unwrap()
-}
+use gyrocal_run::{Plan, RunDir, RunMeta, Sample, Status, StepRecord};
 
 fn example() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/paper-shaped.csv")
@@ -34,7 +33,7 @@ fn assert_user_error(out: &Output, must_name: &str) {
 /// A small complete run: 5 rates, 3 readings each, no fit.json (the report fits it).
 fn small_run(dir: &Path) {
     let plan = Plan::from_toml_str(
-        "[plan]\nname = \"cli test\"\nrates_dps = [0, 5, -5, 10, -10]\nsamples_per_rate = 3\n[table]\nport = \"/dev/ttyUSB1\"\nmax_rate_dps = 20\nacceleration_dps2 = 10\n[dmm]\nport = \"/dev/ttyUSB0\"\n",
+        &common::plans::sweep("cli test", &[0.0, 5.0, -5.0, 10.0, -10.0], 3),
         Path::new("cli.toml"),
     )
     .unwrap();
@@ -159,13 +158,7 @@ fn run_directory_without_steps_csv_exits_2_naming_it() {
 
 /// configs/quick.toml with `rates_dps` replaced, written into `dir`.
 fn plan_with_rates(dir: &Path, rates: &str) -> PathBuf {
-    let quick = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/quick.toml");
-    let text = std::fs::read_to_string(quick).unwrap();
-    let from = "rates_dps = [0, 1, -1, 10, -10]";
-    assert!(text.contains(from));
-    let path = dir.join("plan.toml");
-    std::fs::write(&path, text.replace(from, &format!("rates_dps = {rates}"))).unwrap();
-    path
+    common::plans::write(dir, "plan.toml", &common::plans::quick_with_rates(rates))
 }
 
 /// Checks the plan (which must warn about `model`), runs it on the simulated bench (which must

@@ -12,17 +12,7 @@ use std::time::{Duration, Instant};
 use nix::sys::signal::{Signal, kill};
 use nix::unistd::Pid;
 
-use common::{config, gyrocal};
-
-fn steps_done(dir: &Path) -> usize {
-    std::fs::read_to_string(dir.join("steps.csv"))
-        .map(|s| s.lines().skip(1).filter(|l| !l.trim().is_empty()).count())
-        .unwrap_or(0)
-}
-
-fn manifest(dir: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap()
-}
+use common::{config, final_table_state, gyrocal, manifest, steps_done};
 
 /// (step, index) of every sample row, and the set of step rows.
 fn samples(dir: &Path) -> Vec<(usize, u64)> {
@@ -88,30 +78,6 @@ fn resume_simulated(plan: &Path, dir: &Path) -> String {
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     assert!(out.status.success(), "{stderr}");
     stderr
-}
-
-/// The simulated table's state at the end of a run, from gyrocal's closing line
-/// `simulated table at the end: mode Off, demand +0 °/s, at rest`.
-fn final_table_state(stderr: &str) -> serde_json::Value {
-    let line = stderr
-        .lines()
-        .find_map(|l| l.strip_prefix("simulated table at the end: "))
-        .unwrap_or_else(|| panic!("no final table state in:\n{stderr}"));
-    let mode = line
-        .strip_prefix("mode ")
-        .and_then(|r| r.split(',').next())
-        .unwrap_or_else(|| panic!("no mode in {line:?}"));
-    let demand: f64 = line
-        .split("demand ")
-        .nth(1)
-        .and_then(|r| r.split(' ').next())
-        .and_then(|v| v.parse().ok())
-        .unwrap_or_else(|| panic!("no demand in {line:?}"));
-    serde_json::json!({
-        "mode": mode,
-        "demanded_dps": demand,
-        "stopped": line.ends_with(", at rest"),
-    })
 }
 
 fn check_complete(dir: &Path, steps: usize, per_step: u64) {

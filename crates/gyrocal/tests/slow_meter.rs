@@ -13,7 +13,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{config, gyrocal};
+use common::{config, gyrocal, manifest};
 
 const METERS: &[(&str, &str)] = &[
     ("34401A RS-232", ""),
@@ -72,10 +72,6 @@ fn run(tmp: &Path, name: &str, meter: &str, mode: &str, faults: &[&str]) -> Outc
         stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
         dir,
     }
-}
-
-fn manifest(dir: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap()
 }
 
 /// (step, rate, mean volts, n + overloads) of each row of steps.csv.

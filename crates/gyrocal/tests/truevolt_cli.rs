@@ -12,53 +12,19 @@ use std::path::{Path, PathBuf};
 use std::process::Stdio;
 use std::time::Duration;
 
-use common::{config, gyrocal};
+use common::{config, final_table_state, gyrocal, manifest};
 
 /// `configs/keysight-34461a.toml` with text replaced, written to `dir/name`.
 fn plan_with(dir: &Path, name: &str, edits: &[(&str, &str)]) -> PathBuf {
-    let mut text = std::fs::read_to_string(config("keysight-34461a.toml")).unwrap();
-    for (from, to) in edits {
-        assert!(text.contains(from), "{from:?} not in the plan");
-        text = text.replace(from, to);
-    }
-    let path = dir.join(name);
-    std::fs::write(&path, text).unwrap();
-    path
+    let text = common::plans::config_with("keysight-34461a.toml", edits);
+    common::plans::write(dir, name, &text)
 }
 
 const PAPER_RATES: &str = "rates_dps = [0, 0.1, -0.1, 0.3, -0.3, 0.7, -0.7, 1, -1, 3, -3, 7, -7, 10, -10, 15, -15, 20, -20]";
 
-fn manifest(dir: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap()
-}
-
 fn csv_rows(path: &Path) -> Vec<BTreeMap<String, String>> {
     let mut r = csv::Reader::from_path(path).unwrap();
     r.deserialize().map(Result::unwrap).collect()
-}
-
-/// The simulated table's state at the end of a run, from gyrocal's closing line
-/// `simulated table at the end: mode Off, demand +0 °/s, at rest`.
-fn final_table_state(stderr: &str) -> serde_json::Value {
-    let line = stderr
-        .lines()
-        .find_map(|l| l.strip_prefix("simulated table at the end: "))
-        .unwrap_or_else(|| panic!("no final table state in:\n{stderr}"));
-    let mode = line
-        .strip_prefix("mode ")
-        .and_then(|r| r.split(',').next())
-        .unwrap_or_else(|| panic!("no mode in {line:?}"));
-    let demand: f64 = line
-        .split("demand ")
-        .nth(1)
-        .and_then(|r| r.split(' ').next())
-        .and_then(|v| v.parse().ok())
-        .unwrap_or_else(|| panic!("no demand in {line:?}"));
-    serde_json::json!({
-        "mode": mode,
-        "demanded_dps": demand,
-        "stopped": line.ends_with(", at rest"),
-    })
 }
 
 struct Done {

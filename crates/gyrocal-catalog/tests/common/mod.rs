@@ -9,6 +9,10 @@ use std::sync::OnceLock;
 
 use gyrocal_files::{Dut, Instruments, Plan, RunDir, RunMeta, Sample, Status, StepRecord};
 
+/// The plans written once for every crate's tests.
+#[path = "../../../../tests/support/plans.rs"]
+pub mod plans;
+
 const RATES: [f64; 5] = [0.0, 1.0, -1.0, 10.0, -10.0];
 const N: u64 = 5;
 
@@ -26,11 +30,7 @@ pub fn template() -> &'static Path {
 }
 
 fn write_template(dir: &Path) {
-    let rates: Vec<String> = RATES.iter().map(|r| r.to_string()).collect();
-    let toml = format!(
-        "[plan]\nname = \"catalog test\"\nrates_dps = [{}]\nsamples_per_rate = {N}\n[table]\nport = \"/dev/ttyUSB1\"\nmax_rate_dps = 20\nacceleration_dps2 = 10\n[dmm]\nport = \"/dev/ttyUSB0\"\n",
-        rates.join(", ")
-    );
+    let toml = plans::sweep("catalog test", &RATES, N);
     let plan = Plan::from_toml_str(&toml, Path::new("test.toml")).unwrap();
     let meta = RunMeta {
         gyrocal_version: "0.1.0-test".into(),

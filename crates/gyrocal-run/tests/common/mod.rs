@@ -10,11 +10,13 @@ use gyrocal_hp34401a::{DriverOptions, Hp34401aMeter, Strategy};
 use gyrocal_link::Transport;
 use gyrocal_run::{Acquisition, Plan, RunDir, RunMeta};
 
+/// The plans written once for every crate's tests.
+#[path = "../../../../tests/support/plans.rs"]
+pub mod plans;
+
 /// A file under `configs/`.
 pub fn config(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../configs")
-        .join(name)
+    plans::config(name)
 }
 
 /// A shipped plan with other rates.

@@ -1,0 +1,7 @@
+//! Helpers shared by the simulator's tests (`mod common;`): the plans written once for every
+//! crate's tests (`tests/support/plans.rs`, see there).
+
+#![allow(dead_code)] // each test file uses a subset
+
+#[path = "../../../tests/support/plans.rs"]
+pub mod plans;
