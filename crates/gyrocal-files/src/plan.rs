@@ -1193,6 +1193,11 @@ pub struct WarmupDoc {
 pub const DEFAULT_WARMUP_WINDOW_S: f64 = 60.0;
 /// Default `[warmup] max_s`, s (IEEE 1431's HRG warm-up is tens of minutes).
 pub const DEFAULT_WARMUP_MAX_S: f64 = 3600.0;
+/// Default warm-up tolerance, in white-noise sigmas of a window mean (`sigma_A(tau0)/sqrt(w)`),
+/// used when `[warmup] tolerance_v` is not given: three sigmas keep a settled gyro from being
+/// called still warming up by noise alone (about 0.3 % of windows), and one value is shared by
+/// the live monitor (gyrocal-run) and the report's warm-up curve so they agree on "settled".
+pub const DEFAULT_WARMUP_SIGMAS: f64 = 3.0;
 
 /// What the rate table does during a drift record (`[drift] table`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
