@@ -194,12 +194,16 @@ pub async fn open_port(port: &PortSpec, options: &LinkOptions) -> Result<Link, L
         )),
         PortSpec::PrologixSerial { path, options: p } => {
             let inner = open_serial(&path.to_string_lossy(), options)?.boxed();
-            Ok(Link::Prologix(PrologixTransport::open(inner, p.clone()).await?))
+            Ok(Link::Prologix(
+                PrologixTransport::open(inner, p.clone()).await?,
+            ))
         }
         PortSpec::PrologixTcp { options: p, .. } => {
             let addr = port.socket_address().unwrap_or_default();
             let inner = open_tcp(&addr, options.connect_timeout).await?.boxed();
-            Ok(Link::Prologix(PrologixTransport::open(inner, p.clone()).await?))
+            Ok(Link::Prologix(
+                PrologixTransport::open(inner, p.clone()).await?,
+            ))
         }
     }
 }

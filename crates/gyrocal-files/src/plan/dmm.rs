@@ -146,9 +146,44 @@ impl DmmModel {
         }
     }
 
-    /// True for a Keysight Truevolt (reached over LAN).
+    /// The model as its maker writes it (`34401A`, `34461A`), for messages.
+    pub fn name(self) -> String {
+        self.as_str().to_ascii_uppercase()
+    }
+
+    /// True for a Keysight Truevolt: which driver family speaks to it. For what the family
+    /// implies, ask the property itself: [`DmmModel::lan_only`] for how it is reached,
+    /// [`DmmSettings::scpi_socket`] for what its port is, [`DmmModel::nplc_values`] for what it
+    /// offers.
     pub fn is_truevolt(self) -> bool {
         self != DmmModel::Hp34401a
+    }
+
+    /// True for a meter reached over LAN only (the Truevolts): its port must be
+    /// `tcp://HOST:5025`, its own SCPI socket.
+    pub fn lan_only(self) -> bool {
+        self.truevolt().is_some()
+    }
+
+    /// The integration times (power-line cycles) this model offers for DC volts: its driver
+    /// crate's fact (the 34460A/61A lack the 34465A/70A's 0.06).
+    pub fn nplc_values(self) -> &'static [f64] {
+        match self.truevolt() {
+            None => &NPLC_VALUES,
+            Some(m) => m.nplc_values(),
+        }
+    }
+
+    /// The Truevolt crate's model, for a Truevolt.
+    fn truevolt(self) -> Option<gyrocal_truevolt::facts::Model> {
+        use gyrocal_truevolt::facts::Model;
+        match self {
+            DmmModel::Hp34401a => None,
+            DmmModel::K34460a => Some(Model::M34460A),
+            DmmModel::K34461a => Some(Model::M34461A),
+            DmmModel::K34465a => Some(Model::M34465A),
+            DmmModel::K34470a => Some(Model::M34470A),
+        }
     }
 }
 
@@ -205,6 +240,15 @@ pub struct DmmSettings {
     pub acquisition: Acquisition,
 }
 
+impl DmmSettings {
+    /// True when the meter's port is its own SCPI socket (a LAN meter's `tcp://HOST:5025`:
+    /// device clear reconnects), not a serial-to-Ethernet converter in front of an RS-232
+    /// meter.
+    pub fn scpi_socket(&self) -> bool {
+        self.model.lan_only() && self.port.is_tcp()
+    }
+}
+
 /// Checks `[dmm]`; its port must differ from the table's (`table_port`).
 pub(super) fn validate(
     m: DmmDoc,
@@ -224,7 +268,7 @@ pub(super) fn validate(
             )
         })?;
     let dmm_port = cx.port("dmm.port", &m.port)?;
-    if model.is_truevolt() && !matches!(dmm_port, Port::Tcp { .. }) {
+    if model.lan_only() && !dmm_port.is_tcp() {
         return Err(cx.err(
             "dmm.port",
             format!(
@@ -264,6 +308,29 @@ pub(super) fn validate(
             ));
         }
     };
+    // what the named model offers: its driver crate's facts (this was `gyrocal check`'s and
+    // `gyrocal run`'s own check; it is the plan's, so a library user never holds a plan the
+    // CLI refuses)
+    if model.lan_only() && acquisition == Acquisition::Poll {
+        return Err(cx.err(
+            "dmm.acquisition",
+            format!(
+                "= \"poll\" is a 34401A baseline; the {} streams (use auto, stream or memory)",
+                model.name()
+            ),
+        ));
+    }
+    if !model.nplc_values().contains(&nplc) {
+        let offered: Vec<String> = model.nplc_values().iter().map(f64::to_string).collect();
+        return Err(cx.err(
+            "dmm.nplc",
+            format!(
+                "= {nplc} is not offered by the {}: use one of {}",
+                model.name(),
+                offered.join(", ")
+            ),
+        ));
+    }
     Ok(DmmSettings {
         model,
         port: dmm_port,

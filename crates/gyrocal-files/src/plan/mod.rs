@@ -50,8 +50,8 @@
 //!   spans);
 //! - the document form and the hash: `doc`;
 //! - stage 2: `validate` (the order of the sections, the error context), then one module
-//!   per section: `section` (`[plan]`), `table` and `dmm` (the bench's instruments, with
-//!   the port in `port`), `simulation` (the simulated truth), `dut`, `acceptance`;
+//!   per section: `section` (`[plan]`), `table` and `dmm` (the bench's instruments; a port is the
+//!   link's own type, [`Port`]), `simulation` (the simulated truth), `dut`, `acceptance`;
 //! - one module per test kind, with `kind` the one dispatch on it: `sweep`
 //!   (`scale_factor`) and `drift` (with its `[drift]` section); `warmup` (`[warmup]`,
 //!   either kind);
@@ -64,7 +64,6 @@ mod drift;
 mod dut;
 mod error;
 mod kind;
-mod port;
 mod raw;
 mod schedule;
 mod schema;
@@ -92,8 +91,11 @@ pub use doc::PlanDoc;
 pub use drift::{Axis, DriftDoc, DriftSettings, EARTH_RATE_DPH, TableRole};
 pub use dut::PlanDut;
 pub use error::{Location, PlanError, PlanErrorKind};
+/// Where an instrument is connected: the link's own type, parsed once when the plan is
+/// validated (`tcp://HOST:PORT`, `prologix:DEVICE?addr=N`, `prologix-tcp://HOST?addr=N` or a
+/// serial device path); nothing downstream parses the string again.
+pub use gyrocal_link::PortSpec as Port;
 pub use kind::PlanKind;
-pub use port::Port;
 pub use schedule::{Acquire, Step};
 pub use section::{MAX_REPEAT, MAX_SAMPLES_PER_RATE, MAX_WHOLE_REVOLUTIONS, PlanSectionDoc};
 pub use simulation::Simulation;

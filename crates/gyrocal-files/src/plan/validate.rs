@@ -7,6 +7,8 @@
 use std::path::Path;
 use std::time::Duration;
 
+use gyrocal_link::PortErrorKind;
+
 use super::doc::PlanDoc;
 use super::error::{Location, PlanError};
 use super::raw::Spans;
@@ -107,8 +109,20 @@ impl Ctx<'_> {
         Ok(d)
     }
 
+    /// A port, parsed into the link's type. A wrong part of a GPIB port string is said with
+    /// what to write, naming the key as `section.key` (the way `gyrocal check` said it when the
+    /// link layer checked it after the plan).
     pub(super) fn port(&self, path: &str, v: &str) -> Result<Port, PlanError> {
-        Port::parse(v).map_err(|m| self.err(path, m))
+        Port::parse(v).map_err(|e| {
+            let message = match e.kind() {
+                PortErrorKind::Gpib => format!(
+                    "= {v:?} is not a GPIB port: {e}; write {path} as prologix:DEVICE?addr=N or \
+                     prologix-tcp://HOST[:PORT]?addr=N"
+                ),
+                _ => e.to_string(),
+            };
+            self.err(path, message)
+        })
     }
 }
 

@@ -24,7 +24,7 @@ use anyhow::Context as _;
 use clap::Args;
 use gyrocal_link::Transport;
 use gyrocal_run::{
-    Event, Phase, Plan, Port, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status,
+    Event, Phase, Plan, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status,
     StopRequest, TableRest, fit_run,
 };
 use tokio::sync::{mpsc, watch};
@@ -648,19 +648,15 @@ async fn execute(
         let (summary, run, signal) = match &plan.dmm().port {
             // the plan reaches the meter over GPIB: the bench put a simulated Prologix
             // controller in front of it, and the real Prologix transport talks to that
-            Port::Gpib(spec) => {
-                let options = match gyrocal_link::parse_port(spec) {
-                    Ok(gyrocal_link::PortSpec::PrologixSerial { options, .. })
-                    | Ok(gyrocal_link::PortSpec::PrologixTcp { options, .. }) => options,
-                    _ => gyrocal_link::PrologixOptions::default(),
-                };
+            port if port.is_gpib() => {
+                let options = port.prologix_options().cloned().unwrap_or_default();
                 let dmm = gyrocal_link::PrologixTransport::open(bench.dmm, options)
                     .await
                     .context("opening the simulated Prologix controller")?;
                 sequence(plan, dmm, Some(bench.table), run).await?
             }
             // a Truevolt on its LAN socket: device clear reconnects to the simulated meter
-            _ if plan.dmm().model.is_truevolt() => {
+            _ if plan.dmm().scpi_socket() => {
                 let Some(lan) = bench.handle.lan.clone() else {
                     anyhow::bail!("the simulated bench has no LAN meter for a Truevolt plan");
                 };
