@@ -707,21 +707,15 @@ async fn execute(
             found.table_rate_dps
         );
         let d = plan.dmm();
-        let dmm = gyrocal_link::open(
-            &d.port.to_string(),
-            &crate::cmd::probe::dmm_link_options(&plan),
-        )
-        .await
-        .with_context(|| format!("opening the multimeter at {}", d.port))?;
+        let dmm = gyrocal_link::open_port(&d.port, &crate::cmd::probe::dmm_link_options(&plan))
+            .await
+            .with_context(|| format!("opening the multimeter at {}", d.port))?;
         let t = plan.table();
         let table = if plan.has_table() {
             Some(
-                gyrocal_link::open(
-                    &t.port.to_string(),
-                    &crate::cmd::probe::table_link_options(&plan),
-                )
-                .await
-                .with_context(|| format!("opening the rate table at {}", t.port))?,
+                gyrocal_link::open_port(&t.port, &crate::cmd::probe::table_link_options(&plan))
+                    .await
+                    .with_context(|| format!("opening the rate table at {}", t.port))?,
             )
         } else {
             None
