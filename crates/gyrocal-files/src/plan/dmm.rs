@@ -241,6 +241,21 @@ pub struct DmmSettings {
 }
 
 impl DmmSettings {
+    /// As the document writes it.
+    pub(super) fn to_doc(&self) -> DmmDoc {
+        DmmDoc {
+            model: self.model.as_str().into(),
+            port: self.port.to_string(),
+            baud: self.baud.into(),
+            framing: self.framing.to_string(),
+            range_v: self.range_v,
+            nplc: self.nplc,
+            autozero: self.autozero,
+            line_hz: self.line_hz.into(),
+            acquisition: self.acquisition.as_str().into(),
+        }
+    }
+
     /// True when the meter's port is its own SCPI socket (a LAN meter's `tcp://HOST:5025`:
     /// device clear reconnects), not a serial-to-Ethernet converter in front of an RS-232
     /// meter.

@@ -12,11 +12,11 @@ use sha2::{Digest, Sha256};
 use gyrocal_fit::acceptance::AcceptanceSpec;
 
 use super::dmm::DmmDoc;
-use super::drift::DriftDoc;
-use super::section::PlanSectionDoc;
+use super::drift::{DriftDoc, DriftSettings};
+use super::section::{self, PlanSectionDoc};
 use super::simulation::Simulation;
 use super::table::TableDoc;
-use super::warmup::WarmupDoc;
+use super::warmup::{WarmupDoc, WarmupSettings};
 use super::{Plan, PlanDut};
 
 const HASH_DOMAIN: &str = "gyrocal-plan-v1\n";
@@ -53,52 +53,18 @@ pub struct PlanDoc {
 }
 
 impl Plan {
-    /// The plan as parsed, defaults explicit (what the manifest stores).
+    /// The plan as parsed, defaults explicit (what the manifest stores): each section's own
+    /// module writes its part.
     pub fn to_doc(&self) -> PlanDoc {
         PlanDoc {
-            plan: PlanSectionDoc {
-                kind: self.kind.as_str().to_string(),
-                name: self.name.clone(),
-                rates_dps: self.rates_dps.clone(),
-                samples_per_rate: self.samples_per_rate.into(),
-                settle_s: self.settle.as_secs_f64(),
-                repeat: self.repeat.into(),
-                whole_revolutions: self.whole_revolutions.into(),
-            },
-            table: self.table_given.then(|| TableDoc {
-                dialect: self.table.dialect.as_str().into(),
-                port: self.table.port.to_string(),
-                baud: self.table.baud.into(),
-                max_rate_dps: self.table.max_rate_dps,
-                acceleration_dps2: self.table.acceleration_dps2,
-                rate_tolerance_dps: self.table.rate_tolerance_dps,
-                stability_window_s: self.table.stability_window.as_secs_f64(),
-                at_rate_timeout_s: self.table.at_rate_timeout.as_secs_f64(),
-            }),
-            dmm: DmmDoc {
-                model: self.dmm.model.as_str().into(),
-                port: self.dmm.port.to_string(),
-                baud: self.dmm.baud.into(),
-                framing: self.dmm.framing.to_string(),
-                range_v: self.dmm.range_v,
-                nplc: self.dmm.nplc,
-                autozero: self.dmm.autozero,
-                line_hz: self.dmm.line_hz.into(),
-                acquisition: self.dmm.acquisition.as_str().into(),
-            },
+            plan: section::to_doc(self),
+            table: self.table_given.then(|| self.table.to_doc()),
+            dmm: self.dmm.to_doc(),
             simulation: self.simulation.clone(),
             dut: self.dut.clone(),
             acceptance: self.acceptance.clone(),
-            drift: self.drift.map(|d| DriftDoc {
-                table: d.table.as_str().into(),
-                axis: d.earth.map(|(a, _)| a.as_str().into()),
-                latitude_deg: d.earth.map(|(_, l)| l),
-            }),
-            warmup: self.warmup.map(|w| WarmupDoc {
-                window_s: w.window.as_secs_f64(),
-                tolerance_v: w.tolerance_v,
-                max_s: w.max.as_secs_f64(),
-            }),
+            drift: self.drift.map(DriftSettings::to_doc),
+            warmup: self.warmup.map(WarmupSettings::to_doc),
         }
     }
 

@@ -169,6 +169,17 @@ pub struct DriftSettings {
     pub earth: Option<(Axis, f64)>,
 }
 
+impl DriftSettings {
+    /// As the document writes it.
+    pub(super) fn to_doc(self) -> DriftDoc {
+        DriftDoc {
+            table: self.table.as_str().into(),
+            axis: self.earth.map(|(a, _)| a.as_str().into()),
+            latitude_deg: self.earth.map(|(_, l)| l),
+        }
+    }
+}
+
 /// Whether `[drift]` says there is no table (`table = "none"`): then `[table]` may be left
 /// out.
 pub(super) fn has_no_table(d: Option<&DriftDoc>) -> bool {

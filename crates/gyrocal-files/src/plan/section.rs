@@ -7,12 +7,12 @@ use std::time::Duration;
 
 use serde::{Deserialize, Serialize};
 
-use super::MAX_DURATION_S;
 use super::error::PlanError;
 use super::kind::{self, PlanKind};
 use super::raw::{RawInt, S, Spans};
 use super::schema::{KeySchema, Kind};
 use super::validate::Ctx;
+use super::{MAX_DURATION_S, Plan};
 
 /// Upper bound for `[plan] samples_per_rate`: one million readings is about 11.5 hours at the
 /// 34401A's 24 readings/s (NPLC 1, autozero on); more is certainly a typo.
@@ -164,4 +164,17 @@ pub(super) fn validate(
         repeat,
         whole_revolutions,
     })
+}
+
+/// `[plan]` of a validated plan, as the document writes it.
+pub(super) fn to_doc(plan: &Plan) -> PlanSectionDoc {
+    PlanSectionDoc {
+        kind: plan.kind.as_str().to_string(),
+        name: plan.name.clone(),
+        rates_dps: plan.rates_dps.clone(),
+        samples_per_rate: plan.samples_per_rate.into(),
+        settle_s: plan.settle.as_secs_f64(),
+        repeat: plan.repeat.into(),
+        whole_revolutions: plan.whole_revolutions.into(),
+    }
 }

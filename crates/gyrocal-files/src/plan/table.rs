@@ -161,6 +161,22 @@ pub struct TableSettings {
     pub at_rate_timeout: Duration,
 }
 
+impl TableSettings {
+    /// As the document writes it.
+    pub(super) fn to_doc(&self) -> TableDoc {
+        TableDoc {
+            dialect: self.dialect.as_str().into(),
+            port: self.port.to_string(),
+            baud: self.baud.into(),
+            max_rate_dps: self.max_rate_dps,
+            acceleration_dps2: self.acceleration_dps2,
+            rate_tolerance_dps: self.rate_tolerance_dps,
+            stability_window_s: self.stability_window.as_secs_f64(),
+            at_rate_timeout_s: self.at_rate_timeout.as_secs_f64(),
+        }
+    }
+}
+
 /// Checks `[table]` (`t`, absent when the file has none; `no_table`: `[drift] table = "none"`
 /// allows that).
 pub(super) fn validate(

@@ -75,6 +75,17 @@ pub struct WarmupSettings {
     pub max: Duration,
 }
 
+impl WarmupSettings {
+    /// As the document writes it.
+    pub(super) fn to_doc(self) -> WarmupDoc {
+        WarmupDoc {
+            window_s: self.window.as_secs_f64(),
+            tolerance_v: self.tolerance_v,
+            max_s: self.max.as_secs_f64(),
+        }
+    }
+}
+
 pub(super) fn validate(w: &WarmupDoc, cx: &Ctx<'_>) -> Result<WarmupSettings, PlanError> {
     let window = cx.duration("warmup.window_s", w.window_s, true)?;
     let max = cx.duration("warmup.max_s", w.max_s, true)?;
