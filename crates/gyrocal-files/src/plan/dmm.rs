@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use super::error::PlanError;
 use super::raw::{RawInt, S, Spans};
-use super::schema::{KeySchema, Kind};
+use super::schema::{IntRule, KeySchema, Kind};
 use super::validate::Ctx;
 use super::{BAUD_RATES, Port};
 
@@ -32,12 +32,12 @@ pub use gyrocal_truevolt::facts::NPLC_65_70 as KNOWN_NPLC_VALUES;
 pub(super) const KEYS: &[KeySchema] = &[
     ("model", Kind::Text, false),
     ("port", Kind::Text, true),
-    ("baud", Kind::Int, false),
+    ("baud", Kind::Int(IntRule::OneOf(&BAUD_RATES)), false),
     ("framing", Kind::Text, false),
     ("range_v", Kind::Number, false),
     ("nplc", Kind::Number, false),
     ("autozero", Kind::Bool, false),
-    ("line_hz", Kind::Int, false),
+    ("line_hz", Kind::Int(IntRule::OneOf(&LINE_HZ)), false),
     ("acquisition", Kind::Text, false),
 ];
 

@@ -8,11 +8,9 @@ use toml::de::{DeTable, DeValue};
 
 use gyrocal_fit::acceptance::{Limits, Quantity};
 
-use super::dmm::LINE_HZ;
 use super::error::{Location, PlanError};
-use super::section::{MAX_REPEAT, MAX_SAMPLES_PER_RATE, MAX_WHOLE_REVOLUTIONS};
 use super::words::{and_list, closest, or_list};
-use super::{BAUD_RATES, acceptance, dmm, drift, dut, section, simulation, table, warmup};
+use super::{acceptance, dmm, drift, dut, section, simulation, table, warmup};
 
 /// One key of a section: its name, the kind of value it holds, and whether it is required.
 pub(super) type KeySchema = (&'static str, Kind, bool);
@@ -38,8 +36,9 @@ pub(super) const SCHEMA: &[SectionSchema] = &[
 pub(super) enum Kind {
     /// A number (integer or float).
     Number,
-    /// A whole number (the allowed values are [`int_rule`]'s).
-    Int,
+    /// A whole number, and the values it allows (written with the key, in its section's
+    /// module).
+    Int(IntRule),
     /// Text in quotes.
     Text,
     /// `true` or `false`.
@@ -77,6 +76,7 @@ fn shown(v: &DeValue<'_>) -> (String, &'static str) {
 }
 
 /// The values an integer key allows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum IntRule {
     /// `lo..=hi`.
     Range(u64, u64),
@@ -84,15 +84,23 @@ pub(super) enum IntRule {
     OneOf(&'static [u32]),
 }
 
+impl IntRule {
+    /// Any whole number from 0 that fits a signed 64-bit integer (`simulation.seed`).
+    pub(super) const NON_NEGATIVE: IntRule = IntRule::Range(0, i64::MAX.unsigned_abs());
+}
+
+/// The values the integer key `section.key` allows: its schema entry's.
 pub(super) fn int_rule(key: &str) -> IntRule {
-    match key {
-        "plan.samples_per_rate" => IntRule::Range(1, MAX_SAMPLES_PER_RATE.into()),
-        "plan.repeat" => IntRule::Range(1, MAX_REPEAT.into()),
-        "plan.whole_revolutions" => IntRule::Range(0, MAX_WHOLE_REVOLUTIONS.into()),
-        "table.baud" | "dmm.baud" => IntRule::OneOf(&BAUD_RATES),
-        "dmm.line_hz" => IntRule::OneOf(&LINE_HZ),
-        _ => IntRule::Range(0, i64::MAX.unsigned_abs()), // simulation.seed
-    }
+    let (section, name) = key.split_once('.').unwrap_or(("", key));
+    SCHEMA
+        .iter()
+        .filter(|s| s.0 == section)
+        .flat_map(|s| s.2.iter())
+        .find_map(|&(k, kind, _)| match kind {
+            Kind::Int(rule) if k == name => Some(rule),
+            _ => None,
+        })
+        .unwrap_or(IntRule::NON_NEGATIVE)
 }
 
 /// The message for an integer key whose value (`shown`, as written) is not allowed: the
@@ -138,8 +146,8 @@ fn wrong_kind(section: &str, key: &str, kind: Kind, v: &DeValue<'_>) -> Option<S
         Kind::Number => Some(format!(
             "= {shown} is {what}: write a number, e.g. {key} = 10"
         )),
-        Kind::Int if v.is_integer() => None,
-        Kind::Int => {
+        Kind::Int(_) if v.is_integer() => None,
+        Kind::Int(_) => {
             let words = int_words(&format!("{section}.{key}"));
             Some(if quoted_number {
                 format!("= {shown} is text, not a number: write {words}, without quotes")
@@ -414,7 +422,7 @@ mod tests {
     fn sample(kind: Kind) -> &'static str {
         match kind {
             Kind::Number => "1.5",
-            Kind::Int => "1",
+            Kind::Int(_) => "1",
             Kind::Text => "\"x\"",
             Kind::Bool => "true",
             Kind::Numbers => "[0, 1]",
@@ -450,5 +458,22 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// An integer key's allowed values are read from its own schema entry.
+    #[test]
+    fn integer_rules_come_from_the_keys_own_entries() {
+        assert_eq!(int_rule("plan.repeat"), IntRule::Range(1, 1000));
+        assert_eq!(
+            int_rule("plan.samples_per_rate"),
+            IntRule::Range(1, 1_000_000)
+        );
+        assert_eq!(int_rule("dmm.line_hz"), IntRule::OneOf(&[50, 60]));
+        assert_eq!(int_rule("table.baud"), int_rule("dmm.baud"));
+        assert_eq!(int_rule("simulation.seed"), IntRule::NON_NEGATIVE);
+        assert_eq!(
+            int_error("plan.repeat", "0", true),
+            "= 0 is out of range: write a whole number from 1 to 1000"
+        );
     }
 }

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use super::error::PlanError;
 use super::kind::{self, PlanKind};
 use super::raw::{RawInt, S, Spans};
-use super::schema::{KeySchema, Kind};
+use super::schema::{IntRule, KeySchema, Kind};
 use super::validate::Ctx;
 use super::{MAX_DURATION_S, Plan};
 
@@ -32,10 +32,22 @@ pub(super) const KEYS: &[KeySchema] = &[
     ("kind", Kind::Text, false),
     ("name", Kind::Text, false),
     ("rates_dps", Kind::Numbers, true),
-    ("samples_per_rate", Kind::Int, true),
+    (
+        "samples_per_rate",
+        Kind::Int(IntRule::Range(1, MAX_SAMPLES_PER_RATE as u64)),
+        true,
+    ),
     ("settle_s", Kind::Number, false),
-    ("repeat", Kind::Int, false),
-    ("whole_revolutions", Kind::Int, false),
+    (
+        "repeat",
+        Kind::Int(IntRule::Range(1, MAX_REPEAT as u64)),
+        false,
+    ),
+    (
+        "whole_revolutions",
+        Kind::Int(IntRule::Range(0, MAX_WHOLE_REVOLUTIONS as u64)),
+        false,
+    ),
 ];
 
 #[derive(Deserialize)]

@@ -6,12 +6,12 @@ use serde::{Deserialize, Serialize};
 
 use super::error::PlanError;
 use super::raw::{RawInt, S, Spans};
-use super::schema::{KeySchema, Kind, int_error};
+use super::schema::{IntRule, KeySchema, Kind, int_error};
 use super::validate::Ctx;
 
 /// The keys of `[simulation]`.
 pub(super) const KEYS: &[KeySchema] = &[
-    ("seed", Kind::Int, false),
+    ("seed", Kind::Int(IntRule::NON_NEGATIVE), false),
     ("scale_factor", Kind::Number, false),
     ("bias", Kind::Number, false),
     ("k2", Kind::Number, false),

@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use super::error::PlanError;
 use super::raw::{RawInt, S, Spans};
-use super::schema::{KeySchema, Kind};
+use super::schema::{IntRule, KeySchema, Kind};
 use super::validate::Ctx;
 use super::{BAUD_RATES, Port};
 
@@ -30,7 +30,7 @@ const DEFAULT_AT_RATE_TIMEOUT_S: f64 = 60.0;
 pub(super) const KEYS: &[KeySchema] = &[
     ("dialect", Kind::Text, false),
     ("port", Kind::Text, true),
-    ("baud", Kind::Int, false),
+    ("baud", Kind::Int(IntRule::OneOf(&BAUD_RATES)), false),
     ("max_rate_dps", Kind::Number, true),
     ("acceleration_dps2", Kind::Number, true),
     ("rate_tolerance_dps", Kind::Number, false),
