@@ -18,7 +18,7 @@
 //! The gyro's own white noise is switched off, so `noise_v` alone sets the reading scatter
 //! and a plan reads as what it means.
 
-use gyrocal_files::{DmmModel, Plan, Port, TableDialect};
+use gyrocal_files::{DmmModel, Plan, TableDialect};
 
 use crate::bench::{BenchConfig, DmmLink, TableWire};
 
@@ -63,9 +63,9 @@ pub fn bench_config(plan: &Plan) -> BenchConfig {
         DmmModel::K34465a => crate::bench::DmmModel::Truevolt(gyrocal_truevolt::Model::M34465A),
         DmmModel::K34470a => crate::bench::DmmModel::Truevolt(gyrocal_truevolt::Model::M34470A),
     };
-    if plan.dmm().model.is_truevolt() {
+    if plan.dmm().scpi_socket() {
         b.dmm_link = DmmLink::Lan;
-    } else if matches!(plan.dmm().port, Port::Gpib(_)) {
+    } else if plan.dmm().port.is_gpib() {
         b.dmm_link = DmmLink::Prologix(Default::default());
     }
     b.table.rate_noise_std = s.rate_noise_dps;

@@ -59,8 +59,9 @@ use tokio::time::Instant;
 use crate::SignalSource;
 use crate::table::TableHandle;
 
-/// Earth's rotation rate, deg/h.
-pub const EARTH_RATE_DEG_PER_H: f64 = 15.041;
+/// Earth's rotation rate, deg/h: the plan's one constant (the simulated truth and the drift
+/// analysis's Earth-rate correction must agree on it).
+pub const EARTH_RATE_DEG_PER_H: f64 = gyrocal_files::plan::EARTH_RATE_DPH;
 
 /// Configuration of the simulated gyro. Every field has a default; unknown fields are errors.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -569,11 +569,19 @@ fn a_truevolt_needs_a_tcp_port_and_unknown_models_are_refused() {
         "model = \"34410a\"\nport = \"/dev/ttyUSB0\"",
     );
     assert_at(&e, 10, "model");
-    // 0.06 is some meter's NPLC: the plan takes it, the CLI checks it against the model
+    // 0.06 is some meter's NPLC, not the 34401A's: since issue 23 the plan checks it against
+    // the named model itself (before, the plan took it and only the CLI refused it, so a
+    // library user held a plan `gyrocal check` would refuse)
+    let e = bad(
+        "port = \"/dev/ttyUSB0\"",
+        "port = \"/dev/ttyUSB0\"\nnplc = 0.06",
+    );
+    assert_at(&e, 11, "nplc");
+    assert!(e.to_string().contains("34401A"), "{e}");
     assert!(
         parse(&GOOD.replace(
             "port = \"/dev/ttyUSB0\"",
-            "port = \"/dev/ttyUSB0\"\nnplc = 0.06"
+            "model = \"34465a\"\nport = \"tcp://10.0.0.9:5025\"\nnplc = 0.06"
         ))
         .is_ok()
     );
@@ -863,4 +871,68 @@ fn servo_off_needs_a_table_whose_servo_can_be_switched_off() {
         "{e}"
     );
     assert!(parse(&text.replace("servo_off", "hold")).is_ok());
+}
+
+/// A GPIB port is parsed by the plan, once, into the link's type: a wrong part is refused at
+/// its line, naming the key and what to write; a good one carries its controller settings.
+#[test]
+fn a_gpib_port_is_parsed_by_the_plan_into_the_links_type() {
+    let e = bad(
+        "port = \"/dev/ttyUSB0\"",
+        "port = \"prologix:/dev/ttyUSB0?addr=31\"",
+    );
+    assert_at(&e, 10, "port");
+    let msg = e.to_string();
+    assert!(msg.contains("[dmm]") && msg.contains("0..=30"), "{msg}");
+    assert!(msg.contains("write dmm.port as prologix:"), "{msg}");
+    let plan = parse(&GOOD.replace(
+        "port = \"/dev/ttyUSB0\"",
+        "port = \"prologix:/dev/ttyUSB0?addr=5&read_tmo_ms=3000\"",
+    ))
+    .unwrap();
+    let port = &plan.dmm().port;
+    assert!(port.is_gpib());
+    let options = port.prologix_options().unwrap();
+    assert_eq!(options.addr, 5);
+    assert_eq!(options.read_tmo, Duration::from_millis(3000));
+    assert!(!plan.table().port.is_gpib());
+}
+
+/// The manifest stores a port in its canonical form (defaults spelled out, like every other
+/// key of the document form): it reloads to the same plan, and the hash, which leaves ports
+/// out, is the serial plan's.
+#[test]
+fn a_gpib_port_in_the_document_form_is_canonical_and_reloads() {
+    let serial = parse(GOOD).unwrap();
+    let plan = parse(&GOOD.replace(
+        "port = \"/dev/ttyUSB0\"",
+        "port = \"prologix-tcp://10.0.0.7\"",
+    ))
+    .unwrap();
+    let doc = plan.to_doc();
+    assert_eq!(doc.dmm.port, "prologix-tcp://10.0.0.7:1234?addr=22");
+    let back = Plan::from_doc(doc, Path::new("manifest.json")).unwrap();
+    assert_eq!(back, plan);
+    assert_eq!(plan.hash(), serial.hash());
+}
+
+/// What the named meter model offers is the plan's to check (it was the CLI's): a Truevolt
+/// refuses the 34401A's polling baseline and an NPLC its model lacks, at the line.
+#[test]
+fn the_named_models_own_settings_are_checked_by_the_plan() {
+    let truevolt = |model: &str, extra: &str| {
+        GOOD.replace(
+            "port = \"/dev/ttyUSB0\"",
+            &format!("model = \"{model}\"\nport = \"tcp://10.0.0.9:5025\"\n{extra}"),
+        )
+    };
+    let e = parse(&truevolt("34461a", "nplc = 0.06")).unwrap_err();
+    assert_at(&e, 12, "nplc");
+    assert!(e.to_string().contains("34461A"), "{e}");
+    let e = parse(&truevolt("34465a", "acquisition = \"poll\"")).unwrap_err();
+    assert_at(&e, 12, "acquisition");
+    assert!(e.to_string().contains("34465A"), "{e}");
+    let plan = parse(&truevolt("34465a", "nplc = 0.06")).unwrap();
+    assert!(plan.dmm().scpi_socket());
+    assert!(!parse(GOOD).unwrap().dmm().scpi_socket());
 }

@@ -30,11 +30,17 @@
 //! virtual time, [`pseudo_terminal`] a pseudo-terminal pair for tests through the serial code.
 
 //! Features: `io` (the default) is everything above; without it only [`facts`] (baud rates,
-//! framings, the device-clear byte) is built, with no async runtime, for the synchronous plan
-//! crate.
+//! framings, the device-clear byte) and [`port`] (a port string parsed into [`PortSpec`]) are
+//! built, with no async runtime, for the synchronous plan crate: a plan holds its ports as
+//! this type, parsed once.
 
 pub mod facts;
+pub mod port;
 pub use facts::{DEVICE_CLEAR, Framing, SUPPORTED_BAUDS};
+pub use port::{
+    DEFAULT_GPIB_ADDRESS, PROLOGIX_SCHEME, PROLOGIX_TCP_PORT, PROLOGIX_TCP_SCHEME, PortError,
+    PortErrorKind, PortSpec, PrologixOptions, TCP_SCHEME,
+};
 
 #[cfg(feature = "io")]
 mod codec;
@@ -58,13 +64,9 @@ pub use codec::{Cut, FrameCodec, Garbled, LineCodec};
 #[cfg(feature = "io")]
 pub use error::{ErrorKind, LinkError, show_bytes};
 #[cfg(feature = "io")]
-pub use open::{
-    Link, PROLOGIX_SCHEME, PROLOGIX_TCP_SCHEME, PortSpec, TCP_SCHEME, open, open_tcp, parse_port,
-};
+pub use open::{Link, open, open_port, open_tcp, parse_port};
 #[cfg(feature = "io")]
-pub use prologix::{
-    DEFAULT_GPIB_ADDRESS, ESC, PROLOGIX_TCP_PORT, PrologixOptions, PrologixTransport, escape,
-};
+pub use prologix::{ESC, PrologixTransport, escape};
 #[cfg(feature = "io")]
 pub use scripted::{ScriptStep, ScriptedTransport};
 #[cfg(all(unix, feature = "io"))]

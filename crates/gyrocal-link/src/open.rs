@@ -1,32 +1,16 @@
-//! [`open`]: one entry point that turns a port string into a transport.
-//!
-//! Port strings:
-//! - `tcp://host:port`: an RS-232 instrument behind a serial-to-Ethernet converter;
-//! - `prologix:<serial path>[?addr=N&read_tmo_ms=T]`: an instrument on GPIB behind a Prologix
-//!   GPIB-USB controller (a USB serial port), e.g. `prologix:/dev/ttyUSB0?addr=22`;
-//! - `prologix-tcp://host[:port][?addr=N&read_tmo_ms=T]`: behind a Prologix GPIB-ETHERNET
-//!   controller (port 1234 when none is given), e.g. `prologix-tcp://10.0.0.7:1234?addr=22`;
-//! - anything else: a serial port path (`/dev/ttyUSB0`, `COM3`, a pseudo-terminal's path).
-//!
-//! `addr` is the instrument's primary GPIB address, 0–30, default 22 (the 34401A's factory
-//! address); `read_tmo_ms` the controller's `++read_tmo_ms`, 1–3000, default 1000.
+//! [`open`]: one entry point that turns a port string into a transport, and [`open_port`] for
+//! a port already parsed ([`PortSpec`], whose module documents the port strings).
 
 use std::time::Duration;
 
 use tokio::net::TcpStream;
 
-use crate::prologix::{PROLOGIX_TCP_PORT, PrologixOptions, PrologixTransport};
+use crate::port::{PortSpec, TCP_SCHEME};
+use crate::prologix::PrologixTransport;
 use crate::{
     DynStream, Field, LinkError, LinkOptions, SocketTransport, StreamTransport, Transport,
     open_serial, tcp_connector,
 };
-
-/// The scheme prefix that selects TCP (an instrument behind a serial-to-Ethernet converter).
-pub const TCP_SCHEME: &str = "tcp://";
-/// The prefix that selects a Prologix GPIB-USB controller on a serial port.
-pub const PROLOGIX_SCHEME: &str = "prologix:";
-/// The prefix that selects a Prologix GPIB-ETHERNET controller.
-pub const PROLOGIX_TCP_SCHEME: &str = "prologix-tcp://";
 
 /// Connects to `tcp://host:port` (the scheme is optional here).
 pub async fn open_tcp(
@@ -60,141 +44,16 @@ pub async fn open_tcp(
     Ok(StreamTransport::new(stream, name))
 }
 
-/// What a port string names (see the module documentation), parsed without opening anything.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum PortSpec {
-    /// A serial port path.
-    Serial(String),
-    /// `host:port` of a serial-to-Ethernet converter.
-    Tcp(String),
-    /// A Prologix GPIB-USB controller on the serial port at `path`.
-    PrologixSerial {
-        /// The controller's serial port.
-        path: String,
-        /// Address and read timeout.
-        options: PrologixOptions,
-    },
-    /// A Prologix GPIB-ETHERNET controller at `host:port`.
-    PrologixTcp {
-        /// `host:port` (port 1234 filled in when the string had none).
-        addr: String,
-        /// Address and read timeout.
-        options: PrologixOptions,
-    },
-}
-
-fn bad(spec: &str, what: String) -> LinkError {
-    LinkError::io(
-        spec,
-        "parsing the port string",
-        std::io::Error::new(std::io::ErrorKind::InvalidInput, what),
-    )
-}
-
-/// Parses the `?addr=N&read_tmo_ms=T` part of a Prologix port string.
-fn prologix_query(spec: &str, query: Option<&str>) -> Result<PrologixOptions, LinkError> {
-    let mut options = PrologixOptions::default();
-    let Some(query) = query else {
-        return Ok(options);
-    };
-    for pair in query.split('&') {
-        let Some((key, value)) = pair.split_once('=') else {
-            return Err(bad(
-                spec,
-                format!("parameter {pair:?} is not key=value (use addr=N, read_tmo_ms=T)"),
-            ));
-        };
-        match key {
-            "addr" => {
-                options.addr = value
-                    .parse::<u8>()
-                    .ok()
-                    .filter(|a| *a <= 30)
-                    .ok_or_else(|| {
-                        bad(
-                            spec,
-                            format!("addr {value:?} is not a GPIB primary address (0..=30)"),
-                        )
-                    })?;
-            }
-            "read_tmo_ms" => {
-                let ms = value
-                    .parse::<u64>()
-                    .ok()
-                    .filter(|m| (1..=3000).contains(m))
-                    .ok_or_else(|| {
-                        bad(
-                            spec,
-                            format!("read_tmo_ms {value:?} is not a number of ms in 1..=3000"),
-                        )
-                    })?;
-                options.read_tmo = Duration::from_millis(ms);
-            }
-            other => {
-                return Err(bad(
-                    spec,
-                    format!("unknown parameter {other:?} (use addr=N, read_tmo_ms=T)"),
-                ));
-            }
-        }
-    }
-    Ok(options)
-}
-
-/// Parses a port string (see the module documentation). Errors name the part that is wrong.
+/// Parses a port string ([`PortSpec::parse`]) as a link error: the port string and
+/// "parsing the port string", then the part that is wrong.
 pub fn parse_port(spec: &str) -> Result<PortSpec, LinkError> {
-    if let Some(rest) = spec.strip_prefix(PROLOGIX_TCP_SCHEME) {
-        let (host, query) = match rest.split_once('?') {
-            Some((h, q)) => (h, Some(q)),
-            None => (rest, None),
-        };
-        if host.is_empty() {
-            return Err(bad(
-                spec,
-                "no host (expected prologix-tcp://host[:port][?addr=N])".into(),
-            ));
-        }
-        let addr = match host.rsplit_once(':') {
-            // an IPv6 literal without a port ("[::1]") has its last colon inside the brackets
-            Some((h, port)) if !port.contains(']') => {
-                if h.is_empty() {
-                    return Err(bad(spec, "no host before the port".into()));
-                }
-                port.parse::<u16>()
-                    .ok()
-                    .filter(|p| *p != 0)
-                    .ok_or_else(|| bad(spec, format!("port {port:?} is not a TCP port")))?;
-                host.to_string()
-            }
-            _ => format!("{host}:{PROLOGIX_TCP_PORT}"),
-        };
-        let options = prologix_query(spec, query)?;
-        return Ok(PortSpec::PrologixTcp { addr, options });
-    }
-    if let Some(rest) = spec.strip_prefix(PROLOGIX_SCHEME) {
-        let (path, query) = match rest.split_once('?') {
-            Some((p, q)) => (p, Some(q)),
-            None => (rest, None),
-        };
-        if path.is_empty() {
-            return Err(bad(
-                spec,
-                "no serial port (expected prologix:/dev/ttyUSB0[?addr=N])".into(),
-            ));
-        }
-        let options = prologix_query(spec, query)?;
-        return Ok(PortSpec::PrologixSerial {
-            path: path.to_string(),
-            options,
-        });
-    }
-    if let Some(addr) = spec.strip_prefix(TCP_SCHEME) {
-        return Ok(PortSpec::Tcp(addr.to_string()));
-    }
-    if spec.is_empty() {
-        return Err(bad(spec, "empty port string".into()));
-    }
-    Ok(PortSpec::Serial(spec.to_string()))
+    PortSpec::parse(spec).map_err(|e| {
+        LinkError::io(
+            spec,
+            "parsing the port string",
+            std::io::Error::new(std::io::ErrorKind::InvalidInput, e.to_string()),
+        )
+    })
 }
 
 /// A link opened by [`open`]: a byte stream with line framing (serial, TCP), or a Prologix GPIB
@@ -303,31 +162,48 @@ impl Transport for Link {
 /// `connect_timeout` to TCP. Stale input is cleared before the link is returned; a Prologix
 /// controller is set up and must answer `++ver`.
 pub async fn open(spec: &str, options: &LinkOptions) -> Result<Link, LinkError> {
-    match parse_port(spec)? {
-        PortSpec::Tcp(addr) if options.scpi_socket => {
-            let connector = tcp_connector(addr, options.connect_timeout);
-            let name = format!(
-                "{}{}",
-                crate::TCP_SCHEME,
-                spec.trim_start_matches(crate::TCP_SCHEME)
+    open_port(&parse_port(spec)?, options).await
+}
+
+/// Opens a link to a parsed port (see [`open`]): the port a plan holds is opened without
+/// being turned back into text and parsed again.
+pub async fn open_port(port: &PortSpec, options: &LinkOptions) -> Result<Link, LinkError> {
+    match port {
+        PortSpec::Tcp { host, port } if options.scpi_socket => {
+            let addr = crate::port::PortSpec::Tcp {
+                host: host.clone(),
+                port: *port,
+            };
+            let name = addr.to_string();
+            let connector = tcp_connector(
+                addr.socket_address().unwrap_or_default(),
+                options.connect_timeout,
             );
             let mut t = SocketTransport::connect(name, connector).await?;
             t.discard_input().await?;
             Ok(Link::Socket(t))
         }
-        PortSpec::Tcp(addr) => {
+        PortSpec::Tcp { .. } => {
+            let addr = port.socket_address().unwrap_or_default();
             let mut t = open_tcp(&addr, options.connect_timeout).await?.boxed();
             t.discard_input().await?;
             Ok(Link::Stream(t))
         }
-        PortSpec::Serial(path) => Ok(Link::Stream(open_serial(&path, options)?.boxed())),
+        PortSpec::Serial(path) => Ok(Link::Stream(
+            open_serial(&path.to_string_lossy(), options)?.boxed(),
+        )),
         PortSpec::PrologixSerial { path, options: p } => {
-            let inner = open_serial(&path, options)?.boxed();
-            Ok(Link::Prologix(PrologixTransport::open(inner, p).await?))
+            let inner = open_serial(&path.to_string_lossy(), options)?.boxed();
+            Ok(Link::Prologix(
+                PrologixTransport::open(inner, p.clone()).await?,
+            ))
         }
-        PortSpec::PrologixTcp { addr, options: p } => {
+        PortSpec::PrologixTcp { options: p, .. } => {
+            let addr = port.socket_address().unwrap_or_default();
             let inner = open_tcp(&addr, options.connect_timeout).await?.boxed();
-            Ok(Link::Prologix(PrologixTransport::open(inner, p).await?))
+            Ok(Link::Prologix(
+                PrologixTransport::open(inner, p.clone()).await?,
+            ))
         }
     }
 }
@@ -335,6 +211,7 @@ pub async fn open(spec: &str, options: &LinkOptions) -> Result<Link, LinkError> 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::PrologixOptions;
 
     fn opts(addr: u8, ms: u64) -> PrologixOptions {
         PrologixOptions {
@@ -352,7 +229,10 @@ mod tests {
         );
         assert_eq!(
             parse_port("tcp://10.0.0.5:4001").unwrap(),
-            PortSpec::Tcp("10.0.0.5:4001".into())
+            PortSpec::Tcp {
+                host: "10.0.0.5".into(),
+                port: 4001
+            }
         );
         assert_eq!(
             parse_port("prologix:/dev/ttyUSB0?addr=22").unwrap(),
@@ -371,21 +251,24 @@ mod tests {
         assert_eq!(
             parse_port("prologix-tcp://lab-gpib:1234?addr=5&read_tmo_ms=3000").unwrap(),
             PortSpec::PrologixTcp {
-                addr: "lab-gpib:1234".into(),
+                host: "lab-gpib".into(),
+                port: 1234,
                 options: opts(5, 3000)
             }
         );
         assert_eq!(
             parse_port("prologix-tcp://10.0.0.7").unwrap(),
             PortSpec::PrologixTcp {
-                addr: "10.0.0.7:1234".into(),
+                host: "10.0.0.7".into(),
+                port: 1234,
                 options: opts(22, 1000)
             }
         );
         assert_eq!(
             parse_port("prologix-tcp://[::1]?addr=0").unwrap(),
             PortSpec::PrologixTcp {
-                addr: "[::1]:1234".into(),
+                host: "::1".into(),
+                port: 1234,
                 options: opts(0, 1000)
             }
         );

@@ -37,54 +37,13 @@ use std::time::Duration;
 
 use tokio::time::Instant;
 
+use crate::port::PrologixOptions;
 use crate::{Field, LinkError, Transport};
 
-/// The TCP port of the Prologix GPIB-ETHERNET controller.
-pub const PROLOGIX_TCP_PORT: u16 = 1234;
-/// The HP 34401A's factory GPIB address, the default `addr`.
-pub const DEFAULT_GPIB_ADDRESS: u8 = 22;
 /// The escape character of the Prologix protocol.
 pub const ESC: u8 = 0x1b;
 
-/// How a [`PrologixTransport`] sets up its controller.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct PrologixOptions {
-    /// The instrument's primary GPIB address, 0–30. Default 22 (the 34401A's factory address).
-    pub addr: u8,
-    /// `++read_tmo_ms`: how long the controller waits for each character of a reply, 1–3000 ms.
-    /// Default 1000 ms.
-    pub read_tmo: Duration,
-    /// Extra silence, beyond `read_tmo`, before an outstanding read is sent again (the
-    /// controller has given up by then). Default 200 ms.
-    pub rearm_margin: Duration,
-    /// How long the controller may take to answer `++ver` at open. Default 2 s.
-    pub open_timeout: Duration,
-}
-
-impl Default for PrologixOptions {
-    fn default() -> Self {
-        PrologixOptions {
-            addr: DEFAULT_GPIB_ADDRESS,
-            read_tmo: Duration::from_millis(1000),
-            rearm_margin: Duration::from_millis(200),
-            open_timeout: Duration::from_secs(2),
-        }
-    }
-}
-
 impl PrologixOptions {
-    /// Checks the address (0–30) and the read timeout (1–3000 ms).
-    pub fn validate(&self) -> Result<(), String> {
-        if self.addr > 30 {
-            return Err(format!("GPIB address {} out of range 0..=30", self.addr));
-        }
-        let ms = self.read_tmo.as_millis();
-        if !(1..=3000).contains(&ms) {
-            return Err(format!("read_tmo_ms {ms} out of range 1..=3000"));
-        }
-        Ok(())
-    }
-
     /// The commands sent at open, in order (without their LF).
     pub fn setup_commands(&self) -> Vec<String> {
         vec![

@@ -28,7 +28,7 @@ pub fn hp34401a_config(plan: &Plan) -> DcvConfig {
         },
         line_hz: d.line_hz,
         baud: d.baud,
-        gpib: matches!(d.port, gyrocal_run::Port::Gpib(_)),
+        gpib: d.port.is_gpib(),
         ..DcvConfig::default()
     }
 }
@@ -66,7 +66,7 @@ pub fn dc_volts(plan: &Plan) -> gyrocal_meter::DcVolts {
 }
 
 /// The Truevolt options a plan asks for (`acquisition`: `auto` and `stream` stream, `memory`
-/// is memory; `poll` is refused by [`check_meter`]).
+/// is memory; `poll` is refused by the plan's own validation).
 pub fn truevolt_options(
     model: gyrocal_truevolt::Model,
     plan: &Plan,
@@ -79,32 +79,6 @@ pub fn truevolt_options(
     gyrocal_truevolt::TruevoltOptions {
         acquisition,
         ..gyrocal_truevolt::TruevoltOptions::new(model)
-    }
-}
-
-/// Checks the plan's meter settings against the named model's own facts (before anything
-/// opens). The message names the key (`[dmm] nplc`) and the model; the caller adds the file.
-pub fn check_meter(plan: &Plan) -> Result<(), String> {
-    match truevolt_model(plan) {
-        None => hp34401a_config(plan).validate().map_err(|e| {
-            // the plan checked range, baud and line frequency against the 34401A's own lists;
-            // what is left is an NPLC another meter offers (0.06)
-            if gyrocal_hp34401a::NPLC_VALUES.contains(&plan.dmm().nplc) {
-                format!("[dmm] {e}")
-            } else {
-                format!("[dmm] nplc: the 34401A refuses it: {e}")
-            }
-        }),
-        Some(model) => {
-            if plan.dmm().acquisition == gyrocal_run::Acquisition::Poll {
-                return Err(format!(
-                    "[dmm] acquisition: \"poll\" is a 34401A baseline; the {model} streams \
-                     (use auto, stream or memory)"
-                ));
-            }
-            gyrocal_truevolt::check(model, &dc_volts(plan), false)
-                .map_err(|e| format!("[dmm] {}: {e}", e.key))
-        }
     }
 }
 
@@ -173,7 +147,7 @@ where
                 hp34401a_strategy(plan),
                 plan.dmm().baud,
             )
-            .over_gpib(matches!(plan.dmm().port, gyrocal_run::Port::Gpib(_)));
+            .over_gpib(plan.dmm().port.is_gpib());
             with_table(plan, dmm, table_link, job).await
         }
         Some(model) => {

@@ -40,34 +40,15 @@ pub struct CheckArgs {
     pub station: Option<PathBuf>,
 }
 
-/// Reads and validates a plan; a bad plan is the user's to fix (exit 2).
+/// Reads and validates a plan; a bad plan is the user's to fix (exit 2). The plan's own
+/// validation is complete (ports parsed into the link's type, the meter's settings checked
+/// against the named model's facts): what `check` adds needs the station file or a live port.
 pub fn load_plan(path: &std::path::Path) -> anyhow::Result<Plan> {
-    let plan = Plan::from_file(path).map_err(|e| BadInput(e.to_string()))?;
-    crate::instruments::check_meter(&plan)
-        .map_err(|e| BadInput(format!("{}: {e}", path.display())))?;
-    check_port(path, "dmm.port", &plan.dmm().port)?;
-    if plan.has_table() {
-        check_port(path, "table.port", &plan.table().port)?;
-    }
-    Ok(plan)
+    Plan::from_file(path).map_err(|e| BadInput(e.to_string()).into())
 }
 
-/// A Prologix port string is kept as written by the plan; its syntax belongs to the link
-/// layer, which checks it here so `check` and `run` refuse a bad one before anything opens.
-pub fn check_port(
-    path: &std::path::Path,
-    key: &str,
-    port: &gyrocal_run::Port,
-) -> anyhow::Result<()> {
-    if let gyrocal_run::Port::Gpib(spec) = port {
-        gyrocal_link::parse_port(spec)
-            .map_err(|e| BadInput(format!("{}: {key}: {e}", path.display())))?;
-    }
-    Ok(())
-}
-
-/// Puts `--dmm-port` and `--table-port` in place of the plan's ports, each checked as the
-/// plan's own would be (a bad one is the user's to fix, exit 2).
+/// Puts `--dmm-port` and `--table-port` in place of the plan's ports, each parsed as the
+/// plan's own is (a bad one is the user's to fix, exit 2).
 pub fn override_ports(
     plan: &mut Plan,
     dmm: Option<&str>,
@@ -75,13 +56,11 @@ pub fn override_ports(
 ) -> anyhow::Result<()> {
     if let Some(p) = dmm {
         let port = gyrocal_run::Port::parse(p).map_err(|e| BadInput(format!("--dmm-port: {e}")))?;
-        check_port(std::path::Path::new("--dmm-port"), "port", &port)?;
         plan.set_dmm_port(port);
     }
     if let Some(p) = table {
         let port =
             gyrocal_run::Port::parse(p).map_err(|e| BadInput(format!("--table-port: {e}")))?;
-        check_port(std::path::Path::new("--table-port"), "port", &port)?;
         plan.set_table_port(port);
     }
     Ok(())

@@ -35,7 +35,7 @@ pub fn dmm_link_options(plan: &Plan) -> LinkOptions {
         framing: d.framing,
         // a Truevolt's tcp:// port is its SCPI socket (device clear reconnects); a 34401A's
         // is a serial converter
-        scpi_socket: d.model.is_truevolt(),
+        scpi_socket: d.scpi_socket(),
         ..LinkOptions::default()
     }
 }
@@ -53,13 +53,13 @@ pub fn table_link_options(plan: &Plan) -> LinkOptions {
 pub async fn probe(plan: &Plan) -> anyhow::Result<Found> {
     use anyhow::Context as _;
     let d = plan.dmm();
-    let dmm = gyrocal_link::open(&d.port.to_string(), &dmm_link_options(plan))
+    let dmm = gyrocal_link::open_port(&d.port, &dmm_link_options(plan))
         .await
         .with_context(|| format!("opening the multimeter at {}", d.port))?;
     let t = plan.table();
     let table = if plan.has_table() {
         Some(
-            gyrocal_link::open(&t.port.to_string(), &table_link_options(plan))
+            gyrocal_link::open_port(&t.port, &table_link_options(plan))
                 .await
                 .with_context(|| format!("opening the rate table at {}", t.port))?,
         )
@@ -140,10 +140,12 @@ fn silent(what: &str, port: &Port, why: &str, plan: &Plan) -> String {
              program holds the port",
             plan.table().baud
         ),
-        Port::Gpib(_) => "check the GPIB address (the port's addr=N against the meter's HP-IB \
+        Port::PrologixSerial { .. } | Port::PrologixTcp { .. } => {
+            "check the GPIB address (the port's addr=N against the meter's HP-IB \
                           address), that the Prologix controller is connected and powered, and \
                           the GPIB cable"
-            .to_string(),
+                .to_string()
+        }
         Port::Tcp { host, port } => format!(
             "check that {host} is reachable and listens on port {port} (a Truevolt's SCPI \
              socket is 5025), that the instrument's LAN interface is enabled, and that no \

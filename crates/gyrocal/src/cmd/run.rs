@@ -24,7 +24,7 @@ use anyhow::Context as _;
 use clap::Args;
 use gyrocal_link::Transport;
 use gyrocal_run::{
-    Event, Phase, Plan, Port, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status,
+    Event, Phase, Plan, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status,
     StopRequest, TableRest, fit_run,
 };
 use tokio::sync::{mpsc, watch};
@@ -648,19 +648,15 @@ async fn execute(
         let (summary, run, signal) = match &plan.dmm().port {
             // the plan reaches the meter over GPIB: the bench put a simulated Prologix
             // controller in front of it, and the real Prologix transport talks to that
-            Port::Gpib(spec) => {
-                let options = match gyrocal_link::parse_port(spec) {
-                    Ok(gyrocal_link::PortSpec::PrologixSerial { options, .. })
-                    | Ok(gyrocal_link::PortSpec::PrologixTcp { options, .. }) => options,
-                    _ => gyrocal_link::PrologixOptions::default(),
-                };
+            port if port.is_gpib() => {
+                let options = port.prologix_options().cloned().unwrap_or_default();
                 let dmm = gyrocal_link::PrologixTransport::open(bench.dmm, options)
                     .await
                     .context("opening the simulated Prologix controller")?;
                 sequence(plan, dmm, Some(bench.table), run).await?
             }
             // a Truevolt on its LAN socket: device clear reconnects to the simulated meter
-            _ if plan.dmm().model.is_truevolt() => {
+            _ if plan.dmm().scpi_socket() => {
                 let Some(lan) = bench.handle.lan.clone() else {
                     anyhow::bail!("the simulated bench has no LAN meter for a Truevolt plan");
                 };
@@ -711,21 +707,15 @@ async fn execute(
             found.table_rate_dps
         );
         let d = plan.dmm();
-        let dmm = gyrocal_link::open(
-            &d.port.to_string(),
-            &crate::cmd::probe::dmm_link_options(&plan),
-        )
-        .await
-        .with_context(|| format!("opening the multimeter at {}", d.port))?;
+        let dmm = gyrocal_link::open_port(&d.port, &crate::cmd::probe::dmm_link_options(&plan))
+            .await
+            .with_context(|| format!("opening the multimeter at {}", d.port))?;
         let t = plan.table();
         let table = if plan.has_table() {
             Some(
-                gyrocal_link::open(
-                    &t.port.to_string(),
-                    &crate::cmd::probe::table_link_options(&plan),
-                )
-                .await
-                .with_context(|| format!("opening the rate table at {}", t.port))?,
+                gyrocal_link::open_port(&t.port, &crate::cmd::probe::table_link_options(&plan))
+                    .await
+                    .with_context(|| format!("opening the rate table at {}", t.port))?,
             )
         } else {
             None
