@@ -21,9 +21,9 @@
 //!   name and SHA-256 of `fit.json` and the headline figures (K, K0, their standard errors,
 //!   the best model). It stays a few kilobytes, so an index of many runs reads it cheaply.
 //! - `fit.json`: the whole fit (the `gyrocal fit --json` document: every model, the
-//!   residuals, the error surface), written by [`crate::fit_run`]; read it with [`load_fit`].
-//! - `allan.json`, `allan.html`: a drift record's Allan analysis, written by the report crate
-//!   through [`RunDir::write_result`] or [`RunResults`] (atomically, under the run's lock, with
+//!   residuals, the error surface), written by `gyrocal_analysis::sweep::fit_run`; read it with [`load_fit`].
+//! - `allan.json`, `allan.html`: a drift record's Allan analysis (`gyrocal-analysis`) and its
+//!   page (`gyrocal-report`), written through [`RunDir::write_result`] or [`RunResults`] (atomically, under the run's lock, with
 //!   its SHA-256 recorded in the manifest's `checksums`).
 //!
 //! ## Integrity
@@ -1918,7 +1918,7 @@ pub fn load(dir: &Path) -> Result<RunData, RunError> {
     Ok(RunData { manifest, steps })
 }
 
-/// Reads a run directory's `fit.json` (what [`crate::fit_run`] wrote): `Ok(None)` when the run
+/// Reads a run directory's `fit.json` (what `gyrocal_analysis::sweep::fit_run` wrote): `Ok(None)` when the run
 /// has none (not fitted yet, or written before fit.json existed: see
 /// [`Manifest::legacy_fit`]). A file that does not parse is an error naming it, its line and
 /// column.
