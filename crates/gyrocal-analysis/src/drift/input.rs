@@ -246,6 +246,47 @@ pub(super) fn run_scale_factor(dir: &Path) -> Result<Option<f64>, String> {
         .filter(|k| k.is_finite() && *k != 0.0))
 }
 
+/// The sample interval τ0 and where it came from: the option, else the median interval of
+/// the time column (pass 1, which sets `cap` to 0 when its intervals went to a temporary file,
+/// so the values follow them there). Returns the reader positioned for pass 2 (`rdr`, or a new
+/// one after pass 1 read the file).
+pub(super) fn sample_interval(
+    file: &Path,
+    column: Option<&str>,
+    cols: &Columns,
+    option: Option<f64>,
+    cap: &mut usize,
+    temp_dir: &Path,
+    rdr: CsvReader,
+) -> Result<(f64, String, CsvReader), DriftError> {
+    match (option, &cols.time) {
+        (Some(t), _) => Ok((t, "option".to_string(), rdr)),
+        (None, Some((_, name))) => {
+            drop(rdr);
+            let (m, spilled) = median_interval(file, column, *cap, temp_dir)?;
+            if spilled {
+                *cap = 0;
+            }
+            let m = m.ok_or_else(|| {
+                data_err(file, None, "fewer than two samples: no sample interval")
+            })?;
+            if !(m.is_finite() && m > 0.0) {
+                return Err(data_err(
+                    file,
+                    None,
+                    format!("the median interval of {name} is {m} s: the time does not increase"),
+                ));
+            }
+            Ok((m, format!("median interval of {name}"), reader(file)?))
+        }
+        (None, None) => Err(data_err(
+            file,
+            Some(1),
+            "no time column (t_s or time): give the sample interval with --tau0",
+        )),
+    }
+}
+
 /// Pass 2 over a record: what it needs.
 pub(super) struct RecordPass<'a> {
     /// The file read.

@@ -203,61 +203,14 @@ pub fn fmt_num(v: f64) -> String {
 /// docs). Errors name the file and, where it applies, the line.
 pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, DriftError> {
     let mut notes = Vec::new();
-    if let Some(dir) = &opts.temp_dir {
-        check_temp_dir(dir)?;
-    }
-    let is_run = path.is_dir();
-    let file = if is_run {
-        path.join(SAMPLES_CSV)
-    } else {
-        path.to_path_buf()
-    };
-    // a run directory's manifest, read once: its plan's kind and its simulated gyro
-    let manifest = if is_run {
-        gyrocal_files::load(path).ok().map(|r| r.manifest)
-    } else {
-        None
-    };
-    // a drift run's segments are joined across the meter's re-arming (the kind read once, by
-    // the crate's one dispatch)
-    let join_below = opts.join_gaps_below_s.or_else(|| {
-        manifest
-            .as_ref()
-            .is_some_and(|m| crate::RunKind::of(m) == crate::RunKind::Drift)
-            .then_some(DRIFT_SEGMENT_JOIN_S)
-    });
-    // a run that watched its warm-up (`[warmup]`): the same criterion, with the tolerance it
-    // used, unless the options ask for another
-    let warmup_opts = match manifest.as_ref().and_then(|m| m.warmup.as_ref()) {
-        Some(w) if opts.warmup == WarmupOptions::default() => WarmupOptions {
-            window_s: w.window_s,
-            tolerance: w.tolerance_v,
-            max_s: Some(w.max_s),
-        },
-        _ => opts.warmup.clone(),
-    };
-    if let Some(k) = opts.scale_factor
-        && (!k.is_finite() || k == 0.0)
-    {
-        return Err(data_err(
-            path,
-            None,
-            format!("scale factor {k}: must be finite and non-zero"),
-        ));
-    }
-    if let Some(t) = opts.tau0_s
-        && (!t.is_finite() || t <= 0.0)
-    {
-        return Err(data_err(
-            path,
-            None,
-            format!("tau0 {t}: must be finite and > 0"),
-        ));
-    }
-    let column = opts
-        .column
-        .as_deref()
-        .or(if is_run { Some("volts") } else { None });
+    let Source {
+        is_run,
+        file,
+        manifest,
+        join_below,
+        warmup_opts,
+        column,
+    } = source(path, opts)?;
 
     // units
     let mut rdr = input::reader(&file)?;
@@ -285,35 +238,8 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
     let temp_dir = opts.temp_dir.clone().unwrap_or_else(std::env::temp_dir);
 
     // τ0
-    let (tau0, tau0_source) = match (opts.tau0_s, &cols.time) {
-        (Some(t), _) => (t, "option".to_string()),
-        (None, Some((_, name))) => {
-            drop(rdr);
-            let (m, spilled) = input::median_interval(&file, column, cap, &temp_dir)?;
-            if spilled {
-                cap = 0;
-            }
-            let m = m.ok_or_else(|| {
-                data_err(&file, None, "fewer than two samples: no sample interval")
-            })?;
-            if !(m.is_finite() && m > 0.0) {
-                return Err(data_err(
-                    &file,
-                    None,
-                    format!("the median interval of {name} is {m} s: the time does not increase"),
-                ));
-            }
-            rdr = input::reader(&file)?;
-            (m, format!("median interval of {name}"))
-        }
-        (None, None) => {
-            return Err(data_err(
-                &file,
-                Some(1),
-                "no time column (t_s or time): give the sample interval with --tau0",
-            ));
-        }
-    };
+    let (tau0, tau0_source, mut rdr) =
+        input::sample_interval(&file, column, &cols, opts.tau0_s, &mut cap, &temp_dir, rdr)?;
     let cols = input::columns(&file, &mut rdr, column)?;
 
     // pass 2: the values and the segments
@@ -338,33 +264,10 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
     } = pass.read(rdr, &mut notes)?;
 
     // the longest segment
-    let (si, _) = segments
-        .iter()
-        .enumerate()
-        .max_by(|a, b| a.1.samples.cmp(&b.1.samples).then(b.0.cmp(&a.0)))
-        .ok_or_else(|| data_err(&file, None, "no samples"))?;
-    if let Some(s) = segments.get_mut(si) {
-        s.analysed = true;
-    }
+    let si = longest_segment(&mut segments, &file, &mut notes)?;
     let (seg_t0, seg_t1, seg_len) = segments
         .get(si)
         .map_or((0.0, 0.0, 0), |s| (s.t_s.0, s.t_s.1, s.samples));
-    if segments.len() > 1
-        && let Some(s) = segments.get(si)
-    {
-        notes.push(format!(
-            "the record has {} gap(s) (intervals > {GAP_FACTOR} τ0): {} segments; only the longest is analysed: segment {} of {}, lines {}–{}, t = {} s to {} s, {} samples",
-            segments.len() - 1,
-            segments.len(),
-            si + 1,
-            segments.len(),
-            s.lines.0,
-            s.lines.1,
-            fmt_g(s.t_s.0),
-            fmt_g(s.t_s.1),
-            s.samples
-        ));
-    }
     let record_samples = values.len();
     let samples = values.finish()?;
     let memory = bounded::memory_use(
@@ -470,6 +373,126 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
         notes,
         memory,
     })
+}
+
+/// What the input brings to its analysis besides the record: the file read (a run
+/// directory's samples.csv), a run's manifest, and the options a run's plan sets when the
+/// caller did not.
+struct Source<'a> {
+    /// The input is a run directory.
+    is_run: bool,
+    /// The file read.
+    file: PathBuf,
+    /// A run directory's manifest, read once: its plan's kind, its warm-up, its simulated gyro.
+    manifest: Option<gyrocal_files::Manifest>,
+    /// Gaps up to this long, s, are joined as dead time.
+    join_below: Option<f64>,
+    /// The warm-up criterion.
+    warmup_opts: WarmupOptions,
+    /// The value column asked for.
+    column: Option<&'a str>,
+}
+
+/// The input's [`Source`], the options checked first (a typing error is bad input at once,
+/// before a long record is read).
+fn source<'a>(path: &Path, opts: &'a AllanOptions) -> Result<Source<'a>, DriftError> {
+    if let Some(dir) = &opts.temp_dir {
+        check_temp_dir(dir)?;
+    }
+    let is_run = path.is_dir();
+    let file = if is_run {
+        path.join(SAMPLES_CSV)
+    } else {
+        path.to_path_buf()
+    };
+    // a run directory's manifest, read once: its plan's kind and its simulated gyro
+    let manifest = if is_run {
+        gyrocal_files::load(path).ok().map(|r| r.manifest)
+    } else {
+        None
+    };
+    // a drift run's segments are joined across the meter's re-arming (the kind read once, by
+    // the crate's one dispatch)
+    let join_below = opts.join_gaps_below_s.or_else(|| {
+        manifest
+            .as_ref()
+            .is_some_and(|m| crate::RunKind::of(m) == crate::RunKind::Drift)
+            .then_some(DRIFT_SEGMENT_JOIN_S)
+    });
+    // a run that watched its warm-up (`[warmup]`): the same criterion, with the tolerance it
+    // used, unless the options ask for another
+    let warmup_opts = match manifest.as_ref().and_then(|m| m.warmup.as_ref()) {
+        Some(w) if opts.warmup == WarmupOptions::default() => WarmupOptions {
+            window_s: w.window_s,
+            tolerance: w.tolerance_v,
+            max_s: Some(w.max_s),
+        },
+        _ => opts.warmup.clone(),
+    };
+    if let Some(k) = opts.scale_factor
+        && (!k.is_finite() || k == 0.0)
+    {
+        return Err(data_err(
+            path,
+            None,
+            format!("scale factor {k}: must be finite and non-zero"),
+        ));
+    }
+    if let Some(t) = opts.tau0_s
+        && (!t.is_finite() || t <= 0.0)
+    {
+        return Err(data_err(
+            path,
+            None,
+            format!("tau0 {t}: must be finite and > 0"),
+        ));
+    }
+    let column = opts
+        .column
+        .as_deref()
+        .or(if is_run { Some("volts") } else { None });
+    Ok(Source {
+        is_run,
+        file,
+        manifest,
+        join_below,
+        warmup_opts,
+        column,
+    })
+}
+
+/// Marks the longest segment (the first of equals) as the one analysed and says so when the
+/// record has gaps; its index.
+fn longest_segment(
+    segments: &mut [Segment],
+    file: &Path,
+    notes: &mut Vec<String>,
+) -> Result<usize, DriftError> {
+    let (si, _) = segments
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.samples.cmp(&b.1.samples).then(b.0.cmp(&a.0)))
+        .ok_or_else(|| data_err(file, None, "no samples"))?;
+    if let Some(s) = segments.get_mut(si) {
+        s.analysed = true;
+    }
+    if segments.len() > 1
+        && let Some(s) = segments.get(si)
+    {
+        notes.push(format!(
+            "the record has {} gap(s) (intervals > {GAP_FACTOR} τ0): {} segments; only the longest is analysed: segment {} of {}, lines {}–{}, t = {} s to {} s, {} samples",
+            segments.len() - 1,
+            segments.len(),
+            si + 1,
+            segments.len(),
+            s.lines.0,
+            s.lines.1,
+            fmt_g(s.t_s.0),
+            fmt_g(s.t_s.1),
+            s.samples
+        ));
+    }
+    Ok(si)
 }
 
 /// The scale factor (the option, else the run's `fit.json`, else a simulated run's gyro), the
