@@ -55,6 +55,9 @@ impl From<DriftError> for ReportError {
 // ---------------------------------------------------------------------------------------------
 // The page
 
+// TODO(issue 23, lead): once the report branch's `crate::page` is merged, render this page
+// through it (`Page::new(..).open`, `Page::close`, its `STYLESHEET` and `esc`) and drop this
+// stylesheet; `tr.beyond` is already among the shared stylesheet's classes.
 const CSS: &str = r#"
 :root { color-scheme: light; }
 body { font-family: system-ui, -apple-system, "Segoe UI", Roboto, Helvetica, Arial, sans-serif;
