@@ -13,7 +13,7 @@ use super::bounded::{self, Samples, Spill};
 use super::{GAP_FACTOR, IRREGULAR_FRACTION, MAX_INPUT_BYTES, Segment, fmt_g};
 use crate::DriftError;
 
-/// A temporary directory the user named ([`AllanOptions::temp_dir`], `--temp-dir`) must exist,
+/// A temporary directory the user named ([`super::AllanOptions::temp_dir`], `--temp-dir`) must exist,
 /// be a directory and take a file: checked before the record is read, so a typing error is
 /// bad input (exit 2) at once rather than a failure halfway through a long record. (The
 /// default, `$TMPDIR`, is the environment's: its failures stay failures of the run.)

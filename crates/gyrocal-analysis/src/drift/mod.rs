@@ -73,7 +73,7 @@
 //! * `stability`: the stability curve, the bias figures and the IEEE 952 noise terms;
 //! * `earth`: the Earth's rate removed from the bias;
 //! * `bounded`: the bounded-memory path;
-//! * [`document`]: the result, [`AllanDocument`] (`allan.json`).
+//! * `document`: the result, [`AllanDocument`] (`allan.json`), and [`DriftFigures`].
 
 use std::path::{Path, PathBuf};
 
