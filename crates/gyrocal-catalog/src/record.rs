@@ -3,7 +3,10 @@
 //! The typed reader of `gyrocal-files` ([`gyrocal_files::load`]) gives the manifest and the
 //! steps; `manifest.json` and `fit.json` are read a second time as plain JSON for the parts
 //! that not every gyrocal writes (the station, the acceptance verdict, the uncertainty budget,
-//! the common-K2 asymmetry): absent parts become NULL columns.
+//! the common-K2 asymmetry): absent parts become NULL columns. A drift record's `allan.json`
+//! is read typed by the analysis crate ([`gyrocal_analysis::drift::DriftFigures`], every
+//! figure optional), which also decides which of the two a run has
+//! ([`gyrocal_analysis::RunKind`]).
 
 use std::path::{Path, PathBuf};
 
@@ -335,11 +338,13 @@ pub fn read_run(dir: &Path, host: Option<&str>) -> Result<RunRecord, CatalogErro
         humidity_pct: m.context.as_ref().and_then(|c| c.humidity_pct),
         gyrocal_version: Some(m.gyrocal_version.clone()).filter(|v| !v.is_empty()),
     };
-    let results = if m.plan.kind() == gyrocal_files::PlanKind::Drift {
-        // a drift record is not fitted: its figures are the Allan analysis's
-        read_json(dir, ALLAN_JSON)?.map(|a| drift_results_of(&a))
-    } else {
-        fit.as_ref().map(|fit| results_of(fit, m))
+    // the analysis crate's one dispatch on the kind: a drift record is not fitted, its figures
+    // are the Allan analysis's
+    let results = match gyrocal_analysis::RunKind::of(m) {
+        gyrocal_analysis::RunKind::Drift => gyrocal_analysis::drift::DriftFigures::load(dir)
+            .map_err(|e| not_a_run(dir, e.to_string()))?
+            .map(|a| drift_results_of(&a)),
+        gyrocal_analysis::RunKind::Sweep => fit.as_ref().map(|fit| results_of(fit, m)),
     };
     let steps = data
         .steps
@@ -387,49 +392,24 @@ pub fn read_run(dir: &Path, host: Option<&str>) -> Result<RunRecord, CatalogErro
     })
 }
 
-/// The Allan analysis a drift run writes at its end.
-const ALLAN_JSON: &str = "allan.json";
-
-/// A drift test's figures from its `allan.json`: the five-term fit's N, B and K (the tests
+/// A drift test's figures from its `allan.json`, read typed by the analysis crate
+/// ([`gyrocal_analysis::drift::DriftFigures`]): the five-term fit's N, B and K (the tests
 /// recover them within their intervals where the slope reads are biased), the bias (the Earth
 /// rate removed when known) and the 100 s bias stability; uncertainties expanded to k = 2. In
 /// °/h only: a record left in volts has none.
-fn drift_results_of(a: &Value) -> Results {
-    let in_rate = a.get("unit").and_then(Value::as_str) == Some("deg/h");
-    let term = |name: &str| -> (Option<f64>, Option<f64>) {
-        let q = a
-            .pointer("/noise_terms/fit/terms")
-            .and_then(Value::as_array)
-            .and_then(|t| {
-                t.iter()
-                    .find(|x| x.get("term").and_then(Value::as_str) == Some(name))
-            })
-            .and_then(|x| x.get("value"));
-        let f = |k: &str| q.and_then(|q| q.get(k)).and_then(Value::as_f64);
-        (f("value"), f("uncertainty").map(|u| 2.0 * u))
-    };
-    let num = |p: &str| a.pointer(p).and_then(Value::as_f64);
-    if !in_rate {
-        return Results {
-            drift_duration_s: num("/analysed/duration_s"),
-            ..Results::default()
-        };
-    }
-    let (arw, u_arw) = term("angle_random_walk");
-    let (b, u_b) = term("bias_instability");
-    let (k, u_k) = term("rate_random_walk");
-    let bias = num("/earth_rate/bias_dph").or_else(|| num("/bias/bias/value"));
+fn drift_results_of(a: &gyrocal_analysis::drift::DriftFigures) -> Results {
+    let k2 = |u: Option<f64>| u.map(|u| 2.0 * u);
     Results {
-        arw_deg_rt_h: arw,
-        u_arw_deg_rt_h: u_arw,
-        bias_instability_dph: b,
-        u_bias_instability_dph: u_b,
-        rrw_dph_rt_h: k,
-        u_rrw_dph_rt_h: u_k,
-        drift_bias_dph: bias,
-        u_drift_bias_dph: num("/bias/bias/uncertainty").map(|u| 2.0 * u),
-        bias_stability_100s_dph: num("/bias/stability_100s/stability/value"),
-        drift_duration_s: num("/analysed/duration_s"),
+        arw_deg_rt_h: a.arw.value,
+        u_arw_deg_rt_h: k2(a.arw.uncertainty),
+        bias_instability_dph: a.bias_instability.value,
+        u_bias_instability_dph: k2(a.bias_instability.uncertainty),
+        rrw_dph_rt_h: a.rrw.value,
+        u_rrw_dph_rt_h: k2(a.rrw.uncertainty),
+        drift_bias_dph: a.bias.value,
+        u_drift_bias_dph: k2(a.bias.uncertainty),
+        bias_stability_100s_dph: a.bias_stability_100s,
+        drift_duration_s: a.duration_s,
         ..Results::default()
     }
 }

@@ -93,7 +93,7 @@ fn complete_run(dir: &Path) -> RunDir {
     })
     .unwrap();
     rd.finish(Status::Complete, None, noisy(44.3)).unwrap();
-    gyrocal_files::fit_run(&mut rd, &gyrocal_fit::Options::default()).unwrap();
+    gyrocal_analysis::sweep::fit_run(&mut rd, &gyrocal_fit::Options::default()).unwrap();
     rd
 }
 

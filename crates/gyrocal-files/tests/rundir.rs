@@ -117,7 +117,7 @@ fn a_full_run_writes_what_the_fit_needs() {
     .unwrap();
     let steps = gyrocal_files::load(&dir).unwrap().steps;
     let analysis = gyrocal_fit::analyze(
-        &gyrocal_files::dataset_from_steps(&steps, "steps.csv"),
+        &gyrocal_analysis::sweep::dataset_from_steps(&steps, "steps.csv"),
         &gyrocal_fit::Options::default(),
     )
     .unwrap();

@@ -83,7 +83,7 @@ pub(crate) fn load_run(dir: &Path) -> Result<Input, ReportError> {
         });
     }
     let run = gyrocal_files::load(dir)?;
-    let data = gyrocal_files::dataset_from_steps(&run.steps, &dir.display().to_string());
+    let data = gyrocal_analysis::sweep::dataset_from_steps(&run.steps, &dir.display().to_string());
     let steps = run
         .steps
         .iter()
@@ -124,7 +124,7 @@ pub(crate) fn load_run(dir: &Path) -> Result<Input, ReportError> {
         // the report's own fit gets the run's records as `fit_run` would give them
         let mut analysis = fit(&data);
         if let Ok(a) = &mut analysis {
-            gyrocal_files::attach_records(a, &run.manifest);
+            gyrocal_analysis::sweep::attach_records(a, &run.manifest);
         }
         (analysis, FitSource::Computed)
     };

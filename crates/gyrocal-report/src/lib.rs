@@ -394,8 +394,8 @@ pub fn load_inputs_checked(
     Ok(inputs)
 }
 
-/// The call for the end of a drift run: analyses `run_dir` ([`allan::analyse_input`]) and writes
-/// `run_dir/allan.json` (the [`allan::AllanDocument`], as `gyrocal allan --json` prints it) and
+/// The call for the end of a drift run: analyses `run_dir` ([`gyrocal_analysis::drift::analyse_input`]) and writes
+/// `run_dir/allan.json` (the [`gyrocal_analysis::drift::AllanDocument`], as `gyrocal allan --json` prints it) and
 /// `run_dir/allan.html` ([`allan::render_allan`]). A run directory (one with a manifest) is
 /// opened for its results ([`gyrocal_files::RunResults`]: under its lock, each file recorded
 /// with its SHA-256 in the manifest; see [`write_allan_into`]); a directory without a manifest
@@ -403,8 +403,8 @@ pub fn load_inputs_checked(
 /// the paths written (JSON first).
 pub fn write_run_allan(
     run_dir: &Path,
-    opts: &allan::AllanOptions,
-) -> Result<(allan::AllanDocument, Vec<PathBuf>), ReportError> {
+    opts: &gyrocal_analysis::drift::AllanOptions,
+) -> Result<(gyrocal_analysis::drift::AllanDocument, Vec<PathBuf>), ReportError> {
     write_run_allan_noted(run_dir, opts, &[])
 }
 
@@ -412,9 +412,9 @@ pub fn write_run_allan(
 /// `gyrocal report --allow-modified`).
 pub fn write_run_allan_noted(
     run_dir: &Path,
-    opts: &allan::AllanOptions,
+    opts: &gyrocal_analysis::drift::AllanOptions,
     notes: &[String],
-) -> Result<(allan::AllanDocument, Vec<PathBuf>), ReportError> {
+) -> Result<(gyrocal_analysis::drift::AllanDocument, Vec<PathBuf>), ReportError> {
     if fs::symlink_metadata(run_dir.join(gyrocal_files::rundir::MANIFEST_JSON)).is_ok() {
         let mut run = gyrocal_files::RunResults::open(run_dir)?;
         return write_allan_into(&mut run, opts, notes);
@@ -439,9 +439,9 @@ pub fn write_run_allan_noted(
 /// page is not (see [`ReportError::allan_warning`]).
 pub fn write_allan_into(
     run: &mut dyn gyrocal_files::WriteResult,
-    opts: &allan::AllanOptions,
+    opts: &gyrocal_analysis::drift::AllanOptions,
     notes: &[String],
-) -> Result<(allan::AllanDocument, Vec<PathBuf>), ReportError> {
+) -> Result<(gyrocal_analysis::drift::AllanDocument, Vec<PathBuf>), ReportError> {
     let dir = run.dir().to_path_buf();
     let _span = tracing::info_span!("allan", dir = %dir.display()).entered();
     let (doc, json, html) = allan_files(&dir, opts, notes)?;
@@ -473,10 +473,10 @@ pub fn write_allan_into(
 /// The analysis of `dir` with `notes` first, as JSON and as the page.
 fn allan_files(
     dir: &Path,
-    opts: &allan::AllanOptions,
+    opts: &gyrocal_analysis::drift::AllanOptions,
     notes: &[String],
-) -> Result<(allan::AllanDocument, String, String), ReportError> {
-    let mut doc = allan::analyse_input(dir, opts)?;
+) -> Result<(gyrocal_analysis::drift::AllanDocument, String, String), ReportError> {
+    let mut doc = gyrocal_analysis::drift::analyse_input(dir, opts)?;
     if !notes.is_empty() {
         doc.notes.splice(0..0, notes.iter().cloned());
     }

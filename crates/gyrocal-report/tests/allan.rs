@@ -6,7 +6,8 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use gyrocal_allan::sim::{GyroNoise, generate};
-use gyrocal_report::allan::{AllanOptions, WarmupOptions, analyse_input, render_allan};
+use gyrocal_analysis::drift::{AllanOptions, WarmupOptions, analyse_input};
+use gyrocal_report::allan::render_allan;
 
 const K: f64 = 0.02;
 const TAU0: f64 = 0.5;
@@ -65,7 +66,7 @@ fn a_run_directory_uses_its_scale_factor_and_skips_overloads() {
 
     // the document round-trips through JSON
     let json = serde_json::to_string(&doc).unwrap();
-    let back: gyrocal_report::allan::AllanDocument = serde_json::from_str(&json).unwrap();
+    let back: gyrocal_analysis::drift::AllanDocument = serde_json::from_str(&json).unwrap();
     assert_eq!(back.segments, doc.segments);
 
     // the page: its SVGs are well-formed XML, the table is there

@@ -117,7 +117,8 @@ fn make_run(dir: &Path, spec: &RunSpec<'_>) {
     }
     if spec.with_fit {
         let run = gyrocal_files::load(dir).unwrap();
-        let data = gyrocal_files::dataset_from_steps(&run.steps, &dir.display().to_string());
+        let data =
+            gyrocal_analysis::sweep::dataset_from_steps(&run.steps, &dir.display().to_string());
         let a = analyze(&data, &Options::default()).unwrap();
         rd.set_fit(a.clone()).unwrap();
     }

@@ -17,11 +17,11 @@ pub mod monitor;
 pub mod sequencer;
 
 pub use gyrocal_files::{
-    Acquire, Acquisition, DmmSettings, Dut, FitRunError, FitSummary, Framing, Instruments,
-    Location, Manifest, Plan, PlanDoc, PlanError, PlanKind, Port, Resume, Retry, RunContext,
-    RunData, RunDir, RunError, RunMeta, Sample, SampleRow, Simulation, Status, Step, StepRecord,
-    TableDialect, TableSettings, Timing, dataset_from_steps, fit_run, load, load_fit, load_samples,
-    num, parse_rfc3339_utc, plan, rfc3339_utc, rundir, station,
+    Acquire, Acquisition, DmmSettings, Dut, FitSummary, Framing, Instruments, Location, Manifest,
+    Plan, PlanDoc, PlanError, PlanKind, Port, Resume, Retry, RunContext, RunData, RunDir, RunError,
+    RunMeta, Sample, SampleRow, Simulation, Status, Step, StepRecord, TableDialect, TableSettings,
+    Timing, load, load_fit, load_samples, num, parse_rfc3339_utc, plan, rfc3339_utc, rundir,
+    station,
 };
 pub use sequencer::{
     Event, Phase, RunSummary, SequenceError, Sequencer, SequencerOptions, StopRequest, TableRest,

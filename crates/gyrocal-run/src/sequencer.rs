@@ -501,7 +501,7 @@ impl<M: Multimeter, T: RateTable> Sequencer<M, T> {
     /// for until it reports rest (a further [`StopRequest::Emergency`] during that wait sends
     /// the emergency stop at once), the multimeter returned to local and the manifest left
     /// with a final status; the summary says which, and where the table was left. The fit is
-    /// the caller's (see [`crate::fit_run`]), so a failed fit never loses the data.
+    /// the caller's (see `gyrocal_analysis::sweep::fit_run`), so a failed fit never loses the data.
     pub async fn run(&mut self, mut stop: watch::Receiver<StopRequest>) -> RunSummary {
         use futures_util::FutureExt as _;
         self.origin = Instant::now();

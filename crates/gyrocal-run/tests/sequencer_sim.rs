@@ -10,9 +10,10 @@ use std::time::Duration;
 
 use common::table_config;
 use gyrocal_acl::AclTable;
+use gyrocal_analysis::sweep::fit_run;
 use gyrocal_run::{
-    Plan, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status, StopRequest, fit_run,
-    load, load_samples,
+    Plan, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status, StopRequest, load,
+    load_samples,
 };
 use gyrocal_sim::bench::{Bench, BenchHandle};
 use gyrocal_sim::from_plan::bench_config;

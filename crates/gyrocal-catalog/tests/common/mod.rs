@@ -81,7 +81,7 @@ fn write_template(dir: &Path) {
         methods: vec![gyrocal_fit::Method::LeastSquares],
         ..gyrocal_fit::Options::default()
     };
-    gyrocal_files::fit_run(&mut rd, &options).unwrap();
+    gyrocal_analysis::sweep::fit_run(&mut rd, &options).unwrap();
     rd.finish(Status::Complete, None, 50.0).unwrap();
 }
 

@@ -11,8 +11,8 @@ use std::fs::File;
 use std::path::{Path, PathBuf};
 
 use super::{
-    LOCK_FILE, MANIFEST_JSON, Manifest, RunDir, RunError, Status, lock_dir, read_manifest,
-    record_result,
+    FIT_JSON, LOCK_FILE, MANIFEST_JSON, Manifest, RunDir, RunError, SAMPLES_CSV, STEPS_CSV, Status,
+    lock_dir, read_manifest, sha256_hex, store_manifest, write_atomic,
 };
 
 /// A writer of a run's result files: an open [`RunDir`] (the run that just ended) or a
@@ -104,4 +104,41 @@ impl Drop for RunResults {
             remove_lock(&self.dir);
         }
     }
+}
+
+/// The files a result may not replace: the data, the record, the fit (which has its own
+/// record), the lock and the log.
+pub(super) const NOT_RESULTS: [&str; 6] = [
+    SAMPLES_CSV,
+    STEPS_CSV,
+    MANIFEST_JSON,
+    FIT_JSON,
+    LOCK_FILE,
+    "run.log",
+];
+
+/// Writes the result `name` into `dir` atomically, then records its SHA-256 in `m` and
+/// stores the manifest (the caller holds the run's lock). If the manifest cannot be stored,
+/// the result file is on disk without a record (`gyrocal verify` then says so).
+pub(super) fn record_result(
+    dir: &Path,
+    m: &mut Manifest,
+    name: &str,
+    bytes: &[u8],
+) -> Result<(), RunError> {
+    if name.contains(['/', '\\'])
+        || name.starts_with('.')
+        || name.is_empty()
+        || NOT_RESULTS.contains(&name)
+    {
+        return Err(RunError::Protocol {
+            path: dir.join(name),
+            message: "a result file name must be a plain, non-hidden name other than the run's data, manifest, fit, lock and log".into(),
+        });
+    }
+    write_atomic(dir, name, bytes)?;
+    m.checksums.insert(name.to_string(), sha256_hex(bytes));
+    store_manifest(dir, m)?;
+    tracing::info!(file = %dir.join(name).display(), "result written and recorded");
+    Ok(())
 }

@@ -1,17 +1,19 @@
 //! `gyrocal allan`: Allan deviation, noise terms, bias stability and warm-up of a drift record
-//! (a run directory's samples.csv or any CSV). The analysis and the page are in
-//! `gyrocal_report::allan`; this module parses the options and prints.
+//! (a run directory's samples.csv or any CSV). The analysis is `gyrocal_analysis::drift`, the
+//! page `gyrocal_report::allan`; this module parses the options and prints.
 
 use std::path::PathBuf;
 
 use anyhow::Context as _;
 use clap::{Args, ValueEnum};
 use gyrocal_allan::{Estimator, TauSet};
-use gyrocal_report::ReportError;
-use gyrocal_report::allan::{
-    AllanDocument, AllanOptions, AnalysisPath, DEFAULT_MAX_MEMORY_MIB, DEFAULT_WARMUP_WINDOW_S,
-    WarmupOptions, analyse_input, fmt_num, noise_name, noise_term_rows, render_allan, term_name,
+use gyrocal_analysis::drift::{
+    AllanDocument, AllanOptions, AnalysisPath, Axis, DEFAULT_MAX_MEMORY_MIB,
+    DEFAULT_WARMUP_WINDOW_S, WarmupOptions, analyse_input, fmt_num,
 };
+use gyrocal_analysis::{DriftError, ErrorKind};
+use gyrocal_report::ReportError;
+use gyrocal_report::allan::{noise_name, noise_term_rows, render_allan, term_name};
 
 use crate::BadInput;
 
@@ -158,7 +160,7 @@ pub struct AllanArgs {
     /// Where the gyro's input axis points (up, down, north, south, east, west): with
     /// --latitude, the Earth's rate along it is removed from the reported bias.
     #[arg(long, value_name = "DIR", requires = "latitude", value_parser = parse_axis)]
-    pub axis: Option<gyrocal_report::allan::Axis>,
+    pub axis: Option<Axis>,
     /// The bench's latitude, degrees north (negative south), for --axis.
     #[arg(long, value_name = "DEG", requires = "axis", allow_hyphen_values = true, value_parser = latitude)]
     pub latitude: Option<f64>,
@@ -176,8 +178,7 @@ pub struct AllanArgs {
     pub temp_dir: Option<PathBuf>,
 }
 
-fn parse_axis(s: &str) -> Result<gyrocal_report::allan::Axis, String> {
-    use gyrocal_report::allan::Axis;
+fn parse_axis(s: &str) -> Result<Axis, String> {
     match s.trim().to_ascii_lowercase().as_str() {
         "up" => Ok(Axis::Up),
         "down" => Ok(Axis::Down),
@@ -197,6 +198,15 @@ fn latitude(s: &str) -> Result<f64, String> {
         Ok(v)
     } else {
         Err(format!("{v} is not a latitude (-90 to 90 degrees)"))
+    }
+}
+
+/// Input problems exit with 2, others with 1.
+fn classify_analysis(e: DriftError) -> anyhow::Error {
+    if e.kind() == ErrorKind::Input {
+        BadInput(e.to_string()).into()
+    } else {
+        anyhow::Error::new(e)
     }
 }
 
@@ -228,7 +238,7 @@ pub fn run(args: &AllanArgs) -> anyhow::Result<u8> {
         max_memory_bytes: Some(args.max_memory_mib.saturating_mul(1024 * 1024)),
         temp_dir: args.temp_dir.clone(),
     };
-    let doc = analyse_input(&args.input, &opts).map_err(classify)?;
+    let doc = analyse_input(&args.input, &opts).map_err(classify_analysis)?;
     if let Some(out) = &args.out {
         let html = render_allan(&doc).map_err(classify)?;
         if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {

@@ -66,11 +66,10 @@ fn destination(args: &ReportArgs) -> Result<PathBuf, BadInput> {
     }
 }
 
-/// A run directory whose plan is a drift record (its report is the Allan page).
+/// A run directory whose plan is a drift record (its report is the Allan page): the analysis
+/// crate's one dispatch on the kind.
 fn is_drift_run(input: &std::path::Path) -> bool {
-    input.is_dir()
-        && gyrocal_run::load(input)
-            .is_ok_and(|r| r.manifest.plan.kind() == gyrocal_run::PlanKind::Drift)
+    gyrocal_analysis::RunKind::of_dir(input) == Some(gyrocal_analysis::RunKind::Drift)
 }
 
 /// Runs `gyrocal report`: prints the path of the HTML written.

@@ -22,10 +22,11 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use clap::Args;
+use gyrocal_analysis::sweep::fit_run;
 use gyrocal_link::Transport;
 use gyrocal_run::{
     Event, Phase, Plan, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status,
-    StopRequest, TableRest, fit_run,
+    StopRequest, TableRest,
 };
 use tokio::sync::{mpsc, watch};
 
@@ -1429,10 +1430,9 @@ fn finish_human(
     }
     // one ending for every kind of complete run: its results, then the table's rest state
     // decides the last line and the exit code
-    let code = if run.manifest().plan.kind() == gyrocal_run::PlanKind::Drift {
-        finish_drift(args, dir, run, human, doc)?
-    } else {
-        finish_sweep(args, dir, summary, run, human, doc)?
+    let code = match gyrocal_analysis::RunKind::of(run.manifest()) {
+        gyrocal_analysis::RunKind::Drift => finish_drift(args, dir, run, human, doc)?,
+        gyrocal_analysis::RunKind::Sweep => finish_sweep(args, dir, summary, run, human, doc)?,
     };
     if !summary.table.nothing_turning() {
         say!(

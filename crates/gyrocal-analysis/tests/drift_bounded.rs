@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 
 use gyrocal_allan::sim::{GyroNoise, generate};
 use gyrocal_allan::{Estimator, TauSet};
-use gyrocal_report::allan::{
+use gyrocal_analysis::drift::{
     AllanDocument, AllanOptions, AnalysisPath, WarmupOptions, analyse_input,
 };
 

@@ -27,7 +27,7 @@
 //! for the prefix sums of the analysed part, 8 an interval during pass 1 (freed before pass 2).
 //!
 //! The warm-up is written once (`detect_warmup_in`, over chunks: a slice in memory, the
-//! file's buffers here); `tests/allan_bounded.rs` compares the two paths' documents field by
+//! file's buffers here); `tests/drift_bounded.rs` compares the two paths' documents field by
 //! field.
 //!
 //! # Measured
@@ -57,7 +57,7 @@ use gyrocal_allan::disk::{SampleFile, SampleWriter};
 use serde::{Deserialize, Serialize};
 
 use super::{Warmup, WarmupOptions, fmt_g};
-use crate::ReportError;
+use crate::DriftError;
 
 /// Default memory budget of the in-memory path, MiB (`--max-memory-mib`).
 pub const DEFAULT_MAX_MEMORY_MIB: u64 = 1024;
@@ -132,8 +132,8 @@ pub(super) fn memory_use(
 }
 
 /// An unnamed temporary file in `dir`.
-pub(super) fn temp_file(dir: &Path) -> Result<File, ReportError> {
-    tempfile::tempfile_in(dir).map_err(|source| ReportError::Io {
+pub(super) fn temp_file(dir: &Path) -> Result<File, DriftError> {
+    tempfile::tempfile_in(dir).map_err(|source| DriftError::Io {
         path: dir.to_path_buf(),
         action: "create a temporary file in",
         source,
@@ -141,8 +141,8 @@ pub(super) fn temp_file(dir: &Path) -> Result<File, ReportError> {
 }
 
 /// An I/O error on the temporary files in `dir`.
-pub(super) fn temp_err(dir: &Path, source: io::Error) -> ReportError {
-    ReportError::Io {
+pub(super) fn temp_err(dir: &Path, source: io::Error) -> DriftError {
+    DriftError::Io {
         path: dir.to_path_buf(),
         action: "write or read a temporary file in",
         source,
@@ -178,7 +178,7 @@ impl<'a> Spill<'a> {
 
     /// Appends a value.
     #[inline]
-    pub(super) fn push(&mut self, v: f64) -> Result<(), ReportError> {
+    pub(super) fn push(&mut self, v: f64) -> Result<(), DriftError> {
         if self.disk.is_none() && self.mem.len() >= self.cap {
             let mut w =
                 SampleWriter::new(temp_file(self.dir)?).map_err(|e| temp_err(self.dir, e))?;
@@ -207,7 +207,7 @@ impl<'a> Spill<'a> {
     }
 
     /// The values.
-    pub(super) fn finish(self) -> Result<Samples, ReportError> {
+    pub(super) fn finish(self) -> Result<Samples, DriftError> {
         match self.disk {
             Some(w) => Ok(Samples::Disk(
                 w.finish().map_err(|e| temp_err(self.dir, e))?,
@@ -270,7 +270,7 @@ pub(super) fn kth_smallest(file: &SampleFile, k: usize) -> io::Result<Option<f64
     Ok(Some(from_total_key(prefix)))
 }
 
-/// The warm-up of `range` of `file`: [`super::detect_warmup_in`] over the file's buffers.
+/// The warm-up of `range` of `file`: `warmup::detect_warmup_in` over the file's buffers.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn detect_warmup_file(
     file: &SampleFile,
@@ -289,7 +289,7 @@ pub(super) fn detect_warmup_file(
         }
         Ok(())
     };
-    super::detect_warmup_in(chunks, range.len(), tau0, t0, factor, opts, notes)
+    super::warmup::detect_warmup_in(chunks, range.len(), tau0, t0, factor, opts, notes)
 }
 
 #[cfg(test)]
