@@ -16,7 +16,7 @@ use gyrocal_analysis::drift::{RunHeader, Warmup, fmt_num};
 use plotters::prelude::*;
 
 use crate::ReportError;
-use crate::html::esc;
+use crate::page::{Page, esc};
 
 /// The analysis's number format (4 significant digits), the page's too.
 fn fmt_g(v: f64) -> String {
@@ -54,38 +54,6 @@ impl From<DriftError> for ReportError {
 
 // ---------------------------------------------------------------------------------------------
 // The page
-
-// TODO(issue 23, lead): once the report branch's `crate::page` is merged, render this page
-// through it (`Page::new(..).open`, `Page::close`, its `STYLESHEET` and `esc`) and drop this
-// stylesheet; `tr.beyond` is already among the shared stylesheet's classes.
-const CSS: &str = r#"
-:root { color-scheme: light; }
-body { font-family: system-ui, -apple-system, "Segoe UI", Roboto, Helvetica, Arial, sans-serif;
-  color: #1a1a1a; background: #fff; margin: 0 auto; padding: 1rem 1.5rem 3rem; max-width: 64rem;
-  line-height: 1.45; }
-h1 { font-size: 1.6rem; margin: 0.5rem 0 0.25rem; }
-h2 { font-size: 1.3rem; border-bottom: 1px solid #ccc; padding-bottom: 0.2rem; margin-top: 2rem; }
-.sub { color: #555; margin: 0 0 1rem; }
-.banner { border: 2px solid #7a4d00; background: #fff4d6; color: #4a2f00; padding: 0.75rem 1rem;
-  border-radius: 4px; margin: 1rem 0; }
-.note { color: #444; font-size: 0.95rem; }
-table { border-collapse: collapse; margin: 0.5rem 0 1rem; font-size: 0.92rem; }
-th, td { border: 1px solid #ccc; padding: 0.25rem 0.6rem; text-align: left; vertical-align: top; }
-th { background: #f2f2f2; }
-td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
-tr.beyond td { color: #888; }
-figure { margin: 1rem 0 1.5rem; }
-figure svg { display: block; width: 100%; max-width: 800px; height: auto; border: 1px solid #e3e3e3; }
-figcaption { font-size: 0.92rem; color: #333; max-width: 800px; margin-top: 0.35rem; }
-code { font-size: 0.9em; word-break: break-all; }
-@media print {
-  body { max-width: none; padding: 0; font-size: 10pt; }
-  h2 { break-after: avoid; }
-  figure, table, .banner { break-inside: avoid; }
-  figure svg { max-width: 100%; border: none; }
-  th { background: #fff; }
-}
-"#;
 
 const FONT: &str = "sans-serif";
 const LIGHT: RGBColor = RGBColor(235, 235, 235);
@@ -439,7 +407,7 @@ pub fn noise_term_rows(nt: &NoiseTerms) -> Vec<(Term, String, String)> {
 /// says so first.
 fn render_run_header(h: &mut String, r: &RunHeader) {
     if r.simulated {
-        h.push_str("<div class=\"banner\" id=\"simulated\"><strong>SIMULATED</strong>: this record was taken on gyrocal's simulated bench, not on instruments; it is not a measurement of a gyro.</div>\n");
+        h.push_str("<div class=\"banner caution\" id=\"simulated\"><strong>SIMULATED</strong>: this record was taken on gyrocal's simulated bench, not on instruments; it is not a measurement of a gyro.</div>\n");
     }
     h.push_str("<h2 id=\"run\">The record</h2>\n<table>\n");
     let mut row = |k: &str, v: String| {
@@ -503,10 +471,9 @@ pub fn render_allan(doc: &AllanDocument) -> Result<String, ReportError> {
     let mut h = String::with_capacity(64 * 1024);
     let name = doc.input.display().to_string();
     let unit = doc.unit.replace("deg", "°");
-    let _ = write!(
-        h,
-        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>Allan analysis: {}</title>\n<style>{CSS}</style>\n</head>\n<body>\n<h1>Allan analysis of a gyro rate record</h1>\n<p class=\"sub\"><code>{}</code>: column <code>{}</code>{}, {} rows</p>\n",
-        esc(&name),
+    let title = format!("Allan analysis: {name}");
+    let sub = format!(
+        "<code>{}</code>: column <code>{}</code>{}, {} rows",
         esc(&doc.file.display().to_string()),
         esc(&doc.value_column),
         doc.time_column
@@ -515,6 +482,9 @@ pub fn render_allan(doc: &AllanDocument) -> Result<String, ReportError> {
             .unwrap_or_default(),
         doc.rows
     );
+    Page::new(&title, "Allan analysis of a gyro rate record")
+        .with_sub(sub)
+        .open(&mut h);
     if let Some(r) = &doc.run {
         render_run_header(&mut h, r);
     }
@@ -564,7 +534,7 @@ pub fn render_allan(doc: &AllanDocument) -> Result<String, ReportError> {
     );
     h.push_str("</table>\n");
     if !doc.notes.is_empty() {
-        h.push_str("<div class=\"banner\"><ul>\n");
+        h.push_str("<div class=\"banner caution\"><ul>\n");
         for n in &doc.notes {
             let _ = writeln!(h, "<li>{}</li>", esc(n));
         }
@@ -602,7 +572,7 @@ pub fn render_allan(doc: &AllanDocument) -> Result<String, ReportError> {
                 let _ = writeln!(h, "<p class=\"note\">{}</p>", esc(n));
             }
         }
-        None => h.push_str("<p class=\"banner\">No noise terms: the curve is not a rate in °/h. Give the scale factor (<code>--scale-factor K</code>, V/(°/s)).</p>\n"),
+        None => h.push_str("<p class=\"banner caution\">No noise terms: the curve is not a rate in °/h. Give the scale factor (<code>--scale-factor K</code>, V/(°/s)).</p>\n"),
     }
     h.push_str("<h2 id=\"bias\">Bias and bias stability (GJB 2426A)</h2>\n<table>\n");
     let _ = writeln!(
@@ -667,9 +637,10 @@ pub fn render_allan(doc: &AllanDocument) -> Result<String, ReportError> {
     }
     let _ = write!(
         h,
-        "</table>\n<p class=\"note\">Deviations in {}. Made by gyrocal allan {}.</p>\n</body>\n</html>\n",
+        "</table>\n<p class=\"note\">Deviations in {}. Made by gyrocal allan {}.</p>\n",
         esc(&unit),
         env!("CARGO_PKG_VERSION")
     );
+    Page::close(&mut h, None);
     Ok(h)
 }

@@ -105,13 +105,11 @@ pub const MAX_INPUT_BYTES: u64 = MAX_SAMPLES_BYTES;
 pub const GAP_FACTOR: f64 = 1.5;
 /// An interval differing from τ0 by more than this fraction is irregular.
 pub const IRREGULAR_FRACTION: f64 = 0.1;
+/// Default warm-up tolerance, in white-noise standard deviations of a window mean.
+pub use gyrocal_files::plan::DEFAULT_WARMUP_SIGMAS;
 /// Default warm-up window, s: the plan's `[warmup] window_s` default, so a run's live
 /// monitor and this analysis agree on "settled".
 pub use gyrocal_files::plan::DEFAULT_WARMUP_WINDOW_S;
-/// Default warm-up tolerance, in white-noise standard deviations of a window mean.
-// TODO(issue 23, lead): becomes `pub use gyrocal_files::plan::DEFAULT_WARMUP_SIGMAS;` once the
-// plan branch (which adds it, same value) is merged.
-pub const DEFAULT_WARMUP_SIGMAS: f64 = 3.0;
 
 /// The warm-up criterion.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
