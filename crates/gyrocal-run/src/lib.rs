@@ -3,7 +3,7 @@
 //! - [`engine`]: executes a plan's compiled steps ([`gyrocal_files::steps`]: the one dispatch
 //!   on the plan's kind) without asking which kind of plan it runs; owns the guaranteed
 //!   teardown (table at rest, meter released) and the bounded repeat of a refused step.
-//! - [`bench`]: the instruments by role ([`Bench`]), so the engine is generic over one
+//! - [`bench`](mod@bench): the instruments by role ([`Bench`]), so the engine is generic over one
 //!   parameter whatever the number of roles, and the same code drives real instruments and
 //!   the simulated bench, in real or virtual time.
 //! - [`sink`]: where the results go ([`Sink`]): the run directory, the progress display, the

@@ -216,7 +216,12 @@ impl Sink for RunDir {
         if let Some(t) = &f.timing {
             self.set_timing(t.clone())?;
         }
-        Ok(RunDir::finish(self, f.status, f.reason.clone(), f.elapsed_s)?)
+        Ok(RunDir::finish(
+            self,
+            f.status,
+            f.reason.clone(),
+            f.elapsed_s,
+        )?)
     }
 }
 
@@ -253,17 +258,11 @@ pub struct Monitors {
 impl Monitors {
     /// Monitors for a schedule of `of` steps; `warmup`: a warm-up to watch in the segments,
     /// from run-clock `started_s`, readings every `period_s`.
-    pub fn new(
-        of: usize,
-        warmup: Option<&WarmupSettings>,
-        period_s: f64,
-        started_s: f64,
-    ) -> Self {
+    pub fn new(of: usize, warmup: Option<&WarmupSettings>, period_s: f64, started_s: f64) -> Self {
         Monitors {
             adev: None,
-            warmup: warmup.map(|w| {
-                WarmupWatch::new(w, period_s, started_s, monitor::WARMUP_IN_RECORD)
-            }),
+            warmup: warmup
+                .map(|w| WarmupWatch::new(w, period_s, started_s, monitor::WARMUP_IN_RECORD)),
             of,
         }
     }

@@ -120,8 +120,14 @@ async fn a_consumer_added_without_touching_the_engine_receives_every_step_row() 
     // the consumer saw what steps.csv holds (the file writes 12 significant digits)
     assert_eq!(collected.len(), on_disk.len());
     for (c, d) in collected.iter().zip(&on_disk) {
-        assert_eq!((c.step, c.n, c.t_start_s, c.t_end_s), (d.step, d.n, d.t_start_s, d.t_end_s));
-        assert!((c.volts - d.volts).abs() <= 1e-9 * d.volts.abs().max(1e-3), "{c:?} vs {d:?}");
+        assert_eq!(
+            (c.step, c.n, c.t_start_s, c.t_end_s),
+            (d.step, d.n, d.t_start_s, d.t_end_s)
+        );
+        assert!(
+            (c.volts - d.volts).abs() <= 1e-9 * d.volts.abs().max(1e-3),
+            "{c:?} vs {d:?}"
+        );
     }
     let rates: Vec<f64> = collected.iter().map(|r| r.rate_dps).collect();
     assert_eq!(rates, [0.0, 5.0, -5.0]);
@@ -155,25 +161,47 @@ async fn a_servo_off_drift_record_and_a_sweep_end_at_rest_through_the_same_teard
     let tmp = tempfile::tempdir().unwrap();
     // complete: every segment recorded, the servo was off throughout and stays off
     let plan = drift("servo_off");
-    let (summary, handle) = run(&plan, &tmp.path().join("drift"), CollectRows::default(), None).await;
+    let (summary, handle) = run(
+        &plan,
+        &tmp.path().join("drift"),
+        CollectRows::default(),
+        None,
+    )
+    .await;
     assert_eq!(summary.status, Status::Complete, "{:?}", summary.reason);
     assert_eq!(summary.steps_recorded, 4);
     assert_at_rest(&summary, &handle, SimMode::Off);
     assert!(!handle.table.interlock_closed(), "the servo stays off");
     // stopped after its second segment: the same teardown
-    let (summary, handle) =
-        run(&plan, &tmp.path().join("drift-stopped"), CollectRows::default(), Some(2)).await;
+    let (summary, handle) = run(
+        &plan,
+        &tmp.path().join("drift-stopped"),
+        CollectRows::default(),
+        Some(2),
+    )
+    .await;
     assert_eq!(summary.status, Status::Aborted, "{:?}", summary.reason);
     assert_eq!(summary.steps_recorded, 2);
     assert_at_rest(&summary, &handle, SimMode::Off);
 
     // a sweep, complete and stopped after its second step while turning
     let sweep = plan_with_rates(&[0.0, 10.0, -10.0, 5.0]);
-    let (summary, handle) = run(&sweep, &tmp.path().join("sweep"), CollectRows::default(), None).await;
+    let (summary, handle) = run(
+        &sweep,
+        &tmp.path().join("sweep"),
+        CollectRows::default(),
+        None,
+    )
+    .await;
     assert_eq!(summary.status, Status::Complete, "{:?}", summary.reason);
     assert_at_rest(&summary, &handle, SimMode::Off);
-    let (summary, handle) =
-        run(&sweep, &tmp.path().join("sweep-stopped"), CollectRows::default(), Some(2)).await;
+    let (summary, handle) = run(
+        &sweep,
+        &tmp.path().join("sweep-stopped"),
+        CollectRows::default(),
+        Some(2),
+    )
+    .await;
     assert_eq!(summary.status, Status::Aborted, "{:?}", summary.reason);
     assert_at_rest(&summary, &handle, SimMode::Off);
 }

@@ -25,7 +25,9 @@ pub(super) fn compile(plan: &Plan, remaining: &[Step], warmup_done: bool) -> Com
                         tolerance_dps,
                     },
                 ),
-                TableRole::ServoOff => (TableAction::ServoOff, HoldCheck::ServoOff { tolerance_dps }),
+                TableRole::ServoOff => {
+                    (TableAction::ServoOff, HoldCheck::ServoOff { tolerance_dps })
+                }
                 TableRole::None => (TableAction::Untouched, HoldCheck::None),
             };
             Action {

@@ -5,7 +5,8 @@ use std::time::Duration;
 
 use super::*;
 
-const DMM: &str = "[dmm]\nport = \"/dev/ttyUSB0\"\nrange_v = 10\nnplc = 1\nautozero = false\nline_hz = 50\n";
+const DMM: &str =
+    "[dmm]\nport = \"/dev/ttyUSB0\"\nrange_v = 10\nnplc = 1\nautozero = false\nline_hz = 50\n";
 const TABLE: &str = "[table]\ndialect = \"acl\"\nport = \"/dev/ttyUSB1\"\nmax_rate_dps = 20\nacceleration_dps2 = 10\nrate_tolerance_dps = 0.002\n";
 const WARMUP: &str = "[warmup]\nwindow_s = 10\nmax_s = 600\n";
 
@@ -99,7 +100,11 @@ fn a_drift_record_is_segment_steps_with_the_table_role_in_each_step() {
     assert!(!c.uses_table);
     assert_eq!(c.steps.len(), 3);
     assert_eq!(c.steps[0].step().map(|s| s.index), Some(1));
-    assert!(c.steps.iter().all(|a| a.table == TableAction::Untouched && a.hold == HoldCheck::None));
+    assert!(
+        c.steps
+            .iter()
+            .all(|a| a.table == TableAction::Untouched && a.hold == HoldCheck::None)
+    );
 }
 
 #[test]
@@ -108,7 +113,10 @@ fn a_drift_warm_up_is_watched_in_the_record_not_a_step_and_not_repeated() {
     let c = compile(&plan, &plan.schedule(), false);
     assert_eq!(c.steps.len(), 4);
     assert!(c.steps.iter().all(|a| a.record != Record::Warmup));
-    assert_eq!(c.warmup_in_record.map(|w| w.max), Some(Duration::from_secs(600)));
+    assert_eq!(
+        c.warmup_in_record.map(|w| w.max),
+        Some(Duration::from_secs(600))
+    );
     let again = compile(&plan, &plan.schedule()[2..], true);
     assert_eq!(again.warmup_in_record, None);
 }

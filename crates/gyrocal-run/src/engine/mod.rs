@@ -8,12 +8,12 @@
 //! - **Nothing is recorded that is not complete.** A step's row goes to `steps.csv` (fsynced,
 //!   after its samples) only when all its readings are in; a resume drops whatever a step left
 //!   behind and runs it again.
-//! - **The table is stopped on every way out: the guaranteed [teardown](teardown).** Errors, a
+//! - **The table is stopped on every way out: the guaranteed teardown (`engine/teardown.rs`).** Errors, a
 //!   stop request (Ctrl-C, SIGTERM), a failed consumer and a panic all end in the same
 //!   cleanup: a controlled stop through the table's [`StopHandle`] (an emergency stop on a
 //!   second request), the wait until the table reports rest, a device clear and `SYST:LOC` for
 //!   the multimeter, and the manifest marked `aborted` or `failed` with the reason.
-//! - **A refused step is measured again, a bounded number of times: the [repeat](repeat).**
+//! - **A refused step is measured again, a bounded number of times: the repeat ([`Repeats`]).**
 //!   A step the table did not hold, or whose readings the meter lost before they were
 //!   fetched, is queued again (OpenHTF's REPEAT with a `repeat_limit`); past the limit the run
 //!   fails.
@@ -170,7 +170,7 @@ impl<B: Bench> Engine<B> {
     }
 
     /// Runs the remaining steps of the plan until done, failed or stopped through `stop`.
-    /// Whatever happens (a panic inside the steps included), the [teardown](teardown) stops
+    /// Whatever happens (a panic inside the steps included), the teardown stops
     /// the table and waits until it reports rest (a further [`StopRequest::Emergency`]
     /// during that wait sends the emergency stop at once), returns the multimeter to local
     /// and leaves the manifest with a final status; the summary says which, and where the
@@ -429,9 +429,7 @@ impl<B: Bench> Engine<B> {
     }
 
     fn meter_timing(&mut self) -> Result<Box<dyn gyrocal_meter::TimingModel>, SequenceError> {
-        self.dmm_mut()?
-            .timing()
-            .ok_or_else(|| dmm_error(NoTiming))
+        self.dmm_mut()?.timing().ok_or_else(|| dmm_error(NoTiming))
     }
 
     /// The run's [`Setup`], before its first step.
@@ -499,7 +497,7 @@ impl<B: Bench> Engine<B> {
 fn settle_observer(live: Vec<LiveFn>) -> impl FnMut(SettleProgress) + Send + 'static {
     move |p| {
         for f in &live {
-            f(Event::Settle(p.clone()));
+            f(Event::Settle(p));
         }
     }
 }

@@ -131,6 +131,9 @@ mod tests {
             matches!(&e, SequenceError::NotHeld { step: 3, detail, .. } if detail == "moved off"),
             "{e}"
         );
-        assert!(e.to_string().starts_with("step 4 at 5 °/s not recorded"), "{e}");
+        assert!(
+            e.to_string().starts_with("step 4 at 5 °/s not recorded"),
+            "{e}"
+        );
     }
 }

@@ -59,9 +59,10 @@ impl<B: Bench> Engine<B> {
         pending: Option<PendingFetch<<B::Meter as Multimeter>::Pending>>,
         last: bool,
         ctx: &StepContext,
-    ) -> Result<StepOutcome<PendingFetch<<B::Meter as Multimeter>::Pending>>, SequenceError>
-    {
-        let at_rate = self.table_action(action, Some(step.index), pending, ctx).await?;
+    ) -> Result<StepOutcome<PendingFetch<<B::Meter as Multimeter>::Pending>>, SequenceError> {
+        let at_rate = self
+            .table_action(action, Some(step.index), pending, ctx)
+            .await?;
         self.dwell(action, step.index, at_rate).await?;
         self.emit(Event::Phase {
             step: step.index,

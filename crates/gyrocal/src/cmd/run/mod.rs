@@ -24,8 +24,8 @@ use anyhow::Context as _;
 use clap::Args;
 use gyrocal_link::Transport;
 use gyrocal_run::{
-    Event, Phase, Plan, Port, RunDir, RunMeta, RunSummary, SequencerOptions, Status,
-    StopRequest, TableRest, fit_run,
+    Event, Phase, Plan, Port, RunDir, RunMeta, RunSummary, SequencerOptions, Status, StopRequest,
+    TableRest, fit_run,
 };
 use tokio::sync::{mpsc, watch};
 
