@@ -28,8 +28,8 @@ pub mod sink;
 
 pub use bench::{Bench, MeterAndTable};
 pub use engine::{
-    Engine, Event, Phase, Repeats, RunSummary, SequenceError, Sequencer, SequencerOptions,
-    StopRequest, TableRest,
+    Engine, Event, Phase, Repeats, RunSummary, SequenceError, SequenceErrorKind, Sequencer,
+    SequencerOptions, StopRequest, TableRest,
 };
 pub use gyrocal_files::{
     Acquire, Acquisition, DmmSettings, Dut, FitRunError, FitSummary, Framing, Instruments,

@@ -49,7 +49,9 @@ use crate::sink::{Begin, Connected, EventChannel, LiveFn, Monitors, Sink, Sinks}
 
 pub use events::{Event, Phase};
 pub(crate) use outcome::dmm_error;
-pub use outcome::{RunSummary, SequenceError, SequencerOptions, StopRequest, TableRest};
+pub use outcome::{
+    RunSummary, SequenceError, SequenceErrorKind, SequencerOptions, StopRequest, TableRest,
+};
 pub use repeat::Repeats;
 use step::{PendingFetch, StepOutcome};
 

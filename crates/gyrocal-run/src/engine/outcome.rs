@@ -193,6 +193,50 @@ pub enum SequenceError {
     Panicked(String),
 }
 
+/// What kind of ending a [`SequenceError`] is, for a caller that decides on it (an exit code,
+/// a retry policy) without matching the variants' contents.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SequenceErrorKind {
+    /// The multimeter failed.
+    Meter,
+    /// The rate table failed or faulted.
+    Table,
+    /// The run directory could not be written.
+    RunDir,
+    /// Another consumer of the results failed.
+    Sink,
+    /// The plan must change (every reading overloaded) or the bench does not match the
+    /// recorded data (simulated vs measured): a new run.
+    Plan,
+    /// A step could not be recorded within its bounded repeats (the table did not hold, or
+    /// the meter lost its readings every time).
+    RepeatsSpent,
+    /// The operator or a signal stopped the run.
+    Stopped,
+    /// A bug (a panic).
+    Internal,
+}
+
+impl SequenceError {
+    /// What kind of ending this is.
+    pub fn kind(&self) -> SequenceErrorKind {
+        match self {
+            SequenceError::Dmm(_) => SequenceErrorKind::Meter,
+            SequenceError::Table(_) => SequenceErrorKind::Table,
+            SequenceError::RunDir(_) => SequenceErrorKind::RunDir,
+            SequenceError::Sink(_) => SequenceErrorKind::Sink,
+            SequenceError::AllOverloaded { .. } | SequenceError::Mixed { .. } => {
+                SequenceErrorKind::Plan
+            }
+            SequenceError::NotHeld { .. } | SequenceError::ReadingsLostAgain { .. } => {
+                SequenceErrorKind::RepeatsSpent
+            }
+            SequenceError::Stopped(_) => SequenceErrorKind::Stopped,
+            SequenceError::Panicked(_) => SequenceErrorKind::Internal,
+        }
+    }
+}
+
 fn stopped_text(req: &StopRequest) -> String {
     match req {
         StopRequest::Emergency(by) => format!("stopped by {by} (emergency stop)"),

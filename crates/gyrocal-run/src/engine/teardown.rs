@@ -8,7 +8,7 @@ use gyrocal_table::RateTable;
 use tokio::sync::watch;
 use tokio::time::Instant;
 
-use super::{Engine, Event, RunSummary, SequenceError, StopRequest, TableRest};
+use super::{Engine, Event, RunSummary, SequenceError, SequenceErrorKind, StopRequest, TableRest};
 use crate::bench::Bench;
 use crate::rundir::{Status, Timing as RunTiming};
 use crate::sink::Finish;
@@ -73,10 +73,8 @@ impl<B: Bench> Engine<B> {
             _ => Status::Failed,
         };
         let reason = error.to_string();
-        let resumable = !matches!(
-            error,
-            SequenceError::AllOverloaded { .. } | SequenceError::Mixed { .. }
-        );
+        // a changed plan (or bench) is another run
+        let resumable = error.kind() != SequenceErrorKind::Plan;
         tracing::warn!(%reason, ?status, "run stopping");
         // Table first: it is the dangerous one. A table that faulted or stopped answering gets
         // the emergency path too (rate-table.md: "for a second interrupt or a fault"): a
