@@ -366,3 +366,75 @@ impl Sinks {
         out
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plan::Acquire;
+    use std::time::Duration;
+
+    fn row(step: &Step) -> StepRecord {
+        StepRecord {
+            step: step.index,
+            pass: 0,
+            rate_dps: 0.0,
+            rate_meas_dps: None,
+            rate_meas_std_dps: None,
+            rate_meas_min_dps: None,
+            rate_meas_max_dps: None,
+            rate_samples: None,
+            volts: 0.0,
+            volts_std: None,
+            n: 100,
+            overloads: 0,
+            retries: 0,
+            t_start_s: 0.0,
+            t_end_s: 10.0,
+        }
+    }
+
+    #[test]
+    fn the_monitors_watch_segments_only_and_derive_the_warm_up_and_the_running_deviation() {
+        let settings = WarmupSettings {
+            window: Duration::from_secs(1),
+            tolerance_v: Some(1.0),
+            max: Duration::from_secs(600),
+        };
+        let mut m = Monitors::new(5, Some(&settings), 0.1, 0.0);
+        let step = Step {
+            index: 2,
+            pass: 0,
+            rate_dps: 0.0,
+            acquire: Acquire::Samples(100),
+        };
+        let volts: Vec<f64> = (0..100).map(|i| f64::from(i % 7) * 1e-6).collect();
+        let r = row(&step);
+        let mut derived = Vec::new();
+        // a sweep's row: nothing to watch
+        let as_row = Record::Row(step);
+        let rec = Recorded {
+            step: &step,
+            record: &as_row,
+            row: &r,
+            volts: &volts,
+            t_start: 0.0,
+            t_end: 10.0,
+            elapsed_s: 10.0,
+        };
+        m.recorded(&rec, &mut derived).unwrap();
+        assert!(derived.is_empty());
+        // a segment: the warm-up's state (for the manifest) and the running deviation
+        let as_segment = Record::Segment(step);
+        let rec = Recorded {
+            record: &as_segment,
+            ..rec
+        };
+        m.recorded(&rec, &mut derived).unwrap();
+        assert!(matches!(&derived[0], Event::Warmup(w) if w.mode == monitor::WARMUP_IN_RECORD));
+        assert!(
+            matches!(&derived[1], Event::Drift { segment: 3, of: 5, readings: 100, elapsed_s, .. } if *elapsed_s == 10.0),
+            "{:?}",
+            derived[1]
+        );
+    }
+}
