@@ -14,6 +14,8 @@
 //!   [`RunDir::open_for_resume`] keeps every finished step, drops the partial step's readings
 //!   and a torn last line, and tells the sequencer where to continue. The file formats are
 //!   documented in [`rundir`]; [`num`] says how computed numbers are written.
+//! - [`steps`]: the step vocabulary a plan compiles to (one dispatch on its kind) and the run
+//!   engine executes without asking which kind of plan it runs.
 //! - [`station`]: the bench a run is made on: laboratory, conditions and the instruments'
 //!   calibration records (traceability, due dates), from a station file.
 //! - The analysis of a run (the scale-factor fit of a sweep, the Allan analysis of a drift
@@ -29,6 +31,7 @@ pub mod open;
 pub mod plan;
 pub mod rundir;
 pub mod station;
+pub mod steps;
 mod time;
 
 pub use plan::{

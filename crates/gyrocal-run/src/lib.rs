@@ -1,28 +1,41 @@
 //! gyrocal-run: a calibration run on the instruments.
 //!
+//! - [`engine`]: executes a plan's compiled steps ([`gyrocal_files::steps`]: the one dispatch
+//!   on the plan's kind) without asking which kind of plan it runs; owns the guaranteed
+//!   teardown (table at rest, meter released) and the bounded repeat of a refused step.
+//! - [`bench`](mod@bench): the instruments by role ([`Bench`]), so the engine is generic over one
+//!   parameter whatever the number of roles, and the same code drives real instruments and
+//!   the simulated bench, in real or virtual time.
+//! - [`sink`]: where the results go ([`Sink`]): the run directory, the progress display, the
+//!   live monitors, and whatever is added next, through one trait.
 //! - [`estimate`]: the plan's duration from the instruments' timing models, and the physical
 //!   bound a run's elapsed time is judged against (`gyrocal check` prints it).
-//! - [`monitor`]: what the run watches in its readings: the warm-up, and a drift record's
-//!   running Allan deviation.
-//! - [`sequencer`]: the run itself. Generic over the multimeter's transport and the
-//!   [`gyrocal_table::RateTable`], so the same code drives real instruments and the simulated
-//!   bench, in real or virtual time.
+//! - [`monitor`]: what the run watches in its readings: the warm-up, and a record's running
+//!   Allan deviation.
+//! - [`sequencer`]: the names of the first release (`Sequencer` is the engine over a meter
+//!   and a table).
 //!
 //! The plan and run-directory formats are gyrocal-files' (synchronous, no instrument I/O; the
-//! sequencer calls them between async steps: writes are a few kilobytes per chunk); they are
+//! engine calls them between async steps: writes are a few kilobytes per chunk); they are
 //! re-exported here so a run's code reads as one crate.
 
+pub mod bench;
+pub mod engine;
 pub mod estimate;
 pub mod monitor;
 pub mod sequencer;
+pub mod sink;
 
+pub use bench::{Bench, MeterAndTable};
+pub use engine::{
+    Engine, Event, Phase, Repeats, RunSummary, SequenceError, SequenceErrorKind, Sequencer,
+    SequencerOptions, StopRequest, TableRest,
+};
 pub use gyrocal_files::{
-    Acquire, Acquisition, DmmSettings, Dut, FitSummary, Framing, Instruments, Location, Manifest,
-    Plan, PlanDoc, PlanError, PlanKind, Port, Resume, Retry, RunContext, RunData, RunDir, RunError,
-    RunMeta, Sample, SampleRow, Simulation, Status, Step, StepRecord, TableDialect, TableSettings,
-    Timing, load, load_fit, load_samples, num, parse_rfc3339_utc, plan, rfc3339_utc, rundir,
-    station,
+    Acquire, Acquisition, DmmSettings, Dut, FitSummary, Framing, Instruments,
+    Location, Manifest, Plan, PlanDoc, PlanError, PlanKind, Port, Resume, Retry, RunContext,
+    RunData, RunDir, RunError, RunMeta, Sample, SampleRow, Simulation, Status, Step, StepRecord,
+    TableDialect, TableSettings, Timing, load, load_fit, load_samples,
+    num, parse_rfc3339_utc, plan, rfc3339_utc, rundir, station, steps,
 };
-pub use sequencer::{
-    Event, Phase, RunSummary, SequenceError, Sequencer, SequencerOptions, StopRequest, TableRest,
-};
+pub use sink::{EventChannel, Sink, SinkError, SinkErrorKind};

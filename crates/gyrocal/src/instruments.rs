@@ -1,19 +1,19 @@
 //! Plan → instruments: the one place that knows which drivers exist.
 //!
-//! The sequencer is generic over the two roles ([`gyrocal_meter::Multimeter`] and
-//! [`gyrocal_table::RateTable`]); this module picks the concrete types from the plan and
-//! hands them to one generic function, the way ripgrep's `crates/core/search.rs` dispatches
+//! The engine is generic over one [`Bench`], which provides the instruments by role
+//! ([`gyrocal_meter::Multimeter`], [`gyrocal_table::RateTable`]; room for a chamber and a
+//! power supply); this module picks the concrete types from the plan, builds the bench and
+//! hands it to one generic function, the way ripgrep's `crates/core/search.rs` dispatches
 //! through `enum PatternMatcher` into a generic search. Adding a meter or a table dialect is a
 //! new driver crate (or module) plus one arm here: [`with_meter`] for a meter,
-//! [`with_table`] for a dialect. Each arm costs one monomorphised copy of the sequencer, so
+//! [`with_table`] for a dialect. Each arm costs one monomorphised copy of the engine, so
 //! arms are per meter *or* per table, never per pair.
 
 use gyrocal_hp34401a::{AutoZero, DcvConfig, DriverOptions, MeterTiming, Strategy};
 use gyrocal_link::Transport;
 use gyrocal_meter::{Multimeter, TimingModel};
 use gyrocal_run::plan::DmmModel;
-use gyrocal_run::{Plan, TableDialect};
-use gyrocal_table::RateTable;
+use gyrocal_run::{Bench, MeterAndTable, Plan, TableDialect};
 
 /// The 34401A configuration a plan asks for.
 pub fn hp34401a_config(plan: &Plan) -> DcvConfig {
@@ -102,20 +102,20 @@ pub fn table_limits(plan: &Plan) -> gyrocal_table::Limits {
     }
 }
 
-/// What to do with the instruments once they are built: a generic function over the two
-/// roles (the sequencer with signals and progress, in `gyrocal run`).
+/// What to do with the bench once it is built: a generic function over the [`Bench`] (the
+/// engine with signals and progress, in `gyrocal run`). A further role (a chamber) adds an
+/// associated type to the bench, not a type parameter here.
 pub trait WithInstruments {
     /// What it returns.
     type Output;
-    /// Runs with a meter and a table.
-    fn call<M, T>(self, dmm: M, table: T) -> impl Future<Output = Self::Output>
+    /// Runs on the bench.
+    fn call<B>(self, bench: B) -> impl Future<Output = Self::Output>
     where
-        M: Multimeter + 'static,
-        T: RateTable + 'static;
+        B: Bench + 'static;
 }
 
-/// Builds the plan's multimeter on `dmm_link` and its table on `table_link`, and hands both
-/// to `job`. A plan without a table (`[drift] table = "none"`) gets
+/// Builds the plan's multimeter on `dmm_link` and its table on `table_link` into a bench
+/// ([`MeterAndTable`]), and hands it to `job`. A plan without a table (`[drift] table = "none"`) gets
 /// [`gyrocal_table::NoTable`] whatever link is given (this is the one place that decides it);
 /// a caller on instruments passes `None` for it, so no table port is opened.
 pub async fn with_instruments<D, L, J>(
@@ -165,7 +165,9 @@ where
     J: WithInstruments,
 {
     let Some(table_link) = table_link.filter(|_| plan.has_table()) else {
-        return job.call(dmm, gyrocal_table::NoTable::new()).await;
+        return job
+            .call(MeterAndTable::new(dmm, gyrocal_table::NoTable::new()))
+            .await;
     };
     let policy = gyrocal_table::PolicyConfig {
         limits: table_limits(plan),
@@ -178,7 +180,7 @@ where
                 ..gyrocal_acl::AclConfig::default()
             };
             let table = gyrocal_acl::AclTable::new(table_link, config);
-            job.call(dmm, table).await
+            job.call(MeterAndTable::new(dmm, table)).await
         }
         TableDialect::Aerosmith => {
             let config = gyrocal_aerosmith::AerosmithConfig {
@@ -186,7 +188,7 @@ where
                 ..gyrocal_aerosmith::AerosmithConfig::default()
             };
             let table = gyrocal_aerosmith::AerosmithTable::new(table_link, config);
-            job.call(dmm, table).await
+            job.call(MeterAndTable::new(dmm, table)).await
         }
     }
 }

@@ -78,11 +78,11 @@ struct Probe {
 impl crate::instruments::WithInstruments for Probe {
     type Output = Result<Found, String>;
 
-    async fn call<M, T>(self, mut dmm: M, mut table: T) -> Self::Output
+    async fn call<B>(self, mut bench: B) -> Self::Output
     where
-        M: Multimeter + 'static,
-        T: RateTable + 'static,
+        B: gyrocal_run::Bench + 'static,
     {
+        let (dmm, table) = bench.meter_and_table();
         let d = self.plan.dmm();
         let id = match tokio::time::timeout(PROBE_TIMEOUT, dmm.connect()).await {
             Ok(Ok(id)) => id,

@@ -1,0 +1,269 @@
+//! The ending of a run: the results of a complete run analysed as its compiled steps say
+//! ([`gyrocal_run::steps::Analysis`]), the closing lines, where the table was left, the exit
+//! code.
+
+
+use super::*;
+
+/// The command line that continues this run, with the options it was started with.
+pub(super) fn resume_command(args: &RunArgs, dir: &Path) -> String {
+    // the run's plan is in its manifest: the resume needs no plan file (one that was edited
+    // since would be refused)
+    let mut c = "gyrocal run".to_string();
+    if args.simulate {
+        c.push_str(" --simulate");
+    }
+    if let Some(x) = args.sim_time_scale {
+        c.push_str(&format!(" --sim-time-scale {x}"));
+    }
+    if let Some(p) = &args.dmm_port {
+        c.push_str(&format!(" --dmm-port {p}"));
+    }
+    if let Some(p) = &args.table_port {
+        c.push_str(&format!(" --table-port {p}"));
+    }
+    c.push_str(&format!(" --resume {}", dir.display()));
+    c
+}
+
+/// After the sequencer: fit, report, the closing summary; the exit code. The last line says
+/// where the table was left whenever that is not "at rest, as the table reported".
+pub(super) fn finish(
+    args: &RunArgs,
+    dir: &Path,
+    summary: &RunSummary,
+    mut run: RunDir,
+    signal: Option<StopSignal>,
+    doc: &mut serde_json::Value,
+) -> anyhow::Result<u8> {
+    // human text on stdout, or on stderr when stdout carries the JSON document
+    let human = |text: String| {
+        if args.json {
+            say!("{text}");
+        } else {
+            out!("{text}");
+        }
+    };
+    let resume = summary.resumable.then(|| resume_command(args, dir));
+    let table = match &summary.table {
+        TableRest::AtRest { rate_dps, waited } => serde_json::json!({
+            "at_rest": true, "rate_dps": rate_dps, "waited_s": waited.as_secs_f64(),
+        }),
+        TableRest::NotConfirmed { reason } | TableRest::NeverReached { reason } => {
+            serde_json::json!({ "at_rest": false, "reason": reason })
+        }
+        // nothing can be turning: at rest in the sense a script checks for
+        TableRest::NoTable => serde_json::json!({ "at_rest": true, "none": true }),
+    };
+    let m = run.manifest();
+    doc["run_dir"] = serde_json::json!(dir);
+    doc["status"] = serde_json::json!(summary.status);
+    doc["reason"] = serde_json::json!(summary.reason);
+    doc["emergency_stop"] = serde_json::json!(summary.emergency_stop);
+    doc["table"] = table;
+    doc["steps_recorded_this_session"] = serde_json::json!(summary.steps_recorded);
+    doc["steps_done"] = serde_json::json!(run.done_steps().len());
+    doc["steps_total"] = serde_json::json!(run.schedule().len());
+    doc["elapsed_s"] = serde_json::json!(summary.elapsed_s);
+    doc["timing"] = serde_json::json!(summary.timing);
+    doc["simulated"] = serde_json::json!(m.simulated);
+    // the warm-up as watched online (plans with [warmup])
+    doc["warmup"] = serde_json::json!(m.warmup);
+    doc["resume_command"] = serde_json::json!(match summary.status {
+        Status::Complete => None,
+        _ => resume,
+    });
+    let code = finish_human(args, dir, summary, &mut run, signal, &human, doc);
+    catalog_close(dir, doc);
+    let code = code?;
+    doc["exit_code"] = serde_json::json!(code);
+    Ok(code)
+}
+
+/// The end of a complete drift run: the record is analysed by Allan deviation, not fitted.
+pub(super) fn finish_drift(
+    args: &RunArgs,
+    dir: &Path,
+    run: &mut RunDir,
+    human: &dyn Fn(String),
+    doc: &mut serde_json::Value,
+) -> anyhow::Result<u8> {
+    if args.no_report {
+        human(format!(
+            "drift record complete: analyse it with `gyrocal allan {}` (--scale-factor K for °/h)",
+            dir.display()
+        ));
+    } else {
+        // the analysis finds the scale factor itself (the run's fit.json, or the simulated
+        // gyro's); without one the record stays in volts
+        // through the run directory still open: allan.json and allan.html are recorded in
+        // the manifest with their SHA-256, under the run's lock
+        match gyrocal_report::write_allan_into(run, &Default::default(), &[]) {
+            Ok((a, files)) => {
+                doc["allan"] = serde_json::json!({
+                    "files": files,
+                    "unit": a.unit,
+                    "scale_factor": a.scale_factor,
+                    "noise_terms": a.noise_terms,
+                    "bias": a.bias,
+                    "warmup": a.warmup,
+                });
+                human(format!(
+                    "drift record complete: Allan analysis in {}{}",
+                    files
+                        .iter()
+                        .map(|f| f.display().to_string())
+                        .collect::<Vec<_>>()
+                        .join(" and "),
+                    match &a.scale_factor {
+                        Some(k) => format!(
+                            " (K = {} V/(°/s), {}, converts to °/h)",
+                            k.v_per_dps, k.source
+                        ),
+                        None => format!(
+                            " (in volts: `gyrocal allan {} --scale-factor K` for °/h)",
+                            dir.display()
+                        ),
+                    }
+                ));
+            }
+            Err(e) => say!(
+                "gyrocal: warning: {} (the record is complete: `gyrocal report {}` writes the analysis again)",
+                e.allan_warning(),
+                dir.display()
+            ),
+        }
+    }
+    human(format!("run directory: {}", dir.display()));
+    Ok(0)
+}
+
+/// How long the end of a run waits for the catalog to take the run's last state.
+pub(super) const CATALOG_CLOSE_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// Gives the catalog the run's final state and waits (bounded) for it; says so when the
+/// catalog could not be updated: the run directory has everything, an import catches up.
+pub(super) fn catalog_close(dir: &Path, doc: &mut serde_json::Value) {
+    let Some((writer, _)) = CATALOG.lock().ok().and_then(|mut slot| slot.take()) else {
+        return;
+    };
+    writer.finished(dir);
+    let url = writer.url().to_string();
+    let updated = writer.close(CATALOG_CLOSE_TIMEOUT);
+    doc["catalog"] = serde_json::json!({ "url": url, "updated": updated });
+    if !updated {
+        say!(
+            "gyrocal: warning: the catalog {url} could not be updated (see run.log); the run directory is complete: `gyrocal catalog import {}` brings the catalog up to date",
+            dir.display()
+        );
+    }
+}
+
+/// The human side of [`finish`]: the closing lines, the fit and the report.
+pub(super) fn finish_human(
+    args: &RunArgs,
+    dir: &Path,
+    summary: &RunSummary,
+    run: &mut RunDir,
+    signal: Option<StopSignal>,
+    human: &dyn Fn(String),
+    doc: &mut serde_json::Value,
+) -> anyhow::Result<u8> {
+    let rest_line = match &summary.table {
+        TableRest::AtRest { .. } => "the table is at rest".to_string(),
+        other => rest_text(other),
+    };
+    // before a resume the operator re-arms what the emergency stop opened
+    let rearm = if summary.emergency_stop {
+        "\n  an EMERGENCY STOP was sent (it opens the table's interlock: servo off). Find out why \
+         it was needed, make the table safe and re-arm the interlock at its controller before \
+         resuming (the resume re-enables the servo and fails if the table refuses)"
+    } else {
+        ""
+    };
+    match summary.status {
+        Status::Complete => {}
+        Status::Aborted => {
+            say!(
+                "gyrocal: run aborted: {}\n  {} step(s) recorded this session (a step cut short \
+                 is not recorded: it is measured afresh on resume); resume with: {}{rearm}\n  \
+                 {rest_line}",
+                summary.reason.as_deref().unwrap_or("stopped"),
+                summary.steps_recorded,
+                resume_command(args, dir)
+            );
+            return Ok(signal.map_or(EXIT_ABORTED, |s| s.exit_code));
+        }
+        Status::Failed | Status::Running => {
+            let next = if summary.resumable {
+                format!("resume with: {}", resume_command(args, dir))
+            } else {
+                // the plan must change, so the same run cannot go on
+                "fix the plan and start a new run (a changed plan cannot resume this one)"
+                    .to_string()
+            };
+            say!(
+                "gyrocal: run failed: {}\n  {} step(s) recorded this session; {next}{rearm}\n  \
+                 {rest_line}",
+                summary.reason.as_deref().unwrap_or("unknown"),
+                summary.steps_recorded,
+            );
+            return Ok(1);
+        }
+    }
+    // one ending for every kind of complete run: its results, then the table's rest state
+    // decides the last line and the exit code
+    let code = match gyrocal_analysis::RunKind::of(run.manifest()) {
+        gyrocal_analysis::RunKind::Drift => finish_drift(args, dir, run, human, doc)?,
+        gyrocal_analysis::RunKind::Sweep => finish_sweep(args, dir, summary, run, human, doc)?,
+    };
+    if !summary.table.nothing_turning() {
+        say!(
+            "gyrocal: all steps recorded, but {}",
+            rest_text(&summary.table)
+        );
+        return Ok(1);
+    }
+    Ok(code)
+}
+
+/// The end of a complete sweep: the fit, the timing and the report.
+pub(super) fn finish_sweep(
+    args: &RunArgs,
+    dir: &Path,
+    summary: &RunSummary,
+    run: &mut RunDir,
+    human: &dyn Fn(String),
+    doc: &mut serde_json::Value,
+) -> anyhow::Result<u8> {
+    let analysis = fit_run(run, &gyrocal_fit::Options::default())
+        .with_context(|| format!("fitting {}", dir.display()))?;
+    doc["fit"] = serde_json::json!(run.manifest().fit_summary);
+    doc["acceptance"] = serde_json::json!(run.manifest().acceptance);
+    let mut out = String::new();
+    crate::cmd::fit::human(&mut out, &analysis);
+    human(out);
+    if let Some(t) = &summary.timing {
+        human(format!(
+            "timing: schedule {} (run clock), physical bound {}, ratio {:.4} (acquisition {}); \
+             elapsed {} with connecting and the stop",
+            hms(t.elapsed_s),
+            hms(t.bound_s),
+            t.ratio,
+            t.acquisition.as_deref().unwrap_or("?"),
+            hms(summary.elapsed_s)
+        ));
+    }
+    if !args.no_report {
+        // the data and the fit are safe on disk already: a report failure is a warning
+        match gyrocal_report::write_run_report(dir) {
+            Ok(path) => {
+                doc["report"] = serde_json::json!(path);
+                human(format!("report: {}", path.display()));
+            }
+            Err(e) => say!("gyrocal: warning: no report: {e}"),
+        }
+    }
+    human(format!("run directory: {}", dir.display()));
+    Ok(0)
+}
