@@ -32,10 +32,10 @@ pub use engine::{
     SequencerOptions, StopRequest, TableRest,
 };
 pub use gyrocal_files::{
-    Acquire, Acquisition, DmmSettings, Dut, FitSummary, Framing, Instruments,
-    Location, Manifest, Plan, PlanDoc, PlanError, PlanKind, Port, Resume, Retry, RunContext,
-    RunData, RunDir, RunError, RunMeta, Sample, SampleRow, Simulation, Status, Step, StepRecord,
-    TableDialect, TableSettings, Timing, load, load_fit, load_samples,
-    num, parse_rfc3339_utc, plan, rfc3339_utc, rundir, station, steps,
+    Acquire, Acquisition, DmmSettings, Dut, FitSummary, Framing, Instruments, Location, Manifest,
+    Plan, PlanDoc, PlanError, PlanKind, Port, Resume, Retry, RunContext, RunData, RunDir, RunError,
+    RunMeta, Sample, SampleRow, Simulation, Status, Step, StepRecord, TableDialect, TableSettings,
+    Timing, load, load_fit, load_samples, num, parse_rfc3339_utc, plan, rfc3339_utc, rundir,
+    station, steps,
 };
 pub use sink::{EventChannel, Sink, SinkError, SinkErrorKind};

@@ -6,12 +6,15 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::Plan;
 use super::error::PlanError;
 use super::kind::PlanKind;
 use super::raw::{S, Spans};
+use super::schedule::Step;
 use super::schema::{KeySchema, Kind};
 use super::table::TableDialect;
 use super::validate::Ctx;
+use crate::steps::{Acquiring, Action, Compiled, HoldCheck, Record, Setup, TableAction};
 
 /// The keys of `[drift]`.
 pub(super) const KEYS: &[KeySchema] = &[
@@ -287,4 +290,49 @@ fn validate_drift(d: &DriftDoc, cx: &Ctx<'_>) -> Result<DriftSettings, PlanError
         }
     };
     Ok(DriftSettings { table, earth })
+}
+
+/// The drift record compiled to steps (see [`crate::steps`]): segment steps at zero rate, the
+/// table's part set by `[drift] table` (hold 0 °/s with the servo on, at rest with the servo
+/// off, or no table), the warm-up (when asked for) watched in the record's first segments.
+pub(crate) fn compile(plan: &Plan, remaining: &[Step], warmup_done: bool) -> Compiled {
+    let role = plan.drift().table;
+    let tolerance_dps = plan.table().rate_tolerance_dps;
+    let setup = match role {
+        TableRole::Hold => Setup::EnableTable,
+        TableRole::ServoOff => Setup::RestThenServoOff,
+        TableRole::None => Setup::Nothing,
+    };
+    let steps = remaining
+        .iter()
+        .map(|step| {
+            let (table, hold) = match role {
+                TableRole::Hold => (
+                    TableAction::Rate(step.rate_dps),
+                    HoldCheck::Rate {
+                        demand_dps: step.rate_dps,
+                        tolerance_dps,
+                    },
+                ),
+                TableRole::ServoOff => {
+                    (TableAction::ServoOff, HoldCheck::ServoOff { tolerance_dps })
+                }
+                TableRole::None => (TableAction::Untouched, HoldCheck::None),
+            };
+            Action {
+                table,
+                dwell: plan.settle(),
+                acquire: Acquiring::Readings(step.acquire),
+                hold,
+                record: Record::Segment(*step),
+            }
+        })
+        .collect();
+    Compiled {
+        setup,
+        steps,
+        warmup_in_record: plan.warmup().copied().filter(|_| !warmup_done),
+        schedule_len: plan.step_count(),
+        uses_table: role != TableRole::None,
+    }
 }

@@ -1,6 +1,7 @@
 //! What a plan measures ([`PlanKind`]) and the one dispatch on it in the plan crate: each
 //! kind's own rules live in its module ([`super::sweep`], [`super::drift`]); adding a kind is
-//! a variant here, an arm in each match below and its module.
+//! a variant here, an arm in each match below (its rules, its compile to steps) and its
+//! module.
 
 use super::error::PlanError;
 use super::validate::Ctx;
@@ -36,6 +37,19 @@ impl PlanKind {
             PlanKind::ScaleFactor => "scale_factor",
             PlanKind::Drift => "drift",
         }
+    }
+}
+
+/// Compiles `plan` (of this kind) for a session that runs `remaining` steps of its schedule:
+/// the one dispatch on the kind for the run's engine (see [`crate::steps::compile`]).
+pub(crate) fn compile(
+    plan: &super::Plan,
+    remaining: &[super::Step],
+    warmup_done: bool,
+) -> crate::steps::Compiled {
+    match plan.kind() {
+        PlanKind::ScaleFactor => sweep::compile(plan, remaining, warmup_done),
+        PlanKind::Drift => drift::compile(plan, remaining, warmup_done),
     }
 }
 

@@ -96,6 +96,7 @@ pub use error::{Location, PlanError, PlanErrorKind};
 /// serial device path); nothing downstream parses the string again.
 pub use gyrocal_link::PortSpec as Port;
 pub use kind::PlanKind;
+pub(crate) use kind::compile;
 pub use schedule::{Acquire, Step};
 pub use section::{MAX_REPEAT, MAX_SAMPLES_PER_RATE, MAX_WHOLE_REVOLUTIONS, PlanSectionDoc};
 pub use simulation::Simulation;

@@ -18,16 +18,14 @@
 //! The run as a whole adds its [`Setup`] (enable the table, or bring it to rest and switch
 //! its servo off, or nothing) and whether its teardown must bring a table to rest.
 //!
-//! [`compile`] is the one dispatch on the plan's kind; each kind's compile is self-contained
-//! in its own module (`sweep.rs`, `drift.rs`). Resume keys are unchanged: every step that
+//! [`compile`] goes through the one dispatch on the plan's kind (`plan/kind.rs`); each kind's
+//! compile lives in that kind's own plan module (`plan/sweep.rs`, `plan/drift.rs`), beside its
+//! keys and rules. Resume keys are unchanged: every step that
 //! records carries the plan schedule's [`Step`] (its `index` is the run directory's `step`).
-
-mod drift;
-mod sweep;
 
 use std::time::Duration;
 
-use crate::plan::{Acquire, Plan, PlanKind, Step, WarmupSettings};
+use crate::plan::{Acquire, Plan, Step, WarmupSettings};
 
 /// What the run does once, before its first step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -141,16 +139,6 @@ impl Action {
     }
 }
 
-/// How the results of a complete run are analysed (the CLI's ending asks this instead of
-/// the plan's kind).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Analysis {
-    /// A straight-line fit of the steps' mean voltages against the rates (scale factor).
-    Fit,
-    /// The record's Allan deviation (drift).
-    Allan,
-}
-
 /// A plan compiled for one session: its setup, its steps in order, and what watches them.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Compiled {
@@ -165,8 +153,6 @@ pub struct Compiled {
     pub schedule_len: usize,
     /// The run moves or samples a table: its teardown must bring it to rest.
     pub uses_table: bool,
-    /// How a complete run is analysed.
-    pub analysis: Analysis,
 }
 
 impl Compiled {
@@ -179,20 +165,9 @@ impl Compiled {
 /// Compiles `plan` for a session that runs `remaining` steps of its schedule (all of them on
 /// a fresh run; the run directory's `remaining_steps` on a resume). `warmup_done`: an
 /// earlier session completed the warm-up (manifest `warmup.complete`), so it is not repeated.
-/// The one dispatch on the plan's kind.
+/// Through the one dispatch on the plan's kind (`plan/kind.rs`).
 pub fn compile(plan: &Plan, remaining: &[Step], warmup_done: bool) -> Compiled {
-    match plan.kind() {
-        PlanKind::ScaleFactor => sweep::compile(plan, remaining, warmup_done),
-        PlanKind::Drift => drift::compile(plan, remaining, warmup_done),
-    }
-}
-
-/// How a complete run of `plan` is analysed (without compiling its steps).
-pub fn analysis(plan: &Plan) -> Analysis {
-    match plan.kind() {
-        PlanKind::ScaleFactor => Analysis::Fit,
-        PlanKind::Drift => Analysis::Allan,
-    }
+    crate::plan::compile(plan, remaining, warmup_done)
 }
 
 #[cfg(test)]

@@ -34,7 +34,6 @@ fn a_sweep_is_its_schedule_with_rate_steps_rows_and_the_hold_checked() {
     let c = compile(&plan, &schedule, false);
     assert_eq!(c.setup, Setup::EnableTable);
     assert!(c.uses_table);
-    assert_eq!(c.analysis, Analysis::Fit);
     assert_eq!(c.schedule_len, 6);
     assert_eq!(c.recording().copied().collect::<Vec<_>>(), schedule);
     for (a, s) in c.steps.iter().zip(&schedule) {
@@ -79,7 +78,6 @@ fn a_drift_record_is_segment_steps_with_the_table_role_in_each_step() {
     let hold = drift("hold", false);
     let c = compile(&hold, &hold.schedule(), false);
     assert_eq!(c.setup, Setup::EnableTable);
-    assert_eq!(c.analysis, Analysis::Allan);
     assert!(c.uses_table);
     assert_eq!(c.steps.len(), 4);
     assert!(c.steps.iter().all(|a| a.table == TableAction::Rate(0.0)
@@ -119,10 +117,4 @@ fn a_drift_warm_up_is_watched_in_the_record_not_a_step_and_not_repeated() {
     );
     let again = compile(&plan, &plan.schedule()[2..], true);
     assert_eq!(again.warmup_in_record, None);
-}
-
-#[test]
-fn the_analysis_follows_the_kind_without_compiling() {
-    assert_eq!(analysis(&sweep(false)), Analysis::Fit);
-    assert_eq!(analysis(&drift("none", false)), Analysis::Allan);
 }

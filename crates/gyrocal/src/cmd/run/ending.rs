@@ -2,7 +2,6 @@
 //! ([`gyrocal_run::steps::Analysis`]), the closing lines, where the table was left, the exit
 //! code.
 
-
 use super::*;
 
 /// The command line that continues this run, with the options it was started with.
