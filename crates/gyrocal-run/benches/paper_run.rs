@@ -13,7 +13,8 @@ mod common;
 use common::table_config;
 use criterion::{Criterion, criterion_group, criterion_main};
 use gyrocal_acl::AclTable;
-use gyrocal_run::{Plan, RunDir, RunMeta, Sequencer, SequencerOptions, Status, StopRequest};
+use gyrocal_files::{Plan, RunDir, RunMeta, Status};
+use gyrocal_run::{Sequencer, SequencerOptions, StopRequest};
 use gyrocal_sim::bench::Bench;
 use gyrocal_sim::from_plan::bench_config;
 

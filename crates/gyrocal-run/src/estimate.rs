@@ -18,7 +18,7 @@ use std::time::Duration;
 
 use gyrocal_meter::TimingModel;
 
-use crate::plan::{Plan, Step};
+use gyrocal_files::plan::{Plan, Step};
 
 /// The DC-volts settings a plan's `[dmm]` section asks any meter for.
 pub fn dc_volts(plan: &Plan) -> gyrocal_meter::DcVolts {

@@ -16,8 +16,8 @@
 //!   and a table).
 //!
 //! The plan and run-directory formats are gyrocal-files' (synchronous, no instrument I/O; the
-//! engine calls them between async steps: writes are a few kilobytes per chunk); they are
-//! re-exported here so a run's code reads as one crate.
+//! engine calls them between async steps: writes are a few kilobytes per chunk); a caller
+//! names them from gyrocal-files (no re-export: each type has one name).
 
 pub mod bench;
 pub mod engine;
@@ -30,12 +30,5 @@ pub use bench::{Bench, MeterAndTable};
 pub use engine::{
     Engine, Event, Phase, Repeats, RunSummary, SequenceError, SequenceErrorKind, Sequencer,
     SequencerOptions, StopRequest, TableRest,
-};
-pub use gyrocal_files::{
-    Acquire, Acquisition, DmmSettings, Dut, FitSummary, Framing, Instruments, Location, Manifest,
-    Plan, PlanDoc, PlanError, PlanKind, Port, Resume, Retry, RunContext, RunData, RunDir, RunError,
-    RunMeta, Sample, SampleRow, Simulation, Status, Step, StepRecord, TableDialect, TableSettings,
-    Timing, load, load_fit, load_samples, num, parse_rfc3339_utc, plan, rfc3339_utc, rundir,
-    station, steps,
 };
 pub use sink::{EventChannel, Sink, SinkError, SinkErrorKind};

@@ -9,8 +9,8 @@ use std::collections::VecDeque;
 use gyrocal_allan::Streaming;
 use gyrocal_allan::warmup::{Tolerance, WarmupDetector};
 
-use crate::plan::WarmupSettings;
-use crate::rundir::WarmupRecord;
+use gyrocal_files::plan::WarmupSettings;
+use gyrocal_files::rundir::WarmupRecord;
 
 /// The default warm-up tolerance, in white-noise standard deviations of a window mean (the
 /// same as `gyrocal allan`'s).

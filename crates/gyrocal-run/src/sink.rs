@@ -34,8 +34,8 @@ use gyrocal_files::steps::Record;
 
 use crate::engine::Event;
 use crate::monitor::{self, AdevWatch, WarmupWatch};
-use crate::plan::WarmupSettings;
-use crate::rundir::{Instruments, RunDir, RunError, Sample, Status, StepRecord, Timing};
+use gyrocal_files::plan::WarmupSettings;
+use gyrocal_files::rundir::{Instruments, RunDir, RunError, Sample, Status, StepRecord, Timing};
 
 /// A live feed: called from inside the instruments' callbacks (each table sample while the
 /// engine waits for a rate, each reading the meter receives), so it must not block. Events
@@ -171,7 +171,7 @@ pub trait Sink: Send {
 }
 
 /// The durable record: `samples.csv`, `steps.csv` and `manifest.json` (see
-/// [`crate::rundir`]).
+/// [`gyrocal_files::rundir`]).
 impl Sink for RunDir {
     fn begin(&mut self, begin: &Begin) -> Result<(), SinkError> {
         // the run directory converts run-clock times into UTC from this instant
@@ -370,7 +370,7 @@ impl Sinks {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plan::Acquire;
+    use gyrocal_files::plan::Acquire;
     use std::time::Duration;
 
     fn row(step: &Step) -> StepRecord {

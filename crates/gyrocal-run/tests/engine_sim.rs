@@ -13,11 +13,9 @@ use std::sync::{Arc, Mutex};
 
 use common::{config, new_run, plan_with_rates, table_config};
 use gyrocal_acl::AclTable;
+use gyrocal_files::{Plan, Status, StepRecord, load};
 use gyrocal_run::sink::{Recorded, SinkError};
-use gyrocal_run::{
-    Event, Plan, RunSummary, Sequencer, SequencerOptions, Sink, Status, StepRecord, StopRequest,
-    TableRest, load,
-};
+use gyrocal_run::{Event, RunSummary, Sequencer, SequencerOptions, Sink, StopRequest, TableRest};
 use gyrocal_sim::bench::{Bench, BenchHandle};
 use gyrocal_sim::from_plan::bench_config;
 use gyrocal_sim::table::SimMode;

@@ -15,11 +15,10 @@ use std::sync::atomic::{AtomicU32, Ordering};
 
 use common::table_config;
 use gyrocal_acl::AclTable;
+use gyrocal_files::{Plan, RunDir, RunMeta, Status};
 use gyrocal_hp34401a::Error as DmmError;
 use gyrocal_meter::{Acquired, DcVolts, Identity, Measured, Multimeter, ProgressFn, TimingModel};
-use gyrocal_run::{
-    Plan, RunDir, RunMeta, Sequencer, SequencerOptions, Status, StopRequest, TableRest,
-};
+use gyrocal_run::{Sequencer, SequencerOptions, StopRequest, TableRest};
 use gyrocal_sim::bench::Bench;
 use gyrocal_sim::from_plan::bench_config;
 use gyrocal_sim::table::SimMode;

@@ -12,7 +12,8 @@ use std::path::Path;
 
 use common::table_config;
 use gyrocal_acl::AclTable;
-use gyrocal_run::{Plan, RunDir, RunMeta, Sequencer, SequencerOptions, Status, StopRequest};
+use gyrocal_files::{Plan, RunDir, RunMeta, Status};
+use gyrocal_run::{Sequencer, SequencerOptions, StopRequest};
 use gyrocal_sim::bench::Bench;
 use gyrocal_sim::from_plan::bench_config;
 

@@ -13,10 +13,8 @@ use std::time::Duration;
 
 use common::{config, new_run, plan_with_rates, table_config};
 use gyrocal_acl::AclTable;
-use gyrocal_run::{
-    Event, Phase, Plan, RunSummary, Sequencer, SequencerOptions, Status, StopRequest, TableRest,
-    load,
-};
+use gyrocal_files::{Plan, Status, load};
+use gyrocal_run::{Event, Phase, RunSummary, Sequencer, SequencerOptions, StopRequest, TableRest};
 use gyrocal_sim::bench::{Bench, BenchHandle};
 use gyrocal_sim::from_plan::bench_config;
 use gyrocal_sim::table::SimMode;
@@ -373,7 +371,7 @@ async fn a_step_the_table_did_not_hold_is_measured_again_once_it_holds() {
     let steps: Vec<usize> = data.steps.iter().map(|s| s.step).collect();
     assert_eq!(steps, vec![0, 1, 2], "every step once");
     // the refused attempt left no samples: exactly one step's worth per step
-    let samples = gyrocal_run::load_samples(&dir).unwrap();
+    let samples = gyrocal_files::load_samples(&dir).unwrap();
     assert_eq!(samples.iter().filter(|s| s.step == 1).count(), 50);
     // the recorded step's table statistics are the clean second attempt's
     let s1 = &data.steps[1];
@@ -421,7 +419,7 @@ async fn a_table_that_never_holds_the_rate_fails_the_run_without_recording_the_s
         vec![0]
     );
     assert!(
-        gyrocal_run::load_samples(&dir)
+        gyrocal_files::load_samples(&dir)
             .unwrap()
             .iter()
             .all(|s| s.step == 0)
@@ -475,7 +473,7 @@ fn assert_every_step_once(plan: &Plan, dir: &Path) {
     let n = plan.schedule().len();
     assert_eq!(steps, (0..n).collect::<Vec<_>>(), "every step exactly once");
     let per = plan.samples_per_rate() as usize;
-    let samples = gyrocal_run::load_samples(dir).unwrap();
+    let samples = gyrocal_files::load_samples(dir).unwrap();
     for k in 0..n {
         assert_eq!(
             samples.iter().filter(|s| s.step == k).count(),

@@ -11,10 +11,8 @@ use std::time::Duration;
 use common::table_config;
 use gyrocal_acl::AclTable;
 use gyrocal_analysis::sweep::fit_run;
-use gyrocal_run::{
-    Plan, RunDir, RunMeta, RunSummary, Sequencer, SequencerOptions, Status, StopRequest, load,
-    load_samples,
-};
+use gyrocal_files::{Plan, RunDir, RunMeta, Status, load, load_samples};
+use gyrocal_run::{RunSummary, Sequencer, SequencerOptions, StopRequest};
 use gyrocal_sim::bench::{Bench, BenchHandle};
 use gyrocal_sim::from_plan::bench_config;
 use tokio::sync::watch;

@@ -14,10 +14,8 @@ use std::time::Duration;
 use common::{new_run, plan_from, plan_with_rates, table_config};
 use gyrocal_acl::AclTable;
 use gyrocal_aerosmith::{AerosmithConfig, AerosmithTable};
-use gyrocal_run::{
-    Event, Phase, Plan, RunSummary, Sequencer, SequencerOptions, Status, StopRequest, TableRest,
-    load,
-};
+use gyrocal_files::{Plan, Status, load};
+use gyrocal_run::{Event, Phase, RunSummary, Sequencer, SequencerOptions, StopRequest, TableRest};
 use gyrocal_sim::bench::Bench;
 use gyrocal_sim::from_plan::bench_config;
 use gyrocal_sim::table::{SimMode, TableHandle};
@@ -40,7 +38,7 @@ async fn run(plan: &Plan, dir: &Path, hook: Hook) -> (RunSummary, Vec<Event>, Ta
     let sim = bench.handle.table.clone();
     let dmm = common::hp34401a(bench.dmm, plan);
     let acl = table_config(plan);
-    let (summary, events) = if plan.table().dialect == gyrocal_run::TableDialect::Aerosmith {
+    let (summary, events) = if plan.table().dialect == gyrocal_files::TableDialect::Aerosmith {
         let config = AerosmithConfig {
             policy: acl.policy(),
             ..AerosmithConfig::default()

@@ -9,11 +9,12 @@
 //! [`with_table`] for a dialect. Each arm costs one monomorphised copy of the engine, so
 //! arms are per meter *or* per table, never per pair.
 
+use gyrocal_files::plan::DmmModel;
+use gyrocal_files::{Plan, TableDialect};
 use gyrocal_hp34401a::{AutoZero, DcvConfig, DriverOptions, MeterTiming, Strategy};
 use gyrocal_link::Transport;
 use gyrocal_meter::{Multimeter, TimingModel};
-use gyrocal_run::plan::DmmModel;
-use gyrocal_run::{Bench, MeterAndTable, Plan, TableDialect};
+use gyrocal_run::{Bench, MeterAndTable};
 
 /// The 34401A configuration a plan asks for.
 pub fn hp34401a_config(plan: &Plan) -> DcvConfig {
@@ -36,10 +37,10 @@ pub fn hp34401a_config(plan: &Plan) -> DcvConfig {
 /// The 34401A strategy a plan's `acquisition` key names.
 pub fn hp34401a_strategy(plan: &Plan) -> Strategy {
     match plan.dmm().acquisition {
-        gyrocal_run::Acquisition::Auto => Strategy::Auto,
-        gyrocal_run::Acquisition::Stream => Strategy::Stream,
-        gyrocal_run::Acquisition::Memory => Strategy::Memory,
-        gyrocal_run::Acquisition::Poll => Strategy::Poll,
+        gyrocal_files::Acquisition::Auto => Strategy::Auto,
+        gyrocal_files::Acquisition::Stream => Strategy::Stream,
+        gyrocal_files::Acquisition::Memory => Strategy::Memory,
+        gyrocal_files::Acquisition::Poll => Strategy::Poll,
     }
 }
 
@@ -72,8 +73,8 @@ pub fn truevolt_options(
     plan: &Plan,
 ) -> gyrocal_truevolt::TruevoltOptions {
     let acquisition = match plan.dmm().acquisition {
-        gyrocal_run::Acquisition::Memory => gyrocal_truevolt::Acquisition::Memory,
-        gyrocal_run::Acquisition::Stream => gyrocal_truevolt::Acquisition::Stream,
+        gyrocal_files::Acquisition::Memory => gyrocal_truevolt::Acquisition::Memory,
+        gyrocal_files::Acquisition::Stream => gyrocal_truevolt::Acquisition::Stream,
         _ => gyrocal_truevolt::Acquisition::Auto,
     };
     gyrocal_truevolt::TruevoltOptions {

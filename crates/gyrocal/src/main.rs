@@ -81,8 +81,8 @@ impl std::error::Error for BadInput {}
 /// file, a wrong path, a directory in use) exits 2 through [`BadInput`]; a failure of the
 /// environment (a full disk, an I/O error) or of gyrocal itself exits 1. `context` (e.g.
 /// `--resume`) goes before the message.
-pub fn run_dir_error(e: gyrocal_run::RunError, context: Option<&str>) -> anyhow::Error {
-    use gyrocal_run::rundir::RunErrorKind;
+pub fn run_dir_error(e: gyrocal_files::RunError, context: Option<&str>) -> anyhow::Error {
+    use gyrocal_files::rundir::RunErrorKind;
     let text = match context {
         Some(c) => format!("{c}: {e}"),
         None => e.to_string(),

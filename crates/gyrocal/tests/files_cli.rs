@@ -74,8 +74,8 @@ fn a_simulated_run_writes_utc_times_clean_numbers_a_slim_manifest_and_no_lock() 
     let rows: Vec<csv::StringRecord> = r.records().map(Result::unwrap).collect();
     assert_eq!(rows.len(), 5 * 50);
     for row in &rows {
-        let t = gyrocal_run::rundir::SAMPLES_HEADER.len() - 1;
-        let utc = gyrocal_run::parse_rfc3339_utc(&row[t]).expect("an RFC 3339 time");
+        let t = gyrocal_files::rundir::SAMPLES_HEADER.len() - 1;
+        let utc = gyrocal_files::parse_rfc3339_utc(&row[t]).expect("an RFC 3339 time");
         assert!(utc >= before - std::time::Duration::from_secs(1), "{row:?}");
     }
 
@@ -95,7 +95,7 @@ fn a_simulated_run_writes_utc_times_clean_numbers_a_slim_manifest_and_no_lock() 
     let fit_bytes = std::fs::read(dir.join("fit.json")).unwrap();
     assert_eq!(
         m["fit_summary"]["sha256"].as_str().unwrap(),
-        gyrocal_run::rundir::sha256_hex(&fit_bytes)
+        gyrocal_files::rundir::sha256_hex(&fit_bytes)
     );
     assert!(m["fit_summary"]["scale_factor"].as_f64().unwrap() > 0.3);
     let size = std::fs::metadata(dir.join("manifest.json")).unwrap().len();

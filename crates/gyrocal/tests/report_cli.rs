@@ -12,7 +12,7 @@ use std::process::Output;
 /// `gyrocal ARGS` run to its end, through tests/common.
 use common::gyrocal_output as gyrocal;
 
-use gyrocal_run::{Plan, RunDir, RunMeta, Sample, Status, StepRecord};
+use gyrocal_files::{Plan, RunDir, RunMeta, Sample, Status, StepRecord};
 
 fn example() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/paper-shaped.csv")

@@ -3,8 +3,8 @@
 
 use std::time::Duration;
 
-use crate::plan::Step;
-use crate::rundir::{Retry, StepRecord, WarmupRecord};
+use gyrocal_files::plan::Step;
+use gyrocal_files::rundir::{Retry, StepRecord, WarmupRecord};
 
 use super::TableRest;
 

@@ -43,9 +43,9 @@ use tracing::Instrument as _;
 
 use crate::bench::{Bench, MeterAndTable};
 use crate::estimate::{self, Estimate};
-use crate::plan::{Plan, Step};
-use crate::rundir::{RunDir, Timing as RunTiming};
 use crate::sink::{Begin, Connected, EventChannel, LiveFn, Monitors, Sink, Sinks};
+use gyrocal_files::plan::{Plan, Step};
+use gyrocal_files::rundir::{RunDir, Timing as RunTiming};
 
 pub use events::{Event, Phase};
 pub(crate) use outcome::dmm_error;
@@ -390,7 +390,7 @@ impl<B: Bench> Engine<B> {
         let table_id = format!("{},{},{},{}", t.manufacturer, t.model, t.serial, t.version);
         // simulators say so in their serial field: a run's data are all simulated or all
         // measured, never both
-        let prefix = crate::rundir::SIMULATOR_SERIAL_PREFIX;
+        let prefix = gyrocal_files::rundir::SIMULATOR_SERIAL_PREFIX;
         let simulators = dmm_identity.serial.starts_with(prefix) || t.serial.starts_with(prefix);
         let run = &self.sinks.run;
         let recorded = !run.done_steps().is_empty();
@@ -468,7 +468,7 @@ impl<B: Bench> Engine<B> {
         instrument: &str,
         message: String,
     ) -> Result<(), SequenceError> {
-        let retry = crate::rundir::Retry {
+        let retry = gyrocal_files::rundir::Retry {
             t_s: self.now_s(),
             step,
             instrument: instrument.into(),

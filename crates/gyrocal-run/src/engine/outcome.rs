@@ -7,8 +7,8 @@ use std::time::Duration;
 use gyrocal_meter::MeterError;
 use gyrocal_table::TableError;
 
-use crate::rundir::{RunError, Status, Timing as RunTiming};
 use crate::sink::SinkError;
+use gyrocal_files::rundir::{RunError, Status, Timing as RunTiming};
 
 /// What the operator (or a signal) asked for. The `&'static str` names who asked (`"SIGINT"`,
 /// `"SIGHUP"`, `"operator"`, ...): the manifest's reason and the exit code say it.

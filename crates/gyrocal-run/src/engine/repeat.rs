@@ -23,7 +23,7 @@ use gyrocal_meter::ErrorKind;
 use gyrocal_files::steps::Action;
 
 use super::SequenceError;
-use crate::plan::Step;
+use gyrocal_files::plan::Step;
 
 /// The counts of the bounded repeat, per step of the schedule.
 #[derive(Debug, Clone, Default)]
@@ -108,7 +108,7 @@ fn readings_lost(e: &SequenceError) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plan::Acquire;
+    use gyrocal_files::plan::Acquire;
 
     fn step(index: usize) -> Step {
         Step {

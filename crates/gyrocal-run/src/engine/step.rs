@@ -10,9 +10,9 @@ use tokio::time::Instant;
 use super::{Engine, Event, Phase, SequenceError, StepContext, dmm_error};
 use crate::bench::Bench;
 use crate::monitor::{self, WarmupWatch};
-use crate::plan::Step;
-use crate::rundir::{Sample, StepRecord};
 use crate::sink::Recorded;
+use gyrocal_files::plan::Step;
+use gyrocal_files::rundir::{Sample, StepRecord};
 
 /// How a step ended (errors aside).
 pub(super) enum StepOutcome<P> {

@@ -10,8 +10,8 @@ use tokio::time::Instant;
 
 use super::{Engine, Event, RunSummary, SequenceError, SequenceErrorKind, StopRequest, TableRest};
 use crate::bench::Bench;
-use crate::rundir::{Status, Timing as RunTiming};
 use crate::sink::Finish;
+use gyrocal_files::rundir::{Status, Timing as RunTiming};
 use gyrocal_meter::Multimeter;
 
 impl<B: Bench> Engine<B> {

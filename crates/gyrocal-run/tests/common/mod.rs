@@ -6,9 +6,9 @@
 use std::path::{Path, PathBuf};
 
 use gyrocal_acl::AclConfig;
+use gyrocal_files::{Acquisition, Plan, RunDir, RunMeta};
 use gyrocal_hp34401a::{DriverOptions, Hp34401aMeter, Strategy};
 use gyrocal_link::Transport;
-use gyrocal_run::{Acquisition, Plan, RunDir, RunMeta};
 
 /// The plans written once for every crate's tests.
 #[path = "../../../../tests/support/plans.rs"]

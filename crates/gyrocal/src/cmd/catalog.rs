@@ -69,7 +69,7 @@ pub fn user_error(e: CatalogError) -> anyhow::Error {
 fn resolve(opt: &CatalogOpt) -> anyhow::Result<CatalogUrl> {
     // the station file's `catalog` (from $GYROCAL_STATION or the default file) comes after
     // --catalog and $GYROCAL_CATALOG; a station file that cannot be read is said, not fatal
-    let station_catalog = match gyrocal_run::station::Station::resolve(None) {
+    let station_catalog = match gyrocal_files::station::Station::resolve(None) {
         Ok(found) => found.and_then(|(_, s)| s.catalog),
         Err(e) => {
             eprintln!("gyrocal: warning: station: {e} (its catalog setting is not used)");

@@ -8,7 +8,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use clap::Args;
-use gyrocal_run::Plan;
+use gyrocal_files::Plan;
 use gyrocal_run::estimate::{self, Estimate};
 
 use crate::BadInput;
@@ -55,12 +55,13 @@ pub fn override_ports(
     table: Option<&str>,
 ) -> anyhow::Result<()> {
     if let Some(p) = dmm {
-        let port = gyrocal_run::Port::parse(p).map_err(|e| BadInput(format!("--dmm-port: {e}")))?;
+        let port =
+            gyrocal_files::Port::parse(p).map_err(|e| BadInput(format!("--dmm-port: {e}")))?;
         plan.set_dmm_port(port);
     }
     if let Some(p) = table {
         let port =
-            gyrocal_run::Port::parse(p).map_err(|e| BadInput(format!("--table-port: {e}")))?;
+            gyrocal_files::Port::parse(p).map_err(|e| BadInput(format!("--table-port: {e}")))?;
         plan.set_table_port(port);
     }
     Ok(())
@@ -79,7 +80,7 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
     let est = estimate::estimate(&plan, &steps, 0.0, timing.as_ref());
     let mut warnings = model_warnings(&plan, &args.plan);
     // the station `gyrocal run` would use, read the same way (a bad one is bad input)
-    if let Some((path, station)) = gyrocal_run::station::Station::resolve(args.station.as_deref())
+    if let Some((path, station)) = gyrocal_files::station::Station::resolve(args.station.as_deref())
         .map_err(|e| BadInput(format!("station: {e}")))?
     {
         warnings.extend(station_warnings(&station, &path, plan.has_table()));
@@ -134,7 +135,7 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
 /// certificate cannot name that instrument or its calibration. Said by `gyrocal check` and
 /// at the start of `gyrocal run`.
 pub fn station_warnings(
-    station: &gyrocal_run::station::Station,
+    station: &gyrocal_files::station::Station,
     path: &std::path::Path,
     needs_table: bool,
 ) -> Vec<String> {
@@ -160,7 +161,7 @@ pub fn station_warnings(
 
 /// One line per default model the plan's schedule cannot support: the fit will skip it.
 pub fn model_warnings(plan: &Plan, path: &std::path::Path) -> Vec<String> {
-    if plan.kind() == gyrocal_run::PlanKind::Drift {
+    if plan.kind() == gyrocal_files::PlanKind::Drift {
         return Vec::new(); // a drift record is analysed by Allan deviation, not fitted
     }
     let rates: Vec<f64> = plan.schedule().iter().map(|s| s.rate_dps).collect();
@@ -248,7 +249,7 @@ fn json(
         "readings": est.steps.iter().map(|s| s.samples).sum::<u64>(),
         "estimated_s": est.total.as_secs_f64(),
         "bound_s": est.bound.as_secs_f64(),
-        "drift": (plan.kind() == gyrocal_run::PlanKind::Drift).then(|| {
+        "drift": (plan.kind() == gyrocal_files::PlanKind::Drift).then(|| {
             let d = plan.drift();
             serde_json::json!({
                 "table": d.table.as_str(),
@@ -276,7 +277,7 @@ fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
             o,
             "table: {}{} on {} (max {} °/s, {} °/s², tolerance {} °/s for {:.1} s, timeout {:.0} s)",
             t.dialect.as_str(),
-            if t.dialect == gyrocal_run::TableDialect::Aerosmith {
+            if t.dialect == gyrocal_files::TableDialect::Aerosmith {
                 " (experimental)"
             } else {
                 ""
@@ -317,11 +318,11 @@ fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
     for s in &est.steps {
         at += s.ramp.as_secs_f64() + s.settle.as_secs_f64() + s.acquire.as_secs_f64();
         let turns = match s.step.acquire {
-            gyrocal_run::Acquire::Span { revolutions, .. } => format!(
+            gyrocal_files::Acquire::Span { revolutions, .. } => format!(
                 "  ({revolutions} turn{})",
                 if revolutions == 1 { "" } else { "s" }
             ),
-            gyrocal_run::Acquire::Samples(_) => String::new(),
+            gyrocal_files::Acquire::Samples(_) => String::new(),
         };
         let _ = writeln!(
             o,
@@ -345,7 +346,7 @@ fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
         "physical bound     {} (ramps at the acceleration limit + dwells + arming and reading time + unavoidable transfers)",
         hms(est.bound.as_secs_f64())
     );
-    if plan.kind() == gyrocal_run::PlanKind::Drift {
+    if plan.kind() == gyrocal_files::PlanKind::Drift {
         let d = plan.drift();
         let _ = writeln!(
             o,
@@ -362,7 +363,7 @@ fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
         let _ = writeln!(
             o,
             "warm-up: {}, {} s windows, up to {} (not in the estimate)",
-            if plan.kind() == gyrocal_run::PlanKind::Drift {
+            if plan.kind() == gyrocal_files::PlanKind::Drift {
                 "watched in the record's first segments"
             } else {
                 "before the sweep, at 0 °/s"

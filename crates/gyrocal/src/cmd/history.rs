@@ -31,10 +31,10 @@ pub struct HistoryArgs {
 fn sci(v: Option<f64>, u: Option<f64>) -> String {
     match (v, u) {
         (Some(v), Some(u)) => {
-            let (v, u) = gyrocal_run::num::value_and_u(v, Some(u));
+            let (v, u) = gyrocal_files::num::value_and_u(v, Some(u));
             format!("{v} ± {u}")
         }
-        (Some(v), None) => gyrocal_run::num::significant(v, 7),
+        (Some(v), None) => gyrocal_files::num::significant(v, 7),
         _ => "—".to_string(),
     }
 }

@@ -6,9 +6,9 @@
 
 use std::time::Duration;
 
+use gyrocal_files::{Plan, Port};
 use gyrocal_link::LinkOptions;
 use gyrocal_meter::Multimeter;
-use gyrocal_run::{Plan, Port};
 use gyrocal_table::RateTable;
 
 /// How long each instrument may take to identify itself.

@@ -51,12 +51,12 @@ pub struct ReportArgs {
 fn destination(args: &ReportArgs) -> Result<PathBuf, BadInput> {
     match (&args.out, args.inputs.as_slice()) {
         (Some(out), _) => Ok(out.clone()),
-        (None, [one]) if one.is_dir() => Ok(one.join(gyrocal_run::rundir::REPORT_HTML)),
+        (None, [one]) if one.is_dir() => Ok(one.join(gyrocal_files::rundir::REPORT_HTML)),
         (None, [one]) => Ok(one
             .parent()
             .filter(|d| !d.as_os_str().is_empty())
             .unwrap_or(std::path::Path::new("."))
-            .join(gyrocal_run::rundir::REPORT_HTML)),
+            .join(gyrocal_files::rundir::REPORT_HTML)),
         (None, many) => Err(BadInput(format!(
             "{} inputs: say where their combined report goes with -o FILE (for example -o \
              reports/combined.html; the plots are written beside it); each run directory keeps \
@@ -131,7 +131,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
                 )
                 .into());
             };
-            let spec = gyrocal_run::plan::load_acceptance(path)
+            let spec = gyrocal_files::plan::load_acceptance(path)
                 .map_err(|e| BadInput(format!("--acceptance: {e}")))?;
             let mut input =
                 gyrocal_report::load_inputs_checked(std::slice::from_ref(one), args.allow_modified)

@@ -179,7 +179,7 @@ fn load_config(path: &Path) -> Result<BenchConfig> {
     let table: toml::Table = toml::from_str(&src)
         .map_err(|e| BadInput(format!("{shown}: not TOML: {}", one_line(&e.to_string()))))?;
     if table.contains_key("plan") || table.contains_key("simulation") {
-        let plan = gyrocal_run::Plan::from_toml_str(&src, path)
+        let plan = gyrocal_files::Plan::from_toml_str(&src, path)
             .map_err(|e| BadInput(one_line(&e.to_string())))?;
         Ok(gyrocal_sim::from_plan::bench_config(&plan))
     } else {

@@ -21,7 +21,7 @@ pub struct VerifyArgs {
 pub fn run(args: &VerifyArgs) -> anyhow::Result<u8> {
     let mut bad = 0usize;
     for dir in &args.runs {
-        let v = gyrocal_run::rundir::verify(dir).map_err(|e| crate::run_dir_error(e, None))?;
+        let v = gyrocal_files::rundir::verify(dir).map_err(|e| crate::run_dir_error(e, None))?;
         for p in &v.problems {
             bad += 1;
             println!("{}: {p}", dir.display());
@@ -43,8 +43,8 @@ pub fn run(args: &VerifyArgs) -> anyhow::Result<u8> {
         let missing: Vec<&str> = v
             .checks
             .iter()
-            .filter(|c| c.state == gyrocal_run::rundir::FileState::NotRecorded)
-            .filter(|c| gyrocal_run::rundir::DATA_FILES.contains(&c.file.as_str()))
+            .filter(|c| c.state == gyrocal_files::rundir::FileState::NotRecorded)
+            .filter(|c| gyrocal_files::rundir::DATA_FILES.contains(&c.file.as_str()))
             .map(|c| c.file.as_str())
             .collect();
         if !missing.is_empty() {

@@ -1,5 +1,5 @@
 //! The ending of a run: the results of a complete run analysed as its compiled steps say
-//! ([`gyrocal_run::steps::Analysis`]), the closing lines, where the table was left, the exit
+//! ([`gyrocal_files::steps::Analysis`]), the closing lines, where the table was left, the exit
 //! code.
 
 use super::*;

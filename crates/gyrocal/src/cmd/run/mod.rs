@@ -1,6 +1,6 @@
 //! `gyrocal run PLAN`: the calibration run, on real instruments or on the simulated bench.
 //!
-//! The run directory is written as the run goes (see `gyrocal_run::rundir`); at the end the
+//! The run directory is written as the run goes (see `gyrocal_files::rundir`); at the end the
 //! data are fitted, `fit.json` and `report.html` written, and the elapsed time compared with
 //! the physical bound.
 //!
@@ -23,11 +23,9 @@ use std::time::Duration;
 use anyhow::Context as _;
 use clap::Args;
 use gyrocal_analysis::sweep::fit_run;
+use gyrocal_files::{Plan, RunDir, RunMeta, Status};
 use gyrocal_link::Transport;
-use gyrocal_run::{
-    Event, Phase, Plan, RunDir, RunMeta, RunSummary, SequencerOptions, Status, StopRequest,
-    TableRest,
-};
+use gyrocal_run::{Event, Phase, RunSummary, SequencerOptions, StopRequest, TableRest};
 use tokio::sync::{mpsc, watch};
 
 use crate::BadInput;
@@ -178,9 +176,9 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
     let (mut plan, plan_path) = match (&args.plan, &args.resume) {
         (Some(path), _) => (load_plan(path)?, path.clone()),
         (None, Some(dir)) => {
-            let plan = gyrocal_run::rundir::run_plan(dir)
+            let plan = gyrocal_files::rundir::run_plan(dir)
                 .map_err(|e| crate::run_dir_error(e, Some("--resume")))?;
-            (plan, dir.join(gyrocal_run::rundir::MANIFEST_JSON))
+            (plan, dir.join(gyrocal_files::rundir::MANIFEST_JSON))
         }
         (None, None) => return Err(BadInput("a plan (or --resume DIR) is needed".into()).into()),
     };

@@ -9,8 +9,8 @@ pub(super) type PendingDeviations = Vec<(String, String)>;
 
 /// What a run records about the gyro, the station and the departures known before it starts.
 pub(super) struct Records {
-    pub(super) dut: Option<gyrocal_run::Dut>,
-    pub(super) station: Option<gyrocal_run::station::Station>,
+    pub(super) dut: Option<gyrocal_files::Dut>,
+    pub(super) station: Option<gyrocal_files::station::Station>,
     /// (kind, text) of each deviation to record when the run directory is open.
     pub(super) deviations: PendingDeviations,
     /// Where the run is indexed (`None`: not at all).
@@ -37,7 +37,7 @@ pub(super) fn catalog_note(f: impl FnOnce(&gyrocal_catalog::CatalogWriter, &Path
 /// `--catalog` is bad input; any other catalog trouble is a warning (the run goes on).
 pub(super) fn catalog_url(
     args: &RunArgs,
-    station: Option<&gyrocal_run::station::Station>,
+    station: Option<&gyrocal_files::station::Station>,
 ) -> anyhow::Result<Option<gyrocal_catalog::CatalogUrl>> {
     let off = |s: &str| matches!(s.trim(), "off" | "none");
     if let Some(flag) = &args.catalog {
@@ -65,12 +65,12 @@ pub(super) fn catalog_url(
 /// The gyro under test: the plan's `[dut]`, overridden by `--dut-serial`/`--dut-model`. A new
 /// simulated run without a serial gets the simulated gyro's (`SIM-GYRO-<seed>`), so its
 /// certificate is complete; a resume keeps what the run recorded.
-pub(super) fn dut_for_run(args: &RunArgs, plan: &Plan) -> Option<gyrocal_run::Dut> {
+pub(super) fn dut_for_run(args: &RunArgs, plan: &Plan) -> Option<gyrocal_files::Dut> {
     let from_plan = plan.dut().cloned().unwrap_or_default();
-    let mut dut = from_plan.overridden_by(gyrocal_run::Dut {
+    let mut dut = from_plan.overridden_by(gyrocal_files::Dut {
         serial: args.dut_serial.clone(),
         model: args.dut_model.clone(),
-        ..gyrocal_run::Dut::default()
+        ..gyrocal_files::Dut::default()
     });
     if args.simulate && args.resume.is_none() && dut.serial.is_none() {
         dut.serial = Some(format!("SIM-GYRO-{}", plan.simulation().seed));
@@ -88,8 +88,8 @@ pub(super) fn station_for_run(
     args: &RunArgs,
     plan: &Plan,
     sim_seed: u64,
-) -> anyhow::Result<(Option<gyrocal_run::station::Station>, PendingDeviations)> {
-    use gyrocal_run::station::Station;
+) -> anyhow::Result<(Option<gyrocal_files::station::Station>, PendingDeviations)> {
+    use gyrocal_files::station::Station;
     let today = jiff::Zoned::now().date();
     let station = match Station::resolve(args.station.as_deref())
         .map_err(|e| BadInput(format!("station: {e}")))?
@@ -167,12 +167,12 @@ pub(super) fn open_run_dir(
 pub(super) fn open_run_dir_inner(
     args: &RunArgs,
     plan: &Plan,
-    dut: Option<gyrocal_run::Dut>,
-    station: Option<gyrocal_run::station::Station>,
+    dut: Option<gyrocal_files::Dut>,
+    station: Option<gyrocal_files::station::Station>,
 ) -> anyhow::Result<(PathBuf, RunDir)> {
     let virtual_time = args.simulate;
     // the environment as entered, else the station's usual conditions
-    let context = gyrocal_run::RunContext {
+    let context = gyrocal_files::RunContext {
         operator: args.operator.clone(),
         customer: args.customer.clone(),
         ambient_c: args
@@ -188,7 +188,7 @@ pub(super) fn open_run_dir_inner(
         virtual_time,
         dut,
         station,
-        context: (context != gyrocal_run::RunContext::default()).then_some(context),
+        context: (context != gyrocal_files::RunContext::default()).then_some(context),
         ..RunMeta::default()
     };
     // A directory whose creation was interrupted holds no data: the run starts in it.
@@ -238,7 +238,7 @@ pub(super) fn open_run_dir_inner(
 }
 
 /// How a station reads in a deviation: its id and its instruments' asset ids and serials.
-pub(super) fn station_words(s: &gyrocal_run::station::Station) -> String {
+pub(super) fn station_words(s: &gyrocal_files::station::Station) -> String {
     let instruments = s
         .instruments()
         .iter()
@@ -256,10 +256,10 @@ pub(super) fn station_words(s: &gyrocal_run::station::Station) -> String {
 /// instruments' models, asset ids, serials and certificates; not the dates, which a simulated
 /// station takes from the day) is the one the run started on.
 pub(super) fn station_change(
-    started: Option<&gyrocal_run::station::Station>,
-    now: Option<&gyrocal_run::station::Station>,
+    started: Option<&gyrocal_files::station::Station>,
+    now: Option<&gyrocal_files::station::Station>,
 ) -> Option<String> {
-    let key = |s: &gyrocal_run::station::Station| {
+    let key = |s: &gyrocal_files::station::Station| {
         let mut k = vec![s.id.clone()];
         for (role, r) in s.instruments() {
             k.extend([
@@ -297,9 +297,9 @@ pub(super) fn check_resume_dut(dir: &Path, serial: Option<&str>) -> anyhow::Resu
     let Some(serial) = serial else {
         return Ok(());
     };
-    let path = dir.join(gyrocal_run::rundir::MANIFEST_JSON);
+    let path = dir.join(gyrocal_files::rundir::MANIFEST_JSON);
     let Ok(bytes) =
-        gyrocal_run::rundir::read_capped(&path, gyrocal_run::rundir::MAX_MANIFEST_BYTES)
+        gyrocal_files::rundir::read_capped(&path, gyrocal_files::rundir::MAX_MANIFEST_BYTES)
     else {
         return Ok(()); // the resume names the missing or unreadable manifest itself
     };
@@ -325,9 +325,9 @@ pub(super) fn check_resume_dut(dir: &Path, serial: Option<&str>) -> anyhow::Resu
 /// opened or changed: it would mix simulated and measured data in one calibration. Reads only
 /// the manifest's `simulated` flag (the rest is checked by the resume itself).
 pub(super) fn check_resume_mode(dir: &Path, simulate: bool) -> anyhow::Result<()> {
-    let path = dir.join(gyrocal_run::rundir::MANIFEST_JSON);
+    let path = dir.join(gyrocal_files::rundir::MANIFEST_JSON);
     let Ok(bytes) =
-        gyrocal_run::rundir::read_capped(&path, gyrocal_run::rundir::MAX_MANIFEST_BYTES)
+        gyrocal_files::rundir::read_capped(&path, gyrocal_files::rundir::MAX_MANIFEST_BYTES)
     else {
         return Ok(()); // the resume names the missing, unreadable or oversized manifest itself
     };
@@ -369,6 +369,6 @@ pub(super) fn attach_log(dir: &Path) {
 
 pub(super) fn default_dir(plan: &Path) -> PathBuf {
     let stem = plan.file_stem().and_then(|s| s.to_str()).unwrap_or("run");
-    let now = gyrocal_run::rfc3339_utc(std::time::SystemTime::now()).replace(':', "");
+    let now = gyrocal_files::rfc3339_utc(std::time::SystemTime::now()).replace(':', "");
     PathBuf::from("runs").join(format!("{stem}-{now}"))
 }
