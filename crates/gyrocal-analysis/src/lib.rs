@@ -23,7 +23,7 @@
 
 use std::path::Path;
 
-use gyrocal_files::plan::PlanKind;
+use gyrocal_files::plan::{Plan, PlanKind};
 use gyrocal_files::rundir::{ALLAN_JSON, FIT_JSON, Manifest, RunDir};
 
 pub mod drift;
@@ -31,6 +31,16 @@ mod error;
 pub mod sweep;
 
 pub use error::{AnalysisError, DriftError, ErrorKind, FitRunError};
+
+/// What the analysis will not be able to do with a run of `plan` (at `path`, for the
+/// messages): one line each, said by `gyrocal check` and before `gyrocal run` starts.
+pub fn plan_warnings(plan: &Plan, path: &Path) -> Vec<String> {
+    match RunKind::of_plan(plan) {
+        RunKind::Sweep => sweep::plan_warnings(plan, path),
+        // a drift record is analysed by Allan deviation, not fitted
+        RunKind::Drift => Vec::new(),
+    }
+}
 
 /// What kind of analysis a run gets: the one dispatch on a run's kind.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -44,7 +54,12 @@ pub enum RunKind {
 impl RunKind {
     /// The kind of the run whose manifest is `m` (its plan's kind).
     pub fn of(m: &Manifest) -> RunKind {
-        match m.plan.kind() {
+        RunKind::of_plan(&m.plan)
+    }
+
+    /// The kind of analysis a run of `plan` will get.
+    pub fn of_plan(plan: &Plan) -> RunKind {
+        match plan.kind() {
             PlanKind::ScaleFactor => RunKind::Sweep,
             PlanKind::Drift => RunKind::Drift,
         }

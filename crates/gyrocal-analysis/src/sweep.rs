@@ -9,6 +9,7 @@
 
 use std::path::Path;
 
+use gyrocal_files::plan::Plan;
 use gyrocal_files::rundir::{Manifest, RunData, RunDir, STEPS_CSV, StepRecord, load};
 use gyrocal_files::station;
 
@@ -210,4 +211,32 @@ pub fn uncertainty_inputs(
         ),
     }
     (inputs, missing)
+}
+
+/// One line per default model the sweep's schedule cannot support: the fit will skip it
+/// (`gyrocal check` and `gyrocal run` say so before the run).
+pub fn plan_warnings(plan: &Plan, path: &Path) -> Vec<String> {
+    let rates: Vec<f64> = plan.schedule().iter().map(|s| s.rate_dps).collect();
+    let mut distinct = rates.clone();
+    distinct.sort_by(f64::total_cmp);
+    distinct.dedup();
+    let list: Vec<String> = distinct.iter().map(f64::to_string).collect();
+    gyrocal_fit::unsupported_models(&rates, &gyrocal_fit::Options::default().models)
+        .into_iter()
+        .map(|s| {
+            format!(
+                "{}: the schedule has {} distinct rates ({} °/s): the fit will skip the {} model: {}{}",
+                path.display(),
+                distinct.len(),
+                list.join(", "),
+                s.model,
+                s.reason,
+                if s.model == gyrocal_fit::Model::Split {
+                    " (so no asymmetry, K+ or K-)"
+                } else {
+                    ""
+                }
+            )
+        })
+        .collect()
 }

@@ -292,6 +292,26 @@ fn validate_drift(d: &DriftDoc, cx: &Ctx<'_>) -> Result<DriftSettings, PlanError
     Ok(DriftSettings { table, earth })
 }
 
+/// What `gyrocal check` says of a drift plan: the table's role and the Earth rate removed.
+pub(super) fn summary(d: &DriftSettings) -> super::kind::KindSummary {
+    super::kind::KindSummary {
+        line: format!(
+            "drift record: table {}{}",
+            d.table.describe(),
+            d.earth.map_or(String::new(), |(a, l)| format!(
+                "; input axis {} at latitude {l}°: {:.3} °/h of Earth rate removed from the bias",
+                a.as_str(),
+                a.earth_rate_dph(l)
+            ))
+        ),
+        json: serde_json::json!({
+            "table": d.table.as_str(),
+            "axis": d.earth.map(|(a, _)| a.as_str()),
+            "latitude_deg": d.earth.map(|(_, l)| l),
+        }),
+    }
+}
+
 /// The drift record compiled to steps (see [`crate::steps`]): segment steps at zero rate, the
 /// table's part set by `[drift] table` (hold 0 °/s with the servo on, at rest with the servo
 /// off, or no table), the warm-up (when asked for) watched in the record's first segments.

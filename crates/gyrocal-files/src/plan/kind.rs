@@ -53,6 +53,22 @@ pub(crate) fn compile(
     }
 }
 
+/// What a kind says of itself in `gyrocal check` (its own section of the plan).
+#[derive(Debug, Clone, PartialEq)]
+pub struct KindSummary {
+    /// One line for the terminal.
+    pub line: String,
+    /// Its settings for `gyrocal check --json` (under the kind's name).
+    pub json: serde_json::Value,
+}
+
+pub(super) fn summary(plan: &super::Plan) -> Option<KindSummary> {
+    match plan.kind() {
+        PlanKind::ScaleFactor => None,
+        PlanKind::Drift => Some(drift::summary(&plan.drift())),
+    }
+}
+
 /// `[plan] kind` as written.
 pub(super) fn parse(kind: &str, cx: &Ctx<'_>) -> Result<PlanKind, PlanError> {
     PlanKind::ALL

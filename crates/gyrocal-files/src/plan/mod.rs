@@ -95,8 +95,8 @@ pub use error::{Location, PlanError, PlanErrorKind};
 /// validated (`tcp://HOST:PORT`, `prologix:DEVICE?addr=N`, `prologix-tcp://HOST?addr=N` or a
 /// serial device path); nothing downstream parses the string again.
 pub use gyrocal_link::PortSpec as Port;
-pub use kind::PlanKind;
 pub(crate) use kind::compile;
+pub use kind::{KindSummary, PlanKind};
 pub use schedule::{Acquire, Step};
 pub use section::{MAX_REPEAT, MAX_SAMPLES_PER_RATE, MAX_WHOLE_REVOLUTIONS, PlanSectionDoc};
 pub use simulation::Simulation;
@@ -206,6 +206,11 @@ impl Plan {
     /// What the plan measures.
     pub fn kind(&self) -> PlanKind {
         self.kind
+    }
+    /// What `gyrocal check` says of the plan's kind beyond the schedule (its own section),
+    /// written by the kind's module; `None` for a kind with nothing to add (a sweep).
+    pub fn kind_summary(&self) -> Option<KindSummary> {
+        kind::summary(self)
     }
 
     /// Rates of one pass, in the order applied, °/s.

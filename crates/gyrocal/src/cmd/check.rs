@@ -78,7 +78,7 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
     let steps = plan.schedule();
     let timing = crate::instruments::meter_timing(&plan);
     let est = estimate::estimate(&plan, &steps, 0.0, timing.as_ref());
-    let mut warnings = model_warnings(&plan, &args.plan);
+    let mut warnings = gyrocal_analysis::plan_warnings(&plan, &args.plan);
     // the station `gyrocal run` would use, read the same way (a bad one is bad input)
     if let Some((path, station)) = gyrocal_files::station::Station::resolve(args.station.as_deref())
         .map_err(|e| BadInput(format!("station: {e}")))?
@@ -159,36 +159,6 @@ pub fn station_warnings(
         .collect()
 }
 
-/// One line per default model the plan's schedule cannot support: the fit will skip it.
-pub fn model_warnings(plan: &Plan, path: &std::path::Path) -> Vec<String> {
-    if plan.kind() == gyrocal_files::PlanKind::Drift {
-        return Vec::new(); // a drift record is analysed by Allan deviation, not fitted
-    }
-    let rates: Vec<f64> = plan.schedule().iter().map(|s| s.rate_dps).collect();
-    let mut distinct = rates.clone();
-    distinct.sort_by(f64::total_cmp);
-    distinct.dedup();
-    let list: Vec<String> = distinct.iter().map(f64::to_string).collect();
-    gyrocal_fit::unsupported_models(&rates, &gyrocal_fit::Options::default().models)
-        .into_iter()
-        .map(|s| {
-            format!(
-                "{}: the schedule has {} distinct rates ({} °/s): the fit will skip the {} model: {}{}",
-                path.display(),
-                distinct.len(),
-                list.join(", "),
-                s.model,
-                s.reason,
-                if s.model == gyrocal_fit::Model::Split {
-                    " (so no asymmetry, K+ or K-)"
-                } else {
-                    ""
-                }
-            )
-        })
-        .collect()
-}
-
 /// Formats seconds as `1 h 02 min 03.4 s`, `2 min 03.4 s` or `3.42 s`.
 pub fn hms(s: f64) -> String {
     if !s.is_finite() {
@@ -249,14 +219,7 @@ fn json(
         "readings": est.steps.iter().map(|s| s.samples).sum::<u64>(),
         "estimated_s": est.total.as_secs_f64(),
         "bound_s": est.bound.as_secs_f64(),
-        "drift": (plan.kind() == gyrocal_files::PlanKind::Drift).then(|| {
-            let d = plan.drift();
-            serde_json::json!({
-                "table": d.table.as_str(),
-                "axis": d.earth.map(|(a, _)| a.as_str()),
-                "latitude_deg": d.earth.map(|(_, l)| l),
-            })
-        }),
+        "drift": plan.kind_summary().map(|k| k.json),
         "warmup": plan.warmup().map(|w| serde_json::json!({
             "window_s": w.window.as_secs_f64(),
             "tolerance_v": w.tolerance_v,
@@ -346,24 +309,17 @@ fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
         "physical bound     {} (ramps at the acceleration limit + dwells + arming and reading time + unavoidable transfers)",
         hms(est.bound.as_secs_f64())
     );
-    if plan.kind() == gyrocal_files::PlanKind::Drift {
-        let d = plan.drift();
-        let _ = writeln!(
-            o,
-            "drift record: table {}{}",
-            d.table.describe(),
-            d.earth.map_or(String::new(), |(a, l)| format!(
-                "; input axis {} at latitude {l}°: {:.3} °/h of Earth rate removed from the bias",
-                a.as_str(),
-                a.earth_rate_dph(l)
-            ))
-        );
+    if let Some(k) = plan.kind_summary() {
+        let _ = writeln!(o, "{}", k.line);
     }
     if let Some(w) = plan.warmup() {
         let _ = writeln!(
             o,
             "warm-up: {}, {} s windows, up to {} (not in the estimate)",
-            if plan.kind() == gyrocal_files::PlanKind::Drift {
+            if gyrocal_files::steps::compile(plan, &[], false)
+                .warmup_in_record
+                .is_some()
+            {
                 "watched in the record's first segments"
             } else {
                 "before the sweep, at 0 °/s"

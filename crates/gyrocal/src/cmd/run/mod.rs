@@ -222,7 +222,7 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
         catalog,
     };
     // what `check` warns about, said again before the instruments move
-    for w in crate::cmd::check::model_warnings(&plan, &plan_path) {
+    for w in gyrocal_analysis::plan_warnings(&plan, &plan_path) {
         say!("gyrocal: warning: {w}");
     }
     let mut faults = Vec::with_capacity(args.sim_faults.len());
