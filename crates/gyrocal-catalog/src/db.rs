@@ -20,6 +20,7 @@ use sqlx::sqlite::{
 use crate::error::CatalogError;
 use crate::health;
 use crate::record::{CheckRow, InstrumentRow, Results, RunRecord, RunRow, StepRow};
+use crate::rows::{Calibration, RunSummary};
 use crate::url::CatalogUrl;
 
 // The migrations: one folder (`migrations/`) for both backends, compiled in.
@@ -159,28 +160,6 @@ pub struct RunFilter {
     pub station: Option<String>,
     /// At most this many runs (newest first).
     pub limit: Option<i64>,
-}
-
-/// One line of [`Catalog::runs`]: the run and its headline results.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct RunSummary {
-    /// The run.
-    #[serde(flatten)]
-    pub run: RunRow,
-    /// Its results, when fitted.
-    pub results: Option<Results>,
-}
-
-/// One calibration of a gyro, for its history.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct Calibration {
-    /// The run.
-    #[serde(flatten)]
-    pub run: RunRow,
-    /// Its results.
-    pub results: Option<Results>,
-    /// Its acceptance checks (with their limits).
-    pub checks: Vec<CheckRow>,
 }
 
 const RUN_COLUMNS: &str = "r.id, r.directory, r.host, r.station_id, r.plan_name, r.plan_hash, \

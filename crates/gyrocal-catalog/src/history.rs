@@ -2,8 +2,8 @@
 
 use serde::Serialize;
 
-use crate::db::Calibration;
 use crate::record::Results;
+use crate::rows::Calibration;
 
 /// A quantity followed over the calibrations.
 #[derive(Debug, Clone, Copy)]

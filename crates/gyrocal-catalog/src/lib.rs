@@ -35,26 +35,38 @@
 //! compiled in (no system library).
 #![doc = include_str!("../SCHEMA.md")]
 
+#[cfg(feature = "db")]
 mod db;
 mod error;
+#[cfg(feature = "db")]
 mod health;
 mod history;
+#[cfg(feature = "db")]
 mod pg_probe;
 mod record;
+mod rows;
+#[cfg(feature = "db")]
 mod url;
+#[cfg(feature = "db")]
 mod writer;
 
-pub use db::{Calibration, Catalog, OpenOptions, RunFilter, RunSummary};
+#[cfg(feature = "db")]
+pub use db::{Catalog, OpenOptions, RunFilter};
 pub use error::{CatalogError, ErrorKind};
+#[cfg(feature = "db")]
 pub use health::{set_aside, sqlite_damage};
 pub use history::{Band, History, Limits, QUANTITIES, Quantity, Repeatability, Trend, TrendPoint};
 pub use record::{
     CheckRow, InstrumentRow, KIND_SCALE_FACTOR, Results, RunRecord, RunRow, StepRow, find_run_dirs,
     host_name, is_run_dir, read_run,
 };
+pub use rows::{Calibration, RunSummary};
+#[cfg(feature = "db")]
 pub use url::{CATALOG_ENV, CatalogUrl, redact, resolve};
+#[cfg(feature = "db")]
 pub use writer::{CatalogWriter, WriterOptions, WriterStats};
 
+#[cfg(feature = "db")]
 impl Catalog {
     /// The history of the gyro `serial`: its complete calibrations (simulated ones only when
     /// `include_simulated`), repeatability, trends and control bands.

@@ -24,8 +24,8 @@
 //!   [`Report::write`] writes it. [`render_run`] and [`render_steps_csv`] are the one-input
 //!   shortcuts.
 //!
-//! Every page (this report, the drift page of [`allan`], a gyro's `history`, with the
-//! `history` feature) is built on [`page`]: one skeleton, one stylesheet, one HTML escaper.
+//! Every page (this report, the drift page of [`allan`], a gyro's [`history`]) is built on
+//! [`page`]: one skeleton, one stylesheet, one HTML escaper.
 //!
 //! # What it is not
 //!
@@ -37,7 +37,6 @@
 
 pub mod allan;
 mod certificate;
-#[cfg(feature = "history")]
 pub mod history;
 mod html;
 mod input;
