@@ -1794,3 +1794,60 @@ fn e2e_a_table_whose_replies_come_half_a_second_late_keeps_in_step() {
 fn e2e_a_table_whose_replies_come_1_2_s_late_keeps_in_step() {
     slow_table_completes(1.2, 8);
 }
+
+// ---------------------------------------------------------------------------------------------
+// A servo-off drift record that ends (complete, or resumed after a SIGINT) over
+// pseudo-terminals: the engine's other setup (rest, then the servo switched off through the
+// interlock) and the same teardown and ending as a sweep's
+
+#[test]
+fn e2e_a_servo_off_drift_record_completes_with_the_table_off_and_at_rest() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_drift_plan(tmp.path(), "servo_off", 3);
+    let dir = tmp.path().join("run");
+    let sim = Sim::start(&plan, &[]);
+    let end = Run::start(&plan, &sim, &out_args(&dir), None).wait();
+    assert_eq!(end.code, Some(0), "{end:?}");
+    assert!(end.stderr.contains("table at rest"), "{}", end.stderr);
+    assert_eq!(manifest(&dir)["status"], "complete");
+    assert_eq!(steps(&dir).len(), 3);
+    let (mode, rate) = probe_table(sim.table());
+    assert_eq!(mode, "OFF", "the servo is off after the record");
+    assert!(rate.abs() < 0.05, "table turning at {rate} °/s");
+    let last = sim.finish();
+    assert_table_parked(&last);
+    assert_eq!(
+        last["table"]["demands_seen"], 0,
+        "never given a rate: {last}"
+    );
+}
+
+#[test]
+fn e2e_a_servo_off_drift_record_stopped_by_sigint_resumes_to_completion_at_rest() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_drift_plan(tmp.path(), "servo_off", 4);
+    let dir = tmp.path().join("run");
+    let sim = Sim::start_scaled(&plan, &[], "5");
+    let run = Run::start(&plan, &sim, &out_args(&dir), None);
+    wait_segments(&dir, 1);
+    run.guard.signal(Signal::SIGINT);
+    let end = run.wait();
+    assert_eq!(end.code, Some(130), "{end:?}");
+    let done = steps(&dir).len();
+    assert!(done < 4, "stopped part-way: {done} segments");
+
+    let end = Run::start(&plan, &sim, &resume_args(&dir), None).wait();
+    assert_eq!(end.code, Some(0), "{end:?}");
+    assert!(end.stderr.contains("table at rest"), "{}", end.stderr);
+    assert_eq!(manifest(&dir)["status"], "complete");
+    assert_eq!(steps(&dir).len(), 4, "every segment once");
+    let (mode, rate) = probe_table(sim.table());
+    assert_eq!(mode, "OFF", "the servo stays off");
+    assert!(rate.abs() < 0.05, "table turning at {rate} °/s");
+    let last = sim.finish();
+    assert_table_parked(&last);
+    assert_eq!(
+        last["table"]["demands_seen"], 0,
+        "never given a rate: {last}"
+    );
+}
