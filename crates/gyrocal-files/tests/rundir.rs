@@ -5,73 +5,16 @@
 
 mod common;
 
+use common::{meta, plan, plan_text, run_step};
+
 use std::fs::{self, OpenOptions};
 use std::io::Write;
 use std::path::Path;
 
 use gyrocal_files::rundir::{MANIFEST_JSON, SAMPLES_CSV, STEPS_CSV};
 use gyrocal_files::{
-    Instruments, Plan, Retry, RunDir, RunError, RunMeta, Sample, Status, StepRecord, load,
-    load_samples,
+    Instruments, Plan, Retry, RunDir, RunError, Sample, Status, StepRecord, load, load_samples,
 };
-
-/// The plan of these tests' run directories (5 rates, 7 readings).
-fn plan_text() -> String {
-    common::plans::sweep("rundir test", &[0.0, 1.0, -1.0, 2.0, -2.0], 7)
-}
-
-fn plan() -> Plan {
-    Plan::from_toml_str(&plan_text(), Path::new("test.toml")).unwrap()
-}
-
-fn meta() -> RunMeta {
-    RunMeta {
-        gyrocal_version: "0.1.0-test".into(),
-        ..RunMeta::default()
-    }
-}
-
-fn volts(step: usize, i: u64) -> f64 {
-    0.0088 + 0.3612 * [0.0, 1.0, -1.0, 2.0, -2.0][step] + (i as f64) * 1e-6
-}
-
-/// Writes all samples of `step` in chunks of 3 (with an overload at index 4) and its record.
-fn run_step(rd: &mut RunDir, step: usize, record: bool) {
-    let n = 7u64;
-    let samples: Vec<Sample> = (0..n)
-        .map(|i| Sample {
-            index: i,
-            t_s: step as f64 * 10.0 + i as f64 * 0.0415,
-            volts: (i != 4).then(|| volts(step, i)),
-        })
-        .collect();
-    for chunk in samples.chunks(3) {
-        rd.append_samples(step, chunk).unwrap();
-    }
-    if record {
-        let s = rd.schedule()[step];
-        let good: Vec<f64> = samples.iter().filter_map(|s| s.volts).collect();
-        let mean = good.iter().sum::<f64>() / good.len() as f64;
-        rd.append_step(StepRecord {
-            step,
-            pass: s.pass,
-            rate_dps: s.rate_dps,
-            rate_meas_dps: Some(s.rate_dps + 1e-5),
-            rate_meas_std_dps: Some(1e-4),
-            rate_meas_min_dps: Some(s.rate_dps - 2e-4),
-            rate_meas_max_dps: Some(s.rate_dps + 2e-4),
-            rate_samples: Some(12),
-            volts: mean,
-            volts_std: Some(1e-6),
-            n: good.len() as u64,
-            overloads: 1,
-            retries: 0,
-            t_start_s: step as f64 * 10.0,
-            t_end_s: step as f64 * 10.0 + 0.3,
-        })
-        .unwrap();
-    }
-}
 
 fn append_raw(path: &Path, bytes: &[u8]) {
     OpenOptions::new()
