@@ -75,8 +75,9 @@ pub struct Engine<B: Bench> {
     /// The live feeds of the sinks that want them (settle samples, each reading).
     live: Vec<LiveFn>,
     options: SequencerOptions,
-    /// The plan compiled for this session (at the start of [`Engine::run`]).
-    program: Option<Compiled>,
+    /// The plan compiled for this session (at construction, again at the start of
+    /// [`Engine::run`] from the run directory as it is then).
+    program: Compiled,
     origin: Instant,
     offset_s: f64,
     recorded: usize,
@@ -108,6 +109,7 @@ impl<B: Bench> Engine<B> {
         let stop_handle = bench.table().stop_handle();
         let offset_s = run.manifest().elapsed_s;
         let repeats = Repeats::new(options.step_retries, options.lost_retries);
+        let program = compile_for(&plan, &run);
         Engine {
             plan,
             bench,
@@ -119,7 +121,7 @@ impl<B: Bench> Engine<B> {
             },
             live: Vec::new(),
             options,
-            program: None,
+            program,
             origin: Instant::now(),
             offset_s,
             recorded: 0,
@@ -184,12 +186,7 @@ impl<B: Bench> Engine<B> {
         // the plan compiled for this session: what the teardown must bring to rest is known
         // before any instrument is asked anything
         let run = &self.sinks.run;
-        let warmup_done = run.manifest().warmup.as_ref().is_some_and(|w| w.complete);
-        self.program = Some(steps::compile(
-            &self.plan,
-            &run.remaining_steps(),
-            warmup_done,
-        ));
+        self.program = compile_for(&self.plan, run);
         if let Some(done) = run.manifest().warmup.as_ref().filter(|w| w.complete)
             && self.plan.warmup().is_some()
         {
@@ -237,12 +234,6 @@ impl<B: Bench> Engine<B> {
         }
     }
 
-    fn program(&self) -> Result<&Compiled, SequenceError> {
-        self.program
-            .as_ref()
-            .ok_or_else(|| SequenceError::Panicked("the plan was not compiled".into()))
-    }
-
     /// Connects, sets up, and runs every step of the session; stops the table at the end.
     async fn steps(&mut self) -> Result<RunTiming, SequenceError> {
         self.sinks.begin(&Begin {
@@ -250,7 +241,7 @@ impl<B: Bench> Engine<B> {
         })?;
         let reading_time = self.connect_and_configure().await?;
         let (setup, schedule_len, warmup_in_record, actions, recording) = {
-            let p = self.program()?;
+            let p = &self.program;
             (
                 p.setup,
                 p.schedule_len,
@@ -537,4 +528,11 @@ fn panic_text(panic: &Box<dyn std::any::Any + Send>) -> String {
         .map(|s| s.to_string())
         .or_else(|| panic.downcast_ref::<String>().cloned())
         .unwrap_or_else(|| "unknown panic".into())
+}
+
+/// `plan` compiled for a session on `run`: its remaining steps, the warm-up left out when an
+/// earlier session completed it.
+fn compile_for(plan: &Plan, run: &RunDir) -> Compiled {
+    let warmup_done = run.manifest().warmup.as_ref().is_some_and(|w| w.complete);
+    steps::compile(plan, &run.remaining_steps(), warmup_done)
 }

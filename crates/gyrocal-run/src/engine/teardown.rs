@@ -147,7 +147,7 @@ impl<B: Bench> Engine<B> {
         stop: &mut watch::Receiver<StopRequest>,
         emergency_sent: bool,
     ) -> TableRest {
-        if self.program.as_ref().is_some_and(|p| !p.uses_table) {
+        if !self.program.uses_table {
             tracing::info!("no rate table in this run: nothing to bring to rest");
             self.tell(Event::Rest(TableRest::NoTable));
             return TableRest::NoTable;
