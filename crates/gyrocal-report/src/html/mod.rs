@@ -17,7 +17,7 @@ use summary::{best_rule_text, estimators, residual_table, summary};
 
 use crate::input::Input;
 use crate::page::Page;
-/// The escaper, from [`crate::page`] (kept at this path for the drift page's `use`).
+/// The one escaper ([`crate::page::esc`]), for the report's sections.
 pub(crate) use crate::page::esc;
 use crate::{Report, ReportError, certificate, plots};
 
