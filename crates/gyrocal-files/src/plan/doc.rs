@@ -12,7 +12,7 @@ use sha2::{Digest, Sha256};
 use gyrocal_fit::acceptance::AcceptanceSpec;
 
 use super::dmm::DmmDoc;
-use super::drift::{DriftDoc, DriftSettings};
+use super::kind::KindSectionsDoc;
 use super::section::{self, PlanSectionDoc};
 use super::simulation::Simulation;
 use super::table::TableDoc;
@@ -42,11 +42,12 @@ pub struct PlanDoc {
     /// `[acceptance]` (absent: no specification). Not part of the hash.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub acceptance: Option<AcceptanceSpec>,
-    /// `[drift]` (a drift plan's table role and bench orientation; absent: the defaults).
-    /// Part of the hash; absent from the documents of plans that have none, so their hashes
-    /// stay what they were.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub drift: Option<DriftDoc>,
+    /// The test kinds' own sections (`[drift]`), each under its own name at this place in
+    /// the document (so the serialised form, and the hash, of every existing plan stays byte
+    /// for byte what it was). Part of the hash; a section absent from the file is absent
+    /// from the document.
+    #[serde(flatten)]
+    pub kinds: KindSectionsDoc,
     /// `[warmup]` (absent: no warm-up). Part of the hash.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub warmup: Option<WarmupDoc>,
@@ -63,7 +64,7 @@ impl Plan {
             simulation: self.simulation.clone(),
             dut: self.dut.clone(),
             acceptance: self.acceptance.clone(),
-            drift: self.drift.map(DriftSettings::to_doc),
+            kinds: self.kind_sections.to_doc(),
             warmup: self.warmup.map(WarmupSettings::to_doc),
         }
     }

@@ -5,6 +5,7 @@
 //! that can switch its servo off).
 
 use serde::{Deserialize, Serialize};
+use toml::de::DeTable;
 
 use super::Plan;
 use super::error::PlanError;
@@ -187,6 +188,28 @@ impl DriftSettings {
 /// out.
 pub(super) fn has_no_table(d: Option<&DriftDoc>) -> bool {
     d.is_some_and(|d| d.table.trim() == TableRole::None.as_str())
+}
+
+/// The same, read off the file's shape before serde (`root`: the whole file), so the shape
+/// check does not ask for a `[table]` the plan does not need.
+pub(super) fn has_no_table_in(root: &DeTable<'_>) -> bool {
+    root.iter()
+        .find(|(k, _)| k.get_ref().as_ref() == "drift")
+        .and_then(|(_, v)| v.get_ref().as_table())
+        .and_then(|d| {
+            d.iter()
+                .find(|(k, _)| k.get_ref().as_ref() == "table")
+                .and_then(|(_, v)| v.get_ref().as_str().map(|s| s.trim() == "none"))
+        })
+        .unwrap_or(false)
+}
+
+impl Plan {
+    /// `[drift]`: the table's role and the bench's orientation (the defaults when the plan
+    /// has no `[drift]`; only a drift plan may have one).
+    pub fn drift(&self) -> DriftSettings {
+        self.kind_sections.drift.unwrap_or_default()
+    }
 }
 
 /// A drift plan records once at rest: exactly one rate, 0.

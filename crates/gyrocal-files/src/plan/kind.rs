@@ -1,11 +1,99 @@
 //! What a plan measures ([`PlanKind`]) and the one dispatch on it in the plan crate: each
-//! kind's own rules live in its module ([`super::sweep`], [`super::drift`]); adding a kind is
-//! a variant here, an arm in each match below (its rules, its compile to steps) and its
-//! module.
+//! kind's own rules live in its module ([`super::sweep`], [`super::drift`]), its own section
+//! of the file (`[drift]`) included; adding a kind is its module and this file (a variant,
+//! an arm in each match below, its section's field in [`KindSectionsDoc`] and
+//! [`KindSections`]). The common sections' modules (raw, document, schema, validation) reach
+//! the kinds' sections only through here.
 
+use serde::{Deserialize, Serialize};
+use toml::de::DeTable;
+
+use super::drift::{DriftDoc, DriftSettings, RawDrift};
 use super::error::PlanError;
+use super::raw::Spans;
+use super::schema::SectionSchema;
+use super::table::TableDialect;
 use super::validate::Ctx;
 use super::{drift, sweep};
+
+/// The test kinds' own sections of the file (name, required, keys), in the order the file
+/// documents them: part of the schema the file's shape is checked against.
+pub(super) const SECTIONS: &[SectionSchema] = &[("drift", false, drift::KEYS)];
+
+/// The kinds' own sections as written in the file, read by their modules from the same text
+/// as the common sections (serde ignores the common sections here; their struct ignores
+/// these).
+#[derive(Deserialize)]
+struct RawSections {
+    drift: Option<RawDrift>,
+}
+
+/// Reads the kinds' own sections from the plan's text, their values' spans into `sp`.
+pub(super) fn raw_sections(src: &str, sp: &mut Spans) -> Result<KindSectionsDoc, toml::de::Error> {
+    let raw: RawSections = toml::from_str(src)?;
+    Ok(KindSectionsDoc {
+        drift: raw.drift.map(|d| DriftDoc::from_raw(d, sp)),
+    })
+}
+
+/// The test kinds' own sections in the document form (what the manifest stores and the hash
+/// covers): one optional field per kind that has a section, flattened into the
+/// [`super::PlanDoc`] at the place the document always had them.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct KindSectionsDoc {
+    /// `[drift]` (a drift plan's table role and bench orientation; absent: the defaults).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub drift: Option<DriftDoc>,
+}
+
+impl KindSectionsDoc {
+    /// Whether the kinds' sections leave the plan without a table (`[drift] table = "none"`):
+    /// then `[table]` may be left out.
+    pub(super) fn uses_table(&self) -> bool {
+        !drift::has_no_table(self.drift.as_ref())
+    }
+
+    /// Validates each section against the plan's `kind` (a kind's section on a plan of
+    /// another kind is refused) and the table's dialect.
+    pub(super) fn validate(
+        self,
+        kind: PlanKind,
+        dialect: TableDialect,
+        cx: &Ctx<'_>,
+    ) -> Result<KindSections, PlanError> {
+        Ok(KindSections {
+            drift: drift::validate(self.drift, kind, dialect, cx)?,
+        })
+    }
+}
+
+/// The kinds' own sections, validated.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub(super) struct KindSections {
+    pub(super) drift: Option<DriftSettings>,
+}
+
+impl KindSections {
+    /// As the document writes them.
+    pub(super) fn to_doc(&self) -> KindSectionsDoc {
+        KindSectionsDoc {
+            drift: self.drift.map(DriftSettings::to_doc),
+        }
+    }
+}
+
+/// Whether the file's shape (before serde) says the plan needs no `[table]`.
+pub(super) fn table_optional_in(root: &DeTable<'_>) -> bool {
+    drift::has_no_table_in(root)
+}
+
+/// Whether a run of `plan` uses a rate table.
+pub(super) fn uses_table(plan: &super::Plan) -> bool {
+    match plan.kind() {
+        PlanKind::ScaleFactor => true,
+        PlanKind::Drift => plan.drift().table != drift::TableRole::None,
+    }
+}
 
 pub(super) fn default_kind() -> String {
     PlanKind::ScaleFactor.as_str().to_string()
@@ -95,5 +183,41 @@ pub(super) fn check_rates(
     match kind {
         PlanKind::ScaleFactor => sweep::check_rates(rates, cx),
         PlanKind::Drift => drift::check_rates(rates, written, cx),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{Plan, PlanDoc};
+
+    const DRIFT: &str = "[plan]\nkind = \"drift\"\nrates_dps = [0]\nsamples_per_rate = 10\n\
+        [table]\nport = \"/dev/ttyUSB1\"\nmax_rate_dps = 20\nacceleration_dps2 = 10\n\
+        [dmm]\nport = \"/dev/ttyUSB0\"\n[drift]\ntable = \"servo_off\"\n[warmup]\n";
+
+    /// A kind's own section sits in the document where `[drift]` always sat (after
+    /// `[acceptance]`, before `[warmup]`), so the serialised document, and the hash, of a
+    /// drift plan are what they were before the kinds' sections moved behind this module.
+    #[test]
+    fn a_kinds_section_keeps_its_place_in_the_document() {
+        let plan = Plan::from_toml_str(DRIFT, std::path::Path::new("drift.toml")).unwrap();
+        let json = serde_json::to_string(&plan.to_doc()).unwrap();
+        let drift = json.find("\"drift\":{").unwrap();
+        let warmup = json.find("\"warmup\":{").unwrap();
+        let simulation = json.find("\"simulation\":{").unwrap();
+        assert!(simulation < drift && drift < warmup, "{json}");
+        assert_eq!(plan.drift().table, super::drift::TableRole::ServoOff);
+    }
+
+    /// A document (a manifest's plan) with a section no plan has is refused, as it was when
+    /// every section was a field of the document.
+    #[test]
+    fn a_document_with_an_unknown_section_is_refused() {
+        let plan = Plan::from_toml_str(DRIFT, std::path::Path::new("drift.toml")).unwrap();
+        let mut v = serde_json::to_value(plan.to_doc()).unwrap();
+        v.as_object_mut()
+            .unwrap()
+            .insert("bogus".into(), serde_json::json!({"x": 1}));
+        let back: Result<PlanDoc, _> = serde_json::from_value(v);
+        assert!(back.is_err(), "{back:?}");
     }
 }

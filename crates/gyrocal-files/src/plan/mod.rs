@@ -96,7 +96,7 @@ pub use error::{Location, PlanError, PlanErrorKind};
 /// serial device path); nothing downstream parses the string again.
 pub use gyrocal_link::PortSpec as Port;
 pub(crate) use kind::compile;
-pub use kind::{KindSummary, PlanKind};
+pub use kind::{KindSectionsDoc, KindSummary, PlanKind};
 pub use schedule::{Acquire, Step};
 pub use section::{MAX_REPEAT, MAX_SAMPLES_PER_RATE, MAX_WHOLE_REVOLUTIONS, PlanSectionDoc};
 pub use simulation::Simulation;
@@ -113,6 +113,12 @@ pub(crate) use words::{and_list, closest};
 use error::PLAN_DOCUMENT;
 use raw::{RawFile, Spans, raw_to_doc};
 use schema::{check_shape, finding_error, plain_words};
+
+/// The names of a plan file's sections (`plan`, `table`, ..., the test kinds' own), in the
+/// order the file documents them.
+pub(crate) fn section_names() -> impl Iterator<Item = &'static str> {
+    schema::schema().map(|s| s.0)
+}
 use source::{read_document, section_at};
 use validate::{Ctx, validate};
 
@@ -141,7 +147,8 @@ pub struct Plan {
     simulation: Simulation,
     dut: Option<PlanDut>,
     acceptance: Option<AcceptanceSpec>,
-    drift: Option<DriftSettings>,
+    /// The test kinds' own sections, validated (`[drift]`).
+    kind_sections: kind::KindSections,
     warmup: Option<WarmupSettings>,
     /// The file had a `[table]` section (without one, `[drift] table = "none"`: `table` holds
     /// [`TableDoc::unused`]'s settings, which nothing reads).
@@ -177,7 +184,8 @@ impl Plan {
         }
         let raw: RawFile = toml::from_str(src).map_err(syntax)?;
         let mut spans = Spans::default();
-        let doc = raw_to_doc(raw, &mut spans);
+        let kinds = kind::raw_sections(src, &mut spans).map_err(syntax)?;
+        let doc = raw_to_doc(raw, kinds, &mut spans);
         let cx = Ctx {
             origin,
             src: Some(src),
@@ -242,14 +250,9 @@ impl Plan {
         &self.dmm
     }
     /// Whether the run uses a rate table (every plan but a drift record with
-    /// `[drift] table = "none"`).
+    /// `[drift] table = "none"`): the plan's kind says.
     pub fn has_table(&self) -> bool {
-        self.drift().table != TableRole::None
-    }
-    /// `[drift]`: the table's role and the bench's orientation (the defaults when the plan
-    /// has no `[drift]`; only a drift plan may have one).
-    pub fn drift(&self) -> DriftSettings {
-        self.drift.unwrap_or_default()
+        kind::uses_table(self)
     }
     /// `[warmup]`, when the plan asks for a warm-up.
     pub fn warmup(&self) -> Option<&WarmupSettings> {

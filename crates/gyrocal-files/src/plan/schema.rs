@@ -1,5 +1,5 @@
 //! The file's shape, checked before serde so errors name the right place in words: the
-//! sections and their keys ([`SCHEMA`], assembled from each section's own module, where the
+//! sections and their keys ([`schema`], assembled from each section's own module, where the
 //! key's raw field, default and checks live beside its entry), what kind of value each key
 //! holds, and the findings (unknown section or key with a did-you-mean, a missing key, a
 //! value of the wrong kind) reported before the values are validated.
@@ -10,7 +10,7 @@ use gyrocal_fit::acceptance::{Limits, Quantity};
 
 use super::error::{Location, PlanError};
 use super::words::{and_list, closest, or_list};
-use super::{acceptance, dmm, drift, dut, section, simulation, table, warmup};
+use super::{acceptance, dmm, dut, section, simulation, table, warmup};
 
 /// One key of a section: its name, the kind of value it holds, and whether it is required.
 pub(super) type KeySchema = (&'static str, Kind, bool);
@@ -19,17 +19,25 @@ pub(super) type KeySchema = (&'static str, Kind, bool);
 /// the `Raw*` structs by a unit test.
 pub(super) type SectionSchema = (&'static str, bool, &'static [KeySchema]);
 
-/// Every section, in the order the file documents them.
-pub(super) const SCHEMA: &[SectionSchema] = &[
+/// The common sections before the test kinds' own ones, in the order the file documents them.
+const COMMON: &[SectionSchema] = &[
     ("plan", true, section::KEYS),
     ("table", true, table::KEYS),
     ("dmm", true, dmm::KEYS),
     ("simulation", false, simulation::KEYS),
     ("dut", false, dut::KEYS),
     ("acceptance", false, acceptance::KEYS),
-    ("drift", false, drift::KEYS),
-    ("warmup", false, warmup::KEYS),
 ];
+
+/// The common sections after the test kinds' own ones.
+const LAST: &[SectionSchema] = &[("warmup", false, warmup::KEYS)];
+
+/// Every section, in the order the file documents them: the common ones, with the test
+/// kinds' own sections ([`super::kind::SECTIONS`], written by each kind's module) between
+/// `[acceptance]` and `[warmup]`.
+pub(super) fn schema() -> impl Iterator<Item = &'static SectionSchema> + Clone {
+    COMMON.iter().chain(super::kind::SECTIONS).chain(LAST)
+}
 
 /// What a key holds, in the words an operator reads in an error message.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -92,8 +100,7 @@ impl IntRule {
 /// The values the integer key `section.key` allows: its schema entry's.
 pub(super) fn int_rule(key: &str) -> IntRule {
     let (section, name) = key.split_once('.').unwrap_or(("", key));
-    SCHEMA
-        .iter()
+    schema()
         .filter(|s| s.0 == section)
         .flat_map(|s| s.2.iter())
         .find_map(|&(k, kind, _)| match kind {
@@ -193,8 +200,7 @@ pub(super) fn check_keys(
     for (key, v) in table.iter() {
         let key_str: &str = key.get_ref().as_ref();
         let Some(&(kname, kind, _)) = keys.iter().find(|k| k.0 == key_str) else {
-            let elsewhere: Vec<String> = SCHEMA
-                .iter()
+            let elsewhere: Vec<String> = schema()
                 .filter(|s| s.0 != sname && s.2.iter().any(|k| k.0 == key_str))
                 .map(|s| format!("[{}]", s.0))
                 .collect();
@@ -301,13 +307,13 @@ fn check_limits(section: &str, table: &DeTable<'_>, out: &mut Vec<Finding>) {
     }
 }
 
-/// Checks the file's sections, keys and value kinds against [`SCHEMA`]; returns every finding.
+/// Checks the file's sections, keys and value kinds against [`schema`]; returns every finding.
 pub(super) fn check_shape(root: &DeTable<'_>) -> Vec<Finding> {
     let mut out = Vec::new();
-    let section_names = || SCHEMA.iter().map(|s| s.0);
+    let section_names = || schema().map(|s| s.0);
     for (name, value) in root.iter() {
         let name_str: &str = name.get_ref().as_ref();
-        let Some((sname, _, keys)) = SCHEMA.iter().find(|s| s.0 == name_str) else {
+        let Some((sname, _, keys)) = schema().find(|s| s.0 == name_str) else {
             let all = and_list(
                 &section_names()
                     .map(|s| format!("[{s}]"))
@@ -345,18 +351,10 @@ pub(super) fn check_shape(root: &DeTable<'_>) -> Vec<Finding> {
         };
         check_keys(sname, keys, table, Some(name.span().start), &mut out);
     }
-    // a drift record on a bench without a table leaves [table] out
-    let no_table = root
-        .iter()
-        .find(|(k, _)| k.get_ref().as_ref() == "drift")
-        .and_then(|(_, v)| v.get_ref().as_table())
-        .and_then(|d| {
-            d.iter()
-                .find(|(k, _)| k.get_ref().as_ref() == "table")
-                .and_then(|(_, v)| v.get_ref().as_str().map(|s| s.trim() == "none"))
-        })
-        .unwrap_or(false);
-    for &(sname, required, keys) in SCHEMA {
+    // a plan whose kind needs no table (a drift record with `[drift] table = "none"`) may
+    // leave [table] out
+    let no_table = super::kind::table_optional_in(root);
+    for &(sname, required, keys) in schema() {
         if sname == "table" && no_table {
             continue;
         }
@@ -436,7 +434,7 @@ mod tests {
     fn schema_matches_the_raw_structs() {
         let doc = |skip: Option<(&str, &str)>| {
             let mut text = String::new();
-            for &(section, _, keys) in SCHEMA {
+            for &(section, _, keys) in schema() {
                 text.push_str(&format!("[{section}]\n"));
                 for &(key, kind, _) in keys {
                     if skip != Some((section, key)) {
@@ -447,15 +445,17 @@ mod tests {
             text
         };
         let full = doc(None);
-        assert!(toml::from_str::<RawFile>(&full).is_ok(), "{full}");
-        for &(section, _, keys) in SCHEMA {
+        // the common sections are RawFile's; the kinds' own are read by their modules
+        let parse = |text: &str| {
+            toml::from_str::<RawFile>(text).and_then(|_| {
+                super::super::kind::raw_sections(text, &mut super::super::raw::Spans::default())
+            })
+        };
+        assert!(parse(&full).is_ok(), "{full}");
+        for &(section, _, keys) in schema() {
             for &(key, _, required) in keys {
                 let text = doc(Some((section, key)));
-                assert_eq!(
-                    toml::from_str::<RawFile>(&text).is_err(),
-                    required,
-                    "[{section}] {key}"
-                );
+                assert_eq!(parse(&text).is_err(), required, "[{section}] {key}");
             }
         }
     }

@@ -15,7 +15,7 @@ use super::raw::Spans;
 use super::schema::int_error;
 use super::source::line_col;
 use super::{MAX_DURATION_S, Plan, Port};
-use super::{acceptance, dmm, drift, dut, section, simulation, table, warmup};
+use super::{acceptance, dmm, dut, section, simulation, table, warmup};
 
 /// Where a plan came from, to place its errors.
 pub(super) struct Ctx<'a> {
@@ -135,13 +135,13 @@ pub(super) fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
         simulation,
         dut,
         acceptance,
-        drift,
+        kinds,
         warmup,
     } = doc;
     // [table] first: the rates are checked against its limits. A drift record without a
     // table (`[drift] table = "none"`) may leave the section out.
     let table_given = table.is_some();
-    let table = table::validate(table, drift::has_no_table(drift.as_ref()), cx)?;
+    let table = table::validate(table, !kinds.uses_table(), cx)?;
     let section = section::validate(plan, table.max_rate_dps, cx)?;
     let dmm = dmm::validate(dmm, &table.port, cx)?;
     simulation::validate(&simulation, cx)?;
@@ -149,10 +149,10 @@ pub(super) fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
     if let Some(a) = &acceptance {
         acceptance::validate(a, cx)?;
     }
-    let drift = drift::validate(drift, section.kind, table.dialect, cx)?;
+    let kind_sections = kinds.validate(section.kind, table.dialect, cx)?;
     let warmup = warmup.map(|w| warmup::validate(&w, cx)).transpose()?;
     Ok(Plan {
-        drift,
+        kind_sections,
         warmup,
         table_given,
         kind: section.kind,

@@ -374,16 +374,11 @@ mod manifest_plan {
 
     use crate::plan::{Plan, PlanDoc};
 
-    /// The sections that stay sections; every other key belongs to `[plan]`.
-    const SECTIONS: [&str; 7] = [
-        "table",
-        "dmm",
-        "simulation",
-        "dut",
-        "acceptance",
-        "drift",
-        "warmup",
-    ];
+    /// The sections that stay sections (the plan schema's, the test kinds' own included);
+    /// every other key belongs to `[plan]`.
+    fn sections() -> impl Iterator<Item = &'static str> {
+        crate::plan::section_names().filter(|&s| s != "plan")
+    }
 
     pub(super) fn serialize<S: Serializer>(plan: &Plan, s: S) -> Result<S::Ok, S::Error> {
         let doc = serde_json::to_value(plan.to_doc()).map_err(S::Error::custom)?;
@@ -394,7 +389,7 @@ mod manifest_plan {
             Some(Value::Object(section)) => section,
             _ => return Err(S::Error::custom("a plan has a [plan] section")),
         };
-        for key in SECTIONS {
+        for key in sections() {
             if let Some(v) = doc.remove(key) {
                 out.insert(key.to_string(), v);
             }
@@ -415,7 +410,7 @@ mod manifest_plan {
             Value::Object(obj)
         } else {
             let mut doc = Map::new();
-            for key in SECTIONS {
+            for key in sections() {
                 if let Some(v) = obj.remove(key) {
                     doc.insert(key.to_string(), v);
                 }
