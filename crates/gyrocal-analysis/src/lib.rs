@@ -28,9 +28,11 @@ use gyrocal_files::rundir::{ALLAN_JSON, FIT_JSON, Manifest, RunDir};
 
 pub mod drift;
 mod error;
+mod figures;
 pub mod sweep;
 
 pub use error::{AnalysisError, DriftError, ErrorKind, FitRunError};
+pub use figures::Figures;
 
 /// What the analysis will not be able to do with a run of `plan` (at `path`, for the
 /// messages): one line each, said by `gyrocal check` and before `gyrocal run` starts.
@@ -144,4 +146,20 @@ pub fn analyse_run(run: &mut RunDir, opts: &Options) -> Result<Analysis, Analysi
             Ok(Analysis::Drift(Box::new(doc)))
         }
     }
+}
+
+/// The headline figures of the run in `dir` (manifest `m`), read typed from the results file
+/// of its kind: a sweep's from its fit document (`fit`: the run's `fit.json`, or the fit a
+/// format-1 manifest embedded; `None` when it has none), a drift record's from its
+/// `allan.json`. `Ok(None)` when the run has no results yet; an error naming the file when
+/// `allan.json` cannot be read.
+pub fn figures(
+    dir: &Path,
+    m: &Manifest,
+    fit: Option<&serde_json::Value>,
+) -> Result<Option<Figures>, AnalysisError> {
+    Ok(match RunKind::of(m) {
+        RunKind::Sweep => fit.map(|fit| sweep::figures(fit, m)),
+        RunKind::Drift => drift::DriftFigures::load(dir)?.map(|d| d.figures()),
+    })
 }

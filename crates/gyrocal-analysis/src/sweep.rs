@@ -240,3 +240,172 @@ pub fn plan_warnings(plan: &Plan, path: &Path) -> Vec<String> {
         })
         .collect()
 }
+
+/// The headline figures of a sweep ([`crate::Figures`]) from its fit document (`fit`: the
+/// run's `fit.json`, or the fit a format-1 manifest embedded) and its manifest `m` (the
+/// headline figures it records, for a fit document that lacks them). Read typed and
+/// leniently: a figure the document lacks, or holds in another form, is `None`; the others
+/// are still read.
+pub fn figures(fit: &serde_json::Value, m: &Manifest) -> crate::Figures {
+    use serde::Deserialize as _;
+    let v = view::Fit::deserialize(fit).unwrap_or_default();
+    let lsq = |model: &str| {
+        v.fits.iter().find(|f| {
+            f.method.as_deref() == Some("least-squares") && f.model.as_deref() == Some(model)
+        })
+    };
+    let linear = lsq("linear");
+    let common = &v.metrics.asymmetry_common_k2;
+    let u = |q: &str| {
+        v.uncertainty
+            .quantities
+            .iter()
+            .find(|x| x.quantity.as_deref() == Some(q))
+            .and_then(|x| x.expanded_uncertainty)
+    };
+    let summary = m.fit_summary.as_ref();
+    let metrics = &v.metrics;
+    crate::Figures {
+        scale_factor: metrics.scale_factor.or(summary.map(|s| s.scale_factor)),
+        scale_factor_std_error: summary
+            .and_then(|s| s.scale_factor_std_error)
+            .or_else(|| linear.and_then(|l| l.std_errors.k1)),
+        bias_v: metrics.bias_volts.or(summary.map(|s| s.bias_volts)),
+        bias_v_std_error: summary
+            .and_then(|s| s.bias_std_error)
+            .or_else(|| linear.and_then(|l| l.std_errors.k0)),
+        bias_dph: metrics.bias_dph,
+        k_pos: metrics.scale_factor_positive,
+        k_neg: metrics.scale_factor_negative,
+        k2: common
+            .k2
+            .or_else(|| lsq("quadratic").and_then(|q| q.coefficients.k2)),
+        nonlinearity_ppm: metrics.nonlinearity_ppm,
+        asymmetry_ppm: metrics.asymmetry_ppm,
+        asymmetry_common_k2_ppm: common.asymmetry_ppm,
+        repeatability_ppm: metrics.repeatability_ppm,
+        u_scale_factor: u("scale_factor"),
+        u_bias_v: u("bias_v"),
+        u_bias_dph: u("bias_dph"),
+        u_k_pos: u("k_pos"),
+        u_k_neg: u("k_neg"),
+        best_model: v.best_model.clone(),
+        ..crate::Figures::default()
+    }
+}
+
+/// The parts of a fit document [`figures`] reads. Every field is lenient: absent, `null` or
+/// of another type, it reads as its default, so one odd field (a fit written by an earlier
+/// gyrocal) costs that figure, not the others.
+mod view {
+    use serde::de::DeserializeOwned;
+    use serde::{Deserialize, Deserializer};
+
+    /// Any JSON value, read as `T` when it is one, else `T`'s default.
+    fn lenient<'de, D: Deserializer<'de>, T: DeserializeOwned + Default>(
+        d: D,
+    ) -> Result<T, D::Error> {
+        let v = serde_json::Value::deserialize(d)?;
+        Ok(serde_json::from_value(v).unwrap_or_default())
+    }
+
+    /// A finite number, else `None`.
+    fn number<'de, D: Deserializer<'de>>(d: D) -> Result<Option<f64>, D::Error> {
+        let v = serde_json::Value::deserialize(d)?;
+        Ok(v.as_f64().filter(|x| x.is_finite()))
+    }
+
+    /// Non-empty text (a number as its decimal form), else `None`.
+    fn text<'de, D: Deserializer<'de>>(d: D) -> Result<Option<String>, D::Error> {
+        Ok(match serde_json::Value::deserialize(d)? {
+            serde_json::Value::String(s) if !s.is_empty() => Some(s),
+            serde_json::Value::Number(n) => Some(n.to_string()),
+            _ => None,
+        })
+    }
+
+    #[derive(Deserialize, Default)]
+    #[serde(default)]
+    pub(super) struct Fit {
+        #[serde(deserialize_with = "lenient")]
+        pub metrics: Metrics,
+        #[serde(deserialize_with = "lenient")]
+        pub fits: Vec<OneFit>,
+        #[serde(deserialize_with = "lenient")]
+        pub uncertainty: Uncertainty,
+        #[serde(deserialize_with = "text")]
+        pub best_model: Option<String>,
+    }
+
+    #[derive(Deserialize, Default)]
+    #[serde(default)]
+    pub(super) struct Metrics {
+        #[serde(deserialize_with = "number")]
+        pub scale_factor: Option<f64>,
+        #[serde(deserialize_with = "number")]
+        pub bias_volts: Option<f64>,
+        #[serde(deserialize_with = "number")]
+        pub bias_dph: Option<f64>,
+        #[serde(deserialize_with = "number")]
+        pub scale_factor_positive: Option<f64>,
+        #[serde(deserialize_with = "number")]
+        pub scale_factor_negative: Option<f64>,
+        #[serde(deserialize_with = "number")]
+        pub nonlinearity_ppm: Option<f64>,
+        #[serde(deserialize_with = "number")]
+        pub asymmetry_ppm: Option<f64>,
+        #[serde(deserialize_with = "number")]
+        pub repeatability_ppm: Option<f64>,
+        #[serde(deserialize_with = "lenient")]
+        pub asymmetry_common_k2: CommonK2,
+    }
+
+    #[derive(Deserialize, Default)]
+    #[serde(default)]
+    pub(super) struct CommonK2 {
+        #[serde(deserialize_with = "number")]
+        pub k2: Option<f64>,
+        #[serde(deserialize_with = "number")]
+        pub asymmetry_ppm: Option<f64>,
+    }
+
+    #[derive(Deserialize, Default)]
+    #[serde(default)]
+    pub(super) struct OneFit {
+        #[serde(deserialize_with = "text")]
+        pub method: Option<String>,
+        #[serde(deserialize_with = "text")]
+        pub model: Option<String>,
+        #[serde(deserialize_with = "lenient")]
+        pub std_errors: Coefficients,
+        #[serde(deserialize_with = "lenient")]
+        pub coefficients: Coefficients,
+    }
+
+    #[derive(Deserialize, Default)]
+    #[serde(default)]
+    pub(super) struct Coefficients {
+        #[serde(deserialize_with = "number")]
+        pub k0: Option<f64>,
+        #[serde(deserialize_with = "number")]
+        pub k1: Option<f64>,
+        #[serde(deserialize_with = "number")]
+        pub k2: Option<f64>,
+    }
+
+    #[derive(Deserialize, Default)]
+    #[serde(default)]
+    pub(super) struct Uncertainty {
+        #[serde(deserialize_with = "lenient")]
+        pub quantities: Vec<Quantity>,
+    }
+
+    #[derive(Deserialize, Default)]
+    #[serde(default)]
+    pub(super) struct Quantity {
+        #[serde(deserialize_with = "text")]
+        pub quantity: Option<String>,
+        #[serde(deserialize_with = "number")]
+        pub expanded_uncertainty: Option<f64>,
+    }
+}

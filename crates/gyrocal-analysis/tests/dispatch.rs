@@ -263,3 +263,51 @@ fn a_directory_that_is_no_run_has_no_kind() {
     assert_eq!(RunKind::of_dir(&tmp.path().join("missing")), None);
     assert!(analyse(tmp.path(), &Options::default()).is_err());
 }
+
+/// The catalog's figures of a sweep come through the same dispatch, read typed from its
+/// `fit.json`: K as fitted, its expanded uncertainty, the model chosen; a figure of another
+/// type (a fit written by another gyrocal) costs that figure only.
+#[test]
+fn a_sweeps_figures_are_read_typed_from_its_fit_and_leniently() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let mut rd = write_run(&dir, SWEEP, sweep_volts);
+    let Analysis::Sweep(stored) = analyse_run(&mut rd, &Options::default()).unwrap() else {
+        panic!("a sweep analysed as a drift record")
+    };
+    let m = rd.manifest().clone();
+    drop(rd);
+    let fit: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join(FIT_JSON)).unwrap()).unwrap();
+    let f = gyrocal_analysis::figures(&dir, &m, Some(&fit))
+        .unwrap()
+        .unwrap();
+    let k = f.scale_factor.unwrap();
+    assert!(
+        (k - stored.metrics.scale_factor).abs() <= 1e-11 * k.abs(),
+        "{k}"
+    );
+    assert_eq!(
+        f.best_model,
+        stored.best_model.map(|m| serde_json::to_value(m)
+            .unwrap()
+            .as_str()
+            .unwrap()
+            .to_string())
+    );
+    assert!(f.best_model.is_some());
+    assert!(f.scale_factor_std_error.is_some_and(|s| s > 0.0));
+    assert_eq!(f.arw_deg_rt_h, None, "a sweep has no noise terms");
+
+    let mut odd = fit.clone();
+    odd["metrics"]["nonlinearity_ppm"] = serde_json::json!("n/a");
+    odd["fits"] = serde_json::json!("not a list");
+    let g = gyrocal_analysis::figures(&dir, &m, Some(&odd))
+        .unwrap()
+        .unwrap();
+    assert_eq!(g.nonlinearity_ppm, None);
+    assert_eq!(g.scale_factor, f.scale_factor);
+    assert_eq!(g.asymmetry_ppm, f.asymmetry_ppm);
+    // without a fit document a sweep has no figures yet
+    assert_eq!(gyrocal_analysis::figures(&dir, &m, None).unwrap(), None);
+}

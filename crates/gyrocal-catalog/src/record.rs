@@ -1,12 +1,11 @@
 //! A run directory read into the rows the catalog holds ([`RunRecord`]).
 //!
 //! The typed reader of `gyrocal-files` ([`gyrocal_files::load`]) gives the manifest and the
-//! steps; `manifest.json` and `fit.json` are read a second time as plain JSON for the parts
-//! that not every gyrocal writes (the station, the acceptance verdict, the uncertainty budget,
-//! the common-K2 asymmetry): absent parts become NULL columns. A drift record's `allan.json`
-//! is read typed by the analysis crate ([`gyrocal_analysis::drift::DriftFigures`], every
-//! figure optional), which also decides which of the two a run has
-//! ([`gyrocal_analysis::RunKind`]).
+//! steps; `manifest.json` is read a second time as plain JSON for the parts that not every
+//! gyrocal writes (the station, the acceptance verdict): absent parts become NULL columns.
+//! The run's figures are the analysis crate's to read, typed, from its results file by the
+//! run's kind ([`gyrocal_analysis::figures`]: `fit.json` or `allan.json`, every figure
+//! optional).
 
 use std::path::{Path, PathBuf};
 
@@ -70,78 +69,10 @@ pub struct RunRow {
     pub gyrocal_version: Option<String>,
 }
 
-/// One row of `results`: the fit's figures and their expanded uncertainties (k = 2).
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct Results {
-    /// Scale factor K, V/(°/s).
-    pub scale_factor: Option<f64>,
-    /// Standard error of K from the fit, V/(°/s).
-    pub scale_factor_std_error: Option<f64>,
-    /// Bias K0, V.
-    pub bias_v: Option<f64>,
-    /// Standard error of K0, V.
-    pub bias_v_std_error: Option<f64>,
-    /// Bias as a rate, °/h.
-    pub bias_dph: Option<f64>,
-    /// Scale factor of the positive direction K+, V/(°/s).
-    pub k_pos: Option<f64>,
-    /// Scale factor of the negative direction K−, V/(°/s).
-    pub k_neg: Option<f64>,
-    /// Second-order coefficient K2, V/(°/s)² (common-K2 model when present, else the
-    /// quadratic least-squares fit).
-    pub k2: Option<f64>,
-    /// Nonlinearity, ppm.
-    pub nonlinearity_ppm: Option<f64>,
-    /// Asymmetry (GJB, split lines), ppm.
-    pub asymmetry_ppm: Option<f64>,
-    /// Asymmetry with a common K2, ppm.
-    pub asymmetry_common_k2_ppm: Option<f64>,
-    /// Repeatability of K over the passes, ppm.
-    pub repeatability_ppm: Option<f64>,
-    /// Expanded uncertainty of K, V/(°/s).
-    pub u_scale_factor: Option<f64>,
-    /// Expanded uncertainty of K0, V.
-    pub u_bias_v: Option<f64>,
-    /// Expanded uncertainty of the bias, °/h.
-    pub u_bias_dph: Option<f64>,
-    /// Expanded uncertainty of K+, V/(°/s).
-    pub u_k_pos: Option<f64>,
-    /// Expanded uncertainty of K−, V/(°/s).
-    pub u_k_neg: Option<f64>,
-    /// The model the fit chose.
-    pub best_model: Option<String>,
-    /// A drift test's angle random walk N, °/√h (five-term fit).
-    #[serde(default)]
-    pub arw_deg_rt_h: Option<f64>,
-    /// Expanded uncertainty (k = 2) of N, °/√h.
-    #[serde(default)]
-    pub u_arw_deg_rt_h: Option<f64>,
-    /// A drift test's bias instability B, °/h (five-term fit).
-    #[serde(default)]
-    pub bias_instability_dph: Option<f64>,
-    /// Expanded uncertainty (k = 2) of B, °/h.
-    #[serde(default)]
-    pub u_bias_instability_dph: Option<f64>,
-    /// A drift test's rate random walk K, °/h/√h (five-term fit).
-    #[serde(default)]
-    pub rrw_dph_rt_h: Option<f64>,
-    /// Expanded uncertainty (k = 2) of K, °/h/√h.
-    #[serde(default)]
-    pub u_rrw_dph_rt_h: Option<f64>,
-    /// A drift test's bias, °/h (the Earth rate removed when the run's axis and latitude were
-    /// known).
-    #[serde(default)]
-    pub drift_bias_dph: Option<f64>,
-    /// Expanded uncertainty (k = 2) of the drift bias, °/h.
-    #[serde(default)]
-    pub u_drift_bias_dph: Option<f64>,
-    /// GJB bias stability over 100 s windows, °/h.
-    #[serde(default)]
-    pub bias_stability_100s_dph: Option<f64>,
-    /// The analysed record's length, s (after gaps and warm-up).
-    #[serde(default)]
-    pub drift_duration_s: Option<f64>,
-}
+/// One row of `results`: the run's headline figures (the analysis crate's
+/// [`gyrocal_analysis::Figures`]: a sweep's fit or a drift record's noise terms, expanded
+/// uncertainties at k = 2).
+pub use gyrocal_analysis::Figures as Results;
 
 /// One row of `steps`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -338,14 +269,9 @@ pub fn read_run(dir: &Path, host: Option<&str>) -> Result<RunRecord, CatalogErro
         humidity_pct: m.context.as_ref().and_then(|c| c.humidity_pct),
         gyrocal_version: Some(m.gyrocal_version.clone()).filter(|v| !v.is_empty()),
     };
-    // the analysis crate's one dispatch on the kind: a drift record is not fitted, its figures
-    // are the Allan analysis's
-    let results = match gyrocal_analysis::RunKind::of(m) {
-        gyrocal_analysis::RunKind::Drift => gyrocal_analysis::drift::DriftFigures::load(dir)
-            .map_err(|e| not_a_run(dir, e.to_string()))?
-            .map(|a| drift_results_of(&a)),
-        gyrocal_analysis::RunKind::Sweep => fit.as_ref().map(|fit| results_of(fit, m)),
-    };
+    // the analysis crate reads the figures of the run's kind (fit.json, allan.json) typed
+    let results = gyrocal_analysis::figures(dir, m, fit.as_ref())
+        .map_err(|e| not_a_run(dir, e.to_string()))?;
     let steps = data
         .steps
         .iter()
@@ -390,78 +316,6 @@ pub fn read_run(dir: &Path, host: Option<&str>) -> Result<RunRecord, CatalogErro
         instruments,
         checks,
     })
-}
-
-/// A drift test's figures from its `allan.json`, read typed by the analysis crate
-/// ([`gyrocal_analysis::drift::DriftFigures`]): the five-term fit's N, B and K (the tests
-/// recover them within their intervals where the slope reads are biased), the bias (the Earth
-/// rate removed when known) and the 100 s bias stability; uncertainties expanded to k = 2. In
-/// °/h only: a record left in volts has none.
-fn drift_results_of(a: &gyrocal_analysis::drift::DriftFigures) -> Results {
-    let k2 = |u: Option<f64>| u.map(|u| 2.0 * u);
-    Results {
-        arw_deg_rt_h: a.arw.value,
-        u_arw_deg_rt_h: k2(a.arw.uncertainty),
-        bias_instability_dph: a.bias_instability.value,
-        u_bias_instability_dph: k2(a.bias_instability.uncertainty),
-        rrw_dph_rt_h: a.rrw.value,
-        u_rrw_dph_rt_h: k2(a.rrw.uncertainty),
-        drift_bias_dph: a.bias.value,
-        u_drift_bias_dph: k2(a.bias.uncertainty),
-        bias_stability_100s_dph: a.bias_stability_100s,
-        drift_duration_s: a.duration_s,
-        ..Results::default()
-    }
-}
-
-fn results_of(fit: &Value, m: &gyrocal_files::Manifest) -> Results {
-    let metrics = fit.get("metrics").cloned().unwrap_or(Value::Null);
-    let lsq = |model: &str| -> Option<&Value> {
-        fit.get("fits")?.as_array()?.iter().find(|f| {
-            f.get("method").and_then(Value::as_str) == Some("least-squares")
-                && f.get("model").and_then(Value::as_str) == Some(model)
-        })
-    };
-    let linear = lsq("linear");
-    let common = metrics
-        .get("asymmetry_common_k2")
-        .cloned()
-        .unwrap_or(Value::Null);
-    let u = |q: &str| -> Option<f64> {
-        fit.get("uncertainty")?
-            .get("quantities")?
-            .as_array()?
-            .iter()
-            .find(|x| x.get("quantity").and_then(Value::as_str) == Some(q))
-            .and_then(|x| f(x, "expanded_uncertainty"))
-    };
-    let summary = m.fit_summary.as_ref();
-    Results {
-        scale_factor: f(&metrics, "scale_factor").or(summary.map(|s| s.scale_factor)),
-        scale_factor_std_error: summary
-            .and_then(|s| s.scale_factor_std_error)
-            .or_else(|| linear.and_then(|l| f(l.get("std_errors")?, "k1"))),
-        bias_v: f(&metrics, "bias_volts").or(summary.map(|s| s.bias_volts)),
-        bias_v_std_error: summary
-            .and_then(|s| s.bias_std_error)
-            .or_else(|| linear.and_then(|l| f(l.get("std_errors")?, "k0"))),
-        bias_dph: f(&metrics, "bias_dph"),
-        k_pos: f(&metrics, "scale_factor_positive"),
-        k_neg: f(&metrics, "scale_factor_negative"),
-        k2: f(&common, "k2")
-            .or_else(|| lsq("quadratic").and_then(|q| f(q.get("coefficients")?, "k2"))),
-        nonlinearity_ppm: f(&metrics, "nonlinearity_ppm"),
-        asymmetry_ppm: f(&metrics, "asymmetry_ppm"),
-        asymmetry_common_k2_ppm: f(&common, "asymmetry_ppm"),
-        repeatability_ppm: f(&metrics, "repeatability_ppm"),
-        u_scale_factor: u("scale_factor"),
-        u_bias_v: u("bias_v"),
-        u_bias_dph: u("bias_dph"),
-        u_k_pos: u("k_pos"),
-        u_k_neg: u("k_neg"),
-        best_model: s(fit, "best_model"),
-        ..Results::default()
-    }
 }
 
 /// Model and serial from an identity reply `MAKER,MODEL,SERIAL,FIRMWARE`.

@@ -337,6 +337,26 @@ impl DriftFigures {
         Ok(Some(DriftFigures::from_view(view)))
     }
 
+    /// The run's headline figures ([`crate::Figures`]): N, B and K of the five-term fit, the
+    /// bias (the Earth rate removed when known) and the 100 s bias stability, uncertainties
+    /// expanded to k = 2. In °/h only: a record left in volts has the duration alone.
+    pub fn figures(&self) -> crate::Figures {
+        let k2 = |u: Option<f64>| u.map(|u| 2.0 * u);
+        crate::Figures {
+            arw_deg_rt_h: self.arw.value,
+            u_arw_deg_rt_h: k2(self.arw.uncertainty),
+            bias_instability_dph: self.bias_instability.value,
+            u_bias_instability_dph: k2(self.bias_instability.uncertainty),
+            rrw_dph_rt_h: self.rrw.value,
+            u_rrw_dph_rt_h: k2(self.rrw.uncertainty),
+            drift_bias_dph: self.bias.value,
+            u_drift_bias_dph: k2(self.bias.uncertainty),
+            bias_stability_100s_dph: self.bias_stability_100s,
+            drift_duration_s: self.duration_s,
+            ..crate::Figures::default()
+        }
+    }
+
     fn from_view(v: view::Doc) -> DriftFigures {
         let duration_s = v.analysed.and_then(|a| a.duration_s);
         if v.unit.as_deref() != Some("deg/h") {
