@@ -15,8 +15,11 @@ pub use gyrocal_analysis::drift::AllanDocument;
 use gyrocal_analysis::drift::{RunHeader, Warmup, fmt_num};
 use plotters::prelude::*;
 
-use crate::ReportError;
+use std::fs;
+use std::path::{Path, PathBuf};
+
 use crate::page::{Page, esc};
+use crate::{ALLAN_HTML, ALLAN_JSON, ReportError, write_atomic};
 
 /// The analysis's number format (4 significant digits), the page's too.
 fn fmt_g(v: f64) -> String {
@@ -643,4 +646,213 @@ pub fn render_allan(doc: &AllanDocument) -> Result<String, ReportError> {
     );
     Page::close(&mut h, None);
     Ok(h)
+}
+
+// ---------------------------------------------------------------------------------------------
+// The drift record's files: its analysis (allan.json) and its page (allan.html), written
+// through the run directory; the end of a drift run and its report (see `crate::kinds`).
+
+/// The files of a drift run its Allan analysis reads (the record, its steps, the scale factor
+/// from fit.json) and the analysis it replaces (`allan.json`: an edited one is not silently
+/// overwritten).
+pub const DRIFT_FILES_READ: [&str; 4] = [
+    gyrocal_files::rundir::SAMPLES_CSV,
+    gyrocal_files::rundir::STEPS_CSV,
+    gyrocal_files::rundir::FIT_JSON,
+    crate::ALLAN_JSON,
+];
+
+/// The call for the end of a drift run: analyses `run_dir` ([`gyrocal_analysis::drift::analyse_input`]) and writes
+/// `run_dir/allan.json` (the [`gyrocal_analysis::drift::AllanDocument`], as `gyrocal allan --json` prints it) and
+/// `run_dir/allan.html` ([`render_allan`]). A run directory (one with a manifest) is
+/// opened for its results ([`gyrocal_files::RunResults`]: under its lock, each file recorded
+/// with its SHA-256 in the manifest; see [`write_allan_into`]); a directory without a manifest
+/// (a bare `samples.csv`) just gets the two files, each atomically. Returns the document and
+/// the paths written (JSON first).
+pub fn write_run_allan(
+    run_dir: &Path,
+    opts: &gyrocal_analysis::drift::AllanOptions,
+) -> Result<(gyrocal_analysis::drift::AllanDocument, Vec<PathBuf>), ReportError> {
+    write_run_allan_noted(run_dir, opts, &[])
+}
+
+/// [`write_run_allan`] with `notes` put first among the page's notes (e.g. the banners of
+/// `gyrocal report --allow-modified`).
+pub fn write_run_allan_noted(
+    run_dir: &Path,
+    opts: &gyrocal_analysis::drift::AllanOptions,
+    notes: &[String],
+) -> Result<(gyrocal_analysis::drift::AllanDocument, Vec<PathBuf>), ReportError> {
+    if fs::symlink_metadata(run_dir.join(gyrocal_files::rundir::MANIFEST_JSON)).is_ok() {
+        let mut run = gyrocal_files::RunResults::open(run_dir)?;
+        return write_allan_into(&mut run, opts, notes);
+    }
+    let _span = tracing::info_span!("allan", dir = %run_dir.display()).entered();
+    let (doc, json, html) = allan_files(run_dir, opts, notes)?;
+    let (jp, hp) = (run_dir.join(ALLAN_JSON), run_dir.join(ALLAN_HTML));
+    write_atomic(&jp, json.as_bytes())?;
+    write_atomic(&hp, html.as_bytes()).map_err(|e| ReportError::PartlyWritten {
+        written: vec![jp.clone()],
+        failed: Box::new(e),
+    })?;
+    tracing::info!(json = %jp.display(), html = %hp.display(), "allan analysis written");
+    Ok((doc, vec![jp, hp]))
+}
+
+/// The Allan analysis of the run `run` writes (a run that just ended, its [`gyrocal_files::RunDir`]
+/// still open, or a [`gyrocal_files::RunResults`]): `allan.json` then `allan.html`, each through
+/// the run directory (atomically, under the run's lock, its SHA-256 recorded in the manifest),
+/// `notes` first among the page's notes. When `allan.html` cannot be written after
+/// `allan.json` was, the error is [`ReportError::PartlyWritten`]: the analysis is on disk, the
+/// page is not (see [`ReportError::allan_warning`]).
+pub fn write_allan_into(
+    run: &mut dyn gyrocal_files::WriteResult,
+    opts: &gyrocal_analysis::drift::AllanOptions,
+    notes: &[String],
+) -> Result<(gyrocal_analysis::drift::AllanDocument, Vec<PathBuf>), ReportError> {
+    let dir = run.dir().to_path_buf();
+    let _span = tracing::info_span!("allan", dir = %dir.display()).entered();
+    let (doc, json, html) = allan_files(&dir, opts, notes)?;
+    let jp = dir.join(ALLAN_JSON);
+    if let Err(e) = run.write_result(ALLAN_JSON, json.as_bytes()) {
+        // the file may have landed before its record failed (the manifest could not be
+        // stored): say so rather than "no Allan analysis"
+        let landed = gyrocal_files::rundir::sha256_file(&jp)
+            .is_ok_and(|h| h == gyrocal_files::rundir::sha256_hex(json.as_bytes()));
+        return Err(if landed {
+            ReportError::PartlyWritten {
+                written: vec![jp],
+                failed: Box::new(e.into()),
+            }
+        } else {
+            e.into()
+        });
+    }
+    run.write_result(ALLAN_HTML, html.as_bytes())
+        .map_err(|e| ReportError::PartlyWritten {
+            written: vec![jp.clone()],
+            failed: Box::new(e.into()),
+        })?;
+    let hp = dir.join(ALLAN_HTML);
+    tracing::info!(json = %jp.display(), html = %hp.display(), "allan analysis written and recorded");
+    Ok((doc, vec![jp, hp]))
+}
+
+/// The analysis of `dir` with `notes` first, as JSON and as the page.
+fn allan_files(
+    dir: &Path,
+    opts: &gyrocal_analysis::drift::AllanOptions,
+    notes: &[String],
+) -> Result<(gyrocal_analysis::drift::AllanDocument, String, String), ReportError> {
+    let mut doc = gyrocal_analysis::drift::analyse_input(dir, opts)?;
+    if !notes.is_empty() {
+        doc.notes.splice(0..0, notes.iter().cloned());
+    }
+    let json = serde_json::to_string_pretty(&doc).map_err(|e| ReportError::Plot {
+        name: ALLAN_JSON.into(),
+        message: e.to_string(),
+    })?;
+    let html = render_allan(&doc)?;
+    Ok((doc, json, html))
+}
+
+/// A drift record's part of the one dispatch ([`crate::kinds`]): its ending and its own page.
+pub(crate) static PAGES: crate::kinds::KindPages = crate::kinds::KindPages {
+    ending,
+    own_page: Some(crate::kinds::OwnPage {
+        kind: "drift",
+        files_read: &DRIFT_FILES_READ,
+        what: "a drift record: the Allan analysis",
+        alone,
+        write: write_own_page,
+    }),
+};
+
+/// Why a drift record's report takes no other inputs, `--out` or `--acceptance`.
+fn alone(dir: &Path) -> String {
+    format!(
+        "{} is a drift record: its report is its Allan page, written alone into the run directory by `gyrocal report {0}` (or anywhere by `gyrocal allan {0} -o FILE`); --out, --acceptance and other inputs do not apply",
+        dir.display()
+    )
+}
+
+fn write_own_page(dir: &Path, notes: &[String]) -> Result<Vec<PathBuf>, ReportError> {
+    write_run_allan_noted(dir, &Default::default(), notes).map(|(_, files)| files)
+}
+
+/// The end of a complete drift record: the record is analysed by Allan deviation, not
+/// fitted; `allan.json` and `allan.html` are written through the run directory still open
+/// (recorded in the manifest with their SHA-256, under the run's lock). Without `pages` the
+/// record is left for `gyrocal allan`. The analysis finds the scale factor itself (the run's
+/// fit.json, or the simulated gyro's); without one the record stays in volts.
+fn ending(
+    run: &mut gyrocal_files::RunDir,
+    pages: bool,
+) -> Result<crate::kinds::Ending, ReportError> {
+    let dir = run.path().to_path_buf();
+    let mut end = crate::kinds::Ending::default();
+    if !pages {
+        end.results = format!(
+            "drift record complete: analyse it with `gyrocal allan {}` (--scale-factor K for °/h)",
+            dir.display()
+        );
+        return Ok(end);
+    }
+    match write_allan_into(run, &Default::default(), &[]) {
+        Ok((a, files)) => {
+            end.json.insert(
+                "allan".into(),
+                serde_json::json!({
+                    "files": files,
+                    "unit": a.unit,
+                    "scale_factor": a.scale_factor,
+                    "noise_terms": a.noise_terms,
+                    "bias": a.bias,
+                    "warmup": a.warmup,
+                }),
+            );
+            end.results = format!(
+                "drift record complete: Allan analysis in {}{}",
+                files
+                    .iter()
+                    .map(|f| f.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(" and "),
+                match &a.scale_factor {
+                    Some(k) => format!(
+                        " (K = {} V/(°/s), {}, converts to °/h)",
+                        k.v_per_dps, k.source
+                    ),
+                    None => format!(
+                        " (in volts: `gyrocal allan {} --scale-factor K` for °/h)",
+                        dir.display()
+                    ),
+                }
+            );
+        }
+        Err(e) => end.warnings.push(format!(
+            "{} (the record is complete: `gyrocal report {}` writes the analysis again)",
+            e.allan_warning(),
+            dir.display()
+        )),
+    }
+    Ok(end)
+}
+
+impl ReportError {
+    /// The operator's warning when a drift run's Allan analysis could not be written at the
+    /// end of the run, worded by what was written: "no Allan analysis" only when nothing was.
+    pub fn allan_warning(&self) -> String {
+        match self {
+            ReportError::PartlyWritten { written, failed } if !written.is_empty() => format!(
+                "the Allan analysis is in {}, but its page could not be written: {failed}",
+                written
+                    .iter()
+                    .map(|p| p.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(" and ")
+            ),
+            other => format!("no Allan analysis: {other}"),
+        }
+    }
 }

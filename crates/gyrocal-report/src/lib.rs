@@ -40,13 +40,17 @@ mod certificate;
 pub mod history;
 mod html;
 mod input;
+mod kinds;
 pub mod page;
 mod plots;
+pub mod text;
 
 use std::fs;
 use std::path::{Path, PathBuf};
 
+pub use allan::{DRIFT_FILES_READ, write_allan_into, write_run_allan, write_run_allan_noted};
 pub use input::{FitSource, Input, load_input};
+pub use kinds::{Ending, OwnPage, end_of_run, own_page};
 
 use gyrocal_files::rundir::REPORT_HTML;
 
@@ -117,6 +121,9 @@ pub enum ReportError {
         /// The backend's message.
         message: String,
     },
+    /// The analysis a complete run must have could not be made (a sweep's fit).
+    #[error(transparent)]
+    Analysis(#[from] gyrocal_analysis::AnalysisError),
     /// Files of the run differ from the run's own record of them (SHA-256 in its manifest),
     /// or the record is missing: the report is refused rather than issued from files nobody
     /// vouches for (`gyrocal report --allow-modified` makes it with a banner naming them).
@@ -157,6 +164,7 @@ impl ReportError {
                 gyrocal_files::RunErrorKind::Input | gyrocal_files::RunErrorKind::Busy
             ),
             ReportError::Modified { .. } => false,
+            ReportError::Analysis(e) => e.kind() == gyrocal_analysis::ErrorKind::Input,
             ReportError::PartlyWritten { failed, .. } => failed.is_input_error(),
             ReportError::Input(_)
             | ReportError::FitDocument { .. }
@@ -292,16 +300,6 @@ pub const SWEEP_FILES_READ: [&str; 2] = [
     gyrocal_files::rundir::STEPS_CSV,
     gyrocal_files::rundir::FIT_JSON,
 ];
-/// The files of a drift run its Allan analysis reads (the record, its steps, the scale factor
-/// from fit.json) and the analysis it replaces (`allan.json`: an edited one is not silently
-/// overwritten).
-pub const DRIFT_FILES_READ: [&str; 4] = [
-    gyrocal_files::rundir::SAMPLES_CSV,
-    gyrocal_files::rundir::STEPS_CSV,
-    gyrocal_files::rundir::FIT_JSON,
-    ALLAN_JSON,
-];
-
 /// The files of a run a report reads, checked against the run's record by [`check_run`].
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct RunCheck {
@@ -392,116 +390,4 @@ pub fn load_inputs_checked(
         inputs.push(input);
     }
     Ok(inputs)
-}
-
-/// The call for the end of a drift run: analyses `run_dir` ([`gyrocal_analysis::drift::analyse_input`]) and writes
-/// `run_dir/allan.json` (the [`gyrocal_analysis::drift::AllanDocument`], as `gyrocal allan --json` prints it) and
-/// `run_dir/allan.html` ([`allan::render_allan`]). A run directory (one with a manifest) is
-/// opened for its results ([`gyrocal_files::RunResults`]: under its lock, each file recorded
-/// with its SHA-256 in the manifest; see [`write_allan_into`]); a directory without a manifest
-/// (a bare `samples.csv`) just gets the two files, each atomically. Returns the document and
-/// the paths written (JSON first).
-pub fn write_run_allan(
-    run_dir: &Path,
-    opts: &gyrocal_analysis::drift::AllanOptions,
-) -> Result<(gyrocal_analysis::drift::AllanDocument, Vec<PathBuf>), ReportError> {
-    write_run_allan_noted(run_dir, opts, &[])
-}
-
-/// [`write_run_allan`] with `notes` put first among the page's notes (e.g. the banners of
-/// `gyrocal report --allow-modified`).
-pub fn write_run_allan_noted(
-    run_dir: &Path,
-    opts: &gyrocal_analysis::drift::AllanOptions,
-    notes: &[String],
-) -> Result<(gyrocal_analysis::drift::AllanDocument, Vec<PathBuf>), ReportError> {
-    if fs::symlink_metadata(run_dir.join(gyrocal_files::rundir::MANIFEST_JSON)).is_ok() {
-        let mut run = gyrocal_files::RunResults::open(run_dir)?;
-        return write_allan_into(&mut run, opts, notes);
-    }
-    let _span = tracing::info_span!("allan", dir = %run_dir.display()).entered();
-    let (doc, json, html) = allan_files(run_dir, opts, notes)?;
-    let (jp, hp) = (run_dir.join(ALLAN_JSON), run_dir.join(ALLAN_HTML));
-    write_atomic(&jp, json.as_bytes())?;
-    write_atomic(&hp, html.as_bytes()).map_err(|e| ReportError::PartlyWritten {
-        written: vec![jp.clone()],
-        failed: Box::new(e),
-    })?;
-    tracing::info!(json = %jp.display(), html = %hp.display(), "allan analysis written");
-    Ok((doc, vec![jp, hp]))
-}
-
-/// The Allan analysis of the run `run` writes (a run that just ended, its [`gyrocal_files::RunDir`]
-/// still open, or a [`gyrocal_files::RunResults`]): `allan.json` then `allan.html`, each through
-/// the run directory (atomically, under the run's lock, its SHA-256 recorded in the manifest),
-/// `notes` first among the page's notes. When `allan.html` cannot be written after
-/// `allan.json` was, the error is [`ReportError::PartlyWritten`]: the analysis is on disk, the
-/// page is not (see [`ReportError::allan_warning`]).
-pub fn write_allan_into(
-    run: &mut dyn gyrocal_files::WriteResult,
-    opts: &gyrocal_analysis::drift::AllanOptions,
-    notes: &[String],
-) -> Result<(gyrocal_analysis::drift::AllanDocument, Vec<PathBuf>), ReportError> {
-    let dir = run.dir().to_path_buf();
-    let _span = tracing::info_span!("allan", dir = %dir.display()).entered();
-    let (doc, json, html) = allan_files(&dir, opts, notes)?;
-    let jp = dir.join(ALLAN_JSON);
-    if let Err(e) = run.write_result(ALLAN_JSON, json.as_bytes()) {
-        // the file may have landed before its record failed (the manifest could not be
-        // stored): say so rather than "no Allan analysis"
-        let landed = gyrocal_files::rundir::sha256_file(&jp)
-            .is_ok_and(|h| h == gyrocal_files::rundir::sha256_hex(json.as_bytes()));
-        return Err(if landed {
-            ReportError::PartlyWritten {
-                written: vec![jp],
-                failed: Box::new(e.into()),
-            }
-        } else {
-            e.into()
-        });
-    }
-    run.write_result(ALLAN_HTML, html.as_bytes())
-        .map_err(|e| ReportError::PartlyWritten {
-            written: vec![jp.clone()],
-            failed: Box::new(e.into()),
-        })?;
-    let hp = dir.join(ALLAN_HTML);
-    tracing::info!(json = %jp.display(), html = %hp.display(), "allan analysis written and recorded");
-    Ok((doc, vec![jp, hp]))
-}
-
-/// The analysis of `dir` with `notes` first, as JSON and as the page.
-fn allan_files(
-    dir: &Path,
-    opts: &gyrocal_analysis::drift::AllanOptions,
-    notes: &[String],
-) -> Result<(gyrocal_analysis::drift::AllanDocument, String, String), ReportError> {
-    let mut doc = gyrocal_analysis::drift::analyse_input(dir, opts)?;
-    if !notes.is_empty() {
-        doc.notes.splice(0..0, notes.iter().cloned());
-    }
-    let json = serde_json::to_string_pretty(&doc).map_err(|e| ReportError::Plot {
-        name: ALLAN_JSON.into(),
-        message: e.to_string(),
-    })?;
-    let html = allan::render_allan(&doc)?;
-    Ok((doc, json, html))
-}
-
-impl ReportError {
-    /// The operator's warning when a drift run's Allan analysis could not be written at the
-    /// end of the run, worded by what was written: "no Allan analysis" only when nothing was.
-    pub fn allan_warning(&self) -> String {
-        match self {
-            ReportError::PartlyWritten { written, failed } if !written.is_empty() => format!(
-                "the Allan analysis is in {}, but its page could not be written: {failed}",
-                written
-                    .iter()
-                    .map(|p| p.display().to_string())
-                    .collect::<Vec<_>>()
-                    .join(" and ")
-            ),
-            other => format!("no Allan analysis: {other}"),
-        }
-    }
 }

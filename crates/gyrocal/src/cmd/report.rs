@@ -66,54 +66,41 @@ fn destination(args: &ReportArgs) -> Result<PathBuf, BadInput> {
     }
 }
 
-/// A run directory whose plan is a drift record (its report is the Allan page): the analysis
-/// crate's one dispatch on the kind.
-fn is_drift_run(input: &std::path::Path) -> bool {
-    gyrocal_analysis::RunKind::of_dir(input) == Some(gyrocal_analysis::RunKind::Drift)
-}
-
 /// Runs `gyrocal report`: prints the path of the HTML written.
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
-    if let Some(drift) = args.inputs.iter().find(|i| is_drift_run(i)) {
-        // a drift record has no line to fit: its report is the Allan analysis
+    // a run whose report is a page of its kind's own (a drift record's Allan page): the report
+    // crate's one dispatch on the kind says which, and writes it
+    if let Some((input, page)) = args
+        .inputs
+        .iter()
+        .find_map(|i| gyrocal_report::own_page(i).map(|p| (i, p)))
+    {
         if args.inputs.len() > 1 || args.out.is_some() || args.acceptance.is_some() {
-            return Err(BadInput(format!(
-                "{} is a drift record: its report is its Allan page, written alone into the run directory by `gyrocal report {0}` (or anywhere by `gyrocal allan {0} -o FILE`); --out, --acceptance and other inputs do not apply",
-                drift.display()
-            ))
-            .into());
+            return Err(BadInput((page.alone)(input)).into());
         }
-        let notes = checked(
-            drift,
-            &gyrocal_report::DRIFT_FILES_READ,
-            args.allow_modified,
-        )?;
+        let notes = checked(input, page.files_read, args.allow_modified)?;
         for n in &notes {
             eprintln!("gyrocal: warning: {n}");
         }
-        let (_, files) = gyrocal_report::write_run_allan_noted(drift, &Default::default(), &notes)
-            .map_err(classify)?;
-        let page = files
+        let files = (page.write)(input, &notes).map_err(classify)?;
+        let html = files
             .iter()
             .find(|f| f.extension().is_some_and(|e| e == "html"))
             .cloned()
-            .unwrap_or_else(|| drift.join("allan.html"));
+            .unwrap_or_else(|| input.clone());
         if args.json {
             println!(
                 "{:#}",
                 serde_json::json!({
-                    "report": page,
+                    "report": html,
                     "files": files,
                     "inputs": args.inputs,
                     "warnings": notes,
-                    "kind": "drift",
+                    "kind": page.kind,
                 })
             );
         } else {
-            println!(
-                "report: {} (a drift record: the Allan analysis)",
-                page.display()
-            );
+            println!("report: {} ({})", html.display(), page.what);
         }
         return Ok(());
     }

@@ -1,6 +1,6 @@
-//! The ending of a run: the results of a complete run analysed as its compiled steps say
-//! ([`gyrocal_files::steps::Analysis`]), the closing lines, where the table was left, the exit
-//! code.
+//! The ending of a run: the results of a complete run (analysed and written by its kind's
+//! part of the report crate, [`gyrocal_report::end_of_run`]), the closing lines, where the
+//! table was left, the exit code.
 
 use super::*;
 
@@ -79,64 +79,6 @@ pub(super) fn finish(
     Ok(code)
 }
 
-/// The end of a complete drift run: the record is analysed by Allan deviation, not fitted.
-pub(super) fn finish_drift(
-    args: &RunArgs,
-    dir: &Path,
-    run: &mut RunDir,
-    human: &dyn Fn(String),
-    doc: &mut serde_json::Value,
-) -> anyhow::Result<u8> {
-    if args.no_report {
-        human(format!(
-            "drift record complete: analyse it with `gyrocal allan {}` (--scale-factor K for °/h)",
-            dir.display()
-        ));
-    } else {
-        // the analysis finds the scale factor itself (the run's fit.json, or the simulated
-        // gyro's); without one the record stays in volts
-        // through the run directory still open: allan.json and allan.html are recorded in
-        // the manifest with their SHA-256, under the run's lock
-        match gyrocal_report::write_allan_into(run, &Default::default(), &[]) {
-            Ok((a, files)) => {
-                doc["allan"] = serde_json::json!({
-                    "files": files,
-                    "unit": a.unit,
-                    "scale_factor": a.scale_factor,
-                    "noise_terms": a.noise_terms,
-                    "bias": a.bias,
-                    "warmup": a.warmup,
-                });
-                human(format!(
-                    "drift record complete: Allan analysis in {}{}",
-                    files
-                        .iter()
-                        .map(|f| f.display().to_string())
-                        .collect::<Vec<_>>()
-                        .join(" and "),
-                    match &a.scale_factor {
-                        Some(k) => format!(
-                            " (K = {} V/(°/s), {}, converts to °/h)",
-                            k.v_per_dps, k.source
-                        ),
-                        None => format!(
-                            " (in volts: `gyrocal allan {} --scale-factor K` for °/h)",
-                            dir.display()
-                        ),
-                    }
-                ));
-            }
-            Err(e) => say!(
-                "gyrocal: warning: {} (the record is complete: `gyrocal report {}` writes the analysis again)",
-                e.allan_warning(),
-                dir.display()
-            ),
-        }
-    }
-    human(format!("run directory: {}", dir.display()));
-    Ok(0)
-}
-
 /// How long the end of a run waits for the catalog to take the run's last state.
 pub(super) const CATALOG_CLOSE_TIMEOUT: Duration = Duration::from_secs(5);
 
@@ -212,10 +154,7 @@ pub(super) fn finish_human(
     }
     // one ending for every kind of complete run: its results, then the table's rest state
     // decides the last line and the exit code
-    let code = match gyrocal_analysis::RunKind::of(run.manifest()) {
-        gyrocal_analysis::RunKind::Drift => finish_drift(args, dir, run, human, doc)?,
-        gyrocal_analysis::RunKind::Sweep => finish_sweep(args, dir, summary, run, human, doc)?,
-    };
+    let code = finish_complete(args, dir, summary, run, human, doc)?;
     if !summary.table.nothing_turning() {
         say!(
             "gyrocal: all steps recorded, but {}",
@@ -226,8 +165,9 @@ pub(super) fn finish_human(
     Ok(code)
 }
 
-/// The end of a complete sweep: the fit, the timing and the report.
-pub(super) fn finish_sweep(
+/// The end of a complete run, whatever its kind: its analysis and page (the report crate's
+/// one dispatch on the kind, [`gyrocal_report::end_of_run`]), the timing, where the files are.
+pub(super) fn finish_complete(
     args: &RunArgs,
     dir: &Path,
     summary: &RunSummary,
@@ -235,13 +175,14 @@ pub(super) fn finish_sweep(
     human: &dyn Fn(String),
     doc: &mut serde_json::Value,
 ) -> anyhow::Result<u8> {
-    let analysis = fit_run(run, &gyrocal_fit::Options::default())
-        .with_context(|| format!("fitting {}", dir.display()))?;
-    doc["fit"] = serde_json::json!(run.manifest().fit_summary);
-    doc["acceptance"] = serde_json::json!(run.manifest().acceptance);
-    let mut out = String::new();
-    crate::cmd::fit::human(&mut out, &analysis);
-    human(out);
+    let ending = gyrocal_report::end_of_run(run, !args.no_report)
+        .with_context(|| format!("analysing {}", dir.display()))?;
+    for (key, value) in ending.json {
+        doc[key] = value;
+    }
+    if !ending.results.is_empty() {
+        human(ending.results);
+    }
     if let Some(t) = &summary.timing {
         human(format!(
             "timing: schedule {} (run clock), physical bound {}, ratio {:.4} (acquisition {}); \
@@ -253,15 +194,11 @@ pub(super) fn finish_sweep(
             hms(summary.elapsed_s)
         ));
     }
-    if !args.no_report {
-        // the data and the fit are safe on disk already: a report failure is a warning
-        match gyrocal_report::write_run_report(dir) {
-            Ok(path) => {
-                doc["report"] = serde_json::json!(path);
-                human(format!("report: {}", path.display()));
-            }
-            Err(e) => say!("gyrocal: warning: no report: {e}"),
-        }
+    for w in &ending.warnings {
+        say!("gyrocal: warning: {w}");
+    }
+    if let Some(line) = ending.page_line {
+        human(line);
     }
     human(format!("run directory: {}", dir.display()));
     Ok(0)

@@ -22,7 +22,6 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use clap::Args;
-use gyrocal_analysis::sweep::fit_run;
 use gyrocal_files::{Plan, RunDir, RunMeta, Status};
 use gyrocal_link::Transport;
 use gyrocal_run::{Event, Phase, RunSummary, SequencerOptions, StopRequest, TableRest};
