@@ -1,10 +1,14 @@
 //! gyrocal-analysis: what a run's data say. Synchronous, no runtime, no I/O beyond the run
 //! directory (and the bounded-memory path's unnamed temporary files).
 //!
-//! - [`RunKind`]: the **one** read of a run's kind outside the plan crate. Every consumer that
-//!   must treat a sweep and a drift record differently (the end of `gyrocal run`, `gyrocal
-//!   report`, the catalog) asks it here, so adding a kind of test is one arm here, not a
-//!   search through the binary.
+//! - One module per kind of test ([`sweep`], [`drift`]), each with a `Kind` implementing
+//!   [`KindAnalysis`]: its analysis, its result file written through the run directory, its
+//!   headline figures, its warnings about a plan. The modules, [`Options`], [`Analysis`] and
+//!   the one dispatch on the kind ([`analyse`], [`analyse_run`], [`figures`],
+//!   [`plan_warnings`]) are generated from the one list of kinds
+//!   ([`gyrocal_files::for_each_test_kind`]), so adding a kind of test is its module here,
+//!   not an arm in this file, and the binary and the catalog never ask which kind a run is.
+//! - [`RunKind`]: the kind of a run (its plan's, [`gyrocal_files::plan::PlanKind`]).
 //! - [`analyse`]: the analysis of a run directory by its kind, as an [`Analysis`]: the
 //!   scale-factor fit of a sweep ([`sweep`]) or the Allan analysis of a drift record
 //!   ([`drift`]). [`analyse_run`] does the same at the end of a run and writes the result
@@ -23,143 +27,127 @@
 
 use std::path::Path;
 
-use gyrocal_files::plan::{Plan, PlanKind};
-use gyrocal_files::rundir::{ALLAN_JSON, FIT_JSON, Manifest, RunDir};
+use gyrocal_files::plan::Plan;
+use gyrocal_files::rundir::{Manifest, RunData, RunDir};
 
-pub mod drift;
 mod error;
 mod figures;
-pub mod sweep;
 
 pub use error::{AnalysisError, DriftError, ErrorKind, FitRunError};
 pub use figures::Figures;
 
-/// What the analysis will not be able to do with a run of `plan` (at `path`, for the
-/// messages): one line each, said by `gyrocal check` and before `gyrocal run` starts.
-pub fn plan_warnings(plan: &Plan, path: &Path) -> Vec<String> {
-    match RunKind::of_plan(plan) {
-        RunKind::Sweep => sweep::plan_warnings(plan, path),
-        // a drift record is analysed by Allan deviation, not fitted
-        RunKind::Drift => Vec::new(),
-    }
+/// What kind of test a run is: its plan's kind ([`RunKind::of`], [`RunKind::of_dir`]), and
+/// the result file its analysis writes ([`RunKind::result_file`]).
+pub use gyrocal_files::plan::PlanKind as RunKind;
+
+/// A kind of test's analysis: what each kind's module provides (as its `Kind`), so that the
+/// one dispatch on the kind is generated from the one list of kinds.
+pub trait KindAnalysis {
+    /// What the analysis of a run of this kind is.
+    type Output: std::fmt::Debug + Clone;
+    /// How to analyse it.
+    type Options: std::fmt::Debug + Clone + Default;
+    /// What the analysis will not be able to do with a run of `plan` (at `path`, for the
+    /// messages): one line each.
+    fn plan_warnings(plan: &Plan, path: &Path) -> Vec<String>;
+    /// Analyses the run in `dir` (read as `data`), writing nothing.
+    fn analyse(
+        dir: &Path,
+        data: &RunData,
+        opts: &Self::Options,
+    ) -> Result<Self::Output, AnalysisError>;
+    /// Analyses the run that just ended (its [`RunDir`] still open) and writes the result
+    /// through the run directory (atomically, under the run's lock, its SHA-256 in the
+    /// manifest).
+    fn analyse_run(run: &mut RunDir, opts: &Self::Options) -> Result<Self::Output, AnalysisError>;
+    /// The headline figures of the run in `dir` (manifest `m`; `fit`: its fit document when it
+    /// has one), read typed from its result file; `Ok(None)` when it has no results yet.
+    fn figures(
+        dir: &Path,
+        m: &Manifest,
+        fit: Option<&serde_json::Value>,
+    ) -> Result<Option<Figures>, AnalysisError>;
 }
 
-/// What kind of analysis a run gets: the one dispatch on a run's kind.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum RunKind {
-    /// A sweep of rates: the scale-factor fit (`fit.json`), the report (`report.html`).
-    Sweep,
-    /// A static record: the Allan analysis (`allan.json`), its page (`allan.html`).
-    Drift,
-}
+/// The kinds' modules and the one dispatch on the kind, from the one list of kinds.
+macro_rules! kinds {
+    ($($module:ident => $variant:ident),* $(,)?) => {
+        $(pub mod $module;)*
 
-impl RunKind {
-    /// The kind of the run whose manifest is `m` (its plan's kind).
-    pub fn of(m: &Manifest) -> RunKind {
-        RunKind::of_plan(&m.plan)
-    }
-
-    /// The kind of analysis a run of `plan` will get.
-    pub fn of_plan(plan: &Plan) -> RunKind {
-        match plan.kind() {
-            PlanKind::ScaleFactor => RunKind::Sweep,
-            PlanKind::Drift => RunKind::Drift,
+        /// How to analyse a run: the options of each kind's analysis, one field per kind,
+        /// named as its module (only the run's kind's apply).
+        #[derive(Debug, Clone, Default)]
+        pub struct Options {
+            $(
+                #[doc = concat!("The options of the `", stringify!($module), "` kind's analysis.")]
+                pub $module: <$module::Kind as KindAnalysis>::Options,
+            )*
         }
-    }
 
-    /// The kind of the run in `dir`, or `None` when `dir` is not a readable run directory (a
-    /// file, a directory without a manifest, a malformed one: the caller's own reading says
-    /// why).
-    pub fn of_dir(dir: &Path) -> Option<RunKind> {
-        if !dir.is_dir() {
-            return None;
+        /// The analysis of a run, by its kind.
+        #[derive(Debug, Clone)]
+        pub enum Analysis {
+            $(
+                #[doc = concat!("The analysis of a run of the `", stringify!($module), "` kind.")]
+                $variant(Box<<$module::Kind as KindAnalysis>::Output>),
+            )*
         }
-        gyrocal_files::load(dir)
-            .ok()
-            .map(|r| RunKind::of(&r.manifest))
-    }
 
-    /// The result file the analysis of this kind writes into the run directory.
-    pub fn result_file(self) -> &'static str {
-        match self {
-            RunKind::Sweep => FIT_JSON,
-            RunKind::Drift => ALLAN_JSON,
+        impl Analysis {
+            /// The kind of run this analysis is of.
+            pub fn kind(&self) -> RunKind {
+                match self {
+                    $(Analysis::$variant(_) => RunKind::$variant,)*
+                }
+            }
         }
-    }
-}
 
-/// How to analyse a run: the options of each kind's analysis (only the run's kind's apply).
-#[derive(Debug, Clone, Default)]
-pub struct Options {
-    /// The scale-factor fit of a sweep.
-    pub fit: gyrocal_fit::Options,
-    /// The Allan analysis of a drift record.
-    pub allan: drift::AllanOptions,
-}
-
-/// The analysis of a run, by its kind.
-#[derive(Debug, Clone)]
-pub enum Analysis {
-    /// A sweep's scale-factor fit, with the run's calibration records attached.
-    Sweep(Box<gyrocal_fit::Analysis>),
-    /// A drift record's Allan analysis.
-    Drift(Box<drift::AllanDocument>),
-}
-
-impl Analysis {
-    /// The kind of run this analysis is of.
-    pub fn kind(&self) -> RunKind {
-        match self {
-            Analysis::Sweep(_) => RunKind::Sweep,
-            Analysis::Drift(_) => RunKind::Drift,
+        /// What the analysis will not be able to do with a run of `plan` (at `path`, for the
+        /// messages): one line each, said by `gyrocal check` and before `gyrocal run` starts.
+        pub fn plan_warnings(plan: &Plan, path: &Path) -> Vec<String> {
+            match RunKind::of_plan(plan) {
+                $(RunKind::$variant => <$module::Kind as KindAnalysis>::plan_warnings(plan, path),)*
+            }
         }
-    }
-}
 
-/// Analyses the run in `dir` by its kind, writing nothing: a sweep's steps fitted with the
-/// run's records attached (as [`sweep::fit_run`] would store them), a drift record's Allan
-/// analysis (as `allan.json` holds it).
-pub fn analyse(dir: &Path, opts: &Options) -> Result<Analysis, AnalysisError> {
-    let data = gyrocal_files::load(dir)?;
-    match RunKind::of(&data.manifest) {
-        RunKind::Sweep => Ok(Analysis::Sweep(Box::new(sweep::analyse_steps(
-            dir, &data, &opts.fit,
-        )?))),
-        RunKind::Drift => Ok(Analysis::Drift(Box::new(drift::analyse_input(
-            dir,
-            &opts.allan,
-        )?))),
-    }
-}
-
-/// Analyses the run that just ended (its [`RunDir`] still open) by its kind and writes the
-/// result through the run directory: `fit.json` for a sweep ([`sweep::fit_run`]),
-/// `allan.json` for a drift record ([`drift::write_document`]); each atomically, under the
-/// run's lock, its SHA-256 in the manifest. (A drift record's page, `allan.html`, is the
-/// report crate's to render and write.)
-pub fn analyse_run(run: &mut RunDir, opts: &Options) -> Result<Analysis, AnalysisError> {
-    match RunKind::of(run.manifest()) {
-        RunKind::Sweep => Ok(Analysis::Sweep(Box::new(sweep::fit_run(run, &opts.fit)?))),
-        RunKind::Drift => {
-            let doc = drift::analyse_input(run.path(), &opts.allan)?;
-            drift::write_document(run, &doc)?;
-            Ok(Analysis::Drift(Box::new(doc)))
+        /// Analyses the run in `dir` by its kind, writing nothing (a sweep's steps fitted with
+        /// the run's records attached, as [`sweep::fit_run`] would store them; a drift
+        /// record's Allan analysis, as `allan.json` holds it).
+        pub fn analyse(dir: &Path, opts: &Options) -> Result<Analysis, AnalysisError> {
+            let data = gyrocal_files::load(dir)?;
+            match RunKind::of(&data.manifest) {
+                $(RunKind::$variant => Ok(Analysis::$variant(Box::new(
+                    <$module::Kind as KindAnalysis>::analyse(dir, &data, &opts.$module)?,
+                ))),)*
+            }
         }
-    }
-}
 
-/// The headline figures of the run in `dir` (manifest `m`), read typed from the results file
-/// of its kind: a sweep's from its fit document (`fit`: the run's `fit.json`, or the fit a
-/// format-1 manifest embedded; `None` when it has none), a drift record's from its
-/// `allan.json`. `Ok(None)` when the run has no results yet; an error naming the file when
-/// `allan.json` cannot be read.
-pub fn figures(
-    dir: &Path,
-    m: &Manifest,
-    fit: Option<&serde_json::Value>,
-) -> Result<Option<Figures>, AnalysisError> {
-    Ok(match RunKind::of(m) {
-        RunKind::Sweep => fit.map(|fit| sweep::figures(fit, m)),
-        RunKind::Drift => drift::DriftFigures::load(dir)?.map(|d| d.figures()),
-    })
+        /// Analyses the run that just ended (its [`RunDir`] still open) by its kind and writes
+        /// the result through the run directory (`fit.json` for a sweep, `allan.json` for a
+        /// drift record; each atomically, under the run's lock, its SHA-256 in the
+        /// manifest). A page (`allan.html`, `report.html`) is the report crate's to write.
+        pub fn analyse_run(run: &mut RunDir, opts: &Options) -> Result<Analysis, AnalysisError> {
+            match RunKind::of(run.manifest()) {
+                $(RunKind::$variant => Ok(Analysis::$variant(Box::new(
+                    <$module::Kind as KindAnalysis>::analyse_run(run, &opts.$module)?,
+                ))),)*
+            }
+        }
+
+        /// The headline figures of the run in `dir` (manifest `m`), read typed from the
+        /// results file of its kind: a sweep's from its fit document (`fit`: the run's
+        /// `fit.json`, or the fit a format-1 manifest embedded; `None` when it has none), a
+        /// drift record's from its `allan.json`. `Ok(None)` when the run has no results yet;
+        /// an error naming the file when `allan.json` cannot be read.
+        pub fn figures(
+            dir: &Path,
+            m: &Manifest,
+            fit: Option<&serde_json::Value>,
+        ) -> Result<Option<Figures>, AnalysisError> {
+            match RunKind::of(m) {
+                $(RunKind::$variant => <$module::Kind as KindAnalysis>::figures(dir, m, fit),)*
+            }
+        }
+    };
 }
+gyrocal_files::for_each_test_kind!(kinds);

@@ -409,3 +409,38 @@ mod view {
         pub expanded_uncertainty: Option<f64>,
     }
 }
+
+/// The sweep's part of the analysis crate's one dispatch.
+pub struct Kind;
+
+impl crate::KindAnalysis for Kind {
+    type Output = gyrocal_fit::Analysis;
+    type Options = gyrocal_fit::Options;
+
+    fn plan_warnings(plan: &Plan, path: &Path) -> Vec<String> {
+        plan_warnings(plan, path)
+    }
+
+    fn analyse(
+        dir: &Path,
+        data: &RunData,
+        opts: &gyrocal_fit::Options,
+    ) -> Result<gyrocal_fit::Analysis, crate::AnalysisError> {
+        Ok(analyse_steps(dir, data, opts)?)
+    }
+
+    fn analyse_run(
+        run: &mut RunDir,
+        opts: &gyrocal_fit::Options,
+    ) -> Result<gyrocal_fit::Analysis, crate::AnalysisError> {
+        Ok(fit_run(run, opts)?)
+    }
+
+    fn figures(
+        _dir: &Path,
+        m: &Manifest,
+        fit: Option<&serde_json::Value>,
+    ) -> Result<Option<crate::Figures>, crate::AnalysisError> {
+        Ok(fit.map(|fit| figures(fit, m)))
+    }
+}

@@ -192,7 +192,7 @@ fn a_drift_record_in_deg_per_hour_gives_the_catalog_its_figures_typed() {
     let dir = tmp.path().join("run");
     let mut rd = write_run(&dir, DRIFT, drift_volts);
     let opts = Options {
-        allan: gyrocal_analysis::drift::AllanOptions {
+        drift: gyrocal_analysis::drift::AllanOptions {
             scale_factor: Some(0.02),
             ..Default::default()
         },

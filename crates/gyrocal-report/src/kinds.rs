@@ -2,8 +2,9 @@
 //! page module says, in one [`KindPages`], what the end of a complete run of that kind writes
 //! and says ([`end_of_run`]) and whether its report is a page of its own, written alone into
 //! the run directory ([`own_page`]), instead of the calibration certificate (which combines
-//! runs and takes acceptance limits). Adding a kind of test is its page module and one arm in
-//! [`pages`]: the binary and the catalog never ask which kind a run is.
+//! runs and takes acceptance limits). The kinds' modules and the dispatch are generated from
+//! the one list of kinds: adding a kind of test is its module in `kinds/`, no arm here; the
+//! binary and the catalog never ask which kind a run is.
 
 use std::path::{Path, PathBuf};
 
@@ -21,13 +22,22 @@ pub(crate) struct KindPages {
     pub(crate) own_page: Option<OwnPage>,
 }
 
-/// The kind's pages: the one match on the kind in this crate.
-fn pages(kind: RunKind) -> &'static KindPages {
-    match kind {
-        RunKind::Sweep => &SWEEP,
-        RunKind::Drift => &crate::allan::PAGES,
-    }
+/// The kinds' modules (`kinds/sweep.rs`, `kinds/drift.rs`, each with its [`KindPages`] as
+/// `PAGES`) and the one match on the kind in this crate, from the one list of kinds
+/// ([`gyrocal_files::for_each_test_kind`]).
+macro_rules! kinds {
+    ($($module:ident => $variant:ident),* $(,)?) => {
+        $(mod $module;)*
+
+        /// The kind's pages.
+        fn pages(kind: RunKind) -> &'static KindPages {
+            match kind {
+                $(RunKind::$variant => &$module::PAGES,)*
+            }
+        }
+    };
 }
+gyrocal_files::for_each_test_kind!(kinds);
 
 /// What the end of a complete run wrote and has to say.
 #[derive(Debug, Clone, Default)]
@@ -73,35 +83,4 @@ pub struct OwnPage {
 /// a bare steps CSV, anything that is not a readable run directory).
 pub fn own_page(dir: &Path) -> Option<&'static OwnPage> {
     pages(RunKind::of_dir(dir)?).own_page.as_ref()
-}
-
-/// A sweep: its fit, and the certificate.
-static SWEEP: KindPages = KindPages {
-    ending: sweep_ending,
-    own_page: None,
-};
-
-/// The end of a complete sweep: the fit stored in `fit.json` (with the run's records), its
-/// text, and `report.html` when `pages`.
-fn sweep_ending(run: &mut RunDir, pages: bool) -> Result<Ending, ReportError> {
-    let analysis = gyrocal_analysis::sweep::fit_run(run, &gyrocal_fit::Options::default())
-        .map_err(|e| ReportError::Analysis(e.into()))?;
-    let mut end = Ending::default();
-    let m = run.manifest();
-    end.json
-        .insert("fit".into(), serde_json::json!(m.fit_summary));
-    end.json
-        .insert("acceptance".into(), serde_json::json!(m.acceptance));
-    crate::text::fit_summary(&mut end.results, &analysis);
-    if pages {
-        // the data and the fit are safe on disk already: a report failure is a warning
-        match crate::write_run_report(run.path()) {
-            Ok(path) => {
-                end.page_line = Some(format!("report: {}", path.display()));
-                end.json.insert("report".into(), serde_json::json!(path));
-            }
-            Err(e) => end.warnings.push(format!("no report: {e}")),
-        }
-    }
-    Ok(end)
 }

@@ -557,3 +557,41 @@ fn units(
     };
     Ok((scale_factor, factor, unit))
 }
+
+/// The drift record's part of the analysis crate's one dispatch.
+pub struct Kind;
+
+impl crate::KindAnalysis for Kind {
+    type Output = AllanDocument;
+    type Options = AllanOptions;
+
+    /// A drift record is analysed by Allan deviation, not fitted: nothing to warn about.
+    fn plan_warnings(_plan: &gyrocal_files::Plan, _path: &Path) -> Vec<String> {
+        Vec::new()
+    }
+
+    fn analyse(
+        dir: &Path,
+        _data: &gyrocal_files::rundir::RunData,
+        opts: &AllanOptions,
+    ) -> Result<AllanDocument, crate::AnalysisError> {
+        Ok(analyse_input(dir, opts)?)
+    }
+
+    fn analyse_run(
+        run: &mut gyrocal_files::RunDir,
+        opts: &AllanOptions,
+    ) -> Result<AllanDocument, crate::AnalysisError> {
+        let doc = analyse_input(run.path(), opts)?;
+        write_document(run, &doc)?;
+        Ok(doc)
+    }
+
+    fn figures(
+        dir: &Path,
+        _m: &gyrocal_files::Manifest,
+        _fit: Option<&serde_json::Value>,
+    ) -> Result<Option<crate::Figures>, crate::AnalysisError> {
+        Ok(DriftFigures::load(dir)?.map(|d| d.figures()))
+    }
+}

@@ -318,6 +318,7 @@ fn validate_drift(d: &DriftDoc, cx: &Ctx<'_>) -> Result<DriftSettings, PlanError
 /// What `gyrocal check` says of a drift plan: the table's role and the Earth rate removed.
 pub(super) fn summary(d: &DriftSettings) -> super::kind::KindSummary {
     super::kind::KindSummary {
+        key: "drift",
         line: format!(
             "drift record: table {}{}",
             d.table.describe(),

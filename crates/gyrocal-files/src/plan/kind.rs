@@ -8,6 +8,21 @@
 use serde::{Deserialize, Serialize};
 use toml::de::DeTable;
 
+/// **The one list of test kinds**: `module => PlanKind variant`, one entry per kind. Every crate
+/// with a part of its own per kind expands it with a macro of its own (`$callback! { sweep =>
+/// Sweep, drift => Drift }`), declaring one module per kind (named as here) and its one
+/// dispatch on the kind (a match over the variants, generated): the plan crate's kind modules
+/// (`plan/sweep.rs`, `plan/drift.rs`), the analysis crate's (`gyrocal-analysis/src/sweep.rs`,
+/// `drift/`), the report crate's (`gyrocal-report/src/kinds/`). So a kind of test is added
+/// here (this list, its variant and its arms in this file) and in its three modules, and in
+/// no crate's `lib.rs` or `mod.rs`.
+#[macro_export]
+macro_rules! for_each_test_kind {
+    ($callback:ident) => {
+        $callback! { sweep => Sweep, drift => Drift }
+    };
+}
+
 use super::drift::{DriftDoc, DriftSettings, RawDrift};
 use super::error::PlanError;
 use super::raw::Spans;
@@ -90,25 +105,26 @@ pub(super) fn table_optional_in(root: &DeTable<'_>) -> bool {
 /// Whether a run of `plan` uses a rate table.
 pub(super) fn uses_table(plan: &super::Plan) -> bool {
     match plan.kind() {
-        PlanKind::ScaleFactor => true,
+        PlanKind::Sweep => true,
         PlanKind::Drift => plan.drift().table != drift::TableRole::None,
     }
 }
 
 pub(super) fn default_kind() -> String {
-    PlanKind::ScaleFactor.as_str().to_string()
+    PlanKind::Sweep.as_str().to_string()
 }
 
 pub(super) fn is_scale_factor(kind: &str) -> bool {
-    kind == PlanKind::ScaleFactor.as_str()
+    kind == PlanKind::Sweep.as_str()
 }
 
 /// What a plan measures.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum PlanKind {
-    /// A sweep of rates for the scale factor (the paper's method).
+    /// A sweep of rates for the scale factor (the paper's method): `kind = "scale_factor"`,
+    /// the default.
     #[default]
-    ScaleFactor,
+    Sweep,
     /// A static record at zero rate (IEEE 952 §6.6 drift test) in durable segments: every
     /// rate is 0, `samples_per_rate` readings make one segment (one step) and `repeat`
     /// segments the record; analysed by Allan deviation instead of a line.
@@ -117,12 +133,40 @@ pub enum PlanKind {
 
 impl PlanKind {
     /// All kinds.
-    pub const ALL: [PlanKind; 2] = [PlanKind::ScaleFactor, PlanKind::Drift];
+    pub const ALL: [PlanKind; 2] = [PlanKind::Sweep, PlanKind::Drift];
+
+    /// The kind of the run whose manifest is `m` (its plan's).
+    pub fn of(m: &crate::rundir::Manifest) -> PlanKind {
+        m.plan.kind()
+    }
+
+    /// The kind of a run of `plan`.
+    pub fn of_plan(plan: &super::Plan) -> PlanKind {
+        plan.kind()
+    }
+
+    /// The kind of the run in `dir`, or `None` when `dir` is not a readable run directory (a
+    /// file, a directory without a manifest, a malformed one: the caller's own reading says
+    /// why).
+    pub fn of_dir(dir: &std::path::Path) -> Option<PlanKind> {
+        if !dir.is_dir() {
+            return None;
+        }
+        crate::load(dir).ok().map(|r| r.manifest.plan.kind())
+    }
+
+    /// The result file the analysis of a run of this kind writes into its run directory.
+    pub fn result_file(self) -> &'static str {
+        match self {
+            PlanKind::Sweep => crate::rundir::FIT_JSON,
+            PlanKind::Drift => crate::rundir::ALLAN_JSON,
+        }
+    }
 
     /// `scale_factor` or `drift`, as written in a plan.
     pub fn as_str(self) -> &'static str {
         match self {
-            PlanKind::ScaleFactor => "scale_factor",
+            PlanKind::Sweep => "scale_factor",
             PlanKind::Drift => "drift",
         }
     }
@@ -136,7 +180,7 @@ pub(crate) fn compile(
     warmup_done: bool,
 ) -> crate::steps::Compiled {
     match plan.kind() {
-        PlanKind::ScaleFactor => sweep::compile(plan, remaining, warmup_done),
+        PlanKind::Sweep => sweep::compile(plan, remaining, warmup_done),
         PlanKind::Drift => drift::compile(plan, remaining, warmup_done),
     }
 }
@@ -144,15 +188,17 @@ pub(crate) fn compile(
 /// What a kind says of itself in `gyrocal check` (its own section of the plan).
 #[derive(Debug, Clone, PartialEq)]
 pub struct KindSummary {
+    /// The key its settings go under in `gyrocal check --json` (its section's name: `drift`).
+    pub key: &'static str,
     /// One line for the terminal.
     pub line: String,
-    /// Its settings for `gyrocal check --json` (under the kind's name).
+    /// Its settings for `gyrocal check --json` (under [`KindSummary::key`]).
     pub json: serde_json::Value,
 }
 
 pub(super) fn summary(plan: &super::Plan) -> Option<KindSummary> {
     match plan.kind() {
-        PlanKind::ScaleFactor => None,
+        PlanKind::Sweep => None,
         PlanKind::Drift => Some(drift::summary(&plan.drift())),
     }
 }
@@ -181,7 +227,7 @@ pub(super) fn check_rates(
     cx: &Ctx<'_>,
 ) -> Result<(), PlanError> {
     match kind {
-        PlanKind::ScaleFactor => sweep::check_rates(rates, cx),
+        PlanKind::Sweep => sweep::check_rates(rates, cx),
         PlanKind::Drift => drift::check_rates(rates, written, cx),
     }
 }

@@ -60,7 +60,6 @@
 mod acceptance;
 mod dmm;
 mod doc;
-mod drift;
 mod dut;
 mod error;
 mod kind;
@@ -70,11 +69,19 @@ mod schema;
 mod section;
 mod simulation;
 mod source;
-mod sweep;
 mod table;
 mod validate;
 mod warmup;
 mod words;
+
+// The test kinds' modules (`sweep`, `drift`), one per entry of the one list of kinds
+// ([`crate::for_each_test_kind`], in `kind.rs`).
+macro_rules! kind_modules {
+    ($($module:ident => $variant:ident),* $(,)?) => {
+        $(mod $module;)*
+    };
+}
+crate::for_each_test_kind!(kind_modules);
 
 use std::path::Path;
 use std::time::Duration;

@@ -200,7 +200,7 @@ fn json(
             })
         })
         .collect();
-    serde_json::json!({
+    let mut doc = serde_json::json!({
         "plan": path,
         "name": plan.name(),
         "hash": plan.hash(),
@@ -219,14 +219,18 @@ fn json(
         "readings": est.steps.iter().map(|s| s.samples).sum::<u64>(),
         "estimated_s": est.total.as_secs_f64(),
         "bound_s": est.bound.as_secs_f64(),
-        "drift": plan.kind_summary().map(|k| k.json),
         "warmup": plan.warmup().map(|w| serde_json::json!({
             "window_s": w.window.as_secs_f64(),
             "tolerance_v": w.tolerance_v,
             "max_s": w.max.as_secs_f64(),
         })),
         "warnings": warnings,
-    })
+    });
+    // the kind's own settings, under its section's name (`drift`)
+    if let Some(k) = plan.kind_summary() {
+        doc[k.key] = k.json;
+    }
+    doc
 }
 
 fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
