@@ -6,6 +6,9 @@
 
 use std::error::Error;
 
+pub(crate) mod axis;
+pub(crate) mod legend;
+
 use gyrocal_fit::{Analysis, ErrorSurface, Fit, Method, Model};
 use plotters::coord::ranged1d::ValueFormatter;
 use plotters::prelude::*;
