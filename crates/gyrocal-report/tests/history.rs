@@ -52,6 +52,7 @@ fn sweep(serial: &str, day: u32, k: f64, simulated: bool) -> Calibration {
             verdict: Some("pass".into()),
             ..CheckRow::default()
         }],
+        rates_dps: vec![-10.0, -1.0, 0.0, 1.0, 10.0],
     }
 }
 

@@ -22,8 +22,8 @@ const PAD: i32 = 8;
 /// Width of a swatch, px.
 const SWATCH: i32 = 26;
 /// Average width of a character of the legend font, px (sans-serif at 13 px averages about
-/// 6.5; rounded up so that the box never clips its text).
-const CHAR_PX: f64 = 7.0;
+/// 6.2; a little more so that the box never clips its text).
+const CHAR_PX: f64 = 6.4;
 /// Gap kept between the legend and the frame, px.
 const INSET: i32 = 6;
 
