@@ -154,7 +154,7 @@ fn limited_by(series: &str) -> &str {
 /// not changed, but σ estimated from n earlier values is itself uncertain, and a new value of
 /// an unchanged gyro falls outside mean ± 3s with the probability of a Student t with n − 1
 /// degrees of freedom beyond 3/√(1 + 1/n): 25 % with 2 earlier calibrations (the false alarms
-/// the issue saw), 12 % with 3, 7.6 % with 4, 5.2 % with 5, 2.4 % with 8. From 5 on a warning
+/// the issue saw), 12 % with 3, 7.5 % with 4, 5.2 % with 5, 2.5 % with 8. From 5 on a warning
 /// is rare enough to be worth reading; a lab that wants fewer false alarms waits for more.
 pub const MIN_BAND_POINTS: usize = 5;
 
@@ -481,7 +481,11 @@ impl History {
                 latest_outside_band: outside,
             });
         }
-        if plans.len() > 1 {
+        // a drift test and a sweep are never compared: only several plans of one kind are
+        if plans
+            .iter()
+            .any(|p| plans.iter().filter(|q| q.kind == p.kind).count() > 1)
+        {
             let names: Vec<String> = plans.iter().map(describe_plan).collect();
             warnings.insert(
                 0,
@@ -644,6 +648,24 @@ mod tests {
         assert!(k.latest_outside_band);
         assert_eq!(h.warnings.len(), 1);
         assert!(h.warnings[0].contains("0.362 V/(°/s)"), "{}", h.warnings[0]);
+    }
+
+    #[test]
+    fn a_drift_test_beside_the_sweeps_is_no_mixing_of_plans() {
+        let mut drift = cal(4, 0.0, "d", &[0.0]);
+        drift.run.kind = "drift".into();
+        drift.results = Some(Results {
+            arw_deg_rt_h: Some(0.01),
+            ..Results::default()
+        });
+        let h = History::of(
+            "G-1",
+            true,
+            vec![cal(1, 0.361, "a", &FIVE), cal(2, 0.361, "b", &FIVE), drift],
+        );
+        assert_eq!(h.plans.len(), 2);
+        assert!(h.warnings.is_empty(), "{:?}", h.warnings);
+        assert_eq!(h.repeatability.n, 2, "the sweeps' plan, though a drift test is the latest");
     }
 
     #[test]

@@ -237,16 +237,7 @@ fn curve_plot(doc: &AllanDocument) -> Result<String, ReportError> {
             .margin_right(margin + right)
             .x_label_area_size(x_area)
             .y_label_area_size(y_area)
-            .build_cartesian_2d(
-                (x0..x1)
-                    .log_scale()
-                    .with_key_points(xa.ticks())
-                    .with_light_points(xa.minor()),
-                (y0..y1)
-                    .log_scale()
-                    .with_key_points(ya.ticks())
-                    .with_light_points(ya.minor()),
-            )?;
+            .build_cartesian_2d(xa.coord(), ya.coord())?;
         chart
             .configure_mesh()
             .x_desc("averaging time τ (s)")

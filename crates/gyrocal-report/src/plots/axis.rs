@@ -24,6 +24,49 @@
 //! `.with_light_points(axis.minor())`, and label with [`LogAxis::label`] /
 //! [`LinearAxis::label`].
 
+use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint, Ranged};
+
+/// A coordinate with the ticks of an axis of this module: plotters draws its mesh and labels
+/// at exactly these (bold: labelled, light: minor grid lines). Built by [`LinearAxis::coord`]
+/// and [`LogAxis::coord`].
+#[derive(Debug, Clone)]
+pub(crate) struct Ticked {
+    lo: f64,
+    hi: f64,
+    log: bool,
+    bold: Vec<f64>,
+    light: Vec<f64>,
+}
+
+impl Ranged for Ticked {
+    type FormatOption = DefaultFormatting;
+    type ValueType = f64;
+
+    fn map(&self, v: &f64, limit: (i32, i32)) -> i32 {
+        let t = if self.log {
+            (v.ln() - self.lo.ln()) / (self.hi.ln() - self.lo.ln())
+        } else {
+            (v - self.lo) / (self.hi - self.lo)
+        };
+        let t = if t.is_finite() { t } else { 0.0 };
+        let px = f64::from(limit.0) + f64::from(limit.1 - limit.0) * t;
+        // far outside the frame is clipped anyway; keep the cast in range
+        px.round().clamp(-1e6, 1e6) as i32
+    }
+
+    fn key_points<H: KeyPointHint>(&self, hint: H) -> Vec<f64> {
+        if hint.weight().allow_light_points() {
+            self.light.clone()
+        } else {
+            self.bold.clone()
+        }
+    }
+
+    fn range(&self) -> std::ops::Range<f64> {
+        self.lo..self.hi
+    }
+}
+
 /// A decade at least this tall (px) shows minor ticks at every 2..9 ×.
 pub(crate) const MINOR_ALL_PX: f64 = 90.0;
 /// A decade at least this tall (px), but less than [`MINOR_ALL_PX`], shows minor ticks at 2
@@ -122,16 +165,30 @@ impl LogAxis {
     }
 
     /// The labelled ticks, ascending.
+    #[cfg(test)]
     pub(crate) fn ticks(&self) -> Vec<f64> {
         self.labelled.clone()
     }
 
     /// The minor (unlabelled) ticks, ascending.
+    #[cfg(test)]
     pub(crate) fn minor(&self) -> Vec<f64> {
         self.minor.clone()
     }
 
+    /// The coordinate to build a chart on.
+    pub(crate) fn coord(&self) -> Ticked {
+        Ticked {
+            lo: self.lo,
+            hi: self.hi,
+            log: true,
+            bold: self.labelled.clone(),
+            light: self.minor.clone(),
+        }
+    }
+
     /// The label format of this axis.
+    #[cfg(test)]
     pub(crate) fn format(&self) -> DecadeFormat {
         self.format
     }
@@ -254,8 +311,32 @@ impl LinearAxis {
     }
 
     /// The labelled ticks, ascending.
+    #[cfg(test)]
     pub(crate) fn ticks(&self) -> Vec<f64> {
         self.ticks.clone()
+    }
+
+    /// An axis over `lo..hi` with ticks of the caller's (a category axis: one per
+    /// calibration), labelled by the caller.
+    pub(crate) fn with_ticks(lo: f64, hi: f64, ticks: Vec<f64>) -> LinearAxis {
+        LinearAxis {
+            lo,
+            hi,
+            ticks,
+            decimals: 0,
+            scale: 0,
+        }
+    }
+
+    /// The coordinate to build a chart on.
+    pub(crate) fn coord(&self) -> Ticked {
+        Ticked {
+            lo: self.lo,
+            hi: self.hi,
+            log: false,
+            bold: self.ticks.clone(),
+            light: Vec::new(),
+        }
     }
 
     /// The label of a value on this axis: `value / 10^scale` with the axis's decimals; never
