@@ -135,7 +135,12 @@ impl Legend {
             Placement::Corner(Corner::UpperLeft) => (xs.start + INSET, ys.start + INSET),
             Placement::Corner(Corner::LowerRight) => (xs.end - w - INSET, ys.end - h - INSET),
             Placement::Corner(Corner::LowerLeft) => (xs.start + INSET, ys.end - h - INSET),
-            Placement::Outside => (xs.end + 2 * INSET, ys.start),
+            // against the frame's right edge: the room the plot reserved for it (beyond a
+            // right-hand axis too)
+            Placement::Outside => {
+                let right = i32::try_from(root.dim_in_pixel().0).unwrap_or(xs.end + w);
+                (right - w - 2 * INSET, ys.start)
+            }
         };
         root.draw(&Rectangle::new(
             [(x, y), (x + w, y + h)],
