@@ -446,12 +446,12 @@ impl History {
             let band = mean_std(&earlier)
                 .filter(|_| earlier.len() >= MIN_BAND_POINTS)
                 .map(|(mean, sigma)| Band {
-                n: earlier.len(),
-                mean,
-                sigma,
-                low: mean - 3.0 * sigma,
-                high: mean + 3.0 * sigma,
-            });
+                    n: earlier.len(),
+                    mean,
+                    sigma,
+                    low: mean - 3.0 * sigma,
+                    high: mean + 3.0 * sigma,
+                });
             let outside = band
                 .as_ref()
                 .is_some_and(|b| latest.value < b.low || latest.value > b.high);
@@ -665,7 +665,10 @@ mod tests {
         );
         assert_eq!(h.plans.len(), 2);
         assert!(h.warnings.is_empty(), "{:?}", h.warnings);
-        assert_eq!(h.repeatability.n, 2, "the sweeps' plan, though a drift test is the latest");
+        assert_eq!(
+            h.repeatability.n, 2,
+            "the sweeps' plan, though a drift test is the latest"
+        );
     }
 
     #[test]

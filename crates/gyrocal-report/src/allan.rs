@@ -16,9 +16,9 @@ use gyrocal_analysis::drift::{RunHeader, Warmup, fmt_num};
 use plotters::prelude::*;
 
 use crate::ReportError;
-use crate::plots::axis::LogAxis;
-use crate::plots::legend::{Legend, Placement, Swatch, densify, norm_log};
 use crate::page::{Page, esc};
+use crate::plots::axis::{LinearAxis, LogAxis};
+use crate::plots::legend::{Legend, Placement, Swatch, densify, norm_lin, norm_log};
 
 /// The analysis's number format (4 significant digits), the page's too.
 fn fmt_g(v: f64) -> String {
@@ -315,7 +315,8 @@ fn curve_plot(doc: &AllanDocument) -> Result<String, ReportError> {
 
 fn warmup_plot(doc: &AllanDocument, w: &Warmup) -> Result<String, ReportError> {
     draw("warmup.svg", |s| {
-        let root = SVGBackend::with_string(s, (800, 400)).into_drawing_area();
+        let size = (800u32, 400u32);
+        let root = SVGBackend::with_string(s, size).into_drawing_area();
         root.fill(&WHITE)?;
         let (mut x0, mut x1, mut y0, mut y1) = (
             f64::INFINITY,
@@ -337,52 +338,78 @@ fn warmup_plot(doc: &AllanDocument, w: &Warmup) -> Result<String, ReportError> {
             (y0, y1) = (c - 1.0, c + 1.0);
         }
         let pad = (y1 - y0) * 0.08;
-        let (y0, y1) = (y0 - pad, y1 + pad);
+        let (xa, ya) = (
+            LinearAxis::new(x0, x1, 8),
+            LinearAxis::new(y0 - pad, y1 + pad, 6),
+        );
         let unit = doc.unit.replace("deg", "°");
+        let tw = doc.segments[doc.analysed.segment].t_s.0 + w.time_s;
+        let red = RGBColor(214, 39, 40);
+        let mut legend = Legend::new();
+        legend.add(
+            "window means",
+            Swatch::Line {
+                color: BLUE,
+                width: 2,
+                dashed: false,
+            },
+        );
+        legend.add(
+            format!("warm-up complete: {} s ({})", fmt_g(w.time_s), w.ended_by),
+            Swatch::Line {
+                color: red,
+                width: 2,
+                dashed: true,
+            },
+        );
+        let (margin, x_area, y_area, caption) = (12u32, 48u32, 90u32, 34u32);
+        let area = (
+            f64::from(size.0 - 2 * margin - y_area),
+            f64::from(size.1 - 2 * margin - caption - x_area),
+        );
+        let line: Vec<(f64, f64)> = w
+            .curve
+            .iter()
+            .map(|&(t, m)| (norm_lin(t, xa.lo, xa.hi), norm_lin(m, ya.lo, ya.hi)))
+            .collect();
+        let placement = legend.place(&densify(&line, 3), area);
+        let right = match placement {
+            Placement::Outside => legend.width() as u32 + 24,
+            Placement::Corner(_) => 0,
+        };
         let mut chart = ChartBuilder::on(&root)
             .caption("Warm-up: rolling mean of the output", (FONT, 20))
-            .margin(12)
-            .x_label_area_size(48)
-            .y_label_area_size(90)
-            .build_cartesian_2d(x0..x1, y0..y1)?;
+            .margin(margin)
+            .margin_right(margin + right)
+            .x_label_area_size(x_area)
+            .y_label_area_size(y_area)
+            .build_cartesian_2d(xa.coord(), ya.coord())?;
         chart
             .configure_mesh()
             .x_desc("time (s)")
-            .y_desc(format!("{} s mean ({unit})", fmt_g(w.window_s)))
+            .y_desc(format!(
+                "{} s mean ({})",
+                fmt_g(w.window_s),
+                ya.scaled_unit(&unit)
+            ))
+            .x_label_formatter(&|v| xa.label(*v))
+            .y_label_formatter(&|v| ya.label(*v))
             .axis_desc_style((FONT, 16))
             .label_style((FONT, 14))
             .light_line_style(LIGHT)
             .bold_line_style(BOLD)
             .draw()?;
-        chart
-            .draw_series(LineSeries::new(
-                w.curve.iter().copied(),
-                BLUE.stroke_width(2),
-            ))?
-            .label("window means")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], BLUE.stroke_width(2)));
-        let tw = doc.segments[doc.analysed.segment].t_s.0 + w.time_s;
-        let red = RGBColor(214, 39, 40);
-        chart
-            .draw_series(DashedLineSeries::new(
-                [(tw, y0), (tw, y1)],
-                6,
-                4,
-                red.stroke_width(2),
-            ))?
-            .label(format!(
-                "warm-up complete: {} s ({})",
-                fmt_g(w.time_s),
-                w.ended_by
-            ))
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], red.stroke_width(2)));
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .label_font((FONT, 13))
-            .background_style(WHITE.mix(0.9))
-            .border_style(BOLD)
-            .draw()?;
+        chart.draw_series(LineSeries::new(
+            w.curve.iter().copied(),
+            BLUE.stroke_width(2),
+        ))?;
+        chart.draw_series(DashedLineSeries::new(
+            [(tw, ya.lo), (tw, ya.hi)],
+            6,
+            4,
+            red.stroke_width(2),
+        ))?;
+        legend.draw(&root, chart.plotting_area().get_pixel_range(), placement)?;
         root.present()?;
         Ok(())
     })

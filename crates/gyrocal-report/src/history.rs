@@ -66,7 +66,9 @@ pub fn render(h: &History) -> String {
     // each calibration with its plan's name (and letter, with several plans)
     let named = |i: usize, c: &gyrocal_catalog::Calibration| -> String {
         match h.plan_of.get(i) {
-            Some(p) if h.plans.len() > 1 => format!("{} (plan {})", c.run.plan_name, plan_letter(*p)),
+            Some(p) if h.plans.len() > 1 => {
+                format!("{} (plan {})", c.run.plan_name, plan_letter(*p))
+            }
             _ => c.run.plan_name.clone(),
         }
     };
@@ -204,7 +206,11 @@ pub fn render(h: &History) -> String {
                     out,
                     "<p class=\"note\">No control band: {} earlier calibration(s){}, {} needed (with fewer, σ is too uncertain: mean ± 3σ of 2 earlier values flags about 1 in 4 calibrations of an unchanged gyro).</p>",
                     t.band_candidates,
-                    if several_plans { " of the latest one's plan" } else { "" },
+                    if several_plans {
+                        " of the latest one's plan"
+                    } else {
+                        ""
+                    },
                     MIN_BAND_POINTS
                 );
             }
@@ -381,7 +387,10 @@ where
         legend.add("calibration ± U (k = 2)", Swatch::Dot(BLACK));
     }
     if standings[Standing::Marginal as usize] {
-        legend.add("marginal (beyond a marginal limit)", Swatch::Diamond(MARGINAL_ORANGE));
+        legend.add(
+            "marginal (beyond a marginal limit)",
+            Swatch::Diamond(MARGINAL_ORANGE),
+        );
     }
     if standings[Standing::Outside as usize] {
         legend.add("outside the acceptance limits", Swatch::Triangle(LIMIT_RED));

@@ -537,10 +537,7 @@ pub(crate) fn training_plot(neuron: &Fit, ls_sse: Option<f64>) -> Result<String,
         }
         if let Some(t) = online {
             let x = t.online_passes as f64 + 0.5;
-            chart.draw_series(LineSeries::new(
-                [(x, ya.lo), (x, ya.hi)],
-                g.stroke_width(1),
-            ))?;
+            chart.draw_series(LineSeries::new([(x, ya.lo), (x, ya.hi)], g.stroke_width(1)))?;
         }
         legend.draw(&root, chart.plotting_area().get_pixel_range(), placement)?;
         root.present()?;

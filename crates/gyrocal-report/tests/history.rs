@@ -202,7 +202,11 @@ fn no_control_band_below_five_earlier_calibrations_and_the_page_says_so() {
         "{html}"
     );
     assert!(!html.contains("control band: mean ± 3σ"));
-    let h = k_series(&[0.3610, 0.36101, 0.36099, 0.36100, 0.36102, 0.36100], 0.37, 0.369);
+    let h = k_series(
+        &[0.3610, 0.36101, 0.36099, 0.36100, 0.36102, 0.36100],
+        0.37,
+        0.369,
+    );
     let html = gyrocal_report::history::render(&h);
     assert!(html.contains("Control band (mean ± 3σ of the 5 earlier calibrations)"));
     let svg = trend_svg(&html, "Scale factor K (");
@@ -245,5 +249,8 @@ fn calibrations_of_another_plan_are_named_and_kept_out_of_the_repeatability() {
         "over 3 calibrations of plan A (the latest calibration's; 1 calibration(s) of other plans left out)"
     ));
     let t = texts(trend_svg(&html, "Scale factor K ("));
-    assert!(t.iter().any(|s| s == "another plan (not in the band)"), "{t:?}");
+    assert!(
+        t.iter().any(|s| s == "another plan (not in the band)"),
+        "{t:?}"
+    );
 }

@@ -893,7 +893,14 @@ fn calibrate_plan(data_home: &Path, dir: &Path, serial: &str, text: &str) {
     std::fs::create_dir_all(dir.parent().unwrap()).unwrap();
     std::fs::write(&plan, text).unwrap();
     ok(&gyrocal(data_home)
-        .args(["run", "--simulate", "--catalog", "off", "--dut-serial", serial])
+        .args([
+            "run",
+            "--simulate",
+            "--catalog",
+            "off",
+            "--dut-serial",
+            serial,
+        ])
         .arg("--out")
         .arg(dir)
         .arg(&plan)
@@ -942,15 +949,15 @@ fn history_tells_plans_apart_by_their_rates_not_their_seeds() {
             .unwrap();
         let stdout = ok(&out);
         let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-        assert!(stdout.contains(&format!("repeatability over {n} calibrations")), "{stdout}");
+        assert!(
+            stdout.contains(&format!("repeatability over {n} calibrations")),
+            "{stdout}"
+        );
         (stdout, stderr)
     };
     // all three: the 5-rate plan with other rates is another plan
     let (stdout, stderr) = history(&data_home, 2);
-    assert!(
-        stdout.contains("(1 of other plans left out)"),
-        "{stdout}"
-    );
+    assert!(stdout.contains("(1 of other plans left out)"), "{stdout}");
     assert!(stderr.contains("follow 2 plans"), "{stderr}");
     // without it: the two seeds are one plan
     std::fs::remove_dir_all(runs.join("other-rates")).unwrap();

@@ -288,10 +288,7 @@ impl LinearAxis {
             .filter(|v| *v >= lo - step * 1e-9 && *v <= hi + step * 1e-9)
             .map(|v| if v.abs() < step * 1e-6 { 0.0 } else { v })
             .collect();
-        let magnitude = ticks
-            .iter()
-            .fold(0.0f64, |m, v| m.max(v.abs()))
-            .max(step);
+        let magnitude = ticks.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(step);
         let decimals = (-e).max(0);
         let top = magnitude.log10().floor() as i32;
         let scale = if decimals > MAX_PLAIN_DECIMALS || top >= 6 {
@@ -345,7 +342,10 @@ impl LinearAxis {
         let x = v / pow10(self.scale);
         let d = self.decimals;
         let s = format!("{x:.d$}");
-        if s.trim_start_matches('-').chars().all(|c| c == '0' || c == '.') {
+        if s.trim_start_matches('-')
+            .chars()
+            .all(|c| c == '0' || c == '.')
+        {
             return format!("{:.d$}", 0.0);
         }
         s.replace('-', "−")
