@@ -490,13 +490,19 @@ where
         .bold_line_style(RGBColor(215, 215, 215))
         .draw()?;
     if let Some(b) = &t.band {
+        // from the first calibration of the band's plan: the others are not in it
+        let from = t
+            .points
+            .iter()
+            .position(|p| p.plan == t.plan)
+            .map_or(x0, |i| i as f64 - 0.5);
         chart.draw_series(std::iter::once(Rectangle::new(
-            [(x0, b.low.max(y0)), (x1, b.high.min(y1))],
+            [(from, b.low.max(y0)), (x1, b.high.min(y1))],
             BAND_BLUE.mix(0.25).filled(),
         )))?;
         if in_view(b.mean) {
             chart.draw_series(LineSeries::new(
-                vec![(x0, b.mean), (x1, b.mean)],
+                vec![(from, b.mean), (x1, b.mean)],
                 BAND_BLUE.stroke_width(1),
             ))?;
         }
