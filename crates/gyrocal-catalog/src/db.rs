@@ -699,6 +699,8 @@ impl Catalog {
         let checks_sql = "SELECT c.run_id, c.quantity, c.value, c.unit, \
              c.expanded_uncertainty, c.min, c.max, c.marginal_min, c.marginal_max, c.verdict \
              FROM checks c JOIN runs r ON r.id = c.run_id WHERE r.dut_serial = $1";
+        let rates_sql = "SELECT DISTINCT s.run_id, s.rate_dps FROM steps s \
+             JOIN runs r ON r.id = s.run_id WHERE r.dut_serial = $1";
         self.check_listed_tables().await?;
         let result: Result<Vec<Calibration>, sqlx::Error> = on_pool!(self, |p| {
             async {
@@ -723,6 +725,7 @@ impl Catalog {
                         run,
                         results,
                         checks: Vec::new(),
+                        rates_dps: Vec::new(),
                     });
                 }
                 let rows = sqlx::query(checks_sql).bind(serial).fetch_all(p).await?;
@@ -746,6 +749,20 @@ impl Catalog {
                     if let Some(&i) = index.get(&id) {
                         out[i].checks.push(check);
                     }
+                }
+                // the rates each run demanded: the history tells plans apart by them (a
+                // different simulation seed is the same plan, a different rate list is not)
+                let rows = sqlx::query(rates_sql).bind(serial).fetch_all(p).await?;
+                for row in &rows {
+                    let id: String = row.try_get("run_id")?;
+                    let rate: f64 = row.try_get("rate_dps")?;
+                    if let Some(&i) = index.get(&id) {
+                        out[i].rates_dps.push(rate);
+                    }
+                }
+                for c in &mut out {
+                    c.rates_dps.sort_by(f64::total_cmp);
+                    c.rates_dps.dedup();
                 }
                 Ok(out)
             }

@@ -55,7 +55,10 @@ pub use db::{Catalog, OpenOptions, RunFilter};
 pub use error::{CatalogError, ErrorKind};
 #[cfg(feature = "db")]
 pub use health::{set_aside, sqlite_damage};
-pub use history::{Band, History, Limits, QUANTITIES, Quantity, Repeatability, Trend, TrendPoint};
+pub use history::{
+    Band, History, Limits, MIN_BAND_POINTS, PlanGroup, PlanKey, QUANTITIES, Quantity,
+    Repeatability, Trend, TrendPoint, describe_plan, plan_key,
+};
 pub use record::{
     CheckRow, InstrumentRow, KIND_SCALE_FACTOR, Results, RunRecord, RunRow, StepRow, find_run_dirs,
     host_name, is_run_dir, read_run,

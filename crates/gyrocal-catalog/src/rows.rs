@@ -23,4 +23,8 @@ pub struct Calibration {
     pub results: Option<Results>,
     /// Its acceptance checks (with their limits).
     pub checks: Vec<CheckRow>,
+    /// The distinct rates its steps demanded, °/s, ascending: with the run's kind, what the
+    /// history compares to tell plans apart ([`crate::history::plan_key`]); empty when the
+    /// catalog holds no step of the run.
+    pub rates_dps: Vec<f64>,
 }

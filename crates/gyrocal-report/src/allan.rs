@@ -19,6 +19,8 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use crate::page::{Page, esc};
+use crate::plots::axis::{LinearAxis, LogAxis};
+use crate::plots::legend::{Legend, Placement, Swatch, densify, norm_lin, norm_log};
 use crate::{ALLAN_HTML, ALLAN_JSON, ReportError, write_atomic};
 
 /// The analysis's number format (4 significant digits), the page's too.
@@ -119,9 +121,14 @@ fn log_grid(lo: f64, hi: f64, n: usize) -> impl Iterator<Item = f64> {
     (0..n).map(move |i| (a + (b - a) * i as f64 / (n - 1) as f64).exp())
 }
 
+/// Size of the σ(τ) plot, px.
+const CURVE_SIZE: (u32, u32) = (800, 520);
+
+/// The σ(τ) plot: log axes labelled at every decade ([`LogAxis`]), the legend where it covers
+/// no point ([`Legend::place`]).
 fn curve_plot(doc: &AllanDocument) -> Result<String, ReportError> {
     draw("allan.svg", |s| {
-        let root = SVGBackend::with_string(s, (800, 520)).into_drawing_area();
+        let root = SVGBackend::with_string(s, CURVE_SIZE).into_drawing_area();
         root.fill(&WHITE)?;
         let pts: Vec<_> = doc
             .curve
@@ -144,8 +151,83 @@ fn curve_plot(doc: &AllanDocument) -> Result<String, ReportError> {
         if !(x0.is_finite() && x1 > 0.0 && y0.is_finite() && y1 > 0.0) {
             (x0, x1, y0, y1) = (0.1, 10.0, 0.1, 10.0);
         }
-        let (x0, x1, y0, y1) = (x0 / 1.5, x1 * 1.5, y0 / 2.0, y1 * 2.0);
+        // the plotting area, px: the frame less the margins, the caption and the label areas
+        let (margin, x_area, y_area, caption) = (12u32, 48u32, 80u32, 36u32);
+        let area_w = f64::from(CURVE_SIZE.0 - 2 * margin - y_area);
+        let area_h = f64::from(CURVE_SIZE.1 - 2 * margin - x_area - caption);
+        let ya = LogAxis::new(y0 / 1.1, y1 * 1.1, area_h);
         let unit = doc.unit.replace("deg", "°");
+        let fit = doc.noise_terms.as_ref().and_then(|n| n.fit.as_ref());
+        // the legend, with the same entries the series below draw
+        let mut legend = Legend::new();
+        let minimum = pts
+            .iter()
+            .min_by(|a, b| a.deviation.total_cmp(&b.deviation));
+        let guide = RGBColor(150, 150, 150);
+        if minimum.is_some() {
+            legend.add(
+                "slope guides −½, 0, +½",
+                Swatch::Line {
+                    color: guide,
+                    width: 1,
+                    dashed: true,
+                },
+            );
+        }
+        if let Some(fit) = fit {
+            for (k, term) in Term::ALL.iter().enumerate() {
+                if fit.coefficients[k] > 0.0 {
+                    legend.add(
+                        term_name(*term),
+                        Swatch::Line {
+                            color: TERM_COLORS[k],
+                            width: 1,
+                            dashed: false,
+                        },
+                    );
+                }
+            }
+            legend.add(
+                "five-term model (weighted fit)",
+                Swatch::Line {
+                    color: BLACK,
+                    width: 2,
+                    dashed: false,
+                },
+            );
+        }
+        legend.add("σ(τ) with 95 % interval (pale: τ > T/4)", Swatch::Dot(BLUE));
+        // what the legend must not cover: the points, their intervals and the model's curve,
+        // on a trial x axis as wide as the plot would be with the legend inside
+        let placement = {
+            let xa = LogAxis::new(x0 / 1.5, x1 * 1.5, area_w);
+            let nx = |t: f64| norm_log(t, xa.lo, xa.hi);
+            let ny = |v: f64| norm_log(v.clamp(ya.lo, ya.hi), ya.lo, ya.hi);
+            let mut data: Vec<(f64, f64)> = Vec::new();
+            for p in &pts {
+                for v in [p.deviation, p.ci95.0, p.ci95.1] {
+                    if v.is_finite() && v > 0.0 {
+                        data.push((nx(p.tau_s), ny(v)));
+                    }
+                }
+            }
+            if let Some(fit) = fit {
+                let line: Vec<(f64, f64)> = log_grid(xa.lo, xa.hi, 100)
+                    .map(|t| (t, fit.variance(t).sqrt()))
+                    .filter(|p| p.1.is_finite() && p.1 >= ya.lo && p.1 <= ya.hi)
+                    .map(|(t, v)| (nx(t), ny(v)))
+                    .collect();
+                data.extend(densify(&line, 4));
+            }
+            legend.place(&data, (area_w, area_h))
+        };
+        // room on the right for the last decade's label (centred on the frame), or the legend
+        let right = match placement {
+            Placement::Outside => legend.width() as u32 + 24,
+            Placement::Corner(_) => 24,
+        };
+        let xa = LogAxis::new(x0 / 1.5, x1 * 1.5, area_w - f64::from(right));
+        let (x0, x1, y0, y1) = (xa.lo, xa.hi, ya.lo, ya.hi);
         let mut chart = ChartBuilder::on(&root)
             .caption(
                 format!(
@@ -154,16 +236,17 @@ fn curve_plot(doc: &AllanDocument) -> Result<String, ReportError> {
                 ),
                 (FONT, 20),
             )
-            .margin(12)
-            .x_label_area_size(48)
-            .y_label_area_size(80)
-            .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())?;
+            .margin(margin)
+            .margin_right(margin + right)
+            .x_label_area_size(x_area)
+            .y_label_area_size(y_area)
+            .build_cartesian_2d(xa.coord(), ya.coord())?;
         chart
             .configure_mesh()
             .x_desc("averaging time τ (s)")
             .y_desc(format!("σ(τ) ({unit})"))
-            .x_label_formatter(&|v| format!("{v:.0e}"))
-            .y_label_formatter(&|v| format!("{v:.1e}"))
+            .x_label_formatter(&|v| xa.label(*v))
+            .y_label_formatter(&|v| ya.label(*v))
             .axis_desc_style((FONT, 16))
             .label_style((FONT, 14))
             .light_line_style(LIGHT)
@@ -171,76 +254,54 @@ fn curve_plot(doc: &AllanDocument) -> Result<String, ReportError> {
             .draw()?;
         let within = |y: f64| y >= y0 && y <= y1 && y.is_finite();
         // slope guides through the minimum
-        if let Some(pm) = pts
-            .iter()
-            .min_by(|a, b| a.deviation.total_cmp(&b.deviation))
-        {
-            let g = RGBColor(150, 150, 150);
-            for (k, slope) in [-0.5f64, 0.0, 0.5].into_iter().enumerate() {
+        if let Some(pm) = minimum {
+            for slope in [-0.5f64, 0.0, 0.5] {
                 let line: Vec<(f64, f64)> = log_grid(x0, x1, 60)
                     .map(|t| (t, pm.deviation * (t / pm.tau_s).powf(slope)))
                     .filter(|p| within(p.1))
                     .collect();
-                let series =
-                    chart.draw_series(DashedLineSeries::new(line, 5, 5, g.stroke_width(1)))?;
-                if k == 0 {
-                    series
-                        .label("slope guides −½, 0, +½")
-                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], g));
-                }
+                chart.draw_series(DashedLineSeries::new(line, 5, 5, guide.stroke_width(1)))?;
             }
         }
         // the fitted model and its terms
-        if let Some(fit) = doc.noise_terms.as_ref().and_then(|n| n.fit.as_ref()) {
+        if let Some(fit) = fit {
             for (k, term) in Term::ALL.iter().enumerate() {
                 let c = fit.coefficients[k];
                 if c <= 0.0 {
                     continue;
                 }
-                let col = TERM_COLORS[k];
                 let line: Vec<(f64, f64)> = log_grid(x0, x1, 120)
                     .map(|t| (t, (c * basis(*term, t)).sqrt()))
                     .filter(|p| within(p.1))
                     .collect();
-                chart
-                    .draw_series(LineSeries::new(line, col.stroke_width(1)))?
-                    .label(term_name(*term))
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], col));
+                chart.draw_series(LineSeries::new(line, TERM_COLORS[k].stroke_width(1)))?;
             }
             let line: Vec<(f64, f64)> = log_grid(x0, x1, 200)
                 .map(|t| (t, fit.variance(t).sqrt()))
                 .filter(|p| within(p.1))
                 .collect();
-            chart
-                .draw_series(LineSeries::new(line, BLACK.stroke_width(2)))?
-                .label("five-term model (weighted fit)")
-                .legend(|(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 24, y)], BLACK.stroke_width(2))
-                });
+            chart.draw_series(LineSeries::new(line, BLACK.stroke_width(2)))?;
         }
         let faded = BLUE.mix(0.35);
-        chart
-            .draw_series(
-                pts.iter()
-                    .filter(|p| p.ci95.0.is_finite() && p.ci95.1.is_finite())
-                    .map(|p| {
-                        let style = if p.beyond_quarter {
-                            faded.stroke_width(1)
-                        } else {
-                            BLUE.stroke_width(1)
-                        };
-                        ErrorBar::new_vertical(
-                            p.tau_s,
-                            p.ci95.0.max(y0),
-                            p.deviation,
-                            p.ci95.1.min(y1),
-                            style,
-                            6,
-                        )
-                    }),
-            )?
-            .label("σ(τ) with 95 % interval (pale: τ > T/4)")
-            .legend(|(x, y)| Circle::new((x + 12, y), 3, BLUE.filled()));
+        chart.draw_series(
+            pts.iter()
+                .filter(|p| p.ci95.0.is_finite() && p.ci95.1.is_finite())
+                .map(|p| {
+                    let style = if p.beyond_quarter {
+                        faded.stroke_width(1)
+                    } else {
+                        BLUE.stroke_width(1)
+                    };
+                    ErrorBar::new_vertical(
+                        p.tau_s,
+                        p.ci95.0.max(y0),
+                        p.deviation,
+                        p.ci95.1.min(y1),
+                        style,
+                        6,
+                    )
+                }),
+        )?;
         chart.draw_series(pts.iter().map(|p| {
             let c = if p.beyond_quarter {
                 faded.filled()
@@ -249,13 +310,7 @@ fn curve_plot(doc: &AllanDocument) -> Result<String, ReportError> {
             };
             Circle::new((p.tau_s, p.deviation), 3, c)
         }))?;
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .label_font((FONT, 13))
-            .background_style(WHITE.mix(0.9))
-            .border_style(BOLD)
-            .draw()?;
+        legend.draw(&root, chart.plotting_area().get_pixel_range(), placement)?;
         root.present()?;
         Ok(())
     })
@@ -263,7 +318,8 @@ fn curve_plot(doc: &AllanDocument) -> Result<String, ReportError> {
 
 fn warmup_plot(doc: &AllanDocument, w: &Warmup) -> Result<String, ReportError> {
     draw("warmup.svg", |s| {
-        let root = SVGBackend::with_string(s, (800, 400)).into_drawing_area();
+        let size = (800u32, 400u32);
+        let root = SVGBackend::with_string(s, size).into_drawing_area();
         root.fill(&WHITE)?;
         let (mut x0, mut x1, mut y0, mut y1) = (
             f64::INFINITY,
@@ -285,52 +341,78 @@ fn warmup_plot(doc: &AllanDocument, w: &Warmup) -> Result<String, ReportError> {
             (y0, y1) = (c - 1.0, c + 1.0);
         }
         let pad = (y1 - y0) * 0.08;
-        let (y0, y1) = (y0 - pad, y1 + pad);
+        let (xa, ya) = (
+            LinearAxis::new(x0, x1, 8),
+            LinearAxis::new(y0 - pad, y1 + pad, 6),
+        );
         let unit = doc.unit.replace("deg", "°");
+        let tw = doc.segments[doc.analysed.segment].t_s.0 + w.time_s;
+        let red = RGBColor(214, 39, 40);
+        let mut legend = Legend::new();
+        legend.add(
+            "window means",
+            Swatch::Line {
+                color: BLUE,
+                width: 2,
+                dashed: false,
+            },
+        );
+        legend.add(
+            format!("warm-up complete: {} s ({})", fmt_g(w.time_s), w.ended_by),
+            Swatch::Line {
+                color: red,
+                width: 2,
+                dashed: true,
+            },
+        );
+        let (margin, x_area, y_area, caption) = (12u32, 48u32, 90u32, 34u32);
+        let area = (
+            f64::from(size.0 - 2 * margin - y_area),
+            f64::from(size.1 - 2 * margin - caption - x_area),
+        );
+        let line: Vec<(f64, f64)> = w
+            .curve
+            .iter()
+            .map(|&(t, m)| (norm_lin(t, xa.lo, xa.hi), norm_lin(m, ya.lo, ya.hi)))
+            .collect();
+        let placement = legend.place(&densify(&line, 3), area);
+        let right = match placement {
+            Placement::Outside => legend.width() as u32 + 24,
+            Placement::Corner(_) => 0,
+        };
         let mut chart = ChartBuilder::on(&root)
             .caption("Warm-up: rolling mean of the output", (FONT, 20))
-            .margin(12)
-            .x_label_area_size(48)
-            .y_label_area_size(90)
-            .build_cartesian_2d(x0..x1, y0..y1)?;
+            .margin(margin)
+            .margin_right(margin + right)
+            .x_label_area_size(x_area)
+            .y_label_area_size(y_area)
+            .build_cartesian_2d(xa.coord(), ya.coord())?;
         chart
             .configure_mesh()
             .x_desc("time (s)")
-            .y_desc(format!("{} s mean ({unit})", fmt_g(w.window_s)))
+            .y_desc(format!(
+                "{} s mean ({})",
+                fmt_g(w.window_s),
+                ya.scaled_unit(&unit)
+            ))
+            .x_label_formatter(&|v| xa.label(*v))
+            .y_label_formatter(&|v| ya.label(*v))
             .axis_desc_style((FONT, 16))
             .label_style((FONT, 14))
             .light_line_style(LIGHT)
             .bold_line_style(BOLD)
             .draw()?;
-        chart
-            .draw_series(LineSeries::new(
-                w.curve.iter().copied(),
-                BLUE.stroke_width(2),
-            ))?
-            .label("window means")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], BLUE.stroke_width(2)));
-        let tw = doc.segments[doc.analysed.segment].t_s.0 + w.time_s;
-        let red = RGBColor(214, 39, 40);
-        chart
-            .draw_series(DashedLineSeries::new(
-                [(tw, y0), (tw, y1)],
-                6,
-                4,
-                red.stroke_width(2),
-            ))?
-            .label(format!(
-                "warm-up complete: {} s ({})",
-                fmt_g(w.time_s),
-                w.ended_by
-            ))
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], red.stroke_width(2)));
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .label_font((FONT, 13))
-            .background_style(WHITE.mix(0.9))
-            .border_style(BOLD)
-            .draw()?;
+        chart.draw_series(LineSeries::new(
+            w.curve.iter().copied(),
+            BLUE.stroke_width(2),
+        ))?;
+        chart.draw_series(DashedLineSeries::new(
+            [(tw, ya.lo), (tw, ya.hi)],
+            6,
+            4,
+            red.stroke_width(2),
+        ))?;
+        legend.draw(&root, chart.plotting_area().get_pixel_range(), placement)?;
         root.present()?;
         Ok(())
     })

@@ -11,13 +11,24 @@ use std::fmt::Write as _;
 
 use plotters::prelude::*;
 
-use gyrocal_catalog::{History, Trend};
+use gyrocal_catalog::{History, Limits, MIN_BAND_POINTS, Trend, describe_plan};
 
 use crate::page::{Page, esc};
+use crate::plots::axis::LinearAxis;
+use crate::plots::legend::{Legend, Placement, Swatch, diamond, norm_lin};
 
 const WIDTH: u32 = 860;
 const HEIGHT: u32 = 320;
 const FONT: &str = "sans-serif";
+
+/// `v` to 6 significant digits without trailing zeros (`0.3616`, not `3.6160e-1`).
+fn short(v: f64) -> String {
+    let s = significant(v, 6);
+    if s.contains('e') || !s.contains('.') {
+        return s;
+    }
+    s.trim_end_matches('0').trim_end_matches('.').to_string()
+}
 
 fn num(v: Option<f64>) -> String {
     v.map_or_else(|| "—".to_string(), |x| significant(x, 7))
@@ -52,27 +63,62 @@ pub fn render(h: &History) -> String {
     for w in &h.warnings {
         let _ = write!(out, "<p class=\"warn\">Warning: {}</p>", esc(w));
     }
+    // each calibration with its plan's name (and letter, with several plans)
+    let named = |i: usize, c: &gyrocal_catalog::Calibration| -> String {
+        match h.plan_of.get(i) {
+            Some(p) if h.plans.len() > 1 => {
+                format!("{} (plan {})", c.run.plan_name, plan_letter(*p))
+            }
+            _ => c.run.plan_name.clone(),
+        }
+    };
     let sweeps: Vec<_> = h
         .calibrations
         .iter()
-        .filter(|c| c.run.kind != "drift")
+        .enumerate()
+        .filter(|(_, c)| c.run.kind != "drift")
+        .map(|(i, c)| (c, named(i, c)))
         .collect();
     let drifts: Vec<_> = h
         .calibrations
         .iter()
-        .filter(|c| c.run.kind == "drift")
+        .enumerate()
+        .filter(|(_, c)| c.run.kind == "drift")
+        .map(|(i, c)| (c, named(i, c)))
         .collect();
+    let several_plans = h.plans.len() > 1;
+    if several_plans {
+        out.push_str("<h2>Plans</h2><p class=\"note\">Calibrations are compared (repeatability, control bands) only with calibrations of the same plan: the same kind of test at the same demanded rates. A different simulation seed is the same plan.</p><ul>");
+        for (i, p) in h.plans.iter().enumerate() {
+            let _ = write!(
+                out,
+                "<li>plan {}: {}</li>",
+                plan_letter(i),
+                esc(&describe_plan(p))
+            );
+        }
+        out.push_str("</ul>");
+    }
     if !sweeps.is_empty() {
         let r = &h.repeatability;
+        let of_plan = match (several_plans, r.plan) {
+            (true, Some(p)) => format!(
+                " of plan {} (the latest calibration's; {} calibration(s) of other plans left out)",
+                plan_letter(p),
+                r.other_plans
+            ),
+            _ => String::new(),
+        };
         let _ = write!(
             out,
             "<h2>Repeatability from calibration to calibration</h2><ul>\
-             <li>scale factor: mean {} V/(°/s), {} ppm (std/mean over {} calibrations)</li>\
+             <li>scale factor: mean {} V/(°/s), {} ppm (std/mean over {} calibrations{})</li>\
              <li>bias: mean {} °/h, std {} °/h</li></ul>",
             num(r.scale_factor_mean),
             r.scale_factor_ppm
                 .map_or("—".to_string(), |v| format!("{v:.2}")),
             r.n,
+            of_plan,
             num(r.bias_dph_mean),
             num(r.bias_dph),
         );
@@ -81,7 +127,7 @@ pub fn render(h: &History) -> String {
              <th>plan</th><th>K ± U (V/(°/s))</th><th>bias ± U (°/h)</th><th>nonlinearity (ppm)</th>\
              <th>asymmetry (ppm)</th><th>verdict</th><th>sim.</th></tr>",
         );
-        for c in &sweeps {
+        for (c, plan) in &sweeps {
             let res = c.results.clone().unwrap_or_default();
             let _ = write!(
                 out,
@@ -91,7 +137,7 @@ pub fn render(h: &History) -> String {
                 esc(&c.run.directory),
                 esc(&c.run.id.chars().take(12).collect::<String>()),
                 esc(c.run.station_id.as_deref().unwrap_or("")),
-                esc(&c.run.plan_name),
+                esc(plan),
                 with_u(res.scale_factor, res.u_scale_factor),
                 with_u(res.bias_dph, res.u_bias_dph),
                 num(res.nonlinearity_ppm),
@@ -108,7 +154,7 @@ pub fn render(h: &History) -> String {
              <th>plan</th><th>N ± U (°/√h)</th><th>B ± U (°/h)</th><th>K ± U (°/h/√h)</th>\
              <th>bias ± U (°/h)</th><th>record (h)</th><th>sim.</th></tr>",
         );
-        for c in &drifts {
+        for (c, plan) in &drifts {
             let res = c.results.clone().unwrap_or_default();
             let _ = write!(
                 out,
@@ -118,7 +164,7 @@ pub fn render(h: &History) -> String {
                 esc(&c.run.directory),
                 esc(&c.run.id.chars().take(12).collect::<String>()),
                 esc(c.run.station_id.as_deref().unwrap_or("")),
-                esc(&c.run.plan_name),
+                esc(plan),
                 with_u(res.arw_deg_rt_h, res.u_arw_deg_rt_h),
                 with_u(res.bias_instability_dph, res.u_bias_instability_dph),
                 with_u(res.rrw_dph_rt_h, res.u_rrw_dph_rt_h),
@@ -138,23 +184,168 @@ pub fn render(h: &History) -> String {
                 let _ = write!(out, "<p>(no plot: {})</p>", esc(&e));
             }
         }
-        if let Some(b) = &t.band {
-            let _ = write!(
-                out,
-                "<p>Control band (mean ± 3σ of the {} earlier calibrations): {} .. {}{}</p>",
-                b.n,
-                significant(b.low, 7),
-                significant(b.high, 7),
-                if t.latest_outside_band {
-                    " <span class=\"warn\">the latest is outside</span>"
-                } else {
-                    ""
-                }
-            );
+        match &t.band {
+            Some(b) => {
+                let _ = write!(
+                    out,
+                    "<p>Control band (mean ± 3σ of the {} earlier calibrations{}): {} .. {} {}{}</p>",
+                    b.n,
+                    if several_plans { " of its plan" } else { "" },
+                    short(b.low),
+                    short(b.high),
+                    esc(&t.unit),
+                    if t.latest_outside_band {
+                        " <span class=\"warn\">the latest is outside</span>"
+                    } else {
+                        ""
+                    }
+                );
+            }
+            None => {
+                let _ = write!(
+                    out,
+                    "<p class=\"note\">No control band: {} earlier calibration(s){}, {} needed (with fewer, σ is too uncertain: mean ± 3σ of 2 earlier values flags about 1 in 4 calibrations of an unchanged gyro).</p>",
+                    t.band_candidates,
+                    if several_plans {
+                        " of the latest one's plan"
+                    } else {
+                        ""
+                    },
+                    MIN_BAND_POINTS
+                );
+            }
         }
     }
     Page::close(&mut out, None);
     out
+}
+
+/// A letter per plan (`A`, `B`, ...; `Z` and on past 26), as the page names them.
+fn plan_letter(i: usize) -> String {
+    char::from_u32(u32::from(b'A') + u32::try_from(i.min(25)).unwrap_or(25))
+        .map_or_else(|| "?".to_string(), |c| c.to_string())
+}
+
+/// Where a point stands against the limits drawn on its plot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Standing {
+    /// Within the marginal limits (or within the limits when there are no marginal ones).
+    Inside,
+    /// Between a marginal limit and its acceptance limit.
+    Marginal,
+    /// Beyond an acceptance limit.
+    Outside,
+}
+
+fn standing(v: f64, l: Option<&Limits>) -> Standing {
+    let Some(l) = l else {
+        return Standing::Inside;
+    };
+    if l.min.is_some_and(|m| v < m) || l.max.is_some_and(|m| v > m) {
+        Standing::Outside
+    } else if l.marginal_min.is_some_and(|m| v < m) || l.marginal_max.is_some_and(|m| v > m) {
+        Standing::Marginal
+    } else {
+        Standing::Inside
+    }
+}
+
+const LIMIT_RED: RGBColor = RGBColor(200, 30, 45);
+const MARGINAL_ORANGE: RGBColor = RGBColor(230, 130, 0);
+const BAND_BLUE: RGBColor = RGBColor(60, 110, 200);
+const OTHER_PLAN: RGBColor = RGBColor(150, 150, 150);
+
+/// Width of a tick label of `chars` characters at the history's 12 px font, px (generous).
+fn label_px(chars: usize) -> f64 {
+    chars as f64 * 7.0
+}
+
+/// The labels under the points, `spacing` px apart: the date at the first calibration of a
+/// day, the time (UTC) at the others of that day, so that a date is never repeated along the
+/// axis; a label that would run into the one before it is left out (a date never is: the
+/// time before it gives way).
+fn x_labels(points: &[gyrocal_catalog::TrendPoint], spacing: f64) -> Vec<String> {
+    let mut last_day = String::new();
+    let full: Vec<(String, bool)> = points
+        .iter()
+        .map(|p| {
+            let day: String = p.started_utc.chars().take(10).collect();
+            if day == last_day {
+                (p.started_utc.chars().skip(11).take(5).collect(), false)
+            } else {
+                last_day.clone_from(&day);
+                (day, true)
+            }
+        })
+        .collect();
+    let mut out = vec![String::new(); full.len()];
+    let mut last: Option<usize> = None;
+    for (i, (label, is_date)) in full.iter().enumerate() {
+        let fits = |j: usize, other: &str| {
+            (i - j) as f64 * spacing
+                >= (label_px(other.chars().count()) + label_px(label.chars().count())) / 2.0 + 6.0
+        };
+        match last {
+            Some(j) if !fits(j, &out[j]) => {
+                if *is_date && !full[j].1 {
+                    // the date wins over the time before it
+                    out[j].clear();
+                    let before = out[..j].iter().rposition(|s| !s.is_empty());
+                    if before.is_none_or(|k| fits(k, &out[k])) {
+                        out[i].clone_from(label);
+                        last = Some(i);
+                    }
+                }
+            }
+            _ => {
+                out[i].clone_from(label);
+                last = Some(i);
+            }
+        }
+    }
+    out
+}
+
+/// The y range of a trend: its values with their uncertainties and its band, padded; a limit
+/// is taken in only when that keeps the data at least a third of the height (a limit far
+/// from the data is named in the legend as above or below the plot instead, so the spread of
+/// the calibrations stays visible).
+fn y_range(t: &Trend) -> (f64, f64) {
+    let mut ys: Vec<f64> = Vec::new();
+    for p in &t.points {
+        let u = p.expanded_uncertainty.unwrap_or(0.0);
+        ys.push(p.value - u);
+        ys.push(p.value + u);
+    }
+    if let Some(b) = &t.band {
+        ys.push(b.low);
+        ys.push(b.high);
+    }
+    let ys: Vec<f64> = ys.into_iter().filter(|v| v.is_finite()).collect();
+    let mut lo = ys.iter().copied().fold(f64::INFINITY, f64::min);
+    let mut hi = ys.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    if !(lo.is_finite() && hi.is_finite()) {
+        return (-1.0, 1.0);
+    }
+    let span = if hi > lo {
+        hi - lo
+    } else {
+        lo.abs().max(1e-12) * 1e-3
+    };
+    if let Some(l) = &t.limits {
+        for v in [l.min, l.max, l.marginal_min, l.marginal_max]
+            .into_iter()
+            .flatten()
+            .filter(|v| v.is_finite())
+        {
+            let (nlo, nhi) = (lo.min(v), hi.max(v));
+            if nhi - nlo <= 3.0 * span {
+                (lo, hi) = (nlo, nhi);
+            }
+        }
+    }
+    let pad = (hi - lo).max(span) * 0.1;
+    (lo - pad, hi + pad)
 }
 
 fn trend_svg(t: &Trend) -> Result<String, String> {
@@ -176,98 +367,201 @@ where
 {
     root.fill(&WHITE)?;
     let n = t.points.len();
-    let mut ys: Vec<f64> = Vec::new();
+    let (y0, y1) = y_range(t);
+    let ya = LinearAxis::new(y0, y1, 6);
+    let (x0, x1) = (-0.5, n as f64 - 0.5);
+    let limits = t.limits.as_ref();
+    let in_view = |v: f64| v >= y0 && v <= y1;
+    // the legend, with the entries of what is drawn
+    let mut legend = Legend::new();
+    let mut standings = [false; 3];
+    let mut other_plan = false;
     for p in &t.points {
-        let u = p.expanded_uncertainty.unwrap_or(0.0);
-        ys.push(p.value - u);
-        ys.push(p.value + u);
+        if p.plan == t.plan {
+            standings[standing(p.value, limits) as usize] = true;
+        } else {
+            other_plan = true;
+        }
+    }
+    if standings[Standing::Inside as usize] {
+        legend.add("calibration ± U (k = 2)", Swatch::Dot(BLACK));
+    }
+    if standings[Standing::Marginal as usize] {
+        legend.add(
+            "marginal (beyond a marginal limit)",
+            Swatch::Diamond(MARGINAL_ORANGE),
+        );
+    }
+    if standings[Standing::Outside as usize] {
+        legend.add("outside the acceptance limits", Swatch::Triangle(LIMIT_RED));
+    }
+    if other_plan {
+        legend.add("another plan (not in the band)", Swatch::Dot(OTHER_PLAN));
+    }
+    let mut offscale: Vec<String> = Vec::new();
+    if let Some(l) = limits {
+        let acc: Vec<f64> = [l.min, l.max].into_iter().flatten().collect();
+        let marg: Vec<f64> = [l.marginal_min, l.marginal_max]
+            .into_iter()
+            .flatten()
+            .collect();
+        for (vals, name) in [(&acc, "acceptance"), (&marg, "marginal")] {
+            for v in vals.iter().filter(|v| !in_view(**v)) {
+                offscale.push(format!(
+                    "{name} limit {} {} the plot",
+                    short(*v).replace('-', "−"),
+                    if *v > y1 { "above" } else { "below" }
+                ));
+            }
+        }
+        if acc.iter().any(|v| in_view(*v)) {
+            legend.add(
+                "acceptance limit",
+                Swatch::Line {
+                    color: LIMIT_RED,
+                    width: 2,
+                    dashed: true,
+                },
+            );
+        }
+        if marg.iter().any(|v| in_view(*v)) {
+            legend.add(
+                "marginal limit",
+                Swatch::Line {
+                    color: MARGINAL_ORANGE,
+                    width: 1,
+                    dashed: true,
+                },
+            );
+        }
+    }
+    for o in &offscale {
+        legend.add(format!("{o} (not drawn)"), Swatch::Band(WHITE.mix(0.0)));
     }
     if let Some(b) = &t.band {
-        ys.push(b.low);
-        ys.push(b.high);
+        legend.add(
+            format!("control band: mean ± 3σ of {} earlier", b.n),
+            Swatch::Band(BAND_BLUE.mix(0.25)),
+        );
     }
-    if let Some(l) = &t.limits {
-        ys.extend(l.min);
-        ys.extend(l.max);
+    // what the legend must not cover: every point and its bar
+    let (margin, x_area, y_area) = (10u32, 36u32, 90u32);
+    let area = (
+        f64::from(WIDTH - 2 * margin - y_area),
+        f64::from(HEIGHT - 2 * margin - x_area),
+    );
+    let mut data: Vec<(f64, f64)> = Vec::new();
+    for (i, p) in t.points.iter().enumerate() {
+        let u = p.expanded_uncertainty.unwrap_or(0.0);
+        for v in [p.value - u, p.value, p.value + u] {
+            data.push((norm_lin(i as f64, x0, x1), norm_lin(v, y0, y1)));
+        }
     }
-    let ys: Vec<f64> = ys.into_iter().filter(|v| v.is_finite()).collect();
-    let lo = ys.iter().copied().fold(f64::INFINITY, f64::min);
-    let hi = ys.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let pad = if hi > lo {
-        (hi - lo) * 0.08
-    } else {
-        lo.abs().max(1e-12) * 1e-3
+    let placement = legend.place(&data, area);
+    let right = match placement {
+        Placement::Outside => legend.width() as u32 + 24,
+        Placement::Corner(_) => 0,
     };
-    let (y0, y1) = (lo - pad, hi + pad);
-    let x1 = n as f64 - 0.5;
-    let dates: Vec<String> = t
-        .points
-        .iter()
-        .map(|p| p.started_utc.chars().take(10).collect())
-        .collect();
+    let labels = x_labels(&t.points, (area.0 - f64::from(right)) / n.max(1) as f64);
     let mut chart = ChartBuilder::on(root)
-        .margin(10)
-        .x_label_area_size(36)
-        .y_label_area_size(90)
-        .build_cartesian_2d(-0.5..x1, y0..y1)?;
+        .margin(margin)
+        .margin_right(margin + right)
+        .x_label_area_size(x_area)
+        .y_label_area_size(y_area)
+        .build_cartesian_2d(
+            LinearAxis::with_ticks(x0, x1, (0..n).map(|i| i as f64).collect()).coord(),
+            ya.coord(),
+        )?;
     chart
         .configure_mesh()
-        .x_desc("calibration")
-        .y_desc(format!("{} ({})", t.label, t.unit))
-        .x_labels(n.min(10))
+        .x_desc("calibration (date, or time UTC when on the same day)")
+        .y_desc(format!("{} ({})", t.label, ya.scaled_unit(&t.unit)))
         .x_label_formatter(&|x| {
             let i = x.round();
             if (x - i).abs() < 1e-6 && i >= 0.0 {
-                dates.get(i as usize).cloned().unwrap_or_default()
+                labels.get(i as usize).cloned().unwrap_or_default()
             } else {
                 String::new()
             }
         })
-        .y_label_formatter(&|y| format!("{y:.4e}"))
+        .y_label_formatter(&|y| ya.label(*y))
         .label_style((FONT, 12))
+        .light_line_style(RGBColor(240, 240, 240))
+        .bold_line_style(RGBColor(215, 215, 215))
         .draw()?;
     if let Some(b) = &t.band {
+        // from the first calibration of the band's plan: the others are not in it
+        let from = t
+            .points
+            .iter()
+            .position(|p| p.plan == t.plan)
+            .map_or(x0, |i| i as f64 - 0.5);
         chart.draw_series(std::iter::once(Rectangle::new(
-            [(-0.5, b.low), (x1, b.high)],
-            RGBColor(120, 170, 230).mix(0.25).filled(),
+            [(from, b.low.max(y0)), (x1, b.high.min(y1))],
+            BAND_BLUE.mix(0.25).filled(),
         )))?;
-        chart.draw_series(LineSeries::new(
-            vec![(-0.5, b.mean), (x1, b.mean)],
-            RGBColor(60, 110, 200).stroke_width(1),
-        ))?;
-    }
-    if let Some(l) = &t.limits {
-        for v in [l.min, l.max].into_iter().flatten() {
-            chart.draw_series(DashedLineSeries::new(
-                vec![(-0.5, v), (x1, v)],
-                6,
-                4,
-                RED.stroke_width(2),
+        if in_view(b.mean) {
+            chart.draw_series(LineSeries::new(
+                vec![(from, b.mean), (x1, b.mean)],
+                BAND_BLUE.stroke_width(1),
             ))?;
         }
     }
-    chart.draw_series(t.points.iter().enumerate().filter_map(|(i, p)| {
-        let u = p.expanded_uncertainty?;
-        Some(ErrorBar::new_vertical(
-            i as f64,
-            p.value - u,
-            p.value,
-            p.value + u,
-            BLACK.stroke_width(1),
-            6,
-        ))
-    }))?;
+    if let Some(l) = limits {
+        for v in [l.min, l.max].into_iter().flatten().filter(|v| in_view(*v)) {
+            chart.draw_series(DashedLineSeries::new(
+                vec![(x0, v), (x1, v)],
+                8,
+                5,
+                LIMIT_RED.stroke_width(2),
+            ))?;
+        }
+        for v in [l.marginal_min, l.marginal_max]
+            .into_iter()
+            .flatten()
+            .filter(|v| in_view(*v))
+        {
+            chart.draw_series(DashedLineSeries::new(
+                vec![(x0, v), (x1, v)],
+                4,
+                4,
+                MARGINAL_ORANGE.stroke_width(1),
+            ))?;
+        }
+    }
     chart.draw_series(LineSeries::new(
         t.points
             .iter()
             .enumerate()
             .map(|(i, p)| (i as f64, p.value)),
-        BLACK.mix(0.4).stroke_width(1),
+        BLACK.mix(0.25).stroke_width(1),
     ))?;
-    chart.draw_series(t.points.iter().enumerate().map(|(i, p)| {
-        let outside = i + 1 == n && t.latest_outside_band;
-        let color = if outside { RED } else { BLACK };
-        Circle::new((i as f64, p.value), 4, color.filled())
+    chart.draw_series(t.points.iter().enumerate().filter_map(|(i, p)| {
+        let u = p.expanded_uncertainty?;
+        let c = if p.plan == t.plan { BLACK } else { OTHER_PLAN };
+        Some(ErrorBar::new_vertical(
+            i as f64,
+            (p.value - u).max(y0),
+            p.value,
+            (p.value + u).min(y1),
+            c.stroke_width(1),
+            6,
+        ))
     }))?;
+    for (i, p) in t.points.iter().enumerate() {
+        let at = chart.backend_coord(&(i as f64, p.value));
+        if p.plan != t.plan {
+            root.draw(&Circle::new(at, 4, OTHER_PLAN.filled()))?;
+            continue;
+        }
+        match standing(p.value, limits) {
+            Standing::Inside => root.draw(&Circle::new(at, 4, BLACK.filled()))?,
+            Standing::Marginal => root.draw(&diamond(at, 6, MARGINAL_ORANGE))?,
+            Standing::Outside => {
+                root.draw(&TriangleMarker::new(at, 7, LIMIT_RED.filled()))?;
+            }
+        }
+    }
+    legend.draw(root, chart.plotting_area().get_pixel_range(), placement)?;
     Ok(())
 }

@@ -76,7 +76,7 @@ figcaption { font-size: 0.92rem; color: #333; max-width: 800px; margin-top: 0.35
 code { font-size: 0.9em; word-break: break-all; }
 @media print {
   body { max-width: none; padding: 0; font-size: 10pt; }
-  h2 { break-after: avoid; }
+  h2, h3, caption { break-after: avoid; }
   figure, table, .banner { break-inside: avoid; }
   figure svg { max-width: 100%; border: none; }
   .banner { background: #fff; color: #000; border: 3px solid #000; }
@@ -88,6 +88,8 @@ code { font-size: 0.9em; word-break: break-all; }
   .signatures { break-inside: avoid; }
 }
 table.cert th { width: 11rem; background: #f7f7f7; }
+#acceptance-table th, #instruments-table th, table.cert.results th { width: auto; }
+#acceptance-table td:last-child { min-width: 14rem; }
 table.signatures { width: 100%; margin-top: 2rem; }
 table.signatures td { height: 2.2rem; min-width: 12rem; }
 .statement { margin-top: 2rem; font-style: italic; }
@@ -102,7 +104,10 @@ caption { text-align: left; font-weight: 600; padding: 0.2rem 0; }
 table.results td.note { font-size: 0.85em; }
 table.budget { font-size: 0.85em; width: 100%; }
 table.budget td:first-child { min-width: 16rem; }
-#instruments-table td { overflow-wrap: anywhere; }
+#instruments-table { font-size: 0.8rem; }
+#instruments-table th, #instruments-table td { padding: 0.2rem 0.35rem; }
+#instruments-table td { overflow-wrap: break-word; }
+#instruments-table td:last-child { overflow-wrap: anywhere; }
 .end { text-align: center; margin-top: 2rem; font-weight: 600; letter-spacing: 0.05em; }
 "#;
 

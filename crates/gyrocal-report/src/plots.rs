@@ -6,12 +6,17 @@
 
 use std::error::Error;
 
+pub(crate) mod axis;
+pub(crate) mod legend;
+
 use gyrocal_fit::{Analysis, ErrorSurface, Fit, Method, Model};
 use plotters::coord::ranged1d::ValueFormatter;
 use plotters::prelude::*;
 
 use crate::ReportError;
 use crate::input::StepStats;
+use axis::{LinearAxis, LogAxis, Ticked};
+use legend::{Legend, Placement, Swatch, densify, norm_lin, norm_log};
 
 /// Width of every plot, px.
 pub(crate) const WIDTH: u32 = 800;
@@ -68,24 +73,112 @@ where
     }
 }
 
-/// The legend, styled the same in every plot.
-fn legend<'a, DB, CT>(
-    chart: &mut ChartContext<'a, DB, CT>,
-    position: SeriesLabelPosition,
+/// A chart on the axes of [`axis`]: the coordinate type of every plot here.
+type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<Ticked, Ticked>>;
+
+/// An axis of [`axis`], whichever kind: its tick labels.
+trait Labels {
+    fn label(&self, v: f64) -> String;
+}
+
+impl Labels for LinearAxis {
+    fn label(&self, v: f64) -> String {
+        LinearAxis::label(self, v)
+    }
+}
+
+impl Labels for LogAxis {
+    fn label(&self, v: f64) -> String {
+        LogAxis::label(self, v)
+    }
+}
+
+/// The mesh of a chart: the axes' own tick labels, titles, the shared style.
+fn mesh<DB: DrawingBackend>(
+    chart: &mut Chart<'_, DB>,
+    x: &impl Labels,
+    y: &impl Labels,
+    x_desc: &str,
+    y_desc: &str,
 ) -> PlotResult
 where
-    DB: DrawingBackend + 'a,
     DB::ErrorType: 'static,
-    CT: CoordTranslate,
 {
     chart
-        .configure_series_labels()
-        .position(position)
-        .label_font((FONT, LABEL_SIZE))
-        .background_style(WHITE.mix(0.9))
-        .border_style(BOLD)
-        .draw()?;
-    Ok(())
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .x_label_formatter(&|v| x.label(*v))
+        .y_label_formatter(&|v| y.label(*v))
+        .draw_styled()
+}
+
+/// The layout of a plot's frame, px: what [`Legend::place`] needs before the chart exists
+/// (the plotting area is the frame less these).
+#[derive(Debug, Clone, Copy)]
+struct Frame {
+    size: (u32, u32),
+    margin: u32,
+    caption: u32,
+    x_area: u32,
+    y_area: u32,
+    right_area: u32,
+}
+
+impl Frame {
+    const fn new(y_area: u32) -> Frame {
+        Frame {
+            size: (WIDTH, HEIGHT),
+            margin: 12,
+            caption: 34,
+            x_area: 48,
+            y_area,
+            right_area: 0,
+        }
+    }
+
+    /// The plotting area (width, height), px, with `right` more px taken on the right.
+    fn area(&self, right: u32) -> (f64, f64) {
+        (
+            f64::from(self.size.0 - 2 * self.margin - self.y_area - self.right_area - right),
+            f64::from(self.size.1 - 2 * self.margin - self.caption - self.x_area),
+        )
+    }
+
+    /// The room a legend placed outside takes.
+    fn legend_room(legend: &Legend, placement: Placement) -> u32 {
+        match placement {
+            Placement::Outside => u32::try_from(legend.width()).unwrap_or(200) + 24,
+            Placement::Corner(_) => 0,
+        }
+    }
+
+    /// A chart builder on `root` with this frame's margins and label areas, `right` px more
+    /// on the right.
+    fn builder<'a, 'b, DB: DrawingBackend>(
+        &self,
+        root: &'a DrawingArea<DB, plotters::coord::Shift>,
+        caption: &str,
+        right: u32,
+    ) -> ChartBuilder<'a, 'b, DB> {
+        let mut b = ChartBuilder::on(root);
+        b.caption(caption, (FONT, TITLE_SIZE))
+            .margin(self.margin)
+            .margin_right(self.margin + right)
+            .x_label_area_size(self.x_area)
+            .y_label_area_size(self.y_area);
+        if self.right_area > 0 {
+            b.right_y_label_area_size(self.right_area);
+        }
+        b
+    }
+}
+
+/// Normalised positions of `pts` on the axes `xa`, `ya` (linear), for [`Legend::place`].
+fn normalised(pts: &[(f64, f64)], xa: &LinearAxis, ya: &LinearAxis) -> Vec<(f64, f64)> {
+    pts.iter()
+        .map(|&(x, y)| (norm_lin(x, xa.lo, xa.hi), norm_lin(y, ya.lo, ya.hi)))
+        .collect()
 }
 
 /// Draws into a string; maps the backend's error to [`ReportError::Plot`] naming the plot.
@@ -158,17 +251,7 @@ pub(crate) fn fit_plot(a: &Analysis) -> Result<String, ReportError> {
             .unwrap_or_default();
         let (x0, x1) = padded(pts.iter().map(|p| p.0));
         let (y0, y1) = padded(pts.iter().map(|p| p.1));
-        let mut chart = ChartBuilder::on(&root)
-            .caption("Measured output vs rate", (FONT, TITLE_SIZE))
-            .margin(12)
-            .x_label_area_size(48)
-            .y_label_area_size(64)
-            .build_cartesian_2d(x0..x1, y0..y1)?;
-        chart
-            .configure_mesh()
-            .x_desc("input rate ω (°/s)")
-            .y_desc("gyro output D (V)")
-            .draw_styled()?;
+        let (xa, ya) = (LinearAxis::new(x0, x1, 8), LinearAxis::new(y0, y1, 6));
         let line = |f: &Fit, n: usize| -> Vec<(f64, f64)> {
             (0..=n)
                 .map(|i| {
@@ -177,54 +260,89 @@ pub(crate) fn fit_plot(a: &Analysis) -> Result<String, ReportError> {
                 })
                 .collect()
         };
-        // The best model first, wide and light, so the two lines stay visible on top of it.
-        if let Some(best) = a.best_model.filter(|m| *m != Model::Linear)
-            && let Some(f) = a.fit(Method::LeastSquares, best)
-        {
-            let c = fit_color(f.method, f.model);
-            chart
-                .draw_series(LineSeries::new(line(f, 200), c.mix(0.55).stroke_width(6)))?
-                .label(format!("best model: least squares, {best} (wide line)"))
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 24, y)], c.mix(0.55).stroke_width(6))
-                });
+        let best = a
+            .best_model
+            .filter(|m| *m != Model::Linear)
+            .and_then(|m| a.fit(Method::LeastSquares, m));
+        let ls = a.fit(Method::LeastSquares, Model::Linear);
+        let neuron = a.fit(Method::Neuron, Model::Linear);
+        let mut legend = Legend::new();
+        if let Some(f) = best {
+            legend.add(
+                format!("best model: least squares, {} (wide line)", f.model),
+                Swatch::Line {
+                    color: fit_color(f.method, f.model),
+                    width: 6,
+                    dashed: false,
+                },
+            );
         }
-        if let Some(f) = a.fit(Method::LeastSquares, Model::Linear) {
-            let c = fit_color(f.method, f.model);
-            chart
-                .draw_series(LineSeries::new(line(f, 2), c.stroke_width(2)))?
-                .label(format!(
+        if let Some(f) = ls {
+            legend.add(
+                format!(
                     "least squares: K = {:.6} V/(°/s), K0 = {:.5} V",
                     f.scale_factor, f.bias
-                ))
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(2))
-                });
+                ),
+                Swatch::Line {
+                    color: fit_color(f.method, f.model),
+                    width: 2,
+                    dashed: false,
+                },
+            );
         }
-        if let Some(f) = a.fit(Method::Neuron, Model::Linear) {
-            let c = fit_color(f.method, f.model);
-            chart
-                .draw_series(DashedLineSeries::new(line(f, 2), 8, 6, c.stroke_width(2)))?
-                .label(format!(
+        if let Some(f) = neuron {
+            legend.add(
+                format!(
                     "neuron: K = {:.6} V/(°/s), K0 = {:.5} V",
                     f.scale_factor, f.bias
-                ))
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(2))
-                });
+                ),
+                Swatch::Line {
+                    color: fit_color(f.method, f.model),
+                    width: 2,
+                    dashed: true,
+                },
+            );
         }
-        chart
-            .draw_series(pts.iter().map(|&p| Circle::new(p, 3, BLACK.filled())))?
-            .label("measured (mean output per step)")
-            .legend(|(x, y)| Circle::new((x + 12, y), 3, BLACK.filled()));
-        legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
+        legend.add("measured (mean output per step)", Swatch::Dot(BLACK));
+        let frame = Frame::new(64);
+        let mut data = normalised(&pts, &xa, &ya);
+        if let Some(f) = ls {
+            data.extend(densify(&normalised(&line(f, 2), &xa, &ya), 40));
+        }
+        let placement = legend.place(&data, frame.area(0));
+        let right = Frame::legend_room(&legend, placement);
+        let mut chart = frame
+            .builder(&root, "Measured output vs rate", right)
+            .build_cartesian_2d(xa.coord(), ya.coord())?;
+        mesh(
+            &mut chart,
+            &xa,
+            &ya,
+            "input rate ω (°/s)",
+            &format!("gyro output D ({})", ya.scaled_unit("V")),
+        )?;
+        // The best model first, wide and light, so the two lines stay visible on top of it.
+        if let Some(f) = best {
+            let c = fit_color(f.method, f.model);
+            chart.draw_series(LineSeries::new(line(f, 200), c.mix(0.55).stroke_width(6)))?;
+        }
+        if let Some(f) = ls {
+            let c = fit_color(f.method, f.model);
+            chart.draw_series(LineSeries::new(line(f, 2), c.stroke_width(2)))?;
+        }
+        if let Some(f) = neuron {
+            let c = fit_color(f.method, f.model);
+            chart.draw_series(DashedLineSeries::new(line(f, 2), 8, 6, c.stroke_width(2)))?;
+        }
+        chart.draw_series(pts.iter().map(|&p| Circle::new(p, 3, BLACK.filled())))?;
+        legend.draw(&root, chart.plotting_area().get_pixel_range(), placement)?;
         root.present()?;
         Ok(())
     })
 }
 
-/// Residuals vs rate of every fit, in volts (left axis) and in °/s equivalent (right axis,
-/// residual / K of the least-squares line).
+/// Residuals vs rate of every fit, in volts (left axis, V, mV or µV as its title says) and in
+/// °/s equivalent (right axis, residual / K of the least-squares line).
 pub(crate) fn residuals_plot(a: &Analysis) -> Result<String, ReportError> {
     draw("residuals.svg", |s| {
         let root = SVGBackend::with_string(s, (WIDTH, HEIGHT)).into_drawing_area();
@@ -241,67 +359,96 @@ pub(crate) fn residuals_plot(a: &Analysis) -> Result<String, ReportError> {
                 .flat_map(|f| f.residuals.iter().map(|r| r.rate_dps)),
         );
         let (y0, y1) = padded(all.map(|r| r * fv));
-        // Head room for the legend above the data.
-        let y1 = y1 + (y1 - y0) * 0.45;
+        let (xa, ya) = (LinearAxis::new(x0, x1, 8), LinearAxis::new(y0, y1, 6));
         let runit = vunit.replace('V', "°/s");
-        let (s0, s1) = if k != 0.0 && k.is_finite() {
-            let (a0, a1) = (y0 / k, y1 / k);
-            (a0.min(a1), a0.max(a1))
+        // the right axis: the same heights divided by K (its ends are the left axis's / K)
+        let sa = if k > 0.0 && k.is_finite() {
+            LinearAxis::new(ya.lo / k, ya.hi / k, 6)
         } else {
-            (y0, y1)
+            LinearAxis::new(ya.lo, ya.hi, 6)
         };
-        let mut chart = ChartBuilder::on(&root)
-            .caption("Residuals (measured − fitted) vs rate", (FONT, TITLE_SIZE))
-            .margin(12)
-            .x_label_area_size(48)
-            .y_label_area_size(64)
-            .right_y_label_area_size(64)
-            .build_cartesian_2d(x0..x1, y0..y1)?
-            .set_secondary_coord(x0..x1, s0..s1);
-        chart
-            .configure_mesh()
-            .x_desc("input rate ω (°/s)")
-            .y_desc(format!("residual ({vunit})"))
-            .draw_styled()?;
+        let series: Vec<(&Fit, Vec<(f64, f64)>)> = a
+            .fits
+            .iter()
+            .map(|f| {
+                let mut pts: Vec<(f64, f64)> = f
+                    .residuals
+                    .iter()
+                    .map(|r| (r.rate_dps, r.residual * fv))
+                    .collect();
+                pts.sort_by(|p, q| p.0.total_cmp(&q.0));
+                (f, pts)
+            })
+            .collect();
+        let mut legend = Legend::new();
+        let mut data = Vec::new();
+        for (f, pts) in &series {
+            let c = fit_color(f.method, f.model);
+            legend.add(
+                fit_name(f),
+                if f.method == Method::Neuron {
+                    Swatch::Line {
+                        color: c,
+                        width: 2,
+                        dashed: true,
+                    }
+                } else {
+                    Swatch::Line {
+                        color: c,
+                        width: 2,
+                        dashed: false,
+                    }
+                },
+            );
+            data.extend(densify(&normalised(pts, &xa, &ya), 12));
+        }
+        let mut frame = Frame::new(64);
+        frame.right_area = 64;
+        let placement = legend.place(&data, frame.area(0));
+        let right = Frame::legend_room(&legend, placement);
+        let mut chart = frame
+            .builder(&root, "Residuals (measured − fitted) vs rate", right)
+            .build_cartesian_2d(xa.coord(), ya.coord())?
+            .set_secondary_coord(xa.coord(), sa.coord());
+        mesh(
+            &mut chart,
+            &xa,
+            &ya,
+            "input rate ω (°/s)",
+            &format!("residual ({})", ya.scaled_unit(vunit)),
+        )?;
         chart
             .configure_secondary_axes()
-            .y_desc(format!("residual / K ({runit} equivalent)"))
+            .y_desc(format!(
+                "residual / K ({} equivalent)",
+                sa.scaled_unit(&runit)
+            ))
+            .y_label_formatter(&|v| sa.label(*v))
             .axis_desc_style((FONT, DESC_SIZE))
             .label_style((FONT, LABEL_SIZE))
             .draw()?;
-        chart.draw_series(LineSeries::new([(x0, 0.0), (x1, 0.0)], BLACK.mix(0.6)))?;
-        for f in &a.fits {
+        chart.draw_series(LineSeries::new(
+            [(xa.lo, 0.0), (xa.hi, 0.0)],
+            BLACK.mix(0.6),
+        ))?;
+        for (f, pts) in &series {
             let c = fit_color(f.method, f.model);
-            let mut pts: Vec<(f64, f64)> = f
-                .residuals
-                .iter()
-                .map(|r| (r.rate_dps, r.residual * fv))
-                .collect();
-            pts.sort_by(|p, q| p.0.total_cmp(&q.0));
-            let name = fit_name(f);
             if f.method == Method::Neuron {
                 chart.draw_series(DashedLineSeries::new(pts.clone(), 6, 4, c.stroke_width(2)))?;
-                chart
-                    .draw_series(pts.iter().map(|&p| Circle::new(p, 5, c.stroke_width(2))))?
-                    .label(name)
-                    .legend(move |(x, y)| Circle::new((x + 12, y), 5, c.stroke_width(2)));
+                chart.draw_series(pts.iter().map(|&p| Circle::new(p, 5, c.stroke_width(2))))?;
             } else {
                 chart.draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))?;
-                chart
-                    .draw_series(pts.iter().map(|&p| Circle::new(p, 3, c.filled())))?
-                    .label(name)
-                    .legend(move |(x, y)| {
-                        PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(2))
-                    });
+                chart.draw_series(pts.iter().map(|&p| Circle::new(p, 3, c.filled())))?;
             }
         }
-        legend(&mut chart, SeriesLabelPosition::UpperMiddle)?;
+        legend.draw(&root, chart.plotting_area().get_pixel_range(), placement)?;
         root.present()?;
         Ok(())
     })
 }
 
-/// The neuron's training error per pass (log scale) with the least-squares minimum SSE.
+/// The neuron's training error per pass (log scale, every decade labelled) with the
+/// least-squares minimum SSE.
 pub(crate) fn training_plot(neuron: &Fit, ls_sse: Option<f64>) -> Result<String, ReportError> {
     draw("training.svg", |s| {
         let root = SVGBackend::with_string(s, (WIDTH, HEIGHT)).into_drawing_area();
@@ -318,64 +465,81 @@ pub(crate) fn training_plot(neuron: &Fit, ls_sse: Option<f64>) -> Result<String,
             .filter(|(_, e)| e.is_finite() && **e > 0.0)
             .map(|(i, e)| ((i + 1) as f64, *e))
             .collect();
-        let positive = pts
-            .iter()
-            .map(|p| p.1)
-            .chain(ls_sse.filter(|v| *v > 0.0 && v.is_finite()));
+        let sse = ls_sse.filter(|v| *v > 0.0 && v.is_finite());
+        let positive = pts.iter().map(|p| p.1).chain(sse);
         let (lo, hi) = positive.fold((f64::INFINITY, 0.0_f64), |(lo, hi), v| {
             (lo.min(v), hi.max(v))
         });
-        let (lo, hi) = if lo.is_finite() && hi > 0.0 {
-            (lo / 2.0, hi * 2.0)
-        } else {
-            (1e-6, 1.0)
-        };
-        let mut chart = ChartBuilder::on(&root)
-            .caption("Neuron training error per pass", (FONT, TITLE_SIZE))
-            .margin(12)
-            .x_label_area_size(48)
-            .y_label_area_size(80)
-            .build_cartesian_2d(0.0..(n as f64 + 1.0), (lo..hi).log_scale())?;
-        chart
-            .configure_mesh()
-            .x_desc("training pass")
-            .y_desc("sum of squared residuals (V²)")
-            .y_label_formatter(&|v| format!("{v:.0e}"))
-            .x_label_formatter(&|v| format!("{v:.0}"))
-            .draw_styled()?;
+        let frame = Frame::new(80);
+        let (_, area_h) = frame.area(0);
+        let ya = LogAxis::new(lo / 1.2, hi * 1.2, area_h);
+        let xa = LinearAxis::new(0.0, n as f64 + 1.0, 8);
         let c = fit_color(Method::Neuron, Model::Linear);
-        chart
-            .draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))?
-            .label("neuron: SSE after each pass")
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(2)));
-        if let Some(sse) = ls_sse.filter(|v| *v > 0.0 && v.is_finite()) {
-            let b = fit_color(Method::LeastSquares, Model::Linear);
-            chart
-                .draw_series(DashedLineSeries::new(
-                    [(0.0, sse), (n as f64 + 1.0, sse)],
-                    8,
-                    6,
-                    b.stroke_width(2),
-                ))?
-                .label(format!("least-squares minimum SSE = {sse:.4e} V²"))
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 24, y)], b.stroke_width(2))
-                });
+        let b = fit_color(Method::LeastSquares, Model::Linear);
+        let g = RGBColor(90, 90, 90);
+        let mut legend = Legend::new();
+        legend.add(
+            "neuron: SSE after each pass",
+            Swatch::Line {
+                color: c,
+                width: 2,
+                dashed: false,
+            },
+        );
+        if let Some(sse) = sse {
+            legend.add(
+                format!("least-squares minimum SSE = {sse:.4e} V²"),
+                Swatch::Line {
+                    color: b,
+                    width: 2,
+                    dashed: true,
+                },
+            );
         }
-        if let Some(t) = trace.filter(|t| t.online_passes > 0 && t.batch_passes > 0) {
-            let x = t.online_passes as f64 + 0.5;
-            let g = RGBColor(90, 90, 90);
-            chart
-                .draw_series(LineSeries::new([(x, lo), (x, hi)], g.stroke_width(1)))?
-                .label(format!(
+        let online = trace.filter(|t| t.online_passes > 0 && t.batch_passes > 0);
+        if let Some(t) = online {
+            legend.add(
+                format!(
                     "end of {} online passes; then {} full-batch passes",
                     t.online_passes, t.batch_passes
-                ))
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 24, y)], g.stroke_width(1))
-                });
+                ),
+                Swatch::Line {
+                    color: g,
+                    width: 1,
+                    dashed: false,
+                },
+            );
         }
-        legend(&mut chart, SeriesLabelPosition::UpperRight)?;
+        let data: Vec<(f64, f64)> = pts
+            .iter()
+            .map(|&(x, y)| (norm_lin(x, xa.lo, xa.hi), norm_log(y, ya.lo, ya.hi)))
+            .collect();
+        let placement = legend.place(&densify(&data, 4), frame.area(0));
+        let right = Frame::legend_room(&legend, placement);
+        let mut chart = frame
+            .builder(&root, "Neuron training error per pass", right)
+            .build_cartesian_2d(xa.coord(), ya.coord())?;
+        mesh(
+            &mut chart,
+            &xa,
+            &ya,
+            "training pass",
+            "sum of squared residuals (V²)",
+        )?;
+        chart.draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))?;
+        if let Some(sse) = sse {
+            chart.draw_series(DashedLineSeries::new(
+                [(xa.lo, sse), (xa.hi, sse)],
+                8,
+                6,
+                b.stroke_width(2),
+            ))?;
+        }
+        if let Some(t) = online {
+            let x = t.online_passes as f64 + 0.5;
+            chart.draw_series(LineSeries::new([(x, ya.lo), (x, ya.hi)], g.stroke_width(1)))?;
+        }
+        legend.draw(&root, chart.plotting_area().get_pixel_range(), placement)?;
         root.present()?;
         Ok(())
     })
@@ -539,17 +703,18 @@ pub(crate) fn noise_plot(steps: &[StepStats]) -> Result<String, ReportError> {
         let pts: Vec<(f64, f64)> = raw.iter().map(|&(w, v)| (w, v * f)).collect();
         let (x0, x1) = padded(pts.iter().map(|p| p.0));
         let (_, y1) = padded(pts.iter().map(|p| p.1).chain([0.0]));
-        let mut chart = ChartBuilder::on(&root)
-            .caption("Noise of the readings per step", (FONT, TITLE_SIZE))
-            .margin(12)
-            .x_label_area_size(48)
-            .y_label_area_size(64)
-            .build_cartesian_2d(x0..x1, 0.0..y1)?;
-        chart
-            .configure_mesh()
-            .x_desc("input rate ω (°/s)")
-            .y_desc(format!("std of the readings ({unit})"))
-            .draw_styled()?;
+        let (xa, ya) = (LinearAxis::new(x0, x1, 8), LinearAxis::new(0.0, y1, 6));
+        let frame = Frame::new(64);
+        let mut chart = frame
+            .builder(&root, "Noise of the readings per step", 0)
+            .build_cartesian_2d(xa.coord(), ya.coord())?;
+        mesh(
+            &mut chart,
+            &xa,
+            &ya,
+            "input rate ω (°/s)",
+            &format!("std of the readings ({})", ya.scaled_unit(unit)),
+        )?;
         let c = RGBColor(31, 119, 180);
         chart.draw_series(pts.iter().map(|&p| Circle::new(p, 4, c.filled())))?;
         root.present()?;
@@ -581,18 +746,22 @@ pub(crate) fn rate_error_plot(steps: &[StepStats]) -> Result<String, ReportError
                 .flat_map(|p| [(p.1 - p.2) * f, (p.1 + p.2) * f])
                 .chain([0.0]),
         );
-        let mut chart = ChartBuilder::on(&root)
-            .caption("Rate table: measured − demanded rate", (FONT, TITLE_SIZE))
-            .margin(12)
-            .x_label_area_size(48)
-            .y_label_area_size(64)
-            .build_cartesian_2d(x0..x1, y0..y1)?;
-        chart
-            .configure_mesh()
-            .x_desc("demanded rate ω (°/s)")
-            .y_desc(format!("rate error ({unit})"))
-            .draw_styled()?;
-        chart.draw_series(LineSeries::new([(x0, 0.0), (x1, 0.0)], BLACK.mix(0.6)))?;
+        let (xa, ya) = (LinearAxis::new(x0, x1, 8), LinearAxis::new(y0, y1, 6));
+        let frame = Frame::new(64);
+        let mut chart = frame
+            .builder(&root, "Rate table: measured − demanded rate", 0)
+            .build_cartesian_2d(xa.coord(), ya.coord())?;
+        mesh(
+            &mut chart,
+            &xa,
+            &ya,
+            "demanded rate ω (°/s)",
+            &format!("rate error ({})", ya.scaled_unit(unit)),
+        )?;
+        chart.draw_series(LineSeries::new(
+            [(xa.lo, 0.0), (xa.hi, 0.0)],
+            BLACK.mix(0.6),
+        ))?;
         let c = RGBColor(44, 160, 44);
         chart.draw_series(raw.iter().map(|&(w, e, sd)| {
             ErrorBar::new_vertical(w, (e - sd) * f, e * f, (e + sd) * f, c.stroke_width(2), 8)
@@ -613,48 +782,81 @@ pub(crate) fn repeatability_plot(ks: &[(f64, Option<f64>)]) -> Result<String, Re
             ks.iter()
                 .flat_map(|&(k, se)| [k - se.unwrap_or(0.0), k + se.unwrap_or(0.0)]),
         );
-        // Head room for the legend above the bars.
-        let y1 = y1 + (y1 - y0) * 0.3;
-        let mut chart = ChartBuilder::on(&root)
-            .caption("Scale factor per run (repeatability)", (FONT, TITLE_SIZE))
-            .margin(12)
-            .x_label_area_size(48)
-            .y_label_area_size(84)
-            .build_cartesian_2d(0.5..(q as f64 + 0.5), y0..y1)?;
-        chart
-            .configure_mesh()
-            .x_desc("run")
-            .y_desc("scale factor K (V/(°/s))")
-            .x_labels(q.min(20))
-            .x_label_formatter(&|v| {
-                if (v - v.round()).abs() < 1e-9 {
-                    format!("{v:.0}")
-                } else {
-                    String::new()
-                }
-            })
-            .y_label_formatter(&|v| format!("{v:.6}"))
-            .draw_styled()?;
+        // one tick per run, at most 20 labelled
+        let every = q.div_ceil(20).max(1);
+        let xa = LinearAxis::with_ticks(
+            0.5,
+            q as f64 + 0.5,
+            (1..=q).step_by(every).map(|i| i as f64).collect(),
+        );
+        let ya = LinearAxis::new(y0, y1, 6);
         let g = RGBColor(120, 120, 120);
-        chart
-            .draw_series(DashedLineSeries::new(
-                [(0.5, mean), (q as f64 + 0.5, mean)],
-                8,
-                6,
-                g.stroke_width(1),
-            ))?
-            .label(format!("mean K = {mean:.7} V/(°/s)"))
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], g.stroke_width(1)));
         let c = fit_color(Method::LeastSquares, Model::Linear);
-        chart
-            .draw_series(ks.iter().enumerate().map(|(i, &(k, se))| {
+        let mut legend = Legend::new();
+        legend.add(
+            format!("mean K = {mean:.7} V/(°/s)"),
+            Swatch::Line {
+                color: g,
+                width: 1,
+                dashed: true,
+            },
+        );
+        legend.add(
+            "least-squares K ± one standard error",
+            Swatch::Line {
+                color: c,
+                width: 2,
+                dashed: false,
+            },
+        );
+        let bars: Vec<(f64, f64)> = ks
+            .iter()
+            .enumerate()
+            .flat_map(|(i, &(k, se))| {
                 let se = se.unwrap_or(0.0);
-                ErrorBar::new_vertical((i + 1) as f64, k - se, k, k + se, c.stroke_width(2), 12)
-            }))?
-            .label("least-squares K ± one standard error")
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], c.stroke_width(2)));
-        legend(&mut chart, SeriesLabelPosition::UpperRight)?;
+                let x = (i + 1) as f64;
+                [(x, k - se), (x, k), (x, k + se)]
+            })
+            .collect();
+        let frame = Frame::new(84);
+        let placement = legend.place(&normalised(&bars, &xa, &ya), frame.area(0));
+        let right = Frame::legend_room(&legend, placement);
+        let mut chart = frame
+            .builder(&root, "Scale factor per run (repeatability)", right)
+            .build_cartesian_2d(xa.coord(), ya.coord())?;
+        let runs = IntegerLabels;
+        mesh(
+            &mut chart,
+            &runs,
+            &ya,
+            "run",
+            &format!("scale factor K ({})", ya.scaled_unit("V/(°/s)")),
+        )?;
+        chart.draw_series(DashedLineSeries::new(
+            [(0.5, mean), (q as f64 + 0.5, mean)],
+            8,
+            6,
+            g.stroke_width(1),
+        ))?;
+        chart.draw_series(ks.iter().enumerate().map(|(i, &(k, se))| {
+            let se = se.unwrap_or(0.0);
+            ErrorBar::new_vertical((i + 1) as f64, k - se, k, k + se, c.stroke_width(2), 12)
+        }))?;
+        legend.draw(&root, chart.plotting_area().get_pixel_range(), placement)?;
         root.present()?;
         Ok(())
     })
+}
+
+/// Labels of a category axis numbered 1, 2, 3...
+struct IntegerLabels;
+
+impl Labels for IntegerLabels {
+    fn label(&self, v: f64) -> String {
+        if (v - v.round()).abs() < 1e-9 {
+            format!("{v:.0}")
+        } else {
+            String::new()
+        }
+    }
 }

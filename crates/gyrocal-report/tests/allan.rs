@@ -127,3 +127,96 @@ fn write_run_allan_writes_the_json_and_the_page() {
             .contains("<svg")
     );
 }
+
+/// The σ(τ) plot of a page: its tick labels per axis (y: right-aligned left of the frame; x:
+/// centred under it), the legend's box and the points' centres.
+struct CurvePlot {
+    y_labels: Vec<String>,
+    x_labels: Vec<String>,
+    legend: (f64, f64, f64, f64),
+    points: Vec<(f64, f64)>,
+}
+
+fn curve_plot(html: &str) -> CurvePlot {
+    let start = html.find("<svg").unwrap();
+    let end = html[start..].find("</svg>").unwrap() + start + 6;
+    let doc = roxmltree::Document::parse(&html[start..end]).unwrap();
+    let num = |n: &roxmltree::Node, a: &str| n.attribute(a).unwrap().parse::<f64>().unwrap();
+    let mut p = CurvePlot {
+        y_labels: Vec::new(),
+        x_labels: Vec::new(),
+        legend: (0.0, 0.0, 0.0, 0.0),
+        points: Vec::new(),
+    };
+    for n in doc.descendants() {
+        if n.has_tag_name("text") && n.attribute("transform").is_none() {
+            let t = n.text().unwrap_or("").trim().to_string();
+            match (n.attribute("text-anchor"), n.attribute("dy")) {
+                (Some("end"), _) => p.y_labels.push(t),
+                (Some("middle"), Some("0.76em")) if num(&n, "y") > 400.0 => p.x_labels.push(t),
+                _ => {}
+            }
+        } else if n.has_tag_name("rect") && n.attribute("opacity") == Some("0.92") {
+            p.legend = (
+                num(&n, "x"),
+                num(&n, "y"),
+                num(&n, "width"),
+                num(&n, "height"),
+            );
+        } else if n.has_tag_name("circle") && n.attribute("r") == Some("3") {
+            // the points (r 3; the legend's own swatch dot is r 4)
+            p.points.push((num(&n, "cx"), num(&n, "cy")));
+        }
+    }
+    p
+}
+
+/// Issue 25: the Allan plot's axes are labelled at every decade, in one format, no label
+/// twice, the curve's minimum between two labels, and the legend covers no point.
+#[test]
+fn the_allan_plot_labels_every_decade_once_and_its_legend_covers_no_point() {
+    let tmp = tempfile::tempdir().unwrap();
+    run_dir(tmp.path(), 20_000, &[], 0.0);
+    let doc = analyse_input(tmp.path(), &AllanOptions::default()).unwrap();
+    let html = render_allan(&doc).unwrap();
+    let p = curve_plot(&html);
+    for labels in [&p.y_labels, &p.x_labels] {
+        assert!(labels.len() >= 2, "{labels:?}");
+        let values: Vec<f64> = labels
+            .iter()
+            .map(|l| {
+                l.parse::<f64>()
+                    .unwrap_or_else(|_| panic!("{l:?} in {labels:?}"))
+            })
+            .collect();
+        // consecutive decades (1 ... 10 ... 100): every decade labelled, none twice
+        for w in values.windows(2) {
+            let r = (w[0] / w[1]).max(w[1] / w[0]);
+            assert!((r - 10.0).abs() < 1e-9, "{labels:?}");
+        }
+        // one format: plain decimals, no exponent form anywhere
+        assert!(labels.iter().all(|l| !l.contains('e')), "{labels:?}");
+    }
+    let ys: Vec<f64> = p.y_labels.iter().map(|l| l.parse().unwrap()).collect();
+    let (lo, hi) = (
+        ys.iter().copied().fold(f64::INFINITY, f64::min),
+        ys.iter().copied().fold(0.0, f64::max),
+    );
+    let min = doc
+        .curve
+        .points
+        .iter()
+        .map(|q| q.deviation)
+        .fold(f64::INFINITY, f64::min);
+    assert!(lo < min && min < hi, "{min} within {ys:?}");
+    let (x, y, w, h) = p.legend;
+    assert!(w > 0.0 && h > 0.0, "a legend");
+    assert!(p.points.len() > 10);
+    for (cx, cy) in &p.points {
+        assert!(
+            !(*cx >= x - 3.0 && *cx <= x + w + 3.0 && *cy >= y - 3.0 && *cy <= y + h + 3.0),
+            "point ({cx}, {cy}) under the legend {:?}",
+            p.legend
+        );
+    }
+}

@@ -580,3 +580,42 @@ fn report_is_on_the_shared_page_with_one_stylesheet() {
     assert!(html.contains("<h1>Gyro scale-factor calibration report</h1>"));
     assert!(html.ends_with("</body>\n</html>\n"));
 }
+
+/// A run directory of `toml`'s plan without steps or fit (enough to compare plans).
+fn bare_run(dir: &Path, toml: &str) {
+    let plan = Plan::from_toml_str(toml, Path::new("test.toml")).unwrap();
+    let mut rd = RunDir::create(dir, &plan, RunMeta::default()).unwrap();
+    rd.finish(Status::Aborted, Some("stopped at once".into()), 1.0)
+        .unwrap();
+}
+
+#[test]
+fn a_different_simulation_seed_is_not_a_different_plan() {
+    let tmp = tempfile::tempdir().unwrap();
+    let base = common::plans::sweep("seeds", &RATES, N);
+    let (a, b, c) = (
+        tmp.path().join("a"),
+        tmp.path().join("b"),
+        tmp.path().join("c"),
+    );
+    bare_run(&a, &format!("{base}\n[simulation]\nseed = 1\n"));
+    bare_run(&b, &format!("{base}\n[simulation]\nseed = 2\n"));
+    // the plan hashes differ ([simulation] is hashed), the method does not
+    let ha = gyrocal_files::load(&a).unwrap().manifest.plan_hash;
+    let hb = gyrocal_files::load(&b).unwrap().manifest.plan_hash;
+    assert_ne!(ha, hb);
+    let same = render_many(&[a.clone(), b]).unwrap();
+    assert!(
+        !same.warnings.iter().any(|w| w.contains("different plans")),
+        "{:?}",
+        same.warnings
+    );
+    // another rate list is another plan
+    bare_run(&c, &common::plans::sweep("seeds", &RATES[..5], N));
+    let mixed = render_many(&[a, c]).unwrap();
+    assert!(
+        mixed.warnings.iter().any(|w| w.contains("different plans")),
+        "{:?}",
+        mixed.warnings
+    );
+}

@@ -886,3 +886,82 @@ fn a_test_run_of_the_binary_sees_none_of_the_users_files() {
     assert_eq!(doc["status"], "complete");
     assert!(doc["catalog"].is_null(), "the run was indexed: {doc:#}");
 }
+
+/// A simulated calibration of the plan `text` (written beside `dir`), not indexed by the run.
+fn calibrate_plan(data_home: &Path, dir: &Path, serial: &str, text: &str) {
+    let plan = dir.with_extension("toml");
+    std::fs::create_dir_all(dir.parent().unwrap()).unwrap();
+    std::fs::write(&plan, text).unwrap();
+    ok(&gyrocal(data_home)
+        .args([
+            "run",
+            "--simulate",
+            "--catalog",
+            "off",
+            "--dut-serial",
+            serial,
+        ])
+        .arg("--out")
+        .arg(dir)
+        .arg(&plan)
+        .output()
+        .unwrap());
+}
+
+/// Issue 25: a different simulation seed is not a different plan (two seeds of quick.toml
+/// give a repeatability and no warning); a different rate list is, and is left out of the
+/// repeatability with a warning naming the plans.
+#[test]
+fn history_tells_plans_apart_by_their_rates_not_their_seeds() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data_home = tmp.path().join("data");
+    let runs = tmp.path().join("runs");
+    let serial = "SEEDS-1";
+    let rates = "rates_dps = [0, 1, -1, 10, -10]";
+    calibrate_plan(
+        &data_home,
+        &runs.join("other-rates"),
+        serial,
+        &common::plans::config_with("quick.toml", &[(rates, "rates_dps = [0, 2, -2, 5, -5]")]),
+    );
+    calibrate_plan(
+        &data_home,
+        &runs.join("seed1"),
+        serial,
+        &common::plans::config_with("quick.toml", &[]),
+    );
+    calibrate_plan(
+        &data_home,
+        &runs.join("seed2"),
+        serial,
+        &common::plans::config_with("quick.toml", &[("seed = 1", "seed = 2")]),
+    );
+    // `rebuild` of the tree into the catalog of `home`, then the history
+    let history = |home: &Path, n: usize| {
+        ok(&gyrocal(home)
+            .args(["catalog", "rebuild"])
+            .arg(&runs)
+            .output()
+            .unwrap());
+        let out = gyrocal(home)
+            .args(["history", serial, "--include-simulated"])
+            .output()
+            .unwrap();
+        let stdout = ok(&out);
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(
+            stdout.contains(&format!("repeatability over {n} calibrations")),
+            "{stdout}"
+        );
+        (stdout, stderr)
+    };
+    // all three: the 5-rate plan with other rates is another plan
+    let (stdout, stderr) = history(&data_home, 2);
+    assert!(stdout.contains("(1 of other plans left out)"), "{stdout}");
+    assert!(stderr.contains("follow 2 plans"), "{stderr}");
+    // without it: the two seeds are one plan
+    std::fs::remove_dir_all(runs.join("other-rates")).unwrap();
+    let (stdout, stderr) = history(&tmp.path().join("fresh"), 2);
+    assert!(!stdout.contains("other plans"), "{stdout}");
+    assert!(!stderr.contains("plans"), "{stderr}");
+}

@@ -90,15 +90,41 @@ impl PlansDiffer {
     }
 }
 
-/// `Some` when the inputs do not all follow one plan (by plan hash). A bare CSV has no plan:
-/// it differs only from nothing, and is named as unknown when run directories disagree.
+/// `Some` when the inputs do not all follow one plan (by [`method_hash`]: a different
+/// simulation seed is the same plan). A bare CSV has no plan: it differs only from nothing,
+/// and is named as unknown when run directories disagree. The warning names each run's plan
+/// hash, as its manifest has it.
 pub(super) fn plans_differ(inputs: &[Input]) -> Option<PlansDiffer> {
-    let hashes: Vec<Option<String>> = inputs
+    let methods: Vec<Option<String>> = inputs
+        .iter()
+        .map(|i| i.manifest.as_ref().map(|m| method_hash(&m.plan)))
+        .collect();
+    if (PlansDiffer { hashes: methods }).distinct() <= 1 {
+        return None;
+    }
+    let hashes = inputs
         .iter()
         .map(|i| i.manifest.as_ref().map(|m| m.plan_hash.clone()))
         .collect();
-    let d = PlansDiffer { hashes };
-    (d.distinct() > 1).then_some(d)
+    Some(PlansDiffer { hashes })
+}
+
+/// What makes two runs' plans the same method: the plan's hash without its `[simulation]`
+/// section (the simulated bench's seed and gyro are not how the gyro was measured; the plan
+/// hash covers them, so two seeds of one plan hash differently). Ports, `[dut]` and
+/// `[acceptance]` are left out as in the plan hash.
+pub(crate) fn method_hash(plan: &gyrocal_files::Plan) -> String {
+    let mut doc = plan.to_doc();
+    if let Some(t) = doc.table.as_mut() {
+        t.port.clear();
+    }
+    doc.dmm.port.clear();
+    doc.dut = None;
+    doc.acceptance = None;
+    doc.simulation = gyrocal_files::plan::Simulation::default();
+    // serialising plain structs cannot fail; an empty body would still compare equal only to
+    // itself
+    gyrocal_files::rundir::sha256_hex(&serde_json::to_vec(&doc).unwrap_or_default())
 }
 
 /// The banner of a simulated run: it comes first, so that simulated numbers are never

@@ -228,7 +228,7 @@ fn one(doc: &mut Doc, input: &Input, run: Option<usize>, cert: bool) -> Result<(
         doc.figure(
             file_name("residuals.svg", run),
             plots::residuals_plot(a)?,
-            "Residual (measured − fitted) of every fit against the rate, on one scale. Left axis in volts; right axis the same residual divided by the least-squares scale factor K, i.e. as an input-rate error. A bowl shape in the linear residuals (positive at both ends, negative in the middle) is an even-order nonlinearity that the quadratic model captures.",
+            "Residual (measured − fitted) of every fit against the rate, on one scale. Left axis in the unit its title names (V, mV or µV); right axis the same residual divided by the least-squares scale factor K, i.e. as an input-rate error. A bowl shape in the linear residuals (positive at both ends, negative in the middle) is an even-order nonlinearity that the quadratic model captures.",
         );
         residual_table(&mut doc.html, a, &sfx);
         estimators(&mut doc.html, a, &sfx);

@@ -126,12 +126,23 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<u8> {
         return Ok(0);
     }
     let rep = &h.repeatability;
+    // with several plans, the repeatability is the latest plan's (the catalog's History)
+    let of = match rep.plan.and_then(|p| h.plans.get(p)) {
+        Some(p) if rep.other_plans > 0 => format!(
+            " of plan \"{}\" ({} of other plans left out)",
+            p.name, rep.other_plans
+        ),
+        _ => String::new(),
+    };
     match (rep.scale_factor_ppm, rep.bias_dph) {
         (Some(k), Some(b)) => println!(
-            "repeatability over {} calibrations: K {k:.2} ppm, bias {b:.4} °/h",
+            "repeatability over {} calibrations{of}: K {k:.2} ppm, bias {b:.4} °/h",
             rep.n
         ),
-        (Some(k), None) => println!("repeatability over {} calibrations: K {k:.2} ppm", rep.n),
+        (Some(k), None) => println!(
+            "repeatability over {} calibrations{of}: K {k:.2} ppm",
+            rep.n
+        ),
         _ => println!("repeatability: needs two calibrations or more"),
     }
     Ok(0)
