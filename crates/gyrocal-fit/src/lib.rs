@@ -72,7 +72,9 @@ pub use analysis::{
     analyze_columns, analyze_many, fit_neuron, unsupported_models,
 };
 pub use asymmetry::{ASYMMETRY_COMMON_K2_MODEL, ASYMMETRY_COMMON_K2_UNITS, AsymmetryCommonK2};
-pub use data::{Columns, Dataset, Point, Weighting};
+pub use data::{
+    Columns, Dataset, Point, RATE_BINS, RATE_BINS_RULE, RATE_GROUPS_MAX, RateBins, Weighting,
+};
 pub use error::FitError;
 pub use lsq::{check_rates, fit_least_squares, fit_least_squares_columns};
 pub use metrics::{Metrics, NONLINEARITY_NORMALISATION, NotComputed, repeatability_ppm};
