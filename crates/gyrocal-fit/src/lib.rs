@@ -63,6 +63,7 @@ pub mod neuron;
 pub mod nonlinearity;
 mod quantity;
 pub mod selection;
+mod stream;
 mod surface;
 pub mod uncertainty;
 mod verdict;
@@ -83,5 +84,6 @@ pub use model::{
 };
 pub use neuron::{NeuronOptions, NeuronStatus};
 pub use selection::{MODEL_SELECTION_LEVEL, ModelSelection, NestedTest};
+pub use stream::{MultiWithPointResiduals, WithPointResiduals};
 pub use surface::ErrorSurface;
 pub use uncertainty::{MeterAccuracy, TableRateAccuracy, Uncertainty, UncertaintyInputs};
