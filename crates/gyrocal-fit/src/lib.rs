@@ -44,6 +44,12 @@
 //! * [`Analysis::attach_uncertainty`] adds the expanded uncertainty (k = 2) budget
 //!   ([`uncertainty`]) from the instruments' stated accuracies, and the metrics' own
 //!   uncertainties (the nonlinearity's by Monte Carlo, [`nonlinearity`]).
+//! * [`analyze_columns`] is the same on column arrays of any size (`gyrocal fit`): above
+//!   [`POINT_RESIDUALS_MAX`] points the fits carry residual summaries per distinct rate for a
+//!   schedule (at most [`RATE_GROUPS_MAX`] distinct rates) and per rate bin ([`RateBins`],
+//!   [`RATE_BINS`] of equal width) for continuous rates, every figure over the points staying
+//!   exact; [`WithPointResiduals`] writes every point's residuals anyway, computed as they are
+//!   written.
 //! * [`Analysis::evaluate_acceptance`] judges an analysis against acceptance limits
 //!   ([`acceptance`]): every limit applies to the figure the report presents as the result,
 //!   with its uncertainty, so the guarded rule decides on evidence.
