@@ -162,4 +162,12 @@ fn the_human_report_has_one_row_per_rate_bin_and_says_so() {
         "{text}"
     );
     assert!(text.lines().count() < 300, "{}", text.lines().count());
+    // A bin's row: its mean rate to 4 decimals, its point count, its mean output.
+    let row = text
+        .lines()
+        .find(|l| l.trim_start().starts_with("-19.9"))
+        .unwrap_or_else(|| panic!("{text}"));
+    let cells: Vec<&str> = row.split_whitespace().collect();
+    assert_eq!(cells[0].split_once('.').unwrap().1.len(), 4, "{row}");
+    assert!(cells[1].parse::<u64>().unwrap() > 0, "{row}");
 }

@@ -504,7 +504,13 @@ pub(crate) fn human(out: &mut String, a: &Analysis) {
             return;
         };
         for (i, r) in base.rate_residuals.iter().enumerate() {
-            let mut row = format!("{:>10} {:>9} {:>14.7}", r.rate_dps, r.n, r.mean_volts);
+            // A schedule's rates as written; a bin's mean rate to 0.1 m°/s.
+            let rate = if r.rate_min_dps.is_some() {
+                format!("{:.4}", r.rate_dps)
+            } else {
+                r.rate_dps.to_string()
+            };
+            let mut row = format!("{rate:>10} {:>9} {:>14.7}", r.n, r.mean_volts);
             for f in [ls, nn, best_fit].into_iter().flatten() {
                 if let Some(fr) = f.rate_residuals.get(i) {
                     let _ = write!(row, " {:>+17.4}", fr.mean_residual * 1e3);
