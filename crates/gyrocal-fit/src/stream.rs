@@ -2,9 +2,10 @@
 //! point's residual in every fit, without holding them.
 //!
 //! Per-point residuals of five fits take 32 bytes a point each in memory (1.6 GB at 10^7
-//! points) and about 500 bytes a point in pretty JSON. [`crate::analyze_columns`] therefore
-//! keeps them only up to [`crate::Options::point_residuals_max`] points and summarises the
-//! rest per rate or per rate bin; [`WithPointResiduals`] is the explicit way to every point
+//! points) and about 850 bytes a point in pretty JSON (844 MB at 10^6 points).
+//! [`crate::analyze_columns`] therefore keeps them only up to
+//! [`crate::Options::point_residuals_max`] points and summarises the rest per rate or per
+//! rate bin; [`WithPointResiduals`] is the explicit way to every point
 //! (`gyrocal fit --json --residuals`): it serializes an analysis made with summaries as the
 //! document the same analysis would be with per-point residuals (byte for byte: the same
 //! keys, in the same order, `residual_detail: "per-point"`, no `rate_residuals`), computing

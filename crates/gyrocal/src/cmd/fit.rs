@@ -120,8 +120,8 @@ pub struct FitArgs {
     /// of more than 10000 points (1000 in the human report) get per-rate summaries instead
     /// (JSON `rate_residuals`, one table row per rate; per rate bin on continuous data, more
     /// than 200 distinct rates). With --json they are written as they are computed, for any
-    /// number of points (about 500 bytes of JSON a point); the human report takes at most
-    /// 2000000 points.
+    /// number of points (about 850 bytes of JSON a point for the five default fits); the
+    /// human report takes at most 2000000 points.
     #[arg(long)]
     pub residuals: bool,
 }
