@@ -13,7 +13,8 @@ time it as a whole process:
 
     /usr/bin/time -v python3 crates/gyrocal-fit/benches/numpy_compare.py FILE.csv
 
-Needs `pip install numpy pandas`.
+Needs `pip install numpy pandas`. The whole-process comparison of issue 24 (continuous rates,
+residuals, the JSON size) is bench/run_fit.sh at the repository root, with bench/fit_numpy.py.
 """
 
 import sys

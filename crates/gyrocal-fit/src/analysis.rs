@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::data::{Columns, Dataset, Weighting};
+use crate::data::{Columns, Dataset, RateBins, Weighting};
 use crate::error::FitError;
 use crate::lsq::{Prepared, assemble, check, check_rates, fit_prepared};
 use crate::metrics::{Metrics, repeatability_ppm};
@@ -25,8 +25,13 @@ pub enum ResidualDetail {
     #[default]
     PerPoint,
     /// Every fit's `residuals` is empty and `rate_residuals` has one entry per distinct rate
-    /// (more points than [`Options::point_residuals_max`]).
+    /// (more points than [`Options::point_residuals_max`], a schedule: at most
+    /// [`crate::RATE_GROUPS_MAX`] distinct rates).
     PerRate,
+    /// Every fit's `residuals` is empty and `rate_residuals` has one entry per non-empty rate
+    /// bin ([`Analysis::rate_bins`]): more points than [`Options::point_residuals_max`] and
+    /// continuous rates (more than [`crate::RATE_GROUPS_MAX`] distinct).
+    PerRateBin,
 }
 
 /// What to compute.
@@ -85,6 +90,13 @@ pub struct Analysis {
     /// before this field existed: per point).
     #[serde(default)]
     pub residual_detail: ResidualDetail,
+    /// The rate bins of continuous data (more than [`crate::RATE_GROUPS_MAX`] distinct rates):
+    /// what the per-bin summaries ([`ResidualDetail::PerRateBin`]) and, above
+    /// [`RATE_MEANS_ABOVE_POINTS`] points, the neuron's online passes
+    /// ([`crate::TrainingData::RateBins`]) are over. Absent for a schedule and for documents
+    /// written before this field existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rate_bins: Option<RateBins>,
     /// The fits, least squares first (in model order), then the neuron.
     pub fits: Vec<Fit>,
     /// The requested models that were not fitted because the data cannot determine them, with
@@ -305,12 +317,13 @@ pub fn analyze_columns(data: &Columns, opts: &Options) -> Result<Analysis, FitEr
     Ok(Analysis {
         source: data.source.clone(),
         points: data.len(),
-        distinct_rates: Some(prep.index.distinct.len()),
-        residual_detail: if point_residuals {
-            ResidualDetail::PerPoint
-        } else {
-            ResidualDetail::PerRate
+        distinct_rates: Some(prep.index.distinct),
+        residual_detail: match (point_residuals, prep.index.bins()) {
+            (true, _) => ResidualDetail::PerPoint,
+            (false, None) => ResidualDetail::PerRate,
+            (false, Some(_)) => ResidualDetail::PerRateBin,
         },
+        rate_bins: prep.index.bins().cloned(),
         fits,
         skipped,
         best_model,

@@ -71,9 +71,9 @@ pub struct AsymmetryCommonK2 {
 /// The joint fit of prepared data, or why it cannot be made (in words, for
 /// [`crate::NotComputed`]).
 pub(crate) fn fit(prep: &Prepared<'_>) -> Result<AsymmetryCommonK2, String> {
-    let pos = prep.index.distinct_where(|w| w > 0.0);
-    let neg = prep.index.distinct_where(|w| w < 0.0);
-    let distinct = prep.index.distinct.len();
+    let pos = prep.index.positive;
+    let neg = prep.index.negative;
+    let distinct = prep.index.distinct;
     if pos == 0 || neg == 0 {
         return Err(format!(
             "needs both turning directions: the data have {pos} positive and {neg} negative distinct rate(s)"

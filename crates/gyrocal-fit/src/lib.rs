@@ -44,6 +44,12 @@
 //! * [`Analysis::attach_uncertainty`] adds the expanded uncertainty (k = 2) budget
 //!   ([`uncertainty`]) from the instruments' stated accuracies, and the metrics' own
 //!   uncertainties (the nonlinearity's by Monte Carlo, [`nonlinearity`]).
+//! * [`analyze_columns`] is the same on column arrays of any size (`gyrocal fit`): above
+//!   [`POINT_RESIDUALS_MAX`] points the fits carry residual summaries per distinct rate for a
+//!   schedule (at most [`RATE_GROUPS_MAX`] distinct rates) and per rate bin ([`RateBins`],
+//!   [`RATE_BINS`] of equal width) for continuous rates, every figure over the points staying
+//!   exact; [`WithPointResiduals`] writes every point's residuals anyway, computed as they are
+//!   written.
 //! * [`Analysis::evaluate_acceptance`] judges an analysis against acceptance limits
 //!   ([`acceptance`]): every limit applies to the figure the report presents as the result,
 //!   with its uncertainty, so the guarded rule decides on evidence.
@@ -63,6 +69,7 @@ pub mod neuron;
 pub mod nonlinearity;
 mod quantity;
 pub mod selection;
+mod stream;
 mod surface;
 pub mod uncertainty;
 mod verdict;
@@ -72,7 +79,9 @@ pub use analysis::{
     analyze_columns, analyze_many, fit_neuron, unsupported_models,
 };
 pub use asymmetry::{ASYMMETRY_COMMON_K2_MODEL, ASYMMETRY_COMMON_K2_UNITS, AsymmetryCommonK2};
-pub use data::{Columns, Dataset, Point, Weighting};
+pub use data::{
+    Columns, Dataset, Point, RATE_BINS, RATE_BINS_RULE, RATE_GROUPS_MAX, RateBins, Weighting,
+};
 pub use error::FitError;
 pub use lsq::{check_rates, fit_least_squares, fit_least_squares_columns};
 pub use metrics::{Metrics, NONLINEARITY_NORMALISATION, NotComputed, repeatability_ppm};
@@ -81,5 +90,6 @@ pub use model::{
 };
 pub use neuron::{NeuronOptions, NeuronStatus};
 pub use selection::{MODEL_SELECTION_LEVEL, ModelSelection, NestedTest};
+pub use stream::{MultiWithPointResiduals, WithPointResiduals};
 pub use surface::ErrorSurface;
 pub use uncertainty::{MeterAccuracy, TableRateAccuracy, Uncertainty, UncertaintyInputs};

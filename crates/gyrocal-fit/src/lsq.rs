@@ -2,7 +2,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::data::{Columns, Dataset, RateIndex, Weighting};
+use crate::data::{Columns, Dataset, RateBins, RateGroups, RateIndex, Weighting};
 use crate::error::FitError;
 use crate::model::{
     Coefficients, Fit, Method, Model, NeuronTrace, RateResidual, Residual, predict,
@@ -293,16 +293,19 @@ pub(crate) struct Prepared<'a> {
     pub cols: &'a Columns,
     pub index: RateIndex,
     pub sigmas: Option<&'a [f64]>,
-    /// Keep per-point residuals (otherwise per-rate summaries).
+    /// Keep per-point residuals (otherwise per-rate or per-bin summaries).
     pub point_residuals: bool,
-    /// Per distinct rate: (sum, min, max) of the outputs, for the per-rate summaries.
+    /// Schedule, without per-point residuals: per distinct rate, (sum, min, max) of the
+    /// outputs, for the per-rate summaries.
     group_volts: Vec<(f64, f64, f64)>,
+    /// Continuous data, without per-point residuals: per bin, (sum of rates, sum of outputs).
+    bin_sums: Vec<(f64, f64)>,
     sst: f64,
 }
 
 impl<'a> Prepared<'a> {
     /// Checks the values are finite, counts the distinct rates, and (without per-point
-    /// residuals) sums the outputs per rate.
+    /// residuals) sums the outputs per rate or per bin.
     pub fn new(
         cols: &'a Columns,
         weighting: Weighting,
@@ -321,13 +324,27 @@ impl<'a> Prepared<'a> {
             .map(|v| (v - mean) * (v - mean))
             .sum();
         let mut group_volts = Vec::new();
+        let mut bin_sums = Vec::new();
         if !point_residuals {
-            group_volts = vec![(0.0, f64::INFINITY, f64::NEG_INFINITY); index.distinct.len()];
-            for (w, d) in cols.rates[..n].iter().zip(&cols.volts[..n]) {
-                let g = &mut group_volts[index.group(*w)];
-                g.0 += d;
-                g.1 = g.1.min(*d);
-                g.2 = g.2.max(*d);
+            match &index.groups {
+                RateGroups::Rates { .. } => {
+                    group_volts =
+                        vec![(0.0, f64::INFINITY, f64::NEG_INFINITY); index.group_count()];
+                    for (w, d) in cols.rates[..n].iter().zip(&cols.volts[..n]) {
+                        let g = &mut group_volts[index.group(*w)];
+                        g.0 += d;
+                        g.1 = g.1.min(*d);
+                        g.2 = g.2.max(*d);
+                    }
+                }
+                RateGroups::Bins { bins, .. } => {
+                    bin_sums = vec![(0.0, 0.0); bins.bins];
+                    for (w, d) in cols.rates[..n].iter().zip(&cols.volts[..n]) {
+                        let b = &mut bin_sums[bins.bin(*w)];
+                        b.0 += w;
+                        b.1 += d;
+                    }
+                }
             }
         }
         Ok(Self {
@@ -336,6 +353,7 @@ impl<'a> Prepared<'a> {
             sigmas: cols.weighting_sigmas(weighting),
             point_residuals,
             group_volts,
+            bin_sums,
             sst,
         })
     }
@@ -371,7 +389,7 @@ pub(crate) fn check(data: &Dataset, model: Model) -> Result<(), FitError> {
 /// [`check_rates`] on rates already counted.
 pub(crate) fn check_index(index: &RateIndex, model: Model) -> Result<(), FitError> {
     let needed = model.coefficient_count();
-    let distinct_all = index.distinct.len();
+    let distinct_all = index.distinct;
     // Distinct rates first: it is the actionable figure (more readings at the same rates
     // cannot determine a polynomial), and fewer points than coefficients implies it.
     if model != Model::Split && distinct_all >= 2 && distinct_all < needed {
@@ -395,8 +413,8 @@ pub(crate) fn check_index(index: &RateIndex, model: Model) -> Result<(), FitErro
     }
     match model {
         Model::Split => {
-            let pos = index.distinct_where(|w| w >= 0.0);
-            let neg = index.distinct_where(|w| w <= 0.0);
+            let pos = index.nonnegative();
+            let neg = index.nonpositive();
             if pos < 2 {
                 return Err(FitError::SplitNeedsBothSigns {
                     side: "positive",
@@ -482,12 +500,11 @@ pub(crate) fn fit_prepared(prep: &Prepared<'_>, model: Model) -> Result<Fit, Fit
     let volts = prep.volts();
     let (coefficients, std_errors) = match model {
         Model::Split => {
-            let side = |keep: fn(f64) -> bool| -> Result<PolySolution, FitError> {
-                let distinct = prep.index.distinct_where(keep);
+            let side = |keep: fn(f64) -> bool, distinct| -> Result<PolySolution, FitError> {
                 solve_poly(rates, volts, sigmas, keep, 1, Model::Split, distinct)
             };
-            let pos = side(|w| w >= 0.0)?;
-            let neg = side(|w| w <= 0.0)?;
+            let pos = side(|w| w >= 0.0, prep.index.nonnegative())?;
+            let neg = side(|w| w <= 0.0, prep.index.nonpositive())?;
             let c = Coefficients {
                 k0: Some(0.5 * (pos.coef[0] + neg.coef[0])),
                 k_pos: Some(pos.coef[1]),
@@ -519,7 +536,7 @@ pub(crate) fn fit_prepared(prep: &Prepared<'_>, model: Model) -> Result<Fit, Fit
                 |_| true,
                 model.degree(),
                 model,
-                prep.index.distinct.len(),
+                prep.index.distinct,
             )?;
             let get = |v: &[f64], j: usize| v.get(j).copied();
             let c = Coefficients {
@@ -569,45 +586,69 @@ pub(crate) fn assemble(
         residuals.reserve_exact(n);
     }
     let (mut sse, mut chi2, mut max_abs) = (0.0_f64, 0.0_f64, 0.0_f64);
-    for (i, (&w, &d)) in prep.rates().iter().zip(prep.volts()).enumerate() {
-        let fitted = predict(model, &coefficients, w);
-        let residual = d - fitted;
-        sse += residual * residual;
-        if let Some(s) = sigmas {
-            chi2 += (residual / s[i]) * (residual / s[i]);
+    let mut rate_residuals: Vec<RateResidual> = Vec::new();
+    match (&prep.index.groups, prep.point_residuals) {
+        (RateGroups::Bins { bins, counts }, false) => {
+            // Per bin: (Σ fitted, Σ residual, max |residual|), in the same pass as the totals.
+            let mut acc = vec![(0.0_f64, 0.0_f64, 0.0_f64); bins.bins];
+            for (i, (&w, &d)) in prep.rates().iter().zip(prep.volts()).enumerate() {
+                let fitted = predict(model, &coefficients, w);
+                let residual = d - fitted;
+                sse += residual * residual;
+                if let Some(s) = sigmas {
+                    chi2 += (residual / s[i]) * (residual / s[i]);
+                }
+                max_abs = max_abs.max(residual.abs());
+                let a = &mut acc[bins.bin(w)];
+                a.0 += fitted;
+                a.1 += residual;
+                a.2 = a.2.max(residual.abs());
+            }
+            rate_residuals = bin_residuals(bins, counts, &prep.bin_sums, &acc);
         }
-        max_abs = max_abs.max(residual.abs());
-        if prep.point_residuals {
-            residuals.push(Residual {
-                rate_dps: w,
-                volts: d,
-                fitted,
-                residual,
-            });
+        _ => {
+            for (i, (&w, &d)) in prep.rates().iter().zip(prep.volts()).enumerate() {
+                let fitted = predict(model, &coefficients, w);
+                let residual = d - fitted;
+                sse += residual * residual;
+                if let Some(s) = sigmas {
+                    chi2 += (residual / s[i]) * (residual / s[i]);
+                }
+                max_abs = max_abs.max(residual.abs());
+                if prep.point_residuals {
+                    residuals.push(Residual {
+                        rate_dps: w,
+                        volts: d,
+                        fitted,
+                        residual,
+                    });
+                }
+            }
+            if let (RateGroups::Rates { rates, counts }, false) =
+                (&prep.index.groups, prep.point_residuals)
+            {
+                rate_residuals = rates
+                    .iter()
+                    .zip(counts)
+                    .zip(&prep.group_volts)
+                    .map(|((&w, &count), &(sum, min, max))| {
+                        let fitted = predict(model, &coefficients, w);
+                        let mean_volts = sum / count as f64;
+                        RateResidual {
+                            rate_dps: w,
+                            n: count,
+                            mean_volts,
+                            fitted,
+                            mean_residual: mean_volts - fitted,
+                            max_abs_residual: (max - fitted).abs().max((min - fitted).abs()),
+                            rate_min_dps: None,
+                            rate_max_dps: None,
+                        }
+                    })
+                    .collect();
+            }
         }
     }
-    let rate_residuals: Vec<RateResidual> = if prep.point_residuals {
-        Vec::new()
-    } else {
-        prep.index
-            .distinct
-            .iter()
-            .zip(&prep.index.counts)
-            .zip(&prep.group_volts)
-            .map(|((&w, &count), &(sum, min, max))| {
-                let fitted = predict(model, &coefficients, w);
-                let mean_volts = sum / count as f64;
-                RateResidual {
-                    rate_dps: w,
-                    n: count,
-                    mean_volts,
-                    fitted,
-                    mean_residual: mean_volts - fitted,
-                    max_abs_residual: (max - fitted).abs().max((min - fitted).abs()),
-                }
-            })
-            .collect()
-    };
     let sst = prep.sst;
     let p = model.coefficient_count();
     let scale_factor = match model {
@@ -643,6 +684,38 @@ pub(crate) fn assemble(
         converged,
         neuron,
     }
+}
+
+/// The per-bin summaries of one fit: the bins with points, increasing rate; each one's rate
+/// is the mean rate of its points, its fitted value the mean of the fit over its points (so
+/// `mean_residual` is the exact mean residual of those points), with the bin's edges.
+fn bin_residuals(
+    bins: &RateBins,
+    counts: &[u64],
+    sums: &[(f64, f64)],
+    acc: &[(f64, f64, f64)],
+) -> Vec<RateResidual> {
+    counts
+        .iter()
+        .zip(sums)
+        .zip(acc)
+        .enumerate()
+        .filter(|(_, ((count, _), _))| **count > 0)
+        .map(|(k, ((&count, &(sum_w, sum_d)), &(sum_f, sum_r, max_r)))| {
+            let c = count as f64;
+            let (lo, hi) = bins.edges(k);
+            RateResidual {
+                rate_dps: sum_w / c,
+                n: count,
+                mean_volts: sum_d / c,
+                fitted: sum_f / c,
+                mean_residual: sum_r / c,
+                max_abs_residual: max_r,
+                rate_min_dps: Some(lo),
+                rate_max_dps: Some(hi),
+            }
+        })
+        .collect()
 }
 
 impl Dataset {

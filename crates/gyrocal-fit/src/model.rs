@@ -145,21 +145,30 @@ pub struct Residual {
 }
 
 /// One rate's fit, summarised over the points measured at that rate (in place of per-point
-/// residuals on large data sets; see [`crate::Options::point_residuals_max`]).
+/// residuals on large data sets; see [`crate::Options::point_residuals_max`]); on continuous
+/// data (more than [`crate::RATE_GROUPS_MAX`] distinct rates) one rate bin's
+/// ([`crate::RateBins`]), with the bin's edges.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct RateResidual {
-    /// Applied rate, °/s.
+    /// Applied rate, °/s (for a bin: the mean rate of its points).
     pub rate_dps: f64,
-    /// Points at that rate.
+    /// Points at that rate (in that bin).
     pub n: u64,
     /// Mean measured output at that rate, V.
     pub mean_volts: f64,
-    /// Output predicted by the fit at that rate, V.
+    /// Output predicted by the fit at that rate, V (for a bin: the mean of the fit over its
+    /// points).
     pub fitted: f64,
-    /// `mean_volts − fitted`, V.
+    /// `mean_volts − fitted`, V (for a bin: the mean residual of its points).
     pub mean_residual: f64,
     /// Largest `|volts − fitted|` over the points at that rate, V.
     pub max_abs_residual: f64,
+    /// A bin's lower edge, °/s (absent for a rate of a schedule).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rate_min_dps: Option<f64>,
+    /// A bin's upper edge, °/s (absent for a rate of a schedule).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rate_max_dps: Option<f64>,
 }
 
 /// What the neuron's online passes presented.
@@ -176,6 +185,17 @@ pub enum TrainingData {
     RateMeans {
         /// Distinct rates presented per online pass.
         rates: usize,
+        /// Points they average.
+        points: usize,
+    },
+    /// As `RateMeans`, on continuous data (more than [`crate::RATE_GROUPS_MAX`] distinct
+    /// rates): each non-empty rate bin's ([`crate::RateBins`]) mean rate and mean output once
+    /// per online pass, its cost weighted by the points (and weights) it averages. The batch
+    /// passes and the pass errors use every point, so the minimum, the SSE and the pass errors
+    /// are those of all points, exactly as with rate means.
+    RateBins {
+        /// Non-empty bins presented per online pass.
+        bins: usize,
         /// Points they average.
         points: usize,
     },

@@ -40,7 +40,7 @@ use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 
-use crate::data::RateIndex;
+use crate::data::{RateGroups, RateIndex};
 use crate::model::TrainingData;
 use crate::surface::SseForm;
 
@@ -218,7 +218,9 @@ pub fn train(
     t
 }
 
-/// Trains on the per-rate means of a large data set ([`TrainingData::RateMeans`]): the same
+/// Trains on the per-rate means of a large data set ([`TrainingData::RateMeans`]), or on
+/// continuous data on the per-bin means ([`TrainingData::RateBins`]: each bin presented at its
+/// points' weighted mean rate): the same
 /// normalisation, initial weights, update rules and stopping rules as [`train`], the online
 /// passes over the distinct rates' weighted mean outputs (each weighted by the summed
 /// normalised weights of its points), the batch gradient, cost and pass errors from the
@@ -236,9 +238,12 @@ pub(crate) fn train_rate_means(
     let raw = |i: usize| sigmas.map_or(1.0, |s| 1.0 / (s[i] * s[i]));
     let usum: f64 = (0..n).map(raw).sum();
     let norm = nf / usum;
-    let groups = index.distinct.len();
+    let groups = index.group_count();
+    let binned = index.bins();
     let mut gu = vec![0.0_f64; groups];
     let mut guy = vec![0.0_f64; groups];
+    // Binned: Σ u·ω per bin, for the bin's weighted mean rate.
+    let mut gux = vec![0.0_f64; if binned.is_some() { groups } else { 0 }];
     let (mut swx, mut swy) = (0.0_f64, 0.0_f64);
     let (mut dmin, mut dmax) = (f64::INFINITY, f64::NEG_INFINITY);
     for i in 0..n {
@@ -248,15 +253,19 @@ pub(crate) fn train_rate_means(
         let g = index.group(rates[i]);
         gu[g] += u;
         guy[g] += u * volts[i];
+        if binned.is_some() {
+            gux[g] += u * rates[i];
+        }
         dmin = dmin.min(volts[i]);
         dmax = dmax.max(volts[i]);
     }
     let mx = swx / nf;
     let my = swy / nf;
-    let sx = index
-        .distinct
-        .iter()
-        .fold(0.0_f64, |m, w| m.max((w - mx).abs()));
+    let sx = match &index.groups {
+        RateGroups::Rates { rates, .. } => rates.iter().fold(0.0_f64, |m, w| m.max((w - mx).abs())),
+        // The largest deviation is at one end of the range, as over the points.
+        RateGroups::Bins { bins, .. } => (bins.hi_dps - mx).abs().max((bins.lo_dps - mx).abs()),
+    };
     let sy = if n > 0 {
         (dmax - my).abs().max((dmin - my).abs())
     } else {
@@ -264,18 +273,27 @@ pub(crate) fn train_rate_means(
     };
     let sx = if sx > 0.0 { sx } else { 1.0 };
     let sy = if sy > 0.0 { sy } else { 1.0 };
-    let xg: Vec<f64> = index.distinct.iter().map(|w| (w - mx) / sx).collect();
-    let yg: Vec<f64> = guy
+    // The groups with points (every distinct rate has some; a bin may have none).
+    let present: Vec<usize> = (0..groups).filter(|&g| index.counts()[g] > 0).collect();
+    let presented = present.len();
+    let xg: Vec<f64> = match &index.groups {
+        RateGroups::Rates { rates, .. } => present.iter().map(|&g| (rates[g] - mx) / sx).collect(),
+        RateGroups::Bins { .. } => present
+            .iter()
+            .map(|&g| (gux[g] / gu[g] - mx) / sx)
+            .collect(),
+    };
+    let yg: Vec<f64> = present
         .iter()
-        .zip(&gu)
-        .map(|(uy, u)| (uy / u - my) / sy)
+        .map(|&g| (guy[g] / gu[g] - my) / sy)
         .collect();
+    let gu: Vec<f64> = present.iter().map(|&g| gu[g]).collect();
     // Mean 1 over the presented means, as the per-point weights have mean 1 over the points.
-    let ug: Vec<f64> = gu.iter().map(|u| u * groups as f64 / nf).collect();
+    let ug: Vec<f64> = gu.iter().map(|u| u * presented as f64 / nf).collect();
     // The weighted least-squares line in normalised units, from the rate means (exact: the
     // within-rate scatter does not move it), as the reference of the sufficient statistics.
     let (mut s1, mut sx1, mut sxx, mut sy1, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for g in 0..groups {
+    for g in 0..presented {
         s1 += gu[g];
         sx1 += gu[g] * xg[g];
         sxx += gu[g] * xg[g] * xg[g];
@@ -308,7 +326,7 @@ pub(crate) fn train_rate_means(
         (gw / nf, gt / nf)
     };
     let max_x2 = xg.iter().fold(0.0_f64, |m, x| m.max(x * x));
-    let budget = (ONLINE_PRESENTATIONS_MAX / groups.max(1) as u64).max(1);
+    let budget = (ONLINE_PRESENTATIONS_MAX / presented.max(1) as u64).max(1);
     let online_limit = opts.max_online_passes.min(budget);
     let problem = Problem {
         x: &xg,
@@ -318,9 +336,16 @@ pub(crate) fn train_rate_means(
         online_limit,
     };
     let mut t = run(&problem, opts, &to_original, &cost, &sse_volts, &grad);
-    t.training_data = TrainingData::RateMeans {
-        rates: groups,
-        points: n,
+    t.training_data = if binned.is_some() {
+        TrainingData::RateBins {
+            bins: presented,
+            points: n,
+        }
+    } else {
+        TrainingData::RateMeans {
+            rates: presented,
+            points: n,
+        }
     };
     t.online_pass_limit = (online_limit < opts.max_online_passes).then_some(online_limit);
     t

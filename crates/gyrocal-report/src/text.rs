@@ -3,7 +3,7 @@
 
 use std::fmt::Write as _;
 
-use gyrocal_fit::{Analysis, Fit, Method, Model, NeuronStatus, TrainingData};
+use gyrocal_fit::{Analysis, Fit, Method, Model, NeuronStatus, ResidualDetail, TrainingData};
 
 fn pm(v: Option<f64>, se: Option<f64>, digits: usize) -> String {
     match (v, se) {
@@ -97,6 +97,18 @@ pub fn fit_summary(out: &mut String, a: &Analysis) {
                 ),
             };
             let _ = writeln!(out, "  {:<24} {status}", "");
+            if let TrainingData::RateBins { bins, points } = t.training_data {
+                let limit = t
+                    .online_pass_limit
+                    .map(|l| format!(", online passes limited to {l}"))
+                    .unwrap_or_default();
+                let _ = writeln!(
+                    out,
+                    "  {:<24} online passes on the means of {bins} rate bins (continuous rates, above {} points), batch passes and errors over all {points} points{limit}",
+                    "",
+                    gyrocal_fit::neuron::RATE_MEANS_ABOVE_POINTS
+                );
+            }
             if let TrainingData::RateMeans { rates, points } = t.training_data {
                 let limit = t
                     .online_pass_limit
@@ -191,7 +203,21 @@ pub fn fit_summary(out: &mut String, a: &Analysis) {
     }
     let per_rate = a.fits.first().is_some_and(|f| !f.rate_residuals.is_empty());
     if per_rate {
-        // One row per distinct rate: the mean output and the mean residuals.
+        // One row per distinct rate (per rate bin on continuous data): the mean output and
+        // the mean residuals.
+        if let (ResidualDetail::PerRateBin, Some(b)) = (a.residual_detail, &a.rate_bins) {
+            let _ = writeln!(
+                out,
+                "continuous rates ({} distinct, more than {}): one row per rate bin, {} bins of {:.4} °/s over [{}, {}] °/s (empty bins left out); the rate is the mean rate of the bin's points, the figures above are over every point",
+                a.distinct_rates
+                    .map_or_else(|| "?".to_string(), |d| d.to_string()),
+                gyrocal_fit::RATE_GROUPS_MAX,
+                b.bins,
+                b.width_dps,
+                b.lo_dps,
+                b.hi_dps
+            );
+        }
         let mut header = format!("{:>10} {:>9} {:>14}", "rate [°/s]", "n", "mean [V]");
         if ls.is_some() {
             let _ = write!(header, " {:>17}", "LS mean r. [mV]");
@@ -207,7 +233,13 @@ pub fn fit_summary(out: &mut String, a: &Analysis) {
             return;
         };
         for (i, r) in base.rate_residuals.iter().enumerate() {
-            let mut row = format!("{:>10} {:>9} {:>14.7}", r.rate_dps, r.n, r.mean_volts);
+            // A schedule's rates as written; a bin's mean rate to 0.1 m°/s.
+            let rate = if r.rate_min_dps.is_some() {
+                format!("{:.4}", r.rate_dps)
+            } else {
+                r.rate_dps.to_string()
+            };
+            let mut row = format!("{rate:>10} {:>9} {:>14.7}", r.n, r.mean_volts);
             for f in [ls, nn, best_fit].into_iter().flatten() {
                 if let Some(fr) = f.rate_residuals.get(i) {
                     let _ = write!(row, " {:>+17.4}", fr.mean_residual * 1e3);

@@ -7,16 +7,18 @@ use std::path::PathBuf;
 use anyhow::Context as _;
 use clap::{Args, ValueEnum};
 use gyrocal_fit::{
-    Columns, Method, Model, MultiAnalysis, NeuronOptions, Options, POINT_RESIDUALS_MAX, Weighting,
-    analyze_columns, input,
+    Columns, Method, Model, MultiAnalysis, MultiWithPointResiduals, NeuronOptions, Options,
+    POINT_RESIDUALS_MAX, Weighting, WithPointResiduals, analyze_columns, input,
 };
 
 /// Above this many points the human report's table has one row per distinct rate (with the
 /// number of points and mean residuals) instead of one row per point.
 pub const HUMAN_POINT_ROWS_MAX: usize = 1_000;
 
-/// The most points `--residuals` accepts: per-point residuals of five fits take 160 bytes a
-/// point in memory (320 MB here) and more in JSON; a larger file is refused with exit 2.
+/// The most points `--residuals` accepts in the human report (one table row per point, built
+/// in memory: per-point residuals of five fits take 160 bytes a point, 320 MB here); a larger
+/// file is refused with exit 2. `--json --residuals` has no such limit: the residuals are
+/// computed while the document is written ([`gyrocal_fit::WithPointResiduals`]).
 pub const RESIDUALS_POINTS_MAX: usize = 2_000_000;
 
 use crate::BadInput;
@@ -115,7 +117,10 @@ pub struct FitArgs {
     pub no_batch_finish: bool,
     /// Per-point residuals in every fit whatever the size of the data. Without it, data sets
     /// of more than 10000 points (1000 in the human report) get per-rate summaries instead
-    /// (JSON `rate_residuals`, one table row per rate). At most 2000000 points.
+    /// (JSON `rate_residuals`, one table row per rate; per rate bin on continuous data, more
+    /// than 200 distinct rates). With --json they are written as they are computed, for any
+    /// number of points (about 850 bytes of JSON a point for the five default fits); the
+    /// human report takes at most 2000000 points.
     #[arg(long)]
     pub residuals: bool,
 }
@@ -162,7 +167,9 @@ impl FitArgs {
             // Models asked for by name must be fitted; the default "every model" skips the
             // ones the data cannot determine and says so.
             skip_unsupported: self.models.is_empty(),
-            point_residuals_max: if self.residuals {
+            // `--json --residuals` streams the per-point residuals from the data while writing
+            // (below): the analysis itself keeps summaries above the usual limit.
+            point_residuals_max: if self.residuals && !self.json {
                 usize::MAX
             } else if self.json {
                 POINT_RESIDUALS_MAX
@@ -186,11 +193,14 @@ fn read(path: &std::path::Path) -> anyhow::Result<Columns> {
 pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     let opts = args.options()?;
     let mut analyses = Vec::new();
+    // `--json --residuals`: the columns of every file, to write each point's residuals from.
+    let stream = args.json && args.residuals;
+    let mut kept: Vec<Columns> = Vec::new();
     for path in &args.files {
         let data = read(path)?;
-        if args.residuals && data.len() > RESIDUALS_POINTS_MAX {
+        if args.residuals && !args.json && data.len() > RESIDUALS_POINTS_MAX {
             return Err(BadInput(format!(
-                "{}: {} points: --residuals (every point of every fit) is limited to {RESIDUALS_POINTS_MAX} points; without it the fits carry per-rate residuals",
+                "{}: {} points: --residuals in the human report (one row per point) is limited to {RESIDUALS_POINTS_MAX} points; with --json it is not (the residuals are written as they are computed); without it the fits carry per-rate residuals",
                 path.display(),
                 data.len()
             ))
@@ -210,17 +220,29 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
             };
             BadInput(format!("{name}: {place}: {e}{hint}"))
         })?;
-        // The columns are dropped here: one file's data in memory at a time.
-        drop(data);
+        if stream {
+            kept.push(data);
+        }
+        // Otherwise the columns are dropped here: one file's data in memory at a time.
         analyses.push(analysis);
     }
     let mut stdout = BufWriter::with_capacity(1 << 16, std::io::stdout().lock());
     if args.json {
-        // Straight to stdout: no copy of the document in memory.
-        if analyses.len() == 1 {
-            serde_json::to_writer_pretty(&mut stdout, &analyses[0])
-        } else {
-            serde_json::to_writer_pretty(&mut stdout, &MultiAnalysis::from_analyses(analyses))
+        // Straight to stdout: no copy of the document in memory; with --residuals each
+        // point's residuals are computed as they are written.
+        match (analyses.len(), stream) {
+            (1, false) => serde_json::to_writer_pretty(&mut stdout, &analyses[0]),
+            (1, true) => serde_json::to_writer_pretty(
+                &mut stdout,
+                &WithPointResiduals::new(&analyses[0], &kept[0]),
+            ),
+            (_, false) => {
+                serde_json::to_writer_pretty(&mut stdout, &MultiAnalysis::from_analyses(analyses))
+            }
+            (_, true) => serde_json::to_writer_pretty(
+                &mut stdout,
+                &MultiWithPointResiduals::new(&MultiAnalysis::from_analyses(analyses), &kept),
+            ),
         }
         .context("writing the result to stdout")?;
         stdout.write_all(b"\n").context("writing to stdout")?;
