@@ -15,7 +15,8 @@ const ROWS: usize = 1_000_000;
 
 /// A record as `bench/gen_allan.py` writes it (a deterministic stand-in for its noise).
 fn write_record(path: &Path) {
-    let mut out = std::io::BufWriter::new(std::fs::File::create(path).unwrap_or_else(|e| panic!("{e}")));
+    let mut out =
+        std::io::BufWriter::new(std::fs::File::create(path).unwrap_or_else(|e| panic!("{e}")));
     let _ = writeln!(out, "t_s,volts");
     let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
     for i in 0..ROWS {
@@ -59,7 +60,9 @@ fn benches(c: &mut Criterion) {
     let mut g = c.benchmark_group("reader_1e6_rows");
     g.sample_size(10);
     g.throughput(Throughput::Elements(ROWS as u64));
-    g.bench_function("line_reader_std_parse", |b| b.iter(|| line_reader(black_box(&path))));
+    g.bench_function("line_reader_std_parse", |b| {
+        b.iter(|| line_reader(black_box(&path)))
+    });
     for threads in [1, 2] {
         g.bench_function(format!("chunked_{threads}_threads"), |b| {
             b.iter(|| chunked(black_box(&path), threads))

@@ -33,7 +33,11 @@ fn spec_for(header: &Header) -> Spec {
 }
 
 fn bits(v: f64) -> u64 {
-    if v.is_nan() { f64::NAN.to_bits() } else { v.to_bits() }
+    if v.is_nan() {
+        f64::NAN.to_bits()
+    } else {
+        v.to_bits()
+    }
 }
 
 fn chunked(input: &[u8], opts: Options) -> Outcome {
@@ -288,7 +292,11 @@ fn errors_name_the_file_and_the_line_across_blocks() {
     let input = b"# c\nt_s,volts\n0,1\n0.01,2\n# note\n0.02,x\n0.03,4\n";
     for chunk in [1, 4, 1 << 20] {
         let out = chunked(input, small(chunk, 2, MAX_LINE_BYTES));
-        assert_eq!(out.rows.len(), 2, "the rows before the bad line are handed out");
+        assert_eq!(
+            out.rows.len(),
+            2,
+            "the rows before the bad line are handed out"
+        );
         assert_eq!(
             out.error.as_deref(),
             Some("r.csv: line 6: column `volts`: not a number: `x`")
@@ -391,11 +399,17 @@ fn counts_and_non_negative_cells() {
         .column(0, Cell::OptionalCount)
         .column(1, Cell::OptionalNonNegative);
     let c = r.next_chunk(&spec).unwrap().unwrap();
-    assert_eq!((0..c.len()).map(|i| c.count(0, i)).collect::<Vec<_>>(), [Some(5), None, Some(7)]);
+    assert_eq!(
+        (0..c.len()).map(|i| c.count(0, i)).collect::<Vec<_>>(),
+        [Some(5), None, Some(7)]
+    );
     assert_eq!(c.column(1)[0], 0.1);
     assert!(c.column(1)[2].is_nan());
     for (input, message) in [
-        (&b"n,s\n0,1\n"[..], "c.csv: line 2: column `n`: not a positive whole number: `0`"),
+        (
+            &b"n,s\n0,1\n"[..],
+            "c.csv: line 2: column `n`: not a positive whole number: `0`",
+        ),
         (b"n,s\n1,-1\n", "c.csv: line 2: column `s`: negative: `-1`"),
     ] {
         let mut r = ChunkedReader::new(input, "c.csv", Options::default()).unwrap();

@@ -28,7 +28,7 @@ use std::path::Path;
 
 use crate::number;
 use crate::split::Splitter;
-use crate::{BOM, Error, Header, MAX_LINE_BYTES, Problem, is_comment_or_blank};
+use crate::{BOM, Error, Header, MAX_LINE_BYTES, Problem, Row, is_comment_or_blank};
 
 /// How a [`ChunkedReader`] reads.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -176,8 +176,13 @@ impl Chunk {
 /// An error found within a block, its line counted from the block's start.
 #[derive(Debug)]
 enum Local {
-    LineTooLong { line: u64 },
-    FieldCount { line: u64, found: usize },
+    LineTooLong {
+        line: u64,
+    },
+    FieldCount {
+        line: u64,
+        found: usize,
+    },
     Value {
         line: u64,
         column: usize,
@@ -226,6 +231,8 @@ struct Slot {
     error: Option<Local>,
     splitter: Splitter,
     cells: Vec<f64>,
+    /// A line's commas (the fast path's field ends).
+    ends: Vec<usize>,
 }
 
 /// A CSV file read in blocks into typed columns (see the module docs).
@@ -346,8 +353,9 @@ impl<R: Read> ChunkedReader<R> {
                 let row = slot.splitter.split(text, line);
                 let header = Header::of_row(&row, &self.file)?;
                 // the rest of the block comes before what was carried over
-                let rest = raw.get(pos..).unwrap_or_default();
-                self.carry.splice(0..0, rest.iter().copied());
+                let mut rest = raw.get(pos..).unwrap_or_default().to_vec();
+                rest.extend_from_slice(&self.carry);
+                self.carry = rest;
                 return Ok(header);
             }
         }
@@ -461,10 +469,14 @@ impl<R: Read> ChunkedReader<R> {
                 for slot in rest.iter_mut().take(filled - 1) {
                     scope.spawn(move || slot.parse(spec, expected, max_line));
                 }
-                first.iter_mut().for_each(|s| s.parse(spec, expected, max_line));
+                first
+                    .iter_mut()
+                    .for_each(|s| s.parse(spec, expected, max_line));
             });
         } else {
-            first.iter_mut().for_each(|s| s.parse(spec, expected, max_line));
+            first
+                .iter_mut()
+                .for_each(|s| s.parse(spec, expected, max_line));
         }
         for slot in slots.iter_mut().take(filled) {
             let base = self.line_base;
@@ -522,66 +534,163 @@ impl<R: Read> ChunkedReader<R> {
 impl Slot {
     /// Parses the block's complete lines into `self.chunk`, counting lines from 1; stops at
     /// the first error (`self.error`), the rows before it kept.
+    ///
+    /// A block without a quote (every block of a logger's record) is scanned once for its
+    /// commas and newlines together (`memchr2`, SIMD), each line's fields where they lie; a
+    /// line with a carriage return other than the one before its newline goes through the
+    /// splitter. A block with a quote goes line by line through the splitter.
     fn parse(&mut self, spec: &Spec, expected: usize, max_line: usize) {
         self.chunk.clear(spec.columns.len());
-        self.error = None;
-        self.lines = 0;
         let raw = self.raw.get(..self.len).unwrap_or_default();
+        let mut rows = Rows {
+            spec,
+            expected,
+            max_line,
+            has_cr: memchr::memchr(b'\r', raw).is_some(),
+            chunk: &mut self.chunk,
+            cells: &mut self.cells,
+            splitter: &mut self.splitter,
+        };
+        let (lines, error) = if memchr::memchr(b'"', raw).is_none() {
+            rows.plain_block(raw, &mut self.ends)
+        } else {
+            rows.quoted_block(raw)
+        };
+        self.lines = lines;
+        self.error = error;
+    }
+}
+
+/// What a block's rows go through: the spec, the limits, where the values go.
+struct Rows<'a> {
+    spec: &'a Spec,
+    expected: usize,
+    max_line: usize,
+    has_cr: bool,
+    chunk: &'a mut Chunk,
+    cells: &'a mut Vec<f64>,
+    splitter: &'a mut Splitter,
+}
+
+impl Rows<'_> {
+    /// A block without quotes: the lines counted, and the error that ended it.
+    fn plain_block(&mut self, raw: &[u8], commas: &mut Vec<usize>) -> (u64, Option<Local>) {
+        let mut line = 0u64;
+        let mut start = 0usize;
+        commas.clear();
+        for pos in memchr::memchr2_iter(b',', b'\n', raw) {
+            if raw.get(pos) == Some(&b',') {
+                commas.push(pos - start);
+                continue;
+            }
+            line += 1;
+            if let Err(e) = self.plain_line(raw.get(start..pos).unwrap_or_default(), line, commas) {
+                return (line, Some(e));
+            }
+            start = pos + 1;
+            commas.clear();
+        }
+        if start < raw.len() {
+            line += 1;
+            if let Err(e) = self.plain_line(raw.get(start..).unwrap_or_default(), line, commas) {
+                return (line, Some(e));
+            }
+        }
+        (line, None)
+    }
+
+    /// One line of a block without quotes, `commas` its commas' positions.
+    fn plain_line(&mut self, text: &[u8], line: u64, commas: &mut Vec<usize>) -> Result<(), Local> {
+        if text.len() > self.max_line {
+            return Err(Local::LineTooLong { line });
+        }
+        let text = if self.has_cr { strip_cr(text) } else { text };
+        if is_comment_or_blank(text) {
+            return Ok(());
+        }
+        if self.has_cr && memchr::memchr(b'\r', text).is_some() {
+            let row = self.splitter.split(text, line);
+            return row_into(&row, self.spec, self.expected, self.chunk, self.cells);
+        }
+        commas.push(text.len());
+        let row = Row {
+            line,
+            data: text,
+            ends: commas,
+            sep: 1,
+        };
+        row_into(&row, self.spec, self.expected, self.chunk, self.cells)
+    }
+
+    /// A block with quotes, line by line through the splitter.
+    fn quoted_block(&mut self, raw: &[u8]) -> (u64, Option<Local>) {
         let mut pos = 0;
         let mut line = 0u64;
         while pos < raw.len() {
             let end = memchr::memchr(b'\n', &raw[pos..]).map_or(raw.len(), |i| pos + i);
-            let text = &raw[pos..end];
+            let text = raw.get(pos..end).unwrap_or_default();
             pos = end + 1;
             line += 1;
-            if text.len() > max_line {
-                self.error = Some(Local::LineTooLong { line });
-                return;
+            if text.len() > self.max_line {
+                return (line, Some(Local::LineTooLong { line }));
             }
             let text = strip_cr(text);
             if is_comment_or_blank(text) {
                 continue;
             }
             let row = self.splitter.split(text, line);
-            if row.len() != expected {
-                self.error = Some(Local::FieldCount {
-                    line,
-                    found: row.len(),
-                });
-                return;
+            if let Err(e) = row_into(&row, self.spec, self.expected, self.chunk, self.cells) {
+                return (line, Some(e));
             }
-            if let Some(f) = spec.flag
-                && row.get(f) == Some(b"1")
-            {
-                self.chunk.skipped += 1;
-                continue;
-            }
-            if spec.skip_empty && row.all_empty() {
-                continue;
-            }
-            self.cells.clear();
-            for (k, &(i, cell)) in spec.columns.iter().enumerate() {
-                let raw_cell = row.get(i).unwrap_or_default();
-                match read_cell(raw_cell, cell) {
-                    Ok(v) => self.cells.push(v),
-                    Err(problem) => {
-                        self.error = Some(Local::Value {
-                            line,
-                            column: k,
-                            text: shown(raw_cell),
-                            problem,
-                        });
-                        return;
-                    }
-                }
-            }
-            for (col, &v) in self.chunk.columns.iter_mut().zip(&self.cells) {
-                col.push(v);
-            }
-            self.chunk.lines.push(line);
         }
-        self.lines = line;
+        (line, None)
     }
+}
+
+/// One data row into the chunk's columns (or skipped, or the error it is).
+fn row_into(
+    row: &Row<'_>,
+    spec: &Spec,
+    expected: usize,
+    chunk: &mut Chunk,
+    cells: &mut Vec<f64>,
+) -> Result<(), Local> {
+    let line = row.line();
+    if row.len() != expected {
+        return Err(Local::FieldCount {
+            line,
+            found: row.len(),
+        });
+    }
+    if let Some(f) = spec.flag
+        && row.get(f) == Some(b"1")
+    {
+        chunk.skipped += 1;
+        return Ok(());
+    }
+    if spec.skip_empty && row.all_empty() {
+        return Ok(());
+    }
+    cells.clear();
+    for (k, &(i, cell)) in spec.columns.iter().enumerate() {
+        let raw_cell = row.get(i).unwrap_or_default();
+        match read_cell(raw_cell, cell) {
+            Ok(v) => cells.push(v),
+            Err(problem) => {
+                return Err(Local::Value {
+                    line,
+                    column: k,
+                    text: shown(raw_cell),
+                    problem,
+                });
+            }
+        }
+    }
+    for (col, &v) in chunk.columns.iter_mut().zip(cells.iter()) {
+        col.push(v);
+    }
+    chunk.lines.push(line);
+    Ok(())
 }
 
 /// A cell as `cell` reads it.

@@ -81,11 +81,44 @@ mod tests {
     #[test]
     fn the_fast_parser_accepts_what_the_standard_library_accepts_bit_for_bit() {
         for cell in [
-            "0", "-0", "+1", "1.", ".5", "+.5", "-.5e-3", "1e5", "1E+05", "1e", "e5", ".", "-",
-            "+", "1.2.3", "0x10", "1_000", "inf", "-inf", "+Infinity", "NaN", "nan", "-nan",
-            "1e999", "-1e-999", "4.9e-324", "2.2250738585072011e-308", "0.1", "0.30000000000000004",
-            "123456789012345678901234567890", "1,5", " 1", "1 ", "\u{a0}2.5", "١", "∞",
-            "0.012495622", "3.000000",
+            "0",
+            "-0",
+            "+1",
+            "1.",
+            ".5",
+            "+.5",
+            "-.5e-3",
+            "1e5",
+            "1E+05",
+            "1e",
+            "e5",
+            ".",
+            "-",
+            "+",
+            "1.2.3",
+            "0x10",
+            "1_000",
+            "inf",
+            "-inf",
+            "+Infinity",
+            "NaN",
+            "nan",
+            "-nan",
+            "1e999",
+            "-1e-999",
+            "4.9e-324",
+            "2.2250738585072011e-308",
+            "0.1",
+            "0.30000000000000004",
+            "123456789012345678901234567890",
+            "1,5",
+            " 1",
+            "1 ",
+            "\u{a0}2.5",
+            "١",
+            "∞",
+            "0.012495622",
+            "3.000000",
         ] {
             same(cell.as_bytes());
         }
@@ -103,6 +136,19 @@ mod tests {
             cell in "[-+0-9.eEinfatyINFATY ]{0,12}",
         ) {
             same(cell.trim_ascii().as_bytes());
+        }
+
+        #[test]
+        fn random_decimals_are_the_same_bits(
+            v in -1e6f64..1e6,
+            decimals in 0usize..25,
+            digits in "[0-9]{1,21}",
+            dot in 0usize..22,
+        ) {
+            same(format!("{v:.decimals$}").as_bytes());
+            let (a, b) = digits.split_at(dot.min(digits.len()));
+            same(format!("{a}.{b}").as_bytes());
+            same(format!("-{a}.{b}").as_bytes());
         }
 
         #[test]
