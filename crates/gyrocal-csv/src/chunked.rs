@@ -37,9 +37,10 @@ pub struct Options {
     pub max_line: usize,
     /// Refuse the input ([`Error::TooLarge`]) once more than this many bytes were read.
     pub max_bytes: Option<u64>,
-    /// Bytes read at a time per thread (1 MiB; at least 1).
+    /// Bytes read at a time per thread (1 MiB; 1 byte to 256 MiB).
     pub chunk_bytes: usize,
-    /// Blocks parsed in parallel (the cores available, at most 4; 1: no thread is started).
+    /// Blocks parsed in parallel (the cores available, at most 4; 1 to 64; 1: no thread is
+    /// started).
     pub threads: usize,
 }
 
@@ -267,9 +268,11 @@ impl ChunkedReader<File> {
 impl<R: Read> ChunkedReader<R> {
     /// A reader of `src`, its header read; `file` names it in errors.
     pub fn new(src: R, file: impl Into<String>, opts: Options) -> Result<ChunkedReader<R>, Error> {
+        // bounds that keep a caller's typing error from asking for terabytes or thousands of
+        // threads: blocks of 1 byte to 256 MiB, 1 to 64 threads
         let opts = Options {
-            chunk_bytes: opts.chunk_bytes.max(1),
-            threads: opts.threads.max(1),
+            chunk_bytes: opts.chunk_bytes.clamp(1, 1 << 28),
+            threads: opts.threads.clamp(1, 64),
             ..opts
         };
         let mut r = ChunkedReader {
@@ -464,19 +467,23 @@ impl<R: Read> ChunkedReader<R> {
         let expected = self.header.names.len();
         let max_line = self.opts.max_line;
         let (first, rest) = slots.split_at_mut(filled.min(1));
-        if filled > 1 {
-            std::thread::scope(|scope| {
-                for slot in rest.iter_mut().take(filled - 1) {
-                    scope.spawn(move || slot.parse(spec, expected, max_line));
-                }
-                first
-                    .iter_mut()
-                    .for_each(|s| s.parse(spec, expected, max_line));
-            });
-        } else {
+        let rest = rest.get_mut(..filled.saturating_sub(1)).unwrap_or_default();
+        // a block per thread; where a thread cannot be started (a process limit), its block
+        // is parsed here afterwards
+        let mut not_started = vec![false; rest.len()];
+        std::thread::scope(|scope| {
+            for (slot, failed) in rest.iter_mut().zip(not_started.iter_mut()) {
+                let work = move || slot.parse(spec, expected, max_line);
+                *failed = std::thread::Builder::new()
+                    .spawn_scoped(scope, work)
+                    .is_err();
+            }
             first
                 .iter_mut()
                 .for_each(|s| s.parse(spec, expected, max_line));
+        });
+        for (slot, _) in rest.iter_mut().zip(&not_started).filter(|(_, f)| **f) {
+            slot.parse(spec, expected, max_line);
         }
         for slot in slots.iter_mut().take(filled) {
             let base = self.line_base;
