@@ -128,37 +128,46 @@ impl Record {
             if t.is_empty() || t.starts_with('#') {
                 continue;
             }
-            let fields: Vec<&str> = t
-                .split([',', ';', '\t', ' '])
-                .filter(|f| !f.is_empty())
-                .collect();
-            let parsed: std::result::Result<Vec<f64>, _> =
-                fields.iter().map(|f| f.parse::<f64>()).collect();
-            let nums = match parsed {
-                Ok(n) if !n.is_empty() => n,
-                _ if !seen_data_line => {
+            // the first two numbers and how many there are, without a vector per line
+            let (mut first, mut second, mut count, mut all_numbers) = (0.0, 0.0, 0usize, true);
+            for f in t.split([',', ';', '\t', ' ']).filter(|f| !f.is_empty()) {
+                match f.parse::<f64>() {
+                    Ok(v) => {
+                        match count {
+                            0 => first = v,
+                            1 => second = v,
+                            _ => {}
+                        }
+                        count += 1;
+                    }
+                    Err(_) => {
+                        all_numbers = false;
+                        break;
+                    }
+                }
+            }
+            if !(all_numbers && count > 0) {
+                if !seen_data_line {
                     seen_data_line = true; // header
                     continue;
                 }
-                _ => {
-                    return Err(Error::Parse {
-                        line: lineno,
-                        msg: format!("not a number in {t:?}"),
-                    });
-                }
-            };
-            seen_data_line = true;
-            let cols = *columns.get_or_insert(nums.len().min(2));
-            if nums.len() < cols {
                 return Err(Error::Parse {
                     line: lineno,
-                    msg: format!("expected {cols} columns, found {}", nums.len()),
+                    msg: format!("not a number in {t:?}"),
+                });
+            }
+            seen_data_line = true;
+            let cols = *columns.get_or_insert(count.min(2));
+            if count < cols {
+                return Err(Error::Parse {
+                    line: lineno,
+                    msg: format!("expected {cols} columns, found {count}"),
                 });
             }
             let (time, value) = if cols == 1 {
-                (None, nums[0])
+                (None, first)
             } else {
-                (Some(nums[0]), nums[1])
+                (Some(first), second)
             };
             if let Some(tv) = time {
                 if !tv.is_finite() {

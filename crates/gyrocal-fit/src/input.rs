@@ -6,8 +6,9 @@
 //! weighting; other columns are ignored. Lines starting with `#` are comments. Empty
 //! `volts_std`/`n` cells mean "not given".
 //!
-//! The text is read by `gyrocal-csv`, the one CSV reader of `gyrocal fit`, `gyrocal report`
-//! and `gyrocal allan`: lines are bounded ([`MAX_LINE_BYTES`]: a file without newlines is
+//! The text is read by `gyrocal-csv`'s chunked reader, the one CSV reader of `gyrocal fit`,
+//! `gyrocal report` and `gyrocal allan` (blocks parsed in parallel into typed columns, the
+//! numbers straight from the bytes, no allocation per row): lines are bounded ([`MAX_LINE_BYTES`]: a file without newlines is
 //! refused after reading that much, before or after a valid header), a UTF-8 byte-order mark
 //! (Excel's) is skipped, every error names the source (the name the caller passes, usually the
 //! file name) and the line, counted over every line (comments and blank lines included). A
@@ -18,12 +19,14 @@
 //!
 //! [`parse_csv`] keeps every row as a [`Point`] and reads at most [`MAX_INPUT_BYTES`] (64 MiB,
 //! several hundred thousand rows; a calibration's steps CSV is a few kilobytes);
-//! [`parse_columns`] keeps only the columns and reads up to [`MAX_ROWS`] rows.
+//! [`parse_columns`] keeps only the columns and reads up to [`MAX_ROWS`] rows; [`read_dataset`]
+//! (`gyrocal report`'s bare CSV) keeps every row as a [`Point`], and more columns if asked,
+//! up to [`MAX_ROWS`] rows whatever the file's size.
 
 use std::io::Read;
 use std::path::Path;
 
-use gyrocal_csv::{Header, Row};
+use gyrocal_csv::{Cell, Chunk, ChunkedReader, Header, Problem, Spec};
 
 use crate::data::{Columns, Dataset, Point};
 
@@ -231,6 +234,28 @@ fn from_csv(e: gyrocal_csv::Error) -> InputError {
             first,
             second,
         },
+        E::Value {
+            file,
+            line,
+            column,
+            text,
+            problem,
+        } => InputError::BadValue {
+            file,
+            line,
+            column: ["rate_dps", "volts", "volts_std", "n"]
+                .into_iter()
+                .find(|c| c.eq_ignore_ascii_case(&column))
+                .unwrap_or("rate_dps"),
+            value: text,
+            reason: match problem {
+                Problem::Empty => "missing value",
+                Problem::NotANumber => "not a number",
+                Problem::NotFinite(_) => "not a finite number",
+                Problem::Negative => "negative",
+                Problem::NotACount => "not a positive whole number",
+            },
+        },
         e @ (E::NotFound { .. } | E::NotAFile { .. } | E::Open { .. }) => InputError::Open {
             file: e.file().to_string(),
             message: e.to_string(),
@@ -267,78 +292,74 @@ impl Cols {
         })
     }
 
-    /// The row's point; `None` for a row of empty cells (a trailing `,,`), skipped like a
-    /// blank line.
-    fn point(&self, row: &Row<'_>, file: &str) -> Result<Option<Point>, InputError> {
-        if row.all_empty() {
-            return Ok(None);
+    /// The typed columns: rate, volts, then `volts_std` (≥ 0 or empty) and `n` (a count or
+    /// empty) when present, then `extra` (any number, NaN otherwise); rows of empty cells (a
+    /// trailing `,,`) skipped like blank lines. Cells are checked in that order.
+    fn spec(&self, extra: &[Option<usize>]) -> Spec {
+        let mut spec = Spec::new()
+            .column(self.rate, Cell::Number)
+            .column(self.volts, Cell::Number);
+        if let Some(c) = self.std {
+            spec = spec.column(c, Cell::OptionalNonNegative);
         }
-        let line = row.line();
-        let bad = |column: &'static str, value: &[u8], reason: &'static str| InputError::BadValue {
-            file: file.to_string(),
-            line,
-            column,
-            value: String::from_utf8_lossy(value).into_owned(),
-            reason,
-        };
-        let number = |col: usize, column: &'static str| -> Result<f64, InputError> {
-            let text = row.get(col).unwrap_or_default();
-            if text.is_empty() {
-                return Err(bad(column, text, "missing value"));
-            }
-            let v: f64 = std::str::from_utf8(text)
-                .ok()
-                .and_then(|t| t.parse().ok())
-                .ok_or_else(|| bad(column, text, "not a number"))?;
-            if !v.is_finite() {
-                return Err(bad(column, text, "not a finite number"));
-            }
-            Ok(v)
-        };
-        let rate_dps = number(self.rate, "rate_dps")?;
-        let volts = number(self.volts, "volts")?;
-        let volts_std = match self.std {
-            Some(c) if !row.get(c).unwrap_or_default().is_empty() => {
-                let s = number(c, "volts_std")?;
-                if s < 0.0 {
-                    return Err(bad("volts_std", row.get(c).unwrap_or_default(), "negative"));
-                }
-                Some(s)
-            }
-            _ => None,
-        };
-        let n = match self.n {
-            Some(c) if !row.get(c).unwrap_or_default().is_empty() => {
-                let text = row.get(c).unwrap_or_default();
-                let v: u64 = std::str::from_utf8(text)
-                    .ok()
-                    .and_then(|t| t.parse().ok())
-                    .filter(|v| *v > 0)
-                    .ok_or_else(|| bad("n", text, "not a positive whole number"))?;
-                Some(v)
-            }
-            _ => None,
-        };
-        Ok(Some(Point {
-            rate_dps,
-            volts,
-            volts_std,
-            n,
-            line: Some(line),
-        }))
+        if let Some(c) = self.n {
+            spec = spec.column(c, Cell::OptionalCount);
+        }
+        for c in extra.iter().flatten() {
+            spec = spec.column(*c, Cell::Lenient);
+        }
+        spec.skip_empty_rows()
+    }
+
+    /// The spec's column of `extra[j]`.
+    fn extra_column(&self, j: usize) -> usize {
+        2 + usize::from(self.std.is_some()) + usize::from(self.n.is_some()) + j
+    }
+
+    /// Row `i` of a chunk read with [`Cols::spec`].
+    fn point(&self, chunk: &Chunk, i: usize) -> Point {
+        let k_std = 2;
+        let k_n = 2 + usize::from(self.std.is_some());
+        Point {
+            rate_dps: chunk.column(0).get(i).copied().unwrap_or(f64::NAN),
+            volts: chunk.column(1).get(i).copied().unwrap_or(f64::NAN),
+            volts_std: self
+                .std
+                .and_then(|_| chunk.column(k_std).get(i).copied())
+                .filter(|s| !s.is_nan()),
+            n: self.n.and_then(|_| chunk.count(k_n, i)),
+            line: chunk.lines().get(i).copied(),
+        }
     }
 }
 
-/// Reads every data point of `rdr`, handing each to `sink`.
+/// The reader of `reader` (gyrocal's chunked reader), and where its columns are.
+fn open_reader<R: Read>(
+    reader: R,
+    source: &str,
+    max_bytes: Option<u64>,
+) -> Result<(ChunkedReader<R>, Cols), InputError> {
+    let opts = gyrocal_csv::Options {
+        max_bytes,
+        ..gyrocal_csv::Options::default()
+    };
+    let rdr = ChunkedReader::new(reader, source, opts).map_err(from_csv)?;
+    let cols = Cols::of(rdr.header(), source)?;
+    Ok((rdr, cols))
+}
+
+/// Reads every data point of `reader` (at most `max_bytes`), handing each to `sink`.
 fn read_points<R: Read>(
-    mut rdr: gyrocal_csv::Reader<R>,
-    file: &str,
+    reader: R,
+    source: &str,
+    max_bytes: Option<u64>,
     mut sink: impl FnMut(Point) -> Result<(), InputError>,
 ) -> Result<(), InputError> {
-    let cols = Cols::of(rdr.header().map_err(from_csv)?, file)?;
-    while let Some(row) = rdr.next_row().map_err(from_csv)? {
-        if let Some(p) = cols.point(&row, file)? {
-            sink(p)?;
+    let (mut rdr, cols) = open_reader(reader, source, max_bytes)?;
+    let spec = cols.spec(&[]);
+    while let Some(chunk) = rdr.next_chunk(&spec).map_err(from_csv)? {
+        for i in 0..chunk.len() {
+            sink(cols.point(chunk, i))?;
         }
     }
     Ok(())
@@ -375,9 +396,8 @@ pub fn read_columns(path: &Path) -> Result<Columns, InputError> {
 /// assert_eq!(data.points[1].line, Some(4));
 /// ```
 pub fn parse_csv<R: Read>(reader: R, source: &str) -> Result<Dataset, InputError> {
-    let rdr = gyrocal_csv::Reader::new(reader, source).with_max_bytes(MAX_INPUT_BYTES);
     let mut points = Vec::new();
-    read_points(rdr, source, |p| {
+    read_points(reader, source, Some(MAX_INPUT_BYTES), |p| {
         points.push(p);
         Ok(())
     })?;
@@ -412,13 +432,13 @@ pub fn parse_columns_limited<R: Read>(
     source: &str,
     max_rows: u64,
 ) -> Result<Columns, InputError> {
-    let mut rdr = gyrocal_csv::Reader::new(reader, source);
-    let with_std = rdr.header().map_err(from_csv)?.find("volts_std").is_some();
+    let (mut rdr, cols) = open_reader(reader, source, None)?;
+    let spec = cols.spec(&[]);
     let mut rates: Vec<f64> = Vec::new();
     let mut volts: Vec<f64> = Vec::new();
-    let mut sigmas: Option<Vec<f64>> = with_std.then(Vec::new);
+    let mut sigmas: Option<Vec<f64>> = cols.std.map(|_| Vec::new());
     let mut last_line = None;
-    read_points(rdr, source, |p| {
+    let mut sink = |p: Point| {
         let line = p.line.unwrap_or(0);
         let rows = rates.len() as u64;
         if rows >= max_rows {
@@ -443,13 +463,79 @@ pub fn parse_columns_limited<R: Read>(
         }
         last_line = Some(line);
         Ok(())
-    })?;
+    };
+    while let Some(chunk) = rdr.next_chunk(&spec).map_err(from_csv)? {
+        for i in 0..chunk.len() {
+            sink(cols.point(chunk, i))?;
+        }
+    }
     Ok(Columns {
         source: Some(source.to_string()),
         rates,
         volts,
         sigmas,
         last_line,
+    })
+}
+
+/// A data set read by [`read_dataset`], and the extra columns asked for.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DatasetWithExtras {
+    /// The points, as [`parse_csv`] reads them.
+    pub data: Dataset,
+    /// For each extra column asked for: `None` when the header has no such column, else a
+    /// value per point (NaN where the cell holds no number).
+    pub extras: Vec<Option<Vec<f64>>>,
+}
+
+/// Reads the CSV data set at `path` as [`parse_csv`] does, without its byte limit: at most
+/// [`MAX_ROWS`] rows ([`InputError::TooManyRows`]), running out of memory an error
+/// ([`InputError::OutOfMemory`]), and in the same pass the columns `extra` (optional, any
+/// number, never an error: informative columns such as a report's measured rate). A regular
+/// file only, as [`read_csv`].
+pub fn read_dataset(path: &Path, extra: &[&str]) -> Result<DatasetWithExtras, InputError> {
+    let source = path.display().to_string();
+    let (mut rdr, cols) = open_reader(open(path)?, &source, None)?;
+    let found: Vec<Option<usize>> = extra.iter().map(|e| rdr.header().find(e)).collect();
+    let spec = cols.spec(&found);
+    let mut points: Vec<Point> = Vec::new();
+    let mut extras: Vec<Option<Vec<f64>>> = found.iter().map(|f| f.map(|_| Vec::new())).collect();
+    while let Some(chunk) = rdr.next_chunk(&spec).map_err(from_csv)? {
+        for i in 0..chunk.len() {
+            let p = cols.point(chunk, i);
+            let line = p.line.unwrap_or(0);
+            let rows = points.len() as u64;
+            if rows >= MAX_ROWS {
+                return Err(InputError::TooManyRows {
+                    file: source,
+                    line,
+                    cap: MAX_ROWS,
+                });
+            }
+            if !(grow(&mut points) && extras.iter_mut().flatten().all(grow)) {
+                return Err(InputError::OutOfMemory {
+                    file: source,
+                    line,
+                    rows,
+                });
+            }
+            points.push(p);
+            let mut j = 0;
+            for (e, f) in extras.iter_mut().zip(&found) {
+                if let Some(e) = e {
+                    let k = cols.extra_column(j);
+                    e.push(chunk.column(k).get(i).copied().unwrap_or(f64::NAN));
+                }
+                j += usize::from(f.is_some());
+            }
+        }
+    }
+    Ok(DatasetWithExtras {
+        data: Dataset {
+            source: Some(source),
+            points,
+        },
+        extras,
     })
 }
 

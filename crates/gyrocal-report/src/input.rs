@@ -142,15 +142,30 @@ pub(crate) fn load_run(dir: &Path) -> Result<Input, ReportError> {
 
 /// Reads a bare steps CSV and fits it.
 pub(crate) fn load_csv(path: &Path) -> Result<Input, ReportError> {
-    // gyrocal's one CSV reader: a regular file only, bounded lines, a byte-order mark skipped
-    let data = gyrocal_fit::input::read_csv(path)?;
-    let measured = measured_rates(path);
+    // gyrocal's one CSV reader (chunked: a regular file only, bounded lines, a byte-order mark
+    // skipped), in one pass with the optional measured-rate columns; bounded by rows
+    // (`gyrocal fit`'s limit), not by the file's bytes
+    let read = gyrocal_fit::input::read_dataset(path, &["rate_meas_dps", "rate_meas_std_dps"])?;
+    let data = read.data;
+    let measured = |k: usize, i: usize| {
+        read.extras
+            .get(k)
+            .and_then(Option::as_ref)
+            .and_then(|c| c.get(i).copied())
+            .filter(|v| v.is_finite())
+    };
+    // the standard deviation only beside a measured rate, as the steps CSV writes them
+    let has_meas = read.extras.first().is_some_and(Option::is_some);
     let steps = data
         .points
         .iter()
         .enumerate()
         .map(|(i, p)| {
-            let (m, s) = measured.get(i).copied().unwrap_or((None, None));
+            let (m, s) = if has_meas {
+                (measured(0, i), measured(1, i))
+            } else {
+                (None, None)
+            };
             StepStats {
                 rate_dps: p.rate_dps,
                 volts_std: p.volts_std,
@@ -177,37 +192,6 @@ pub(crate) fn load_csv(path: &Path) -> Result<Input, ReportError> {
         notes: Vec::new(),
         acceptance_from: None,
     })
-}
-
-/// The optional `rate_meas_dps` / `rate_meas_std_dps` columns of a steps CSV, row by row
-/// (data rows only, in the order `parse_csv` reads them: rows of empty cells skipped). Best
-/// effort, through the same reader: the file was just read whole by `parse_csv`; a missing or
-/// unreadable optional cell is `None`.
-fn measured_rates(path: &Path) -> Vec<(Option<f64>, Option<f64>)> {
-    let Ok(mut rdr) = gyrocal_csv::Reader::open(path) else {
-        return Vec::new();
-    };
-    let Ok(header) = rdr.header() else {
-        return Vec::new();
-    };
-    let (Some(meas), std) = (
-        header.find("rate_meas_dps"),
-        header.find("rate_meas_std_dps"),
-    ) else {
-        return Vec::new();
-    };
-    let cell = |rec: &gyrocal_csv::Row<'_>, i: Option<usize>| {
-        i.and_then(|i| rec.text(i))
-            .and_then(|s| s.parse::<f64>().ok())
-            .filter(|v| v.is_finite())
-    };
-    let mut out = Vec::new();
-    while let Ok(Some(rec)) = rdr.next_row() {
-        if !rec.all_empty() {
-            out.push((cell(&rec, Some(meas)), cell(&rec, std)));
-        }
-    }
-    out
 }
 
 /// A run's fit document: an [`Analysis`], or a [`MultiAnalysis`] of one file.

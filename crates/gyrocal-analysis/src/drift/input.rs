@@ -76,15 +76,18 @@ fn open_checked(path: &Path) -> Result<File, DriftError> {
     Ok(file)
 }
 
-/// The record's CSV reader: gyrocal's one reader (`gyrocal-csv`: bounded lines, a byte-order
-/// mark skipped, every line counted).
-pub(super) type CsvReader = gyrocal_csv::Reader<File>;
+/// The record's CSV reader: gyrocal's one reader, chunked (`gyrocal-csv`'s `ChunkedReader`:
+/// blocks parsed in parallel into typed columns, bounded lines, a byte-order mark skipped,
+/// every line counted); its header is read when it is made.
+pub(super) type CsvReader = gyrocal_csv::ChunkedReader<File>;
 
 pub(super) fn reader(path: &Path) -> Result<CsvReader, DriftError> {
-    Ok(gyrocal_csv::Reader::new(
+    gyrocal_csv::ChunkedReader::new(
         open_checked(path)?,
         path.display().to_string(),
-    ))
+        gyrocal_csv::Options::default(),
+    )
+    .map_err(|e| csv_err(path, &e))
 }
 
 fn csv_err(path: &Path, e: &gyrocal_csv::Error) -> DriftError {
@@ -103,12 +106,39 @@ fn csv_err(path: &Path, e: &gyrocal_csv::Error) -> DriftError {
     }
 }
 
+/// A reading error of the data rows: a bad cell is said as this module always said it
+/// (`` `volts` is not a number: "x" ``), the column named as it was asked for.
+fn row_err(path: &Path, e: &gyrocal_csv::Error, cols: &Columns) -> DriftError {
+    use gyrocal_csv::Problem;
+    let gyrocal_csv::Error::Value {
+        line,
+        column,
+        text,
+        problem,
+        ..
+    } = e
+    else {
+        return csv_err(path, e);
+    };
+    let name = [Some(&cols.value_name), cols.time.as_ref().map(|t| &t.1)]
+        .into_iter()
+        .flatten()
+        .find(|n| n.eq_ignore_ascii_case(column))
+        .unwrap_or(column);
+    let message = match problem {
+        Problem::Empty => format!("`{name}` is empty"),
+        Problem::NotFinite(v) => format!("`{name}` is not finite ({v})"),
+        _ => format!("`{name}` is not a number: {:?}", text.trim()),
+    };
+    data_err(path, Some(*line), message)
+}
+
 pub(super) fn columns(
     path: &Path,
     rdr: &mut CsvReader,
     wanted: Option<&str>,
 ) -> Result<Columns, DriftError> {
-    let header = rdr.header().map_err(|e| csv_err(path, &e))?;
+    let header = rdr.header();
     let names = header.names();
     let line = Some(header.line());
     let find = |n: &str| header.find(n);
@@ -148,31 +178,24 @@ pub(super) fn columns(
     })
 }
 
-fn number(path: &Path, line: u64, column: &str, field: Option<&[u8]>) -> Result<f64, DriftError> {
-    let text = field.map(String::from_utf8_lossy).unwrap_or_default();
-    let text = text.trim();
-    if text.is_empty() {
-        return Err(data_err(path, Some(line), format!("`{column}` is empty")));
+/// The columns a pass reads: `time` (pass 1) or the value, the time and the demanded rate
+/// (pass 2), overload rows skipped and counted.
+fn spec(cols: &Columns, value: bool, rate: Option<usize>) -> gyrocal_csv::Spec {
+    use gyrocal_csv::Cell;
+    let mut spec = gyrocal_csv::Spec::new();
+    if value {
+        spec = spec.column(cols.value, Cell::Number);
     }
-    match text.parse::<f64>() {
-        Ok(v) if v.is_finite() => Ok(v),
-        Ok(v) => Err(data_err(
-            path,
-            Some(line),
-            format!("`{column}` is not finite ({v})"),
-        )),
-        Err(_) => Err(data_err(
-            path,
-            Some(line),
-            format!("`{column}` is not a number: {text:?}"),
-        )),
+    if let Some((ti, _)) = &cols.time {
+        spec = spec.column(*ti, Cell::Number);
     }
-}
-
-fn is_overload(rec: &gyrocal_csv::Row<'_>, cols: &Columns) -> bool {
-    cols.overload
-        .and_then(|i| rec.get(i))
-        .is_some_and(|f| f == b"1")
+    if let Some(ri) = rate {
+        spec = spec.column(ri, Cell::Lenient);
+    }
+    if let Some(oi) = cols.overload {
+        spec = spec.skip_flagged(oi);
+    }
+    spec
 }
 
 /// Pass 1: the median interval of the time column (over rows that are not overloads), and
@@ -185,21 +208,22 @@ pub(super) fn median_interval(
 ) -> Result<(Option<f64>, bool), DriftError> {
     let mut rdr = reader(path)?;
     let cols = columns(path, &mut rdr, column)?;
-    let Some((ti, tname)) = &cols.time else {
+    if cols.time.is_none() {
         return Ok((None, false));
-    };
+    }
+    let spec = spec(&cols, false, None);
     let mut intervals = Spill::new(cap, temp_dir);
     let mut prev: Option<f64> = None;
-    while let Some(rec) = rdr.next_row().map_err(|e| csv_err(path, &e))? {
-        if is_overload(&rec, &cols) {
-            continue;
+    while let Some(chunk) = rdr
+        .next_chunk(&spec)
+        .map_err(|e| row_err(path, &e, &cols))?
+    {
+        for &t in chunk.column(0) {
+            if let Some(p) = prev {
+                intervals.push(t - p)?;
+            }
+            prev = Some(t);
         }
-        let line = rec.line();
-        let t = number(path, line, tname, rec.get(*ti))?;
-        if let Some(p) = prev {
-            intervals.push(t - p)?;
-        }
-        prev = Some(t);
     }
     let spilled = intervals.spilled();
     let mid = intervals.len() / 2;
@@ -345,75 +369,74 @@ impl<'a> RecordPass<'a> {
         let mut prev_t: Option<f64> = None;
         let (mut rate_lo, mut rate_hi) = (f64::INFINITY, f64::NEG_INFINITY);
         let rate_col = if self.rate_column {
-            rdr.header().ok().and_then(|h| h.find("rate_dps"))
+            rdr.header().find("rate_dps")
         } else {
             None
         };
-        while let Some(rec) = rdr.next_row().map_err(|e| csv_err(file, &e))? {
-            rows += 1;
-            if is_overload(&rec, cols) {
-                overloads += 1;
-                continue;
-            }
-            let line = rec.line();
-            let v = number(file, line, &cols.value_name, rec.get(cols.value))?;
-            let t = match &cols.time {
-                Some((ti, tname)) => number(file, line, tname, rec.get(*ti))?,
-                _ => values.len() as f64 * tau0,
-            };
-            if let Some(ri) = rate_col
-                && let Some(r) = rec
-                    .get(ri)
-                    .and_then(|f| std::str::from_utf8(f).ok())
-                    .and_then(|s| s.parse::<f64>().ok())
-            {
-                rate_lo = rate_lo.min(r);
-                rate_hi = rate_hi.max(r);
-            }
-            let new_segment = match prev_t {
-                None => true,
-                Some(p) => {
-                    let dt = t - p;
-                    if dt <= 0.0 {
-                        return Err(data_err(
-                            file,
-                            Some(line),
-                            format!("the time does not increase ({t} s after {p} s)"),
-                        ));
-                    }
-                    if dt > GAP_FACTOR * tau0 {
-                        if self.join_below.is_some_and(|j| dt <= j) {
-                            joined_gaps += 1;
-                            dead_time_s += dt - tau0;
-                            false
-                        } else {
-                            true
-                        }
-                    } else {
-                        if (dt - tau0).abs() > IRREGULAR_FRACTION * tau0 {
-                            irregular += 1;
-                            first_irregular.get_or_insert(line);
-                        }
-                        false
-                    }
+        let spec = spec(cols, true, rate_col);
+        // the spec's columns: the value, then the time and the rate when there are
+        let k_rate = 1 + usize::from(cols.time.is_some());
+        while let Some(chunk) = rdr.next_chunk(&spec).map_err(|e| row_err(file, &e, cols))? {
+            rows += chunk.len() as u64 + chunk.skipped();
+            overloads += chunk.skipped();
+            let times = cols.time.as_ref().map(|_| chunk.column(1));
+            let rates = rate_col.map(|_| chunk.column(k_rate));
+            for (i, (&v, &line)) in chunk.column(0).iter().zip(chunk.lines()).enumerate() {
+                let t = match times.and_then(|ts| ts.get(i)) {
+                    Some(&t) => t,
+                    None => values.len() as f64 * tau0,
+                };
+                if let Some(&r) = rates.and_then(|rs| rs.get(i))
+                    && !r.is_nan()
+                {
+                    rate_lo = rate_lo.min(r);
+                    rate_hi = rate_hi.max(r);
                 }
-            };
-            if new_segment {
-                seg_start_idx.push(values.len());
-                segments.push(Segment {
-                    lines: (line, line),
-                    t_s: (t, t),
-                    samples: 0,
-                    analysed: false,
-                });
+                let new_segment = match prev_t {
+                    None => true,
+                    Some(p) => {
+                        let dt = t - p;
+                        if dt <= 0.0 {
+                            return Err(data_err(
+                                file,
+                                Some(line),
+                                format!("the time does not increase ({t} s after {p} s)"),
+                            ));
+                        }
+                        if dt > GAP_FACTOR * tau0 {
+                            if self.join_below.is_some_and(|j| dt <= j) {
+                                joined_gaps += 1;
+                                dead_time_s += dt - tau0;
+                                false
+                            } else {
+                                true
+                            }
+                        } else {
+                            if (dt - tau0).abs() > IRREGULAR_FRACTION * tau0 {
+                                irregular += 1;
+                                first_irregular.get_or_insert(line);
+                            }
+                            false
+                        }
+                    }
+                };
+                if new_segment {
+                    seg_start_idx.push(values.len());
+                    segments.push(Segment {
+                        lines: (line, line),
+                        t_s: (t, t),
+                        samples: 0,
+                        analysed: false,
+                    });
+                }
+                if let Some(s) = segments.last_mut() {
+                    s.lines.1 = line;
+                    s.t_s.1 = t;
+                    s.samples += 1;
+                }
+                prev_t = Some(t);
+                values.push(v * self.factor)?;
             }
-            if let Some(s) = segments.last_mut() {
-                s.lines.1 = line;
-                s.t_s.1 = t;
-                s.samples += 1;
-            }
-            prev_t = Some(t);
-            values.push(v * self.factor)?;
         }
         drop(rdr);
         if values.len() == 0 {

@@ -1,38 +1,27 @@
 #!/usr/bin/env bash
-# The fit section of gyrocal's side-by-side benchmarks (issue 24): whole-process time and peak
-# memory (/usr/bin/time -v) of `gyrocal fit FILE --json` and of pandas + numpy lstsq
-# (bench/fit_numpy.py: linear, quadratic, cubic and their residuals) on the same generated
-# files, the size of gyrocal's JSON, and the two sides' K, K0 and SSE compared.
+# gyrocal's side-by-side benchmarks: whole-process time and peak memory (/usr/bin/time -v) of
+# the gyrocal CLI and of the Python scripts doing the same work, on the same generated files.
+# bench/README.md says what each section measures and how to read the table.
 #
-# Written beside bench/run.sh (the csv helper's, with the allan section): section_fit is meant
-# to be one of its SECTIONS; until they are joined it runs on its own.
-#
-# usage: bench/run_fit.sh
+# usage: bench/run.sh [SECTION...]      sections: fit, allan (default: every section)
 # environment:
-#   GYROCAL      the gyrocal binary (default: $CARGO_TARGET_DIR or target/release/gyrocal,
-#                built if missing: about a quarter of an hour on two cores)
+#   GYROCAL      the gyrocal binary (default: target/release/gyrocal, built if missing:
+#                about a quarter of an hour on two cores)
 #   BENCH_DATA   where the generated files and the outputs go (default /tmp/gyrocal-bench;
-#                the 10^7-point file is 205 MB)
-#   FIT_POINTS   the continuous-rate sizes (default "1e6 1e7")
-#   BENCH_VENV   a Python venv with numpy and pandas (bench/setup.sh makes one; default
-#                /tmp/gyrocal-bench-venv)
+#                the allan section's 10^8-row file is 2.6 GB)
+#   ALLAN_ROWS   the allan section's sizes (default "1e7 1e8")
+#   FIT_POINTS   the fit section's continuous-rate sizes (default "1e6 1e7"; the 10^7 gyrocal
+#                run under a 2 GiB address-space cap, `ulimit -v 2097152`, as issue 24 asks;
+#                the 19-rate schedule is always 10^6 points)
+#   BENCH_VENV   the Python venv (bench/setup.sh; default /tmp/gyrocal-bench-venv)
 #
-# Cases: continuous rates at 10^6 and 10^7 points (the 10^7 gyrocal run under a 2 GiB
-# address-space cap, `ulimit -v 2097152`, as the issue asks), and the paper's 19-rate
-# schedule at 10^6 points.
+# Each section is independent: a function section_NAME, listed in SECTIONS.
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 repo="$(cd "$here/.." && pwd)"
 data="${BENCH_DATA:-/tmp/gyrocal-bench}"
 mkdir -p "$data"
-venv="${BENCH_VENV:-/tmp/gyrocal-bench-venv}"
-if [[ -x "$venv/bin/python" ]]; then
-    python="$venv/bin/python"
-elif [[ -x "$here/setup.sh" ]]; then
-    python="$("$here/setup.sh" | tail -n 1)/bin/python"
-else
-    python=python3
-fi
+python="$("$here/setup.sh" | tail -n 1)/bin/python"
 
 gyrocal_bin() {
     if [[ -n "${GYROCAL:-}" ]]; then
@@ -72,6 +61,26 @@ header() {
     echo "|------------------------------------|----------|----------|----------|--------------|"
 }
 
+# allan: `gyrocal allan FILE --json` against pandas read_csv + allantools oadev (octave),
+# on records of t_s,volts (bench/gen_allan.py); then the curves compared (whole record: the
+# warm-up detection off) and, for the largest size, the bounded-memory path (--streaming).
+section_allan() {
+    local gyrocal
+    gyrocal="$(gyrocal_bin)"
+    header "allan"
+    for n in ${ALLAN_ROWS:-1e7 1e8}; do
+        local csv="$data/allan_$n.csv"
+        [[ -s "$csv" ]] || "$python" "$here/gen_allan.py" "$n" "$csv"
+        cat "$csv" > /dev/null # both sides start from the page cache
+        timed "gyrocal_allan_$n" "$gyrocal" allan "$csv" --json
+        timed "gyrocal_allan_${n}_streaming" "$gyrocal" allan "$csv" --json --streaming
+        timed "pandas_allantools_$n" "$python" "$here/allan_pandas.py" "$csv"
+        "$gyrocal" allan "$csv" --json --warmup-window 0 > "$data/gyrocal_allan_${n}_whole.json"
+        "$python" "$here/allan_compare.py" "$data/gyrocal_allan_${n}_whole.json" \
+            "$data/pandas_allantools_$n.out" | tail -n 1
+    done
+}
+
 # fit: `gyrocal fit FILE --json` against pandas + numpy lstsq on continuous-rate data
 # (bench/gen_fit_continuous.py) and on a 19-rate schedule (bench/gen_fit_schedule.py).
 section_fit() {
@@ -100,4 +109,14 @@ section_fit() {
     done
 }
 
-section_fit
+SECTIONS=(fit allan)
+
+selected=("$@")
+[[ ${#selected[@]} -gt 0 ]] || selected=("${SECTIONS[@]}")
+for s in "${selected[@]}"; do
+    if ! declare -F "section_$s" > /dev/null; then
+        echo "bench/run.sh: no section $s (sections: ${SECTIONS[*]})" >&2
+        exit 2
+    fi
+    "section_$s"
+done
