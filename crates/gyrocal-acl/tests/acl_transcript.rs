@@ -6,7 +6,9 @@ use gyrocal_acl::{AclConfig, AclTable};
 use gyrocal_link::ScriptedTransport;
 use gyrocal_table::{RateTable, TableErrorKind, TableState};
 
-const NO_ERROR: &str = "0,\"No error\"";
+mod common;
+use common::NO_ERROR;
+
 const IDN: &str = "ACUTRONIC,ACUTROL3000,1234,3.1";
 
 fn connected(script: ScriptedTransport) -> ScriptedTransport {
