@@ -58,7 +58,6 @@ fn options(model: Model) -> TruevoltOptions {
     TruevoltOptions::new(model)
 }
 
-
 fn connect_script(idn: &str) -> ScriptedTransport {
     ScriptedTransport::new("tcp://lab-dmm:5025")
         .query("*IDN?", idn)
