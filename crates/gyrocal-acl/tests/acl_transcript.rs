@@ -13,7 +13,7 @@ const IDN: &str = "ACUTRONIC,ACUTROL3000,1234,3.1";
 
 fn connected(script: ScriptedTransport) -> ScriptedTransport {
     script
-        .query("*IDN?", "ACUTRONIC,ACUTROL3000,1234,3.1")
+        .query("*IDN?", IDN)
         .query(":System:Error?", NO_ERROR)
         .query(":Mode? 1", "OFF")
 }
