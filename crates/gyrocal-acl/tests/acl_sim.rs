@@ -5,25 +5,15 @@
 
 use std::time::Duration;
 
-use gyrocal_acl::{AclConfig, AclTable};
-use gyrocal_link::memory_pair;
-use gyrocal_sim::table::{SimMode, SimTable, TableConfig, TableFaults, TableHandle};
+use gyrocal_sim::table::{SimMode, TableConfig, TableFaults, TableHandle};
 use gyrocal_table::{RateTable, SettleCriteria, TableErrorKind, TableState};
 use tokio::time::Instant;
 
-/// Commands have no reply: let the simulator task read what was written before looking at it.
-async fn let_sim_run() {
-    tokio::time::sleep(Duration::from_millis(1)).await;
-}
-
-type Table = AclTable<gyrocal_link::StreamTransport<tokio::io::DuplexStream>>;
+mod common;
+use common::{Table, enabled_sim_table, let_sim_run};
 
 async fn bench(config: TableConfig) -> (Table, TableHandle) {
-    let (transport, device) = memory_pair("sim-table");
-    let handle = SimTable::spawn(device, config, 7);
-    let mut table = AclTable::new(transport, AclConfig::default());
-    table.connect().await.unwrap();
-    table.enable().await.unwrap();
+    let (table, handle) = enabled_sim_table(config, 7).await;
     assert_eq!(table.state(), TableState::Servoed);
     assert!(handle.interlock_closed());
     (table, handle)

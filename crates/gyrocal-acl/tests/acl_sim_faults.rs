@@ -7,21 +7,16 @@
 
 use std::time::Duration;
 
-use gyrocal_acl::{AclConfig, AclTable};
-use gyrocal_link::memory_pair;
-use gyrocal_sim::table::{DemandFault, ReplyFault, SimMode, SimTable, TableConfig, TableHandle};
+use gyrocal_sim::table::{DemandFault, ReplyFault, SimMode, TableConfig, TableHandle};
 use gyrocal_table::{RateTable, SettleCriteria, TableErrorKind, TableMode, TableState};
 use tokio::time::Instant;
 
-type Table = AclTable<gyrocal_link::StreamTransport<tokio::io::DuplexStream>>;
+mod common;
+use common::{Table, enabled_sim_table, let_sim_run};
 
 /// A connected, enabled table turning steadily at `rate` deg/s.
 async fn turning(rate: f64) -> (Table, TableHandle) {
-    let (transport, device) = memory_pair("sim-table");
-    let sim = SimTable::spawn(device, TableConfig::default(), 11);
-    let mut table = AclTable::new(transport, AclConfig::default());
-    table.connect().await.unwrap();
-    table.enable().await.unwrap();
+    let (mut table, sim) = enabled_sim_table(TableConfig::default(), 11).await;
     if rate != 0.0 {
         table.set_rate(rate, 5.0).await.unwrap();
         table
@@ -206,7 +201,7 @@ async fn wait_stopped_is_not_fooled_by_a_rate_passing_through_zero() {
     assert!(msg.contains("not at rest"), "{msg}");
     assert!(msg.contains("in mode RATE"), "{msg}");
     assert!(msg.contains("last measured -"), "{msg}");
-    tokio::time::sleep(Duration::from_millis(1)).await; // let the sim read the stop
+    let_sim_run().await; // let the sim read the stop
     assert_eq!(sim.mode(), SimMode::Off, "the fault stopped the table");
 }
 
@@ -215,7 +210,7 @@ async fn wait_stopped_on_a_silent_table_fails_naming_the_last_rate() {
     let (mut table, sim) = turning(20.0).await;
     table.stop().await.unwrap();
     // answers for a while, then goes silent mid-deceleration
-    tokio::time::sleep(Duration::from_millis(1)).await;
+    let_sim_run().await;
     let silence = sim.clone();
     tokio::spawn(async move {
         tokio::time::sleep(Duration::from_millis(1050)).await;

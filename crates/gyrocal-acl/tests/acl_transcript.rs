@@ -6,12 +6,14 @@ use gyrocal_acl::{AclConfig, AclTable};
 use gyrocal_link::ScriptedTransport;
 use gyrocal_table::{RateTable, TableErrorKind, TableState};
 
-const NO_ERROR: &str = "0,\"No error\"";
+mod common;
+use common::NO_ERROR;
+
 const IDN: &str = "ACUTRONIC,ACUTROL3000,1234,3.1";
 
 fn connected(script: ScriptedTransport) -> ScriptedTransport {
     script
-        .query("*IDN?", "ACUTRONIC,ACUTROL3000,1234,3.1")
+        .query("*IDN?", IDN)
         .query(":System:Error?", NO_ERROR)
         .query(":Mode? 1", "OFF")
 }

@@ -43,7 +43,9 @@ fn block_on<F: std::future::Future>(f: F) -> F::Output {
 }
 
 const IDN: &str = "ACUTRONIC,ACUTROL3000,SIM0001,1.0";
-const NO_ERROR: &str = "0,\"No error\"";
+
+mod common;
+use common::NO_ERROR;
 
 /// A reply that is either arbitrary or one the table could plausibly send.
 fn reply() -> impl Strategy<Value = String> {

@@ -6,19 +6,15 @@
 
 use std::time::Duration;
 
-use gyrocal_aerosmith::{AerosmithConfig, AerosmithTable};
-use gyrocal_link::memory_pair;
-use gyrocal_sim::table::aerosmith::AerosmithWire;
-use gyrocal_sim::table::{SimTable, TableConfig, TableHandle};
+use gyrocal_sim::table::{TableConfig, TableHandle};
 use gyrocal_table::{RateTable, SettleCriteria, TableErrorKind, TableMode, TableState};
 use tokio::time::Instant;
 
-type Table = AerosmithTable<gyrocal_link::StreamTransport<tokio::io::DuplexStream>>;
+mod common;
+use common::{Table, sim_aerosmith};
 
 async fn bench(config: TableConfig) -> (Table, TableHandle) {
-    let (transport, device) = memory_pair("sim-aerosmith");
-    let handle = SimTable::spawn_aerosmith(device, config, AerosmithWire::default(), 7);
-    let mut table = AerosmithTable::new(transport, AerosmithConfig::default());
+    let (mut table, handle) = sim_aerosmith(config, 7);
     table.connect().await.unwrap();
     assert_eq!(table.state(), TableState::Connected);
     table.enable().await.unwrap();

@@ -7,6 +7,9 @@ use gyrocal_aerosmith::{
 use gyrocal_link::ScriptedTransport;
 use gyrocal_table::{RateTable, TableError, TableErrorKind, TableMode, TableState};
 
+mod common;
+use common::aerosmith;
+
 /// Expects `command` + CR and answers `reply` (which ends with the prompt).
 fn q(script: ScriptedTransport, command: &str, reply: &str) -> ScriptedTransport {
     script
@@ -37,7 +40,7 @@ async fn aerosmith_transcript_connect_enable_rate_stop() {
     let script = q(script, "JOG10.0000", ">");
     // no interlock command: the emergency stop is STO too
     let script = script.expect_raw(b"STO\r");
-    let mut table = AerosmithTable::new(script, AerosmithConfig::default());
+    let mut table = aerosmith(script);
     let id = table.connect().await.unwrap();
     assert_eq!(id.manufacturer, "Ideal Aerosmith");
     assert_eq!(table.state(), TableState::Connected);
@@ -64,7 +67,7 @@ async fn aerosmith_question_mark_is_a_table_error_and_limits_send_nothing() {
     let script = enabled(ScriptedTransport::new("table"));
     let script = q(script, "ACL5.0000", ">");
     let script = q(script, "JOG10.0000", "?\r>");
-    let mut table = AerosmithTable::new(script, AerosmithConfig::default());
+    let mut table = aerosmith(script);
     table.connect().await.unwrap();
     table.enable().await.unwrap();
     // client-side limits: refused before a byte is sent
@@ -90,7 +93,7 @@ async fn aerosmith_fault_bit_in_a_sample_faults_the_driver_and_stops() {
     let script = q(script, "PVE", "9.990000\r>");
     let script = q(script, "STA", "5\r>");
     let script = script.expect_raw(b"STO\r");
-    let mut table = AerosmithTable::new(script, AerosmithConfig::default());
+    let mut table = aerosmith(script);
     table.connect().await.unwrap();
     table.enable().await.unwrap();
     table.set_rate(20.0, 5.0).await.unwrap();
@@ -108,7 +111,7 @@ async fn aerosmith_lost_and_garbled_replies_are_asked_again() {
     let script = script.expect_raw(b"PVE\r").silence().reply("0.400000\r>");
     let script = q(script, "PVE", "#.5\r>");
     let script = q(script, "PVE", "0.500000\r>");
-    let mut table = AerosmithTable::new(script, AerosmithConfig::default());
+    let mut table = aerosmith(script);
     table.connect().await.unwrap();
     table.enable().await.unwrap();
     assert_eq!(table.read_rate().await.unwrap(), 0.5);

@@ -8,27 +8,16 @@ use gyrocal_hp34401a::{
     AutoZero, DcvConfig, DriverOptions, Error, ErrorKind, Hp34401a, LinkLoss, Reading, Strategy,
     Timing,
 };
-use gyrocal_link::{DynStream, StreamTransport, memory_pair};
-use gyrocal_sim::dmm::{DmmConfig, DmmHandle, Fault, LocalMode, SimDmm};
+use gyrocal_sim::dmm::{DmmConfig, DmmHandle, Fault, LocalMode};
 use gyrocal_sim::signal::{Constant, FnOfTime};
 use tokio::time::Instant;
 
-type Dmm = Hp34401a<StreamTransport<DynStream>>;
-
-fn nplc1() -> DcvConfig {
-    DcvConfig {
-        nplc: 1.0,
-        range: Some(10.0),
-        autozero: AutoZero::On,
-        line_hz: 50,
-        ..DcvConfig::default()
-    }
-}
+mod common;
+use common::{Dmm, VOLTS, nplc1, ready, sim_dmm};
 
 async fn bench_with(cfg: DmmConfig, config: &DcvConfig, volts: f64) -> (Dmm, DmmHandle) {
-    let (link, dev) = memory_pair("sim-dmm");
-    let handle = SimDmm::spawn(dev, cfg, Box::new(Constant(volts)), 7);
-    let mut dmm = Hp34401a::new(link.boxed(), DriverOptions::default());
+    let (link, handle) = sim_dmm(cfg, Box::new(Constant(volts)), 7);
+    let mut dmm = Hp34401a::new(link, DriverOptions::default());
     let id = dmm.connect().await.unwrap();
     assert_eq!(id.raw, "HEWLETT-PACKARD,34401A,0,11-5-2");
     dmm.configure(config).await.unwrap();
@@ -36,7 +25,7 @@ async fn bench_with(cfg: DmmConfig, config: &DcvConfig, volts: f64) -> (Dmm, Dmm
 }
 
 async fn bench(config: &DcvConfig) -> (Dmm, DmmHandle) {
-    bench_with(DmmConfig::default(), config, 1.234_567).await
+    bench_with(DmmConfig::default(), config, VOLTS).await
 }
 
 async fn timed(dmm: &mut Dmm, n: usize, s: Strategy) -> (Vec<Reading>, f64) {
@@ -163,16 +152,13 @@ async fn split_burst_overlaps_with_other_work() {
 
 #[tokio::test(start_paused = true)]
 async fn signal_is_sampled_at_each_reading_time() {
-    let (link, dev) = memory_pair("sim-dmm");
     let ramp = FnOfTime::new(|t| t); // 1 V per second
     let cfg = DmmConfig {
         noise_v: 0.0,
         ..DmmConfig::default()
     };
-    let sim = SimDmm::spawn(dev, cfg, Box::new(ramp), 1);
-    let mut dmm = Hp34401a::new(link.boxed(), DriverOptions::default());
-    dmm.connect().await.unwrap();
-    dmm.configure(&nplc1()).await.unwrap();
+    let (link, sim) = sim_dmm(cfg, Box::new(ramp), 1);
+    let mut dmm = ready(link, DriverOptions::default(), &nplc1()).await;
     let v = dmm.acquire(50, Strategy::Stream).await.unwrap().volts();
     for w in v.windows(2) {
         assert!((w[1] - w[0] - 0.0415).abs() < 1e-6, "{w:?}");
@@ -213,17 +199,12 @@ async fn recovery_from_truncated_reply() {
 
 #[tokio::test(start_paused = true)]
 async fn gives_up_after_the_configured_retries() {
-    let (link, dev) = memory_pair("sim-dmm");
-    let sim = SimDmm::spawn(dev, DmmConfig::default(), Box::new(Constant(1.0)), 1);
-    let mut dmm = Hp34401a::new(
-        link.boxed(),
-        DriverOptions {
-            retries: 2,
-            ..DriverOptions::default()
-        },
-    );
-    dmm.connect().await.unwrap();
-    dmm.configure(&nplc1()).await.unwrap();
+    let (link, sim) = sim_dmm(DmmConfig::default(), Box::new(Constant(1.0)), 1);
+    let options = DriverOptions {
+        retries: 2,
+        ..DriverOptions::default()
+    };
+    let mut dmm = ready(link, options, &nplc1()).await;
     // the first reply of each attempt is lost; the recovery's SYST:ERR? replies come through
     for _ in 0..3 {
         sim.inject(Fault::Garble);
@@ -297,7 +278,7 @@ async fn scheduled_fault_from_config() {
         }],
         ..DmmConfig::default()
     };
-    let (mut dmm, sim) = bench_with(cfg, &nplc1(), 1.234_567).await;
+    let (mut dmm, sim) = bench_with(cfg, &nplc1(), VOLTS).await;
     let acq = dmm.acquire(5, Strategy::Stream).await.unwrap();
     assert_eq!(acq.retries, 1);
     sim.stop().await;
@@ -315,16 +296,13 @@ async fn close_returns_to_local() {
 /// A meter on a slow ramp (0.1 V per second since the bench started, no noise), so each
 /// reading tells when it was integrated.
 async fn ramp_bench(cfg: DmmConfig) -> (Dmm, DmmHandle, Instant) {
-    let (link, dev) = memory_pair("sim-dmm");
     let origin = Instant::now();
     let cfg = DmmConfig {
         noise_v: 0.0,
         ..cfg
     };
-    let sim = SimDmm::spawn(dev, cfg, Box::new(FnOfTime::new(|t| 0.1 * t)), 1);
-    let mut dmm = Hp34401a::new(link.boxed(), DriverOptions::default());
-    dmm.connect().await.unwrap();
-    dmm.configure(&nplc1()).await.unwrap();
+    let (link, sim) = sim_dmm(cfg, Box::new(FnOfTime::new(|t| 0.1 * t)), 1);
+    let dmm = ready(link, DriverOptions::default(), &nplc1()).await;
     (dmm, sim, origin)
 }
 
@@ -497,17 +475,12 @@ async fn a_meter_that_stays_off_is_given_up_after_reconnect_timeout() {
 
 #[tokio::test(start_paused = true)]
 async fn reconnect_timeout_is_an_option() {
-    let (link, dev) = memory_pair("sim-dmm");
-    let sim = SimDmm::spawn(dev, DmmConfig::default(), Box::new(Constant(1.0)), 1);
-    let mut dmm = Hp34401a::new(
-        link.boxed(),
-        DriverOptions {
-            reconnect_timeout: Duration::from_secs(8),
-            ..DriverOptions::default()
-        },
-    );
-    dmm.connect().await.unwrap();
-    dmm.configure(&nplc1()).await.unwrap();
+    let (link, sim) = sim_dmm(DmmConfig::default(), Box::new(Constant(1.0)), 1);
+    let options = DriverOptions {
+        reconnect_timeout: Duration::from_secs(8),
+        ..DriverOptions::default()
+    };
+    let mut dmm = ready(link, options, &nplc1()).await;
     sim.inject(Fault::PowerCycle { off_s: Some(60.0) });
     let t0 = Instant::now();
     let err = dmm.recover().await.unwrap_err();

@@ -5,10 +5,13 @@
 use std::time::Duration;
 
 use gyrocal_hp34401a::{
-    DcvConfig, DriverOptions, Hp34401a, Identity, Reading, Strategy, parse_error, parse_reading,
+    DcvConfig, DriverOptions, Identity, Reading, Strategy, parse_error, parse_reading,
 };
 use gyrocal_link::{LinkError, Transport, show_bytes};
 use proptest::prelude::*;
+
+mod common;
+use common::{IDN, NO_ERROR};
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(2000))]
@@ -88,9 +91,7 @@ proptest! {
         let result = rt.block_on(async {
             let link = Meter { last: String::new(), reading: Some(reply.clone()) };
             let options = DriverOptions { retries: 0, ..DriverOptions::default() };
-            let mut dmm = Hp34401a::new(link, options);
-            dmm.connect().await.unwrap();
-            dmm.configure(&DcvConfig::default()).await.unwrap();
+            let mut dmm = common::ready(link, options, &DcvConfig::default()).await;
             dmm.acquire(1, Strategy::Poll).await
         });
         match parse_reading(&reply) {
@@ -120,8 +121,8 @@ impl Transport for Meter {
     async fn read_line(&mut self, timeout: Option<Duration>) -> Result<String, LinkError> {
         let q = self.last.rsplit(';').next().unwrap_or_default().to_string();
         match q.as_str() {
-            "*IDN?" => Ok("HEWLETT-PACKARD,34401A,0,11-5-2".into()),
-            "SYST:ERR?" => Ok("+0,\"No error\"".into()),
+            "*IDN?" => Ok(IDN.into()),
+            "SYST:ERR?" => Ok(NO_ERROR.into()),
             "*OPC?" => Ok("1".into()),
             "READ?" => match self.reading.take() {
                 Some(r) => Ok(r),

@@ -2,7 +2,7 @@
 //! simulated 34401A in GPIB mode, over an in-memory pipe, in virtual time.
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
-use gyrocal_hp34401a::{AutoZero, DcvConfig, DriverOptions, Hp34401a, Strategy};
+use gyrocal_hp34401a::{DriverOptions, Hp34401a, Strategy};
 use gyrocal_link::{
     DynStream, LinkOptions, PrologixOptions, PrologixTransport, StreamTransport, Transport,
     memory_pair,
@@ -12,17 +12,10 @@ use gyrocal_sim::prologix::{PrologixConfig, PrologixHandle, spawn_gpib_meter};
 use gyrocal_sim::signal::Constant;
 use tokio::time::Instant;
 
-type Dmm = Hp34401a<PrologixTransport<StreamTransport<DynStream>>>;
+mod common;
+use common::{VOLTS, nplc1};
 
-fn nplc1() -> DcvConfig {
-    DcvConfig {
-        nplc: 1.0,
-        range: Some(10.0),
-        autozero: AutoZero::On,
-        line_hz: 50,
-        ..DcvConfig::default()
-    }
-}
+type Dmm = Hp34401a<PrologixTransport<StreamTransport<DynStream>>>;
 
 async fn bench() -> (Dmm, PrologixHandle, DmmHandle) {
     let (link, dev) = memory_pair("sim-prologix");
@@ -30,7 +23,7 @@ async fn bench() -> (Dmm, PrologixHandle, DmmHandle) {
         dev,
         PrologixConfig::default(),
         DmmConfig::default(),
-        Box::new(Constant(1.234_567)),
+        Box::new(Constant(VOLTS)),
         7,
     );
     let link = PrologixTransport::open(link.boxed(), PrologixOptions::default())
@@ -157,7 +150,7 @@ async fn open_accepts_prologix_tcp_port_strings() {
                 time_scale: 10.0,
                 ..DmmConfig::default()
             },
-            Box::new(Constant(1.234_567)),
+            Box::new(Constant(VOLTS)),
             3,
         )
     });

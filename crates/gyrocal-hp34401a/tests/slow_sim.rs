@@ -9,51 +9,31 @@
 use std::time::Duration;
 
 use gyrocal_hp34401a::{DriverOptions, Hp34401aMeter, Strategy};
-use gyrocal_link::{DynStream, StreamTransport, memory_pair};
-use gyrocal_meter::{Acquired, DcVolts, ErrorKind, Measured, MeterError, Multimeter, Reading};
-use gyrocal_sim::dmm::{DmmConfig, DmmHandle, Fault, SimDmm};
+use gyrocal_link::{DynStream, StreamTransport};
+use gyrocal_meter::{Acquired, ErrorKind, Measured, MeterError, Multimeter};
+use gyrocal_sim::dmm::{DmmConfig, DmmHandle, Fault};
 use gyrocal_sim::signal::Constant;
 use tokio::time::Instant;
 
-const VOLTS: f64 = 1.234_567;
+mod common;
+use common::slow_meter::{dcv, step};
+use common::{VOLTS, sim_dmm};
 
 type Meter = Hp34401aMeter<StreamTransport<DynStream>>;
 
-fn dcv() -> DcVolts {
-    DcVolts {
-        range_v: Some(10.0),
-        nplc: 1.0,
-        autozero: true,
-        line_hz: 50,
-    }
-}
-
 async fn ready(strategy: Strategy) -> (Meter, DmmHandle) {
-    let (link, dev) = memory_pair("sim-dmm");
-    let handle = SimDmm::spawn(dev, DmmConfig::default(), Box::new(Constant(VOLTS)), 7);
-    let mut m = Hp34401aMeter::new(link.boxed(), DriverOptions::default(), strategy, 9600);
+    let (link, handle) = sim_dmm(DmmConfig::default(), Box::new(Constant(VOLTS)), 7);
+    let mut m = Hp34401aMeter::new(link, DriverOptions::default(), strategy, 9600);
     m.connect().await.unwrap();
     m.configure(&dcv()).await.unwrap();
     (m, handle)
 }
 
-async fn step(m: &mut Meter, n: usize) -> Acquired {
-    match m.measure(n, true).await.unwrap() {
-        Measured::Complete(acq) => acq,
-        Measured::Pending(p) => m.collect(p).await.unwrap(),
-    }
-}
-
-/// Every reading is the meter's input: no other reply (`1` of `*OPC?`, an error-queue entry,
-/// `*ESR?`'s number) was taken for readings, and none is missing or extra.
+/// Every reading is the meter's input (within the simulated 34401A's noise): no other reply
+/// (`1` of `*OPC?`, an error-queue entry, `*ESR?`'s number) was taken for readings, and none
+/// is missing or extra.
 fn all_readings(acq: &Acquired, n: usize) {
-    assert_eq!(acq.readings.len(), n, "{:?}", acq.notes);
-    for r in &acq.readings {
-        assert!(
-            matches!(r, Reading::Volts(v) if (v - VOLTS).abs() < 1e-5),
-            "{r:?} is not a reading of the {VOLTS} V input"
-        );
-    }
+    common::slow_meter::all_readings(acq, n, VOLTS, 1e-5);
 }
 
 /// Every reply 2.5 s late, streamed (`READ?`) and in memory (`INIT;*OPC?`, `FETC?`): the

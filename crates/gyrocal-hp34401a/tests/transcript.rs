@@ -6,8 +6,8 @@ use gyrocal_hp34401a::{
 };
 use gyrocal_link::ScriptedTransport;
 
-const IDN: &str = "HEWLETT-PACKARD,34401A,0,11-5-2";
-const NO_ERROR: &str = "+0,\"No error\"";
+mod common;
+use common::{IDN, NO_ERROR, nplc1};
 
 fn connect_script() -> ScriptedTransport {
     ScriptedTransport::new("dmm")
@@ -16,14 +16,6 @@ fn connect_script() -> ScriptedTransport {
         .query("*IDN?", IDN)
         .expect_line("*RST;*CLS")
         .query("SYST:ERR?", NO_ERROR)
-}
-
-fn nplc1() -> DcvConfig {
-    DcvConfig {
-        nplc: 1.0,
-        range: Some(10.0),
-        ..DcvConfig::default()
-    }
 }
 
 fn configure_script(t: ScriptedTransport) -> ScriptedTransport {
@@ -40,10 +32,7 @@ fn configure_script(t: ScriptedTransport) -> ScriptedTransport {
 }
 
 async fn ready(t: ScriptedTransport) -> Hp34401a<ScriptedTransport> {
-    let mut dmm = Hp34401a::new(t, DriverOptions::default());
-    dmm.connect().await.unwrap();
-    dmm.configure(&nplc1()).await.unwrap();
-    dmm
+    common::ready(t, DriverOptions::default(), &nplc1()).await
 }
 
 #[tokio::test(start_paused = true)]

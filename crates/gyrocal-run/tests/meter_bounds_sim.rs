@@ -9,11 +9,10 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU32, Ordering};
 
-use common::table_config;
+use common::{config, plans, table_config};
 use gyrocal_acl::AclTable;
 use gyrocal_files::{Plan, RunDir, RunMeta, Status};
 use gyrocal_hp34401a::Error as DmmError;
@@ -24,21 +23,15 @@ use gyrocal_sim::from_plan::bench_config;
 use gyrocal_sim::table::SimMode;
 use tokio::sync::watch;
 
-fn config(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../configs")
-        .join(name)
-}
-
 /// quick.toml in memory mode (every step but the last leaves its readings in the meter, to
 /// be fetched during the next ramp).
 fn memory_plan() -> Plan {
-    let path = config("quick.toml");
-    let text = std::fs::read_to_string(&path)
-        .unwrap()
-        .replace("acquisition = \"auto\"", "acquisition = \"memory\"");
+    let text = plans::config_with(
+        "quick.toml",
+        &[("acquisition = \"auto\"", "acquisition = \"memory\"")],
+    );
     assert!(text.contains("acquisition = \"memory\""));
-    Plan::from_toml_str(&text, &path).unwrap()
+    Plan::from_toml_str(&text, &config("quick.toml")).unwrap()
 }
 
 /// What a meter whose recovery reconfigures it at every transfer says: the readings left in

@@ -8,28 +8,16 @@
 
 mod common;
 
-use std::path::Path;
-
-use common::table_config;
+use common::{set, table_config};
 use gyrocal_acl::AclTable;
 use gyrocal_files::{Plan, RunDir, RunMeta, Status};
 use gyrocal_run::{Sequencer, SequencerOptions, StopRequest};
 use gyrocal_sim::bench::Bench;
 use gyrocal_sim::from_plan::bench_config;
 
+/// `configs/paper.toml` with `edit` applied.
 fn paper_with(edit: impl FnOnce(&mut toml::Table)) -> Plan {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/paper.toml");
-    let mut doc: toml::Table = std::fs::read_to_string(&path).unwrap().parse().unwrap();
-    edit(&mut doc);
-    Plan::from_toml_str(&toml::to_string(&doc).unwrap(), &path).unwrap()
-}
-
-fn set(doc: &mut toml::Table, section: &str, key: &str, value: toml::Value) {
-    doc.get_mut(section)
-        .unwrap()
-        .as_table_mut()
-        .unwrap()
-        .insert(key.into(), value);
+    common::plan_with("paper.toml", edit)
 }
 
 /// Runs `plan` to completion; returns (ratio, elapsed s, bound s, acquisition).

@@ -5,10 +5,10 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Duration;
 
-use common::table_config;
+use common::{config, new_run, plan_with, set, table_config};
 use gyrocal_acl::AclTable;
 use gyrocal_analysis::sweep::fit_run;
 use gyrocal_files::{Plan, RunDir, RunMeta, Status, load, load_samples};
@@ -16,36 +16,6 @@ use gyrocal_run::{RunSummary, Sequencer, SequencerOptions, StopRequest};
 use gyrocal_sim::bench::{Bench, BenchHandle};
 use gyrocal_sim::from_plan::bench_config;
 use tokio::sync::watch;
-
-fn config(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../configs")
-        .join(name)
-}
-
-fn plan_with(name: &str, edit: impl FnOnce(&mut toml::Table)) -> Plan {
-    let path = config(name);
-    let mut doc: toml::Table = std::fs::read_to_string(&path).unwrap().parse().unwrap();
-    edit(&mut doc);
-    Plan::from_toml_str(&toml::to_string(&doc).unwrap(), &path).unwrap()
-}
-
-fn set(doc: &mut toml::Table, section: &str, key: &str, value: toml::Value) {
-    doc.get_mut(section)
-        .unwrap()
-        .as_table_mut()
-        .unwrap()
-        .insert(key.into(), value);
-}
-
-fn new_run(plan: &Plan, dir: &Path) -> RunDir {
-    let meta = RunMeta {
-        gyrocal_version: "test".into(),
-        simulated: true,
-        ..RunMeta::default()
-    };
-    RunDir::create(dir, plan, meta).unwrap()
-}
 
 /// Runs `plan` on `bench` into `run`, asking for a stop once `stop_after` steps were recorded
 /// in this session (if given); fits a complete run as the CLI does.

@@ -4,30 +4,21 @@
 use std::time::Duration;
 
 use gyrocal_link::SocketTransport;
-use gyrocal_meter::{DcVolts, ErrorKind, Measured, MeterError, Multimeter, Reading};
+use gyrocal_meter::{ErrorKind, Measured, MeterError, Multimeter, Reading};
 use gyrocal_sim::dmm::{DmmHandle, Fault};
-use gyrocal_sim::signal::Constant;
-use gyrocal_sim::truevolt::{Personality, SimTruevolt, TruevoltConfig};
+use gyrocal_sim::truevolt::{Personality, TruevoltConfig};
 use gyrocal_truevolt::{Acquisition, Model, TruevoltMeter, TruevoltOptions};
 use tokio::time::Instant;
 
-fn dcv() -> DcVolts {
-    DcVolts {
-        range_v: Some(10.0),
-        nplc: 1.0,
-        autozero: true,
-        line_hz: 50,
-    }
-}
+mod common;
+use common::sim_truevolt;
+use common::slow_meter::dcv;
 
 async fn bench(
     config: TruevoltConfig,
     options: TruevoltOptions,
 ) -> (TruevoltMeter<SocketTransport>, DmmHandle) {
-    let (handle, port) = SimTruevolt::spawn(config, None, Box::new(Constant(2.5)), 7);
-    let link = SocketTransport::connect("tcp://sim:5025", port.connector())
-        .await
-        .unwrap();
+    let (link, handle) = sim_truevolt(config, |c| c).await;
     (TruevoltMeter::new(link, options), handle)
 }
 

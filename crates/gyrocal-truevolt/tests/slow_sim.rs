@@ -8,38 +8,22 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use gyrocal_link::{Connector, LinkError, SocketTransport};
-use gyrocal_meter::{Acquired, DcVolts, ErrorKind, Measured, MeterError, Multimeter, Reading};
+use gyrocal_link::{Connector, SocketTransport};
+use gyrocal_meter::{Acquired, ErrorKind, Measured, MeterError, Multimeter};
 use gyrocal_sim::dmm::{DmmHandle, Fault};
-use gyrocal_sim::signal::Constant;
-use gyrocal_sim::truevolt::{SimTruevolt, TruevoltConfig};
+use gyrocal_sim::truevolt::TruevoltConfig;
 use gyrocal_truevolt::{Acquisition, Model, TruevoltMeter, TruevoltOptions};
 use tokio::time::Instant;
 
-const VOLTS: f64 = 2.5;
-
-fn dcv() -> DcVolts {
-    DcVolts {
-        range_v: Some(10.0),
-        nplc: 1.0,
-        autozero: true,
-        line_hz: 50,
-    }
-}
+mod common;
+use common::slow_meter::{dcv, step};
+use common::{VOLTS, refused, sim_truevolt};
 
 async fn ready_with(
     acquisition: Acquisition,
     connector: impl FnOnce(Connector) -> Connector,
 ) -> (TruevoltMeter<SocketTransport>, DmmHandle) {
-    let (handle, port) = SimTruevolt::spawn(
-        TruevoltConfig::default(),
-        None,
-        Box::new(Constant(VOLTS)),
-        7,
-    );
-    let link = SocketTransport::connect("tcp://sim:5025", connector(port.connector()))
-        .await
-        .unwrap();
+    let (link, handle) = sim_truevolt(TruevoltConfig::default(), connector).await;
     let options = TruevoltOptions {
         acquisition,
         ..TruevoltOptions::new(Model::M34461A)
@@ -54,25 +38,11 @@ async fn ready(acquisition: Acquisition) -> (TruevoltMeter<SocketTransport>, Dmm
     ready_with(acquisition, |c| c).await
 }
 
-/// One step's readings as the sequencer takes them: measured (the last part may stay in the
-/// meter) and collected.
-async fn step(m: &mut TruevoltMeter<SocketTransport>, n: usize) -> Acquired {
-    match m.measure(n, true).await.unwrap() {
-        Measured::Complete(acq) => acq,
-        Measured::Pending(p) => m.collect(p).await.unwrap(),
-    }
-}
-
-/// Every reading is the meter's input: no other reply (`1` of `*OPC?`, an error-queue entry,
-/// an identity) was taken for readings, and none is missing or extra.
+/// Every reading is the meter's input (within the simulated Truevolt's noise): no other
+/// reply (`1` of `*OPC?`, an error-queue entry, an identity) was taken for readings, and none
+/// is missing or extra.
 fn all_readings(acq: &Acquired, n: usize) {
-    assert_eq!(acq.readings.len(), n, "{:?}", acq.notes);
-    for r in &acq.readings {
-        assert!(
-            matches!(r, Reading::Volts(v) if (v - VOLTS).abs() < 1e-3),
-            "{r:?} is not a reading of the {VOLTS} V input"
-        );
-    }
+    common::slow_meter::all_readings(acq, n, VOLTS, 1e-3);
 }
 
 /// The 34461A: every reply 2.5 s late, in memory mode and in stream mode. The first
@@ -175,14 +145,7 @@ async fn a_refused_connection_gets_the_same_come_back_window_as_a_silent_meter()
                 .is_some_and(|i| !i.stats().powered);
             if off {
                 counted.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
-                let refused: gyrocal_link::ConnectFuture = Box::pin(async {
-                    Err(LinkError::io(
-                        "tcp://sim:5025",
-                        "connecting",
-                        std::io::Error::from(std::io::ErrorKind::ConnectionRefused),
-                    ))
-                });
-                return refused;
+                return refused();
             }
             inner()
         })
@@ -213,14 +176,7 @@ async fn a_connection_refused_for_good_fails_after_the_come_back_window() {
     let (mut m, h) = ready_with(Acquisition::Stream, move |inner| {
         Arc::new(move || {
             if flag.load(std::sync::atomic::Ordering::SeqCst) {
-                let refused: gyrocal_link::ConnectFuture = Box::pin(async {
-                    Err(LinkError::io(
-                        "tcp://sim:5025",
-                        "connecting",
-                        std::io::Error::from(std::io::ErrorKind::ConnectionRefused),
-                    ))
-                });
-                return refused;
+                return refused();
             }
             inner()
         })

@@ -12,6 +12,9 @@ const IDN_65: &str = "Keysight Technologies,34465A,MY57600001,A.03.01-03.15-03.0
 const IDN_01: &str = "HEWLETT-PACKARD,34401A,0,11-5-2";
 const NO_ERROR: &str = "+0,\"No error\"";
 
+mod common;
+use common::slow_meter::dcv;
+
 /// A scripted link that behaves as a raw socket: device clear is a reconnect (logged as
 /// `(reconnect)` in the transcript, no byte written), no remote command.
 struct Lan(ScriptedTransport, Vec<&'static str>);
@@ -53,15 +56,6 @@ fn readings(k: usize, v: f64) -> String {
 
 fn options(model: Model) -> TruevoltOptions {
     TruevoltOptions::new(model)
-}
-
-fn dcv() -> DcVolts {
-    DcVolts {
-        range_v: Some(10.0),
-        nplc: 1.0,
-        autozero: true,
-        line_hz: 50,
-    }
 }
 
 fn connect_script(idn: &str) -> ScriptedTransport {

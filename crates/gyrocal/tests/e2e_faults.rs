@@ -38,6 +38,11 @@ const RUN_LIMIT: Duration = Duration::from_secs(20);
 
 /// A small plan in `dir`, with the `[simulation]` section the simulator is started from.
 /// `[table]`/`[dmm]` ports are placeholders: the command line overrides them.
+///
+/// Written out key by key, not built from a `tests/support/plans.rs` plan: the fault
+/// matrix's deadlines are timed against these exact settings (settle, stability window,
+/// at-rate timeout, framing, acquisition, the table's rate noise and ripple), so a change to
+/// a shipped plan or to the kit's minimal plan must not move them.
 fn write_plan(dir: &Path) -> PathBuf {
     write_plan_with(dir, &RATES, 20.0)
 }
@@ -1612,7 +1617,9 @@ fn e2e_sigint_during_the_warm_up_stops_the_table_and_records_nothing() {
 #[test]
 fn e2e_a_drift_record_without_a_table_never_talks_to_one() {
     let tmp = tempfile::tempdir().unwrap();
-    // a drift record on a bench without a table: no [table] section
+    // a drift record on a bench without a table: no [table] section. The plan's exact text is
+    // what the test is about (no `[table]` at all, `table = "none"`), so it stays a literal
+    // rather than a kit plan with a section cut out.
     let plan = tmp.path().join("plan.toml");
     std::fs::write(
         &plan,

@@ -12,31 +12,10 @@ use std::path::Path;
 
 use common::{between, config, gyrocal, json};
 
-const STATION: &str = r#"
-id = "bench-2"
-lab = "Inertial Lab, Example Institute"
-address = "1 Test Road, Example City"
-ambient_c = 22.5
-humidity_pct = 41
-
-[multimeter]
-model = "HP 34401A"
-asset_id = "DMM-0042"
-serial = "3146A12345"
-certificate = "CAL-2026-0815"
-calibrated = "2026-08-15"
-due = "2099-08-15"
-accuracy = "1y"
-
-[table]
-model = "ACUTRONIC AC1120S"
-asset_id = "TBL-0007"
-serial = "AC-1120-77"
-certificate = "CAL-2026-0901"
-calibrated = "2026-09-01"
-due = "2099-09-01"
-rate_accuracy_ppm = 10
-"#;
+/// The station file: bench 2, with the room's conditions (22.5 °C, 41 %).
+fn station_toml() -> String {
+    common::stations::bench_2(common::stations::CONDITIONS)
+}
 
 /// configs/paper.toml with a `[dut]` and the given `[acceptance]` section.
 fn paper_plan(dir: &Path, acceptance: &str) -> std::path::PathBuf {
@@ -104,7 +83,7 @@ fn a_failing_quantity_is_named_on_the_first_page_with_the_serial_and_the_tables_
         tmp.path(),
         "[acceptance]\ndecision_rule = \"simple\"\n\n[acceptance.scale_factor]\nmin = 0.35\nmax = 0.37\n\n[acceptance.bias_dph]\nmin = -500\nmax = 500\n\n[acceptance.nonlinearity_ppm]\nmax = 500\n",
     );
-    let station = station(tmp.path(), STATION);
+    let station = station(tmp.path(), &station_toml());
     let out = tmp.path().join("run");
     let o = gyrocal()
         .arg("run")
@@ -312,7 +291,7 @@ fn the_guarded_rule_is_indeterminate_within_the_uncertainty_of_a_limit() {
 #[test]
 fn an_overdue_calibration_refuses_the_run_unless_allowed_and_then_is_a_deviation() {
     let tmp = tempfile::tempdir().unwrap();
-    let expired = STATION
+    let expired = station_toml()
         .replace("calibrated = \"2026-08-15\"", "calibrated = \"2019-01-31\"")
         .replace("due = \"2099-08-15\"", "due = \"2020-01-31\"");
     let station = station(tmp.path(), &expired);
@@ -461,7 +440,7 @@ fn station_deviations(out: &Path) -> Vec<String> {
 #[test]
 fn a_resume_on_another_station_is_a_deviation_and_on_the_same_one_is_not() {
     let tmp = tempfile::tempdir().unwrap();
-    let a = station(tmp.path(), STATION);
+    let a = station(tmp.path(), &station_toml());
     // the same station: nothing to record
     let out = interrupted_quick_run(tmp.path(), &a);
     let o = gyrocal()
@@ -476,12 +455,12 @@ fn a_resume_on_another_station_is_a_deviation_and_on_the_same_one_is_not() {
 
     // another multimeter: the certificate must say the run was finished on it
     let tmp = tempfile::tempdir().unwrap();
-    let a = station(tmp.path(), STATION);
+    let a = station(tmp.path(), &station_toml());
     let out = interrupted_quick_run(tmp.path(), &a);
     let b = tmp.path().join("other-station.toml");
     std::fs::write(
         &b,
-        STATION
+        station_toml()
             .replace("DMM-0042", "DMM-0099")
             .replace("3146A12345", "3146A99999"),
     )

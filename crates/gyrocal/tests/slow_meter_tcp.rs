@@ -15,7 +15,7 @@ use std::io::{BufRead, BufReader, Lines};
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdout, Stdio};
 
-use common::{config, gyrocal};
+use common::{gyrocal, plans};
 
 /// Kills the simulator if the test fails before it is stopped.
 struct Sim {
@@ -61,33 +61,33 @@ impl Drop for Sim {
     }
 }
 
+/// `configs/keysight-34461a.toml` on the simulator's ports, shortened (3 rates of 50
+/// readings, no settling) and in acquisition `mode`: the kit's exact-text replacements, each
+/// of which fails the test if the shipped plan no longer has its text.
 fn plan(dir: &Path, dmm: &str, table: &str, mode: &str) -> PathBuf {
-    let mut text = std::fs::read_to_string(config("keysight-34461a.toml")).unwrap();
-    for (from, to) in [
-        (
-            "rates_dps = [0, 0.1, -0.1, 0.3, -0.3, 0.7, -0.7, 1, -1, 3, -3, 7, -7, 10, -10, 15, -15, 20, -20]",
-            "rates_dps = [0, 5, -5]".to_string(),
-        ),
-        ("samples_per_rate = 500", "samples_per_rate = 50".into()),
-        ("settle_s = 10", "settle_s = 0".into()),
-        (
-            "port = \"tcp://192.0.2.10:5025\"",
-            format!("port = \"{dmm}\""),
-        ),
-        ("port = \"/dev/ttyUSB1\"", format!("port = \"{table}\"")),
-        ("stability_window_s = 2", "stability_window_s = 0.2".into()),
-        ("acceleration_dps2 = 10", "acceleration_dps2 = 100".into()),
-        (
-            "acquisition = \"auto\"",
-            format!("acquisition = \"{mode}\""),
-        ),
-    ] {
-        assert!(text.contains(from), "{from:?} not in the plan");
-        text = text.replacen(from, &to, 1);
-    }
-    let path = dir.join(format!("{mode}.toml"));
-    std::fs::write(&path, text).unwrap();
-    path
+    let text = plans::config_with(
+        "keysight-34461a.toml",
+        &[
+            (
+                "rates_dps = [0, 0.1, -0.1, 0.3, -0.3, 0.7, -0.7, 1, -1, 3, -3, 7, -7, 10, -10, 15, -15, 20, -20]",
+                "rates_dps = [0, 5, -5]",
+            ),
+            ("samples_per_rate = 500", "samples_per_rate = 50"),
+            ("settle_s = 10", "settle_s = 0"),
+            (
+                "port = \"tcp://192.0.2.10:5025\"",
+                &format!("port = \"{dmm}\""),
+            ),
+            ("port = \"/dev/ttyUSB1\"", &format!("port = \"{table}\"")),
+            ("stability_window_s = 2", "stability_window_s = 0.2"),
+            ("acceleration_dps2 = 10", "acceleration_dps2 = 100"),
+            (
+                "acquisition = \"auto\"",
+                &format!("acquisition = \"{mode}\""),
+            ),
+        ],
+    );
+    plans::write(dir, &format!("{mode}.toml"), &text)
 }
 
 fn case(mode: &'static str) {

@@ -19,16 +19,29 @@ pub fn config(name: &str) -> PathBuf {
     plans::config(name)
 }
 
-/// A shipped plan with other rates.
-pub fn plan_from(name: &str, rates: &[f64]) -> Plan {
+/// The shipped plan `configs/NAME` with `edit` applied to its TOML document (use [`set`]).
+pub fn plan_with(name: &str, edit: impl FnOnce(&mut toml::Table)) -> Plan {
     let path = config(name);
     let mut doc: toml::Table = std::fs::read_to_string(&path).unwrap().parse().unwrap();
-    let plan = doc.get_mut("plan").unwrap().as_table_mut().unwrap();
-    plan.insert(
-        "rates_dps".into(),
-        toml::Value::Array(rates.iter().map(|r| toml::Value::Float(*r)).collect()),
-    );
+    edit(&mut doc);
     Plan::from_toml_str(&toml::to_string(&doc).unwrap(), &path).unwrap()
+}
+
+/// Sets `key` of `[section]` (which the document must have) to `value`.
+pub fn set(doc: &mut toml::Table, section: &str, key: &str, value: toml::Value) {
+    doc.get_mut(section)
+        .unwrap()
+        .as_table_mut()
+        .unwrap()
+        .insert(key.into(), value);
+}
+
+/// A shipped plan with other rates.
+pub fn plan_from(name: &str, rates: &[f64]) -> Plan {
+    plan_with(name, |d| {
+        let rates = rates.iter().map(|r| toml::Value::Float(*r)).collect();
+        set(d, "plan", "rates_dps", toml::Value::Array(rates));
+    })
 }
 
 /// quick.toml with other rates.

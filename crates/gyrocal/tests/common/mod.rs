@@ -13,6 +13,9 @@ use std::process::{Command, Output};
 #[path = "../../../../tests/support/plans.rs"]
 pub mod plans;
 
+#[path = "../../../../tests/support/stations.rs"]
+pub mod stations;
+
 /// True for the environment variables through which gyrocal finds a user's own files: its
 /// catalog and station file (`GYROCAL_*`) and the directories of their defaults (`HOME`,
 /// `XDG_*`), and the caller's log filter (`RUST_LOG`).
