@@ -104,7 +104,7 @@ pub enum Error {
         /// The limit, bytes.
         cap: usize,
     },
-    /// More bytes than [`Reader::with_max_bytes`] allows.
+    /// More bytes than [`crate::Reader::with_max_bytes`] allows.
     #[error(
         "{file}: larger than the {} MiB limit for a data file; is it the right file?",
         cap / (1024 * 1024)
