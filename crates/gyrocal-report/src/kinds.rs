@@ -46,6 +46,11 @@ pub struct Ending {
     pub results: String,
     /// The line saying where the run's page is, when one was written.
     pub page_line: Option<String>,
+    /// The run's page, when one was written.
+    pub page: Option<PathBuf>,
+    /// The run's result in one line (its headline figure with U, k = 2, and the verdict when
+    /// judged), when it has one.
+    pub result: Option<String>,
     /// What `gyrocal run --json` adds to its document, by key (the headline figures, the
     /// files written).
     pub json: serde_json::Map<String, serde_json::Value>,

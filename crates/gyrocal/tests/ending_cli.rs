@@ -88,3 +88,120 @@ fn the_same_runs_with_a_table_that_obeys_exit_0_at_rest() {
         assert!(!o.stderr.contains("could NOT"), "{what}: {}", o.stderr);
     }
 }
+
+/// configs/quick.toml with acceptance limits on the scale factor from `min` to `max` V/(°/s)
+/// (the simulated gyro's K is 0.3612).
+fn quick_with_limits(dir: &Path, name: &str, min: f64, max: f64) -> PathBuf {
+    let text = std::fs::read_to_string(config("quick.toml")).unwrap()
+        + &format!(
+            "\n[acceptance]\ndecision_rule = \"simple\"\n[acceptance.scale_factor]\nmin = {min}\nmax = {max}\n"
+        );
+    let path = dir.join(format!("{name}.toml"));
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// The line of `o`'s human text (stderr with `--json`) that starts with `prefix`.
+fn line<'a>(o: &'a RunOutput, prefix: &str) -> &'a str {
+    o.stderr
+        .lines()
+        .find(|l| l.starts_with(prefix))
+        .unwrap_or_else(|| panic!("no line {prefix:?} in {}", o.stderr))
+}
+
+/// A complete run ends with its result in one line (K ± U at k = 2 and the verdict) and where
+/// to look next; `--fail-on-verdict` turns a rejected gyro into exit 3 for CI, and a run
+/// without a verdict too, while the run itself (its files, its JSON) is the same.
+#[test]
+fn the_result_in_one_line_and_the_verdict_as_an_exit_code_when_asked() {
+    let tmp = tempfile::tempdir().unwrap();
+    let good = quick_with_limits(tmp.path(), "good", 0.35, 0.37);
+    let bad = quick_with_limits(tmp.path(), "bad", 0.30, 0.32);
+
+    let o = run_json(&[
+        &good,
+        &"--simulate",
+        &"--fail-on-verdict",
+        &"--out",
+        &tmp.path().join("g"),
+    ]);
+    assert_eq!(o.code, Some(0), "{}", o.stderr);
+    let result = line(&o, "result: ");
+    assert!(result.contains("K = 0.361"), "{result}");
+    assert!(
+        result.contains(" ± ") && result.contains("(k = 2)"),
+        "{result}"
+    );
+    assert!(result.contains("verdict PASS (simple rule)"), "{result}");
+    let next = o.stderr.lines().last().unwrap();
+    assert!(
+        next.starts_with("next: open ") && next.ends_with("report.html"),
+        "{next}"
+    );
+
+    // the same rejected gyro: exit 0 unless asked, 3 when asked
+    let plain = run_json(&[
+        &bad,
+        &"--simulate",
+        &"--no-report",
+        &"--out",
+        &tmp.path().join("b0"),
+    ]);
+    assert_eq!(plain.code, Some(0), "{}", plain.stderr);
+    assert!(line(&plain, "result: ").contains("verdict FAIL (simple rule)"));
+    let asked = run_json(&[
+        &bad,
+        &"--simulate",
+        &"--no-report",
+        &"--fail-on-verdict",
+        &"--out",
+        &tmp.path().join("b1"),
+    ]);
+    assert_eq!(asked.code, Some(3), "{}", asked.stderr);
+    assert_eq!(asked.doc["status"], "complete");
+    assert_eq!(asked.doc["exit_code"], 3);
+    assert!(asked.stderr.contains("verdict: FAIL"), "{}", asked.stderr);
+    // a marginal level is stricter than fail, never laxer
+    let pass_marginal = run_json(&[
+        &good,
+        &"--simulate",
+        &"--no-report",
+        &"--fail-on-verdict=marginal",
+        &"--out",
+        &tmp.path().join("g1"),
+    ]);
+    assert_eq!(pass_marginal.code, Some(0), "{}", pass_marginal.stderr);
+
+    // no limits, no verdict: asked to fail on one, the run says so and exits 3
+    let none = run_json(&[
+        &config("quick.toml"),
+        &"--simulate",
+        &"--no-report",
+        &"--fail-on-verdict",
+        &"--out",
+        &tmp.path().join("n"),
+    ]);
+    assert_eq!(none.code, Some(3), "{}", none.stderr);
+    assert!(none.stderr.contains("has no verdict"), "{}", none.stderr);
+    assert!(line(&none, "result: ").contains("no acceptance limits"));
+}
+
+/// A complete drift record ends with its noise terms in one line, in °/h.
+#[test]
+fn a_drift_record_ends_with_its_noise_terms() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = short_drift(tmp.path());
+    let o = run_json(&[&plan, &"--simulate", &"--out", &tmp.path().join("d")]);
+    assert_eq!(o.code, Some(0), "{}", o.stderr);
+    let result = line(&o, "result: ");
+    assert!(
+        result.contains("N = ") && result.contains("°/√h"),
+        "{result}"
+    );
+    assert!(result.contains("(k = 2)"), "{result}");
+    assert!(
+        o.doc["page"].as_str().unwrap().ends_with("allan.html"),
+        "{}",
+        o.doc
+    );
+}

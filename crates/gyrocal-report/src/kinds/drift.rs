@@ -52,6 +52,11 @@ fn ending(
     }
     match crate::allan::write_allan_into(run, &Default::default(), &[]) {
         Ok((a, files)) => {
+            end.result = Some(result_line(&a, &dir));
+            end.page = files
+                .iter()
+                .find(|f| f.extension().is_some_and(|e| e == "html"))
+                .cloned();
             end.json.insert(
                 "allan".into(),
                 serde_json::json!({
@@ -91,3 +96,32 @@ fn ending(
     Ok(end)
 }
 
+
+/// "result: N = … ± … °/√h, B = … ± … °/h, K = … ± … °/h/√h (k = 2)": the noise terms of the
+/// five-term fit, as the certificate prints a value with its U; a record left in volts says
+/// how to get them.
+fn result_line(doc: &gyrocal_analysis::drift::AllanDocument, dir: &Path) -> String {
+    let f = gyrocal_analysis::drift::DriftFigures::of(doc).figures();
+    let term = |name: &str, v: Option<f64>, u: Option<f64>, unit: &str| {
+        v.map(|v| {
+            let (v, u) = gyrocal_files::num::value_and_u(v, u);
+            format!("{name} = {v} ± {u} {unit}")
+        })
+    };
+    let terms: Vec<String> = [
+        term("N", f.arw_deg_rt_h, f.u_arw_deg_rt_h, "°/√h"),
+        term("B", f.bias_instability_dph, f.u_bias_instability_dph, "°/h"),
+        term("K", f.rrw_dph_rt_h, f.u_rrw_dph_rt_h, "°/h/√h"),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    if terms.is_empty() {
+        format!(
+            "result: the record is in volts (no scale factor known): `gyrocal allan {} --scale-factor K` gives its noise terms in °/h",
+            dir.display()
+        )
+    } else {
+        format!("result: {} (k = 2)", terms.join(", "))
+    }
+}

@@ -25,15 +25,42 @@ fn sweep_ending(run: &mut RunDir, pages: bool) -> Result<Ending, ReportError> {
     end.json
         .insert("acceptance".into(), serde_json::json!(m.acceptance));
     crate::text::fit_summary(&mut end.results, &analysis);
+    end.result = Some(result_line(&analysis, m));
     if pages {
         // the data and the fit are safe on disk already: a report failure is a warning
         match crate::write_run_report(run.path()) {
             Ok(path) => {
                 end.page_line = Some(format!("report: {}", path.display()));
+                end.page = Some(path.clone());
                 end.json.insert("report".into(), serde_json::json!(path));
             }
             Err(e) => end.warnings.push(format!("no report: {e}")),
         }
     }
     Ok(end)
+}
+
+/// "result: K = 0.36120 ± 0.00015 V/(°/s) (k = 2); verdict PASS (guarded rule)": the scale
+/// factor as the certificate prints a value with its U, and the verdict when the plan has
+/// acceptance limits.
+fn result_line(analysis: &gyrocal_fit::Analysis, m: &gyrocal_files::Manifest) -> String {
+    let figures = serde_json::to_value(analysis)
+        .map(|v| gyrocal_analysis::sweep::figures(&v, m))
+        .unwrap_or_default();
+    let k = match figures.scale_factor {
+        Some(k) => {
+            let (v, u) = gyrocal_files::num::value_and_u(k, figures.u_scale_factor);
+            if figures.u_scale_factor.is_some() {
+                format!("K = {v} ± {u} V/(°/s) (k = 2)")
+            } else {
+                format!("K = {v} V/(°/s) (no uncertainty budget)")
+            }
+        }
+        None => "no scale factor".to_string(),
+    };
+    let verdict = match &m.acceptance {
+        Some(a) => format!("; verdict {} ({} rule)", a.verdict.label(), a.rule.as_str()),
+        None => "; no acceptance limits in the plan".to_string(),
+    };
+    format!("result: {k}{verdict}")
 }

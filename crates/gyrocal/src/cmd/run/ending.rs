@@ -75,6 +75,10 @@ pub(super) fn finish(
     let code = finish_human(args, dir, summary, &mut run, signal, &human, doc);
     catalog_close(dir, doc);
     let code = code?;
+    if summary.status == Status::Complete && summary.table.nothing_turning() {
+        let serial = run.manifest().dut.as_ref().and_then(|d| d.serial.clone());
+        human(next_steps(dir, serial.as_deref(), doc));
+    }
     doc["exit_code"] = serde_json::json!(code);
     Ok(code)
 }
@@ -201,5 +205,55 @@ pub(super) fn finish_complete(
         human(line);
     }
     human(format!("run directory: {}", dir.display()));
-    Ok(0)
+    if let Some(result) = ending.result {
+        human(result);
+    }
+    doc["page"] = serde_json::json!(ending.page);
+    Ok(verdict_code(args, run, doc))
+}
+
+/// The exit code of a complete run at rest: 0, or [`EXIT_VERDICT`] when `--fail-on-verdict`
+/// refuses its verdict (said on stderr, with the quantities that make it).
+fn verdict_code(args: &RunArgs, run: &RunDir, doc: &mut serde_json::Value) -> u8 {
+    let Some(level) = args.fail_on_verdict else {
+        return 0;
+    };
+    match &run.manifest().acceptance {
+        Some(a) if a.verdict >= level.verdict() => {
+            say!(
+                "gyrocal: {}; --fail-on-verdict {}: exit {EXIT_VERDICT}",
+                gyrocal_report::text::verdict_line(a),
+                level.verdict().as_str()
+            );
+            EXIT_VERDICT
+        }
+        Some(_) => 0,
+        None => {
+            doc["verdict_missing"] = serde_json::json!(true);
+            say!(
+                "gyrocal: --fail-on-verdict: the run has no verdict (its plan has no [acceptance]): exit {EXIT_VERDICT}"
+            );
+            EXIT_VERDICT
+        }
+    }
+}
+
+/// The last line of a complete run: where to look next (its page, the gyro's history when the
+/// run was catalogued).
+fn next_steps(dir: &Path, serial: Option<&str>, doc: &serde_json::Value) -> String {
+    let page = doc["page"]
+        .as_str()
+        .map_or_else(|| dir.display().to_string(), str::to_string);
+    let catalogued = doc["catalog"]["updated"].as_bool() == Some(true);
+    match (serial, catalogued) {
+        (Some(serial), true) => format!(
+            "next: open {page}; catalogued in {}: `gyrocal history {serial}` shows this gyro's calibrations",
+            doc["catalog"]["url"].as_str().unwrap_or("the catalog")
+        ),
+        (None, true) => format!(
+            "next: open {page}; catalogued in {} (name the gyro with --dut-serial to follow it with `gyrocal history`)",
+            doc["catalog"]["url"].as_str().unwrap_or("the catalog")
+        ),
+        (_, false) => format!("next: open {page}"),
+    }
 }

@@ -110,7 +110,38 @@ pub struct RunArgs {
     /// Do not write report.html at the end.
     #[arg(long)]
     pub no_report: bool,
+    /// Exit with 3 when a complete run's acceptance verdict is LEVEL or worse (pass <
+    /// marginal < indeterminate < fail; LEVEL defaults to fail), or when it has no verdict (no
+    /// [acceptance] in the plan): for CI and scripts that must fail on a rejected gyro. The
+    /// run, its files and the catalog are the same either way.
+    #[arg(long, value_name = "LEVEL", num_args = 0..=1, default_missing_value = "fail")]
+    pub fail_on_verdict: Option<VerdictLevel>,
 }
+
+/// The verdict at or beyond which `--fail-on-verdict` exits 3.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum VerdictLevel {
+    /// Inside the limits but outside the marginal band, or worse.
+    Marginal,
+    /// Cannot be decided, or worse.
+    Indeterminate,
+    /// Outside the limits.
+    Fail,
+}
+
+impl VerdictLevel {
+    fn verdict(self) -> gyrocal_fit::acceptance::Verdict {
+        use gyrocal_fit::acceptance::Verdict;
+        match self {
+            VerdictLevel::Marginal => Verdict::Marginal,
+            VerdictLevel::Indeterminate => Verdict::Indeterminate,
+            VerdictLevel::Fail => Verdict::Fail,
+        }
+    }
+}
+
+/// The exit code of a complete run whose verdict `--fail-on-verdict` refuses.
+pub const EXIT_VERDICT: u8 = 3;
 
 /// Writes a line to stderr, ignoring errors (the terminal may be gone after SIGHUP).
 macro_rules! say {
