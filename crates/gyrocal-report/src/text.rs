@@ -97,26 +97,24 @@ pub fn fit_summary(out: &mut String, a: &Analysis) {
                 ),
             };
             let _ = writeln!(out, "  {:<24} {status}", "");
-            if let TrainingData::RateBins { bins, points } = t.training_data {
+            // online passes on summaries of a large data set: say which, and over how many
+            let online = match t.training_data {
+                TrainingData::RateBins { bins, points } => {
+                    Some((format!("{bins} rate bins (continuous rates, above"), points))
+                }
+                TrainingData::RateMeans { rates, points } => {
+                    Some((format!("the {rates} rates (above"), points))
+                }
+                _ => None,
+            };
+            if let Some((means_of, points)) = online {
                 let limit = t
                     .online_pass_limit
                     .map(|l| format!(", online passes limited to {l}"))
                     .unwrap_or_default();
                 let _ = writeln!(
                     out,
-                    "  {:<24} online passes on the means of {bins} rate bins (continuous rates, above {} points), batch passes and errors over all {points} points{limit}",
-                    "",
-                    gyrocal_fit::neuron::RATE_MEANS_ABOVE_POINTS
-                );
-            }
-            if let TrainingData::RateMeans { rates, points } = t.training_data {
-                let limit = t
-                    .online_pass_limit
-                    .map(|l| format!(", online passes limited to {l}"))
-                    .unwrap_or_default();
-                let _ = writeln!(
-                    out,
-                    "  {:<24} online passes on the means of the {rates} rates (above {} points), batch passes and errors over all {points} points{limit}",
+                    "  {:<24} online passes on the means of {means_of} {} points), batch passes and errors over all {points} points{limit}",
                     "",
                     gyrocal_fit::neuron::RATE_MEANS_ABOVE_POINTS
                 );
