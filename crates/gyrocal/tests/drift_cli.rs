@@ -473,3 +473,35 @@ fn a_meter_fault_in_a_record_without_a_table_fails_cleanly_and_resumes() {
     assert_eq!(code, Some(0), "{stderr}");
     assert_eq!(segments_done(&out), 10);
 }
+
+/// `gyrocal check` of the 3 h drift plan summarises its 167 identical segments in three lines
+/// (the first, the range, the last) instead of 167 rows; `--json` still lists every step.
+#[test]
+fn check_of_a_drift_plan_summarises_its_identical_segments() {
+    let o = gyrocal()
+        .arg("check")
+        .arg(config("drift.toml"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("… steps 2–166 the same as step 1"), "{text}");
+    let rows = text
+        .lines()
+        // a step row: step, pass, rate, samples, ramp, dwell, acquire, at
+        .filter(|l| {
+            l.split_whitespace().count() == 8
+                && l.split_whitespace().all(|f| f.parse::<f64>().is_ok())
+        })
+        .count();
+    assert_eq!(rows, 2, "{text}");
+    assert!(text.contains("167 steps, 501000 readings"), "{text}");
+    let o = gyrocal()
+        .arg("check")
+        .arg(config("drift.toml"))
+        .arg("--json")
+        .output()
+        .unwrap();
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(doc["steps"].as_array().unwrap().len(), 167);
+}

@@ -281,7 +281,11 @@ fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
         "{:>4} {:>4} {:>9} {:>8} {:>8} {:>8} {:>9} {:>10}",
         "step", "pass", "rate °/s", "samples", "ramp s", "dwell s", "acquire s", "at s"
     );
+    // A run of identical steps (a drift record's segments, a plan repeated at one rate) is
+    // shown by its first and last rows and one line between: 167 identical rows say nothing
+    // the two rows and the count do not.
     let mut at = 0.0;
+    let mut rows: Vec<(String, String)> = Vec::with_capacity(est.steps.len());
     for s in &est.steps {
         at += s.ramp.as_secs_f64() + s.settle.as_secs_f64() + s.acquire.as_secs_f64();
         let turns = match s.step.acquire {
@@ -291,18 +295,42 @@ fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
             ),
             gyrocal_files::Acquire::Samples(_) => String::new(),
         };
-        let _ = writeln!(
-            o,
-            "{:>4} {:>4} {:>9} {:>8} {:>8.2} {:>8.2} {:>9.2} {:>10.1}{turns}",
-            s.step.index + 1,
-            s.step.pass + 1,
+        // what the step does, without where it is in the schedule
+        let what = format!(
+            "{:>9} {:>8} {:>8.2} {:>8.2} {:>9.2}",
             s.step.rate_dps,
             s.samples,
             s.ramp.as_secs_f64(),
             s.settle.as_secs_f64(),
             s.acquire.as_secs_f64(),
-            at
         );
+        let row = format!(
+            "{:>4} {:>4} {what} {at:>10.1}{turns}",
+            s.step.index + 1,
+            s.step.pass + 1,
+        );
+        rows.push((what + &turns, row));
+    }
+    let mut i = 0;
+    while i < rows.len() {
+        let same = rows[i..].iter().take_while(|r| r.0 == rows[i].0).count();
+        if same >= 4 {
+            let _ = writeln!(o, "{}", rows[i].1);
+            let _ = writeln!(
+                o,
+                "{:>9} steps {}–{} the same as step {}",
+                "…",
+                i + 2,
+                i + same - 1,
+                i + 1
+            );
+            let _ = writeln!(o, "{}", rows[i + same - 1].1);
+        } else {
+            for r in &rows[i..i + same] {
+                let _ = writeln!(o, "{}", r.1);
+            }
+        }
+        i += same;
     }
     let samples: u64 = est.steps.iter().map(|s| s.samples).sum();
     let _ = writeln!(o);
