@@ -215,13 +215,52 @@ pub fn uncertainty_inputs(
 
 /// One line per default model the sweep's schedule cannot support: the fit will skip it
 /// (`gyrocal check` and `gyrocal run` say so before the run).
+///
+/// Also: rates the table's hold check cannot tell from rest (within its at-rate tolerance of
+/// zero), and a schedule that leaves the common-K2 asymmetry fit fewer than
+/// [`MIN_ASYMMETRY_DOF`] degrees of freedom (a 5-step plan leaves it 1: its U then rests on one
+/// residual, and the figure can come out with the wrong sign).
 pub fn plan_warnings(plan: &Plan, path: &Path) -> Vec<String> {
     let rates: Vec<f64> = plan.schedule().iter().map(|s| s.rate_dps).collect();
     let mut distinct = rates.clone();
     distinct.sort_by(f64::total_cmp);
     distinct.dedup();
     let list: Vec<String> = distinct.iter().map(f64::to_string).collect();
-    gyrocal_fit::unsupported_models(&rates, &gyrocal_fit::Options::default().models)
+    let mut out = model_warnings(path, &rates, &distinct, &list);
+    let tolerance = plan.table().rate_tolerance_dps;
+    let at_rest: Vec<String> = distinct
+        .iter()
+        .filter(|r| **r != 0.0 && r.abs() <= tolerance)
+        .map(f64::to_string)
+        .collect();
+    if plan.has_table() && !at_rest.is_empty() {
+        out.push(format!(
+            "{}: {} °/s is within the table's at-rate tolerance (±{tolerance} °/s) of zero: its hold check cannot tell such a rate from rest; lower [table] rate_tolerance_dps or leave the rate out",
+            path.display(),
+            at_rest.join(", ")
+        ));
+    }
+    let both_signs = rates.iter().any(|r| *r > 0.0) && rates.iter().any(|r| *r < 0.0);
+    // K0, K+, K−, K2 over one mean per step
+    let dof = rates.len().saturating_sub(4);
+    if both_signs && dof < MIN_ASYMMETRY_DOF {
+        out.push(format!(
+            "{}: {} steps leave the common-K2 asymmetry fit (K0, K+, K−, K2) {dof} degree{} of freedom (at least {MIN_ASYMMETRY_DOF} wanted): its asymmetry and U rest on too few residuals to be trusted; add rates or passes",
+            path.display(),
+            rates.len(),
+            if dof == 1 { "" } else { "s" }
+        ));
+    }
+    out
+}
+
+/// The fewest degrees of freedom the common-K2 asymmetry fit should have before its figure and
+/// its U are worth reporting without a warning.
+pub const MIN_ASYMMETRY_DOF: usize = 3;
+
+/// One line per default model the schedule cannot support.
+fn model_warnings(path: &Path, rates: &[f64], distinct: &[f64], list: &[String]) -> Vec<String> {
+    gyrocal_fit::unsupported_models(rates, &gyrocal_fit::Options::default().models)
         .into_iter()
         .map(|s| {
             format!(

@@ -177,3 +177,107 @@ fn a_regular_file_as_port_is_not_a_serial_port() {
         "no run directory for a port that never opened"
     );
 }
+
+/// `gyrocal check --json` on the plan `text` (written into `dir`): its warnings and its
+/// human text.
+fn check_warnings(dir: &Path, name: &str, text: &str) -> (Vec<String>, String) {
+    let path = common::plans::write(dir, name, text);
+    let o = gyrocal()
+        .arg("check")
+        .arg(&path)
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let warnings = doc["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| w.as_str().unwrap().to_string())
+        .collect();
+    let human = gyrocal().arg("check").arg(&path).output().unwrap();
+    (
+        warnings,
+        String::from_utf8_lossy(&human.stdout).into_owned(),
+    )
+}
+
+/// What an operator expects `check` to say before a run: a rate the table cannot tell from
+/// rest, a fit with too few degrees of freedom for its asymmetry, a plan longer than a day,
+/// and the acceptance limits the run will be judged by.
+#[test]
+fn check_warns_of_what_the_run_could_not_do_and_prints_the_acceptance_limits() {
+    let tmp = tempfile::tempdir().unwrap();
+    // 0.0005 °/s is inside the default ±0.001 °/s at-rate tolerance
+    let (w, _) = check_warnings(
+        tmp.path(),
+        "slow.toml",
+        &common::plans::sweep("slow", &[0.0, 0.0005, -0.0005, 1.0, -1.0, 10.0, -10.0], 10),
+    );
+    assert!(
+        w.iter()
+            .any(|w| w.contains("0.0005, 0.0005") || w.contains("-0.0005, 0.0005")),
+        "{w:?}"
+    );
+    assert!(
+        w.iter()
+            .any(|w| w.contains("at-rate tolerance (±0.001 °/s)")),
+        "{w:?}"
+    );
+
+    // five steps: the common-K2 asymmetry keeps one degree of freedom
+    let (w, _) = check_warnings(
+        tmp.path(),
+        "five.toml",
+        &common::plans::sweep("five", &[0.0, 1.0, -1.0, 10.0, -10.0], 10),
+    );
+    assert!(w.iter().any(|w| w.contains("1 degree of freedom")), "{w:?}");
+    // nine steps: enough, no such warning
+    let (w, _) = check_warnings(
+        tmp.path(),
+        "nine.toml",
+        &common::plans::sweep(
+            "nine",
+            &[0.0, 1.0, -1.0, 3.0, -3.0, 10.0, -10.0, 20.0, -20.0],
+            10,
+        ),
+    );
+    assert!(!w.iter().any(|w| w.contains("degree")), "{w:?}");
+
+    // 19 rates × 10^6 readings of 21.5 ms: days
+    let (w, _) = check_warnings(
+        tmp.path(),
+        "long.toml",
+        &common::plans::sweep(
+            "long",
+            &[0.0, 1.0, -1.0, 3.0, -3.0, 10.0, -10.0, 20.0, -20.0],
+            1_000_000,
+        ),
+    );
+    assert!(w.iter().any(|w| w.contains("longer than a day")), "{w:?}");
+
+    let limited = common::plans::sweep(
+        "limited",
+        &[0.0, 1.0, -1.0, 3.0, -3.0, 10.0, -10.0, 20.0, -20.0],
+        10,
+    ) + "[acceptance]\ndecision_rule = \"guarded\"\n[acceptance.scale_factor]\nmin = 0.35\nmax = 0.37\nmarginal_min = 0.355\nmarginal_max = 0.365\n";
+    let (_, text) = check_warnings(tmp.path(), "limited.toml", &limited);
+    assert!(text.contains("acceptance (guarded rule):"), "{text}");
+    assert!(
+        text.contains("scale_factor") && text.contains("0.35 to 0.37"),
+        "{text}"
+    );
+    assert!(text.contains("marginal outside 0.355 to 0.365"), "{text}");
+    let (_, text) = check_warnings(
+        tmp.path(),
+        "none.toml",
+        &common::plans::sweep("none", &[0.0, 1.0, -1.0], 10),
+    );
+    assert!(text.contains("acceptance: none"), "{text}");
+}

@@ -79,6 +79,13 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
     let timing = crate::instruments::meter_timing(&plan);
     let est = estimate::estimate(&plan, &steps, 0.0, timing.as_ref());
     let mut warnings = gyrocal_analysis::plan_warnings(&plan, &args.plan);
+    if est.total > std::time::Duration::from_secs(24 * 3600) {
+        warnings.push(format!(
+            "{}: the plan runs about {}, longer than a day: is that meant (samples_per_rate, repeat, settle_s)?",
+            args.plan.display(),
+            hms(est.total.as_secs_f64())
+        ));
+    }
     // the station `gyrocal run` would use, read the same way (a bad one is bad input)
     if let Some((path, station)) = gyrocal_files::station::Station::resolve(args.station.as_deref())
         .map_err(|e| BadInput(format!("station: {e}")))?
@@ -343,6 +350,37 @@ fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
     );
     if let Some(k) = plan.kind_summary() {
         let _ = writeln!(o, "{}", k.line);
+    }
+    match plan.acceptance() {
+        Some(a) => {
+            let _ = writeln!(o, "acceptance ({} rule):", a.rule.as_str());
+            for (q, l) in &a.limits {
+                let bound = |v: Option<f64>| v.map_or_else(|| "—".to_string(), |v| v.to_string());
+                let _ = writeln!(
+                    o,
+                    "  {:<20} {} to {} {}{}",
+                    q.name(),
+                    bound(l.min),
+                    bound(l.max),
+                    q.unit(),
+                    if l.marginal_min.is_some() || l.marginal_max.is_some() {
+                        format!(
+                            " (marginal outside {} to {})",
+                            bound(l.marginal_min),
+                            bound(l.marginal_max)
+                        )
+                    } else {
+                        String::new()
+                    }
+                );
+            }
+        }
+        None => {
+            let _ = writeln!(
+                o,
+                "acceptance: none (no [acceptance] in the plan: no verdict)"
+            );
+        }
     }
     if let Some(w) = plan.warmup() {
         let _ = writeln!(
