@@ -420,3 +420,34 @@ fn many_points_get_per_rate_summaries_unless_residuals_is_given() {
     assert!(text.contains("LS mean r. [mV]"), "{text}");
     assert!(text.lines().count() < 60, "{text}");
 }
+
+/// `gyrocal fit RUN_DIR` fits the run's steps (its steps.csv), the same as naming the file;
+/// a directory that is no run is refused saying what to give, not "cannot read: Is a
+/// directory".
+#[test]
+fn a_run_directory_is_fitted_by_its_steps_and_another_directory_is_refused_in_words() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = common::fixture_rundir("sweep-complete", tmp.path());
+    let steps = run.join("steps.csv");
+    let by_dir = gyrocal(&["fit", run.to_str().unwrap(), "--json"]);
+    assert_eq!(
+        by_dir.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&by_dir.stderr)
+    );
+    let by_file = gyrocal(&["fit", steps.to_str().unwrap(), "--json"]);
+    let k = |o: &std::process::Output| {
+        let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        doc["metrics"]["scale_factor"].as_f64().unwrap()
+    };
+    assert_eq!(k(&by_dir), k(&by_file));
+
+    let empty = tmp.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let o = gyrocal(&["fit", empty.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("a directory without steps.csv"), "{err}");
+    assert!(!err.contains("Is a directory"), "{err}");
+}

@@ -68,8 +68,9 @@ impl From<MethodArg> for Method {
 /// Arguments of `gyrocal fit`.
 #[derive(Debug, Args)]
 pub struct FitArgs {
-    /// CSV files with columns rate_dps and volts (optional volts_std, n). Several files: each is
-    /// fitted, and the repeatability across them is reported.
+    /// CSV files with columns rate_dps and volts (optional volts_std, n), or run directories
+    /// (their steps.csv). Several: each is fitted, and the repeatability across them is
+    /// reported.
     #[arg(required = true, value_name = "FILE")]
     pub files: Vec<PathBuf>,
     /// Print exactly one JSON document on stdout instead of the human report.
@@ -185,7 +186,24 @@ impl FitArgs {
 /// the file (and the line). A regular file only: a named pipe or a device (`/dev/zero`) is
 /// refused before it is opened. Memory is bounded by [`input::MAX_ROWS`] rows and
 /// [`input::MAX_LINE_BYTES`] a line. A UTF-8 byte-order mark (Excel's) is skipped.
+///
+/// A run directory is read by its `steps.csv` (the step means the run's own fit uses); any
+/// other directory is refused naming what to give.
 fn read(path: &std::path::Path) -> anyhow::Result<Columns> {
+    let steps = path.join(gyrocal_files::rundir::STEPS_CSV);
+    let path = if path.is_dir() {
+        if !steps.is_file() {
+            return Err(BadInput(format!(
+                "{}: a directory without {}: give a data file (CSV with rate_dps and volts) or a run directory",
+                path.display(),
+                gyrocal_files::rundir::STEPS_CSV
+            ))
+            .into());
+        }
+        steps.as_path()
+    } else {
+        path
+    };
     input::read_columns(path).map_err(|e| BadInput(e.to_string()).into())
 }
 

@@ -18,7 +18,7 @@ pub struct HistoryArgs {
     #[arg(long)]
     pub json: bool,
     /// Write the history as an HTML page with trend plots to FILE.
-    #[arg(short = 'o', long = "output", value_name = "FILE.html")]
+    #[arg(short = 'o', long = "out", alias = "output", value_name = "FILE.html")]
     pub output: Option<PathBuf>,
     /// Count runs on the simulated bench too (left out by default).
     #[arg(long)]
