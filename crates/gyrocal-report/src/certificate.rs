@@ -568,7 +568,10 @@ pub(crate) fn results(html: &mut String, a: &Analysis) {
             Some(c.asymmetry_ppm),
             metric_u("asymmetry_common_k2").or(Some(2.0 * c.asymmetry_std_error_ppm)),
             "ppm",
-            "one fit with K2: unbiased; the result (acceptance key asymmetry_ppm)".into(),
+            format!(
+                "one fit with K2: unbiased; the result (acceptance key asymmetry_ppm){}",
+                few_dof(c.degrees_of_freedom)
+            ),
         ),
         None => row(
             "asymmetry_common_k2",
@@ -760,6 +763,20 @@ pub(crate) fn end_mark(html: &mut String, id: &str) {
         "<p class=\"end\" id=\"end-of-report\">— End of report {} —</p>",
         esc(id)
     );
+}
+
+/// What the certificate and the terminal say beside the common-K2 asymmetry when its fit has
+/// fewer than [`gyrocal_analysis::sweep::MIN_ASYMMETRY_DOF`] degrees of freedom (the warning
+/// `gyrocal check` gives before such a run), else nothing.
+pub(crate) fn few_dof(dof: usize) -> String {
+    if dof < gyrocal_analysis::sweep::MIN_ASYMMETRY_DOF {
+        format!(
+            "; only {dof} degree{} of freedom: too few residuals for this figure and its U to be trusted",
+            if dof == 1 { "" } else { "s" }
+        )
+    } else {
+        String::new()
+    }
 }
 
 #[cfg(test)]

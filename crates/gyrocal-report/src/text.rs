@@ -296,8 +296,11 @@ pub fn fit_summary(out: &mut String, a: &Analysis) {
     if let Some(c) = &m.asymmetry_common_k2 {
         let _ = writeln!(
             out,
-            "  asymmetry, common K2  {:.1} ± {:.1} ppm (1σ; one fit K0 + K+·ω⁺ + K−·ω⁻ + K2·ω², K2 = {:.3e} V/(°/s)²: not biased by the even-order term as the line pair above is)",
-            c.asymmetry_ppm, c.asymmetry_std_error_ppm, c.k2
+            "  asymmetry, common K2  {:.1} ± {:.1} ppm (1σ; one fit K0 + K+·ω⁺ + K−·ω⁻ + K2·ω², K2 = {:.3e} V/(°/s)²: not biased by the even-order term as the line pair above is){}",
+            c.asymmetry_ppm,
+            c.asymmetry_std_error_ppm,
+            c.k2,
+            crate::certificate::few_dof(c.degrees_of_freedom)
         );
     }
     if let Some(r) = m.repeatability_ppm {

@@ -205,3 +205,36 @@ fn a_drift_record_ends_with_its_noise_terms() {
         o.doc
     );
 }
+
+/// The common-K2 asymmetry of a 5-step sweep has 1 degree of freedom: the terminal and the
+/// certificate say so beside the figure (as `gyrocal check` warned); the paper's 19 steps
+/// leave 15 and nothing is said.
+#[test]
+fn too_few_degrees_of_freedom_are_said_beside_the_asymmetry() {
+    let tmp = tempfile::tempdir().unwrap();
+    const FEW: &str = "only 1 degree of freedom: too few residuals";
+    let quick = tmp.path().join("quick");
+    let o = run_json(&[&config("quick.toml"), &"--simulate", &"--out", &quick]);
+    assert_eq!(o.code, Some(0), "{}", o.stderr);
+    assert!(
+        line(&o, "  asymmetry, common K2").contains(FEW),
+        "{}",
+        o.stderr
+    );
+    let html = std::fs::read_to_string(quick.join("report.html")).unwrap();
+    assert!(
+        html.contains(FEW),
+        "the certificate says it beside the figure"
+    );
+
+    let paper = tmp.path().join("paper");
+    let o = run_json(&[&config("paper.toml"), &"--simulate", &"--out", &paper]);
+    assert_eq!(o.code, Some(0), "{}", o.stderr);
+    assert!(
+        !line(&o, "  asymmetry, common K2").contains("degree"),
+        "{}",
+        o.stderr
+    );
+    let html = std::fs::read_to_string(paper.join("report.html")).unwrap();
+    assert!(!html.contains("degree of freedom: too few"));
+}
