@@ -238,3 +238,28 @@ fn too_few_degrees_of_freedom_are_said_beside_the_asymmetry() {
     let html = std::fs::read_to_string(paper.join("report.html")).unwrap();
     assert!(!html.contains("degree of freedom: too few"));
 }
+
+/// A refused verdict never hides a table that could not be confirmed at rest: asked to fail
+/// on the verdict, a rejected gyro on a table that ignores the stop still exits 1 (not 3)
+/// with "stop it by hand" as the last line.
+#[test]
+fn a_refused_verdict_with_a_table_that_ignores_the_stop_exits_1_saying_stop_it_by_hand() {
+    let tmp = tempfile::tempdir().unwrap();
+    let bad = quick_with_limits(tmp.path(), "bad", 0.30, 0.32);
+    let o = run_json(&[
+        &bad,
+        &"--simulate",
+        &"--no-report",
+        &"--fail-on-verdict",
+        &"--sim-fault",
+        &"table:silent@stop1",
+        &"--out",
+        &tmp.path().join("run"),
+    ]);
+    assert_complete_but_not_at_rest(&o, "sweep with a refused verdict");
+    assert!(
+        line(&o, "result: ").contains("verdict FAIL"),
+        "{}",
+        o.stderr
+    );
+}

@@ -157,16 +157,20 @@ pub(super) fn finish_human(
         }
     }
     // one ending for every kind of complete run: its results, then the table's rest state
-    // decides the last line and the exit code
-    let code = finish_complete(args, dir, summary, run, human, doc)?;
+    // decides the last line and the exit code, whatever the analysis did (a failed fit must
+    // not hide a table that could not be confirmed at rest)
+    let ended = finish_complete(args, dir, summary, run, human, doc);
     if !summary.table.nothing_turning() {
+        if let Err(e) = &ended {
+            say!("gyrocal: error: {e:#}");
+        }
         say!(
             "gyrocal: all steps recorded, but {}",
             rest_text(&summary.table)
         );
         return Ok(1);
     }
-    Ok(code)
+    ended
 }
 
 /// The end of a complete run, whatever its kind: its analysis and page (the report crate's
