@@ -371,7 +371,7 @@ impl Catalog {
             url: url.clone(),
             pool,
         };
-        if let Err(e) = catalog.migrate().await {
+        if let Err(e) = catalog.migrate(opts.busy_timeout).await {
             // a damaged file fails the migrator's reads: say so, with the repair
             return Err(match (&catalog.pool, url) {
                 (Pool::Sqlite(p), CatalogUrl::Sqlite(path)) => match health::quick_check(p).await {
@@ -387,7 +387,10 @@ impl Catalog {
         Ok(catalog)
     }
 
-    async fn migrate(&self) -> Result<(), CatalogError> {
+    /// Runs the migrations; `busy` bounds how long a migration waits for another writer's
+    /// lock on an SQLite file (SQLite reports a lock it will not wait for, such as a read
+    /// transaction's upgrade to a write while another connection writes, at once).
+    async fn migrate(&self, busy: Duration) -> Result<(), CatalogError> {
         let source = match self.pool {
             Pool::Sqlite(_) => Embedded(Backend::Sqlite),
             Pool::Postgres(_) => Embedded(Backend::Postgres),
@@ -398,8 +401,13 @@ impl Catalog {
         // PostgreSQL serialises concurrent migrations with an advisory lock; SQLite has no
         // such lock, so two processes opening a new file at once may race: the loser's
         // migration fails (the tables exist) and a second attempt finds them recorded.
+        // A file another writer holds locked is waited for (up to `busy`, backing off), as
+        // every other write waits through the busy timeout; any other failure is tried 3 times.
         let mut last = None;
-        for attempt in 0..3 {
+        let deadline = tokio::time::Instant::now() + busy;
+        let mut pause = Duration::from_millis(50);
+        let mut attempt = 0;
+        while attempt < 3 {
             let result = on_pool!(self, |p| migrator.run(p).await);
             match result {
                 Ok(()) => return Ok(()),
@@ -410,8 +418,15 @@ impl Catalog {
                     {
                         return Err(db_error(&self.url, inner));
                     }
+                    let locked = e.to_string().contains("database is locked");
+                    if !locked || tokio::time::Instant::now() + pause > deadline {
+                        attempt += 1;
+                    }
                     last = Some(e);
-                    tokio::time::sleep(Duration::from_millis(50)).await;
+                    tokio::time::sleep(pause).await;
+                    if locked {
+                        pause = (pause * 2).min(Duration::from_millis(500));
+                    }
                 }
             }
         }
