@@ -897,12 +897,29 @@ async fn sqlite_pool(
         .synchronous(SqliteSynchronous::Normal)
         .busy_timeout(opts.busy_timeout)
         .foreign_keys(true);
-    SqlitePoolOptions::new()
-        .max_connections(opts.max_connections)
-        .acquire_timeout(opts.connect_timeout.max(opts.busy_timeout))
-        .connect_with(options)
-        .await
-        .map_err(|e| db_error(url, &e))
+    // Two processes creating or opening one file at once: switching it to WAL takes a lock
+    // SQLite reports at once instead of waiting for; wait for it (backing off, up to the busy
+    // timeout) as every other write waits.
+    let deadline = tokio::time::Instant::now() + opts.busy_timeout;
+    let mut pause = Duration::from_millis(20);
+    loop {
+        let result = SqlitePoolOptions::new()
+            .max_connections(opts.max_connections)
+            .acquire_timeout(opts.connect_timeout.max(opts.busy_timeout))
+            .connect_with(options.clone())
+            .await;
+        match result {
+            Err(e)
+                if e.to_string().contains("database is locked")
+                    && tokio::time::Instant::now() + pause < deadline =>
+            {
+                tracing::debug!(error = %e, "the catalog file is locked: waiting");
+                tokio::time::sleep(pause).await;
+                pause = (pause * 2).min(Duration::from_millis(500));
+            }
+            other => return other.map_err(|e| db_error(url, &e)),
+        }
+    }
 }
 
 /// A driver error as a [`CatalogError`], its message scrubbed of the URL's password. A
