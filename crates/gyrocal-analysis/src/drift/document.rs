@@ -142,11 +142,36 @@ pub struct Warmup {
     pub max_s: Option<f64>,
     /// Warm-up time from the start of the segment, s.
     pub time_s: f64,
-    /// How it ended: `criterion`, `max` (capped), `not_reached` (never settled: nothing cut).
+    /// How it ended: `criterion`, `max` (capped), `not_reached` (never settled: nothing cut),
+    /// `not_significant` (the criterion settled late, but the start was within the record's own
+    /// wander: nothing cut).
     pub ended_by: String,
+    /// The test that what the criterion found is more than the record's own wander (with the
+    /// default tolerance, when it found a warm-up); absent in documents of earlier gyrocal.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub significance: Option<WarmupSignificance>,
     /// Window means: (time of the window's centre, s; mean in [`AllanDocument::unit`]), at most
     /// 2000 points (evenly decimated).
     pub curve: Vec<(f64, f64)>,
+}
+
+/// Whether a warm-up found by the criterion is more than the record's own wander: the start's
+/// change against the spread of the same span's changes where the gyro has settled.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WarmupSignificance {
+    /// The span tested: the warm-up the criterion found, s.
+    pub span_s: f64,
+    /// |first window mean − window mean at the end of the span|, in [`AllanDocument::unit`].
+    pub change: f64,
+    /// Robust σ of the change of window means over the same span in the settled record
+    /// (median |Δ| / 0.6745), in [`AllanDocument::unit`]; `None` when the settled record had
+    /// too few pairs of windows to measure it (the cut then stands).
+    pub wander: Option<f64>,
+    /// Pairs of settled windows the wander was measured on.
+    pub pairs: usize,
+    /// Whether the warm-up stands: the change is more than 3 × the wander (or the wander could
+    /// not be measured).
+    pub significant: bool,
 }
 
 /// Everything `gyrocal allan` found: what `--json` prints and the page shows.
@@ -197,6 +222,11 @@ pub struct AllanDocument {
     pub run: Option<RunHeader>,
     /// What the reader must be told (gaps, irregular sampling, skipped rows, units, warm-up).
     pub notes: Vec<String>,
+    /// When the record has gaps short beside it (a resume's, a meter's re-arming) and only its
+    /// longest segment was analysed: the `--join-gaps-below` value, s, that would analyse it
+    /// whole (the gaps then count as dead time). Said in [`Self::notes`] too.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub join_gaps_hint_s: Option<f64>,
     /// Which path analysed the record (in memory or bounded) and why.
     #[serde(default)]
     pub memory: MemoryUse,

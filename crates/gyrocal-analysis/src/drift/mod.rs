@@ -64,8 +64,13 @@
 //! [`WarmupOptions::max_s`] if that comes first. Default tolerance: 3 × the white-noise
 //! standard deviation of a window mean, estimated from the segment as σ_A(τ0)/√w (the Allan
 //! deviation at τ0, which first differences make insensitive to a slow drift, scaled as white
-//! noise to the w samples of a window). The Allan analysis and the bias figures use the record
-//! after the warm-up. A window of 0 turns the warm-up off.
+//! noise to the w samples of a window). With the default tolerance a warm-up found is then
+//! tested: it is cut only when the first window's mean differs from the mean where the
+//! criterion settled by more than 3 × the record's own wander over the same span, measured in
+//! the settled record (the robust spread of changes of window means that far apart). A record
+//! whose level wanders (rate random walk, flicker) meets the criterion late by chance; without
+//! this test that chance was cut as a "warm-up". The Allan analysis and the bias figures use
+//! the record after the warm-up. A window of 0 turns the warm-up off.
 //!
 //! # Modules, by concern
 //! * `input`: reading the record (pass 1: τ0; pass 2: the values and the gap-free segments);
@@ -94,7 +99,7 @@ use bounded::Samples;
 pub use bounded::{AnalysisPath, DEFAULT_MAX_MEMORY_MIB, IN_MEMORY_BYTES_PER_SAMPLE, MemoryUse};
 pub use document::{
     AllanDocument, Analysed, DriftFigures, EarthRateRemoved, RunHeader, ScaleFactorUsed, Segment,
-    Warmup, write_document,
+    Warmup, WarmupSignificance, write_document,
 };
 pub use input::check_temp_dir;
 use input::data_err;
@@ -263,6 +268,7 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
 
     // the longest segment
     let si = longest_segment(&mut segments, &file, &mut notes)?;
+    let join_gaps_hint_s = join_gaps_hint(&segments, &mut notes);
     let (seg_t0, seg_t1, seg_len) = segments
         .get(si)
         .map_or((0.0, 0.0, 0), |s| (s.t_s.0, s.t_s.1, s.samples));
@@ -304,6 +310,9 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
         )
         .map_err(|e| bounded::temp_err(&temp_dir, e))?,
     };
+    if let Some(sig) = warmup.as_ref().and_then(|w| w.significance.as_ref()) {
+        notes.push(warmup_significance_note(sig, &unit));
+    }
     let warmup_samples = warmup
         .as_ref()
         .map_or(0, |w| ((w.time_s / tau0).round() as usize).min(seg_len));
@@ -369,6 +378,7 @@ pub fn analyse_input(path: &Path, opts: &AllanOptions) -> Result<AllanDocument, 
         bias,
         earth_rate,
         notes,
+        join_gaps_hint_s,
         memory,
     })
 }
@@ -457,6 +467,65 @@ fn source<'a>(path: &Path, opts: &'a AllanOptions) -> Result<Source<'a>, DriftEr
         warmup_opts,
         column,
     })
+}
+
+/// What the test of a warm-up's significance found, in words.
+fn warmup_significance_note(sig: &WarmupSignificance, unit: &str) -> String {
+    let span = fmt_g(sig.span_s);
+    match sig.wander {
+        None => format!(
+            "the warm-up of {span} s was not tested against the record's own wander: after it the record has {} pairs of windows {span} s apart (needs {})",
+            sig.pairs,
+            warmup::MIN_WANDER_PAIRS
+        ),
+        Some(w) if sig.significant => format!(
+            "the warm-up of {span} s is more than the record's own wander: the start differs from the settled level by {} {unit}, more than {} × {} {unit} (the spread of changes over {span} s in the settled record, {} pairs)",
+            fmt_g(sig.change),
+            fmt_g(warmup::WARMUP_SIGNIFICANCE),
+            fmt_g(w),
+            sig.pairs
+        ),
+        Some(w) => format!(
+            "no warm-up: the window means first agreed after {span} s, but the start differs from there by {} {unit}, within {} × the record's own wander over {span} s ({} {unit}, from {} settled pairs): that is the noise (a random walk or flicker meets the criterion late by chance), nothing is cut",
+            fmt_g(sig.change),
+            fmt_g(warmup::WARMUP_SIGNIFICANCE),
+            fmt_g(w),
+            sig.pairs
+        ),
+    }
+}
+
+/// The largest share of the record's span its gaps may take for the analysis to suggest
+/// joining them (1 %: a resume's or a re-arming's seconds in hours of record; a long break,
+/// where the gyro may have been switched off or moved, is not suggested).
+pub const JOIN_GAPS_HINT_FRACTION: f64 = 0.01;
+
+/// When the record has gaps, all of them short beside its span (together at most
+/// [`JOIN_GAPS_HINT_FRACTION`] of it): the `--join-gaps-below` value that joins them, said in
+/// a note. A whole second above the longest gap, so the value given back is not on its edge.
+fn join_gaps_hint(segments: &[Segment], notes: &mut Vec<String>) -> Option<f64> {
+    let gaps: Vec<f64> = segments
+        .windows(2)
+        .map(|w| w[1].t_s.0 - w[0].t_s.1)
+        .filter(|g| g.is_finite())
+        .collect();
+    let longest = gaps.iter().copied().fold(f64::NAN, f64::max);
+    let (first, last) = (segments.first()?, segments.last()?);
+    let span = last.t_s.1 - first.t_s.0;
+    let total: f64 = gaps.iter().sum();
+    if gaps.is_empty() || !(longest > 0.0 && span > 0.0) || total > JOIN_GAPS_HINT_FRACTION * span {
+        return None;
+    }
+    let hint = longest.floor() + 1.0;
+    notes.push(format!(
+        "the record's {} gap(s) take {} s of its {} s (the longest {} s, e.g. a resume): to analyse it as one record with the gaps as dead time, give --join-gaps-below {} (only if the gyro was left untouched across them)",
+        gaps.len(),
+        fmt_g(total),
+        fmt_g(span),
+        fmt_g(longest),
+        fmt_g(hint)
+    ));
+    Some(hint)
 }
 
 /// Marks the longest segment (the first of equals) as the one analysed and says so when the

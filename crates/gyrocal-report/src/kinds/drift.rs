@@ -86,6 +86,12 @@ fn ending(
                     ),
                 }
             );
+            if let Some(s) = a.join_gaps_hint_s {
+                end.results.push_str(&format!(
+                    "\nnote: the record has short gaps (a resume?) and only its longest segment was analysed: `gyrocal allan {} --join-gaps-below {s:.0}` analyses it whole, the gaps as dead time (if the gyro was left untouched across them)",
+                    dir.display(),
+                ));
+            }
         }
         Err(e) => end.warnings.push(format!(
             "{} (the record is complete: `gyrocal report {}` writes the analysis again)",
