@@ -33,7 +33,7 @@ pub const EXAMPLES: &[(&str, &[Example])] = &[
         "fit",
         &[
             ex(
-                "gyrocal fit runs/paper-20260412T091500Z",
+                "gyrocal fit runs/paper-2026-04-12T091500.000Z",
                 "fit a run directory's steps.csv with every model its rates support",
             ),
             ex(
@@ -83,7 +83,7 @@ pub const EXAMPLES: &[(&str, &[Example])] = &[
                 "on the instruments, naming the gyro under test",
             ),
             ex(
-                "gyrocal run --resume runs/my-gyro-20260412T091500Z",
+                "gyrocal run --resume runs/my-gyro-2026-04-12T091500.000Z",
                 "continue a run stopped by Ctrl-C, a crash or a fault",
             ),
             ex(
@@ -113,7 +113,7 @@ pub const EXAMPLES: &[(&str, &[Example])] = &[
         "report",
         &[
             ex(
-                "gyrocal report runs/paper-20260412T091500Z",
+                "gyrocal report runs/paper-2026-04-12T091500.000Z",
                 "(re)write report.html in the run directory",
             ),
             ex(
@@ -121,7 +121,7 @@ pub const EXAMPLES: &[(&str, &[Example])] = &[
                 "one report of two runs, with their repeatability",
             ),
             ex(
-                "gyrocal report runs/paper-20260412T091500Z --acceptance configs/acceptance.example.toml -o judged.html",
+                "gyrocal report runs/paper-2026-04-12T091500.000Z --acceptance configs/acceptance.example.toml -o judged.html",
                 "judge a run against other limits",
             ),
         ],
@@ -130,7 +130,7 @@ pub const EXAMPLES: &[(&str, &[Example])] = &[
         "verify",
         &[
             ex(
-                "gyrocal verify runs/paper-20260412T091500Z",
+                "gyrocal verify runs/paper-2026-04-12T091500.000Z",
                 "check a run's files against the SHA-256 its manifest recorded",
             ),
             ex(
@@ -174,7 +174,7 @@ pub const EXAMPLES: &[(&str, &[Example])] = &[
         "catalog",
         &[
             ex(
-                "gyrocal catalog import runs/paper-20260412T091500Z",
+                "gyrocal catalog import runs/paper-2026-04-12T091500.000Z",
                 "add a run directory to the catalog",
             ),
             ex(
@@ -191,7 +191,7 @@ pub const EXAMPLES: &[(&str, &[Example])] = &[
         "catalog import",
         &[
             ex(
-                "gyrocal catalog import runs/paper-20260412T091500Z",
+                "gyrocal catalog import runs/paper-2026-04-12T091500.000Z",
                 "add one run directory",
             ),
             ex(
@@ -217,7 +217,7 @@ pub const EXAMPLES: &[(&str, &[Example])] = &[
         "allan",
         &[
             ex(
-                "gyrocal allan runs/drift-20260412T091500Z -o allan.html",
+                "gyrocal allan runs/drift-2026-04-12T091500.000Z -o allan.html",
                 "a drift run's Allan deviation, noise terms and page",
             ),
             ex(
@@ -225,11 +225,11 @@ pub const EXAMPLES: &[(&str, &[Example])] = &[
                 "a record without a time column, converted to °/h",
             ),
             ex(
-                "gyrocal allan runs/drift-20260412T091500Z --estimator mdev --taus decade --json",
+                "gyrocal allan runs/drift-2026-04-12T091500.000Z --estimator mdev --taus decade --json",
                 "the modified deviation at decade τ, as JSON",
             ),
             ex(
-                "gyrocal allan runs/drift-20260412T091500Z --join-gaps-below 60",
+                "gyrocal allan runs/drift-2026-04-12T091500.000Z --join-gaps-below 60",
                 "after a resume: join its gap as dead time instead of splitting the record",
             ),
         ],
