@@ -472,7 +472,8 @@ fn run_one(
             let lines = line_channel(child.stderr.take().unwrap());
             let mut seen = String::new();
             let deadline = Instant::now() + Duration::from_secs(30);
-            while !seen.contains("step 1/") {
+            // "step 1/19 …": the first step has started (any wording that numbers it)
+            while !seen.to_lowercase().contains("step 1") {
                 let left = deadline.saturating_duration_since(Instant::now());
                 match lines.recv_timeout(left) {
                     Ok(l) => {
