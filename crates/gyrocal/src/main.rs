@@ -13,6 +13,7 @@
 )]
 
 mod cmd;
+mod examples;
 mod instruments;
 mod runlog;
 
@@ -22,7 +23,8 @@ use clap::{Parser, Subcommand};
 
 /// Calibrate a gyroscope's scale factor on a rate table.
 #[derive(Debug, Parser)]
-#[command(name = "gyrocal", version, about)]
+// every subcommand's long help and man page end with its examples (src/examples.rs)
+#[command(name = "gyrocal", version, about, mut_subcommands = examples::attach)]
 pub struct Cli {
     /// More log on stderr: -v info, -vv debug (RUST_LOG, when set, decides instead). Without
     /// it the terminal shows gyrocal's own messages only; a run's log is always in its
