@@ -52,6 +52,10 @@
 //! accepted, and `gyrocal run` and `gyrocal check` say at the terminal what is missing
 //! ([`Station::missing_sections`]).
 
+mod serials;
+
+pub use serials::{SERIAL_MISMATCH, SerialCheck, reported_serial};
+
 use std::ffi::OsString;
 use std::fmt;
 use std::ops::Range;
