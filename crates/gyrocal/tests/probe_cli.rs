@@ -156,7 +156,10 @@ fn assert_said_swapped(stderr: &str, sim: &Sim, table_identity: &str) {
         "{stderr}"
     );
     // both probed: each instrument is quoted from its own answer
-    assert!(stderr.contains("HEWLETT-PACKARD,34401A,SIM0001"), "{stderr}");
+    assert!(
+        stderr.contains("HEWLETT-PACKARD,34401A,SIM0001"),
+        "{stderr}"
+    );
     assert!(stderr.contains(table_identity), "{stderr}");
     assert!(!stderr.contains("did not answer"), "{stderr}");
     assert!(

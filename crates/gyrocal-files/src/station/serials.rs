@@ -80,7 +80,13 @@ impl SerialCheck {
     /// The result in words, for the terminal: "the multimeter DMM-0042: the station file says
     /// serial 3146A12345 but the instrument reports SIM0001".
     pub fn words(&self, station_id: &str) -> String {
-        let role = |r: &str| if r == "table" { "rate table" } else { "multimeter" };
+        let role = |r: &str| {
+            if r == "table" {
+                "rate table"
+            } else {
+                "multimeter"
+            }
+        };
         match self {
             SerialCheck::Match { role: r, serial } => format!(
                 "the {}'s serial {serial} matches station {station_id}",
@@ -109,7 +115,11 @@ impl Station {
     /// `table` are the serial fields of their identities (`None`: that instrument was not
     /// identified, or the plan drives no table, when the table is left out). See the module
     /// documentation for what counts as no serial.
-    pub fn check_serials(&self, meter: Option<&str>, table: Option<Option<&str>>) -> Vec<SerialCheck> {
+    pub fn check_serials(
+        &self,
+        meter: Option<&str>,
+        table: Option<Option<&str>>,
+    ) -> Vec<SerialCheck> {
         let mut out = vec![check_one("multimeter", self.multimeter.as_ref(), meter)];
         if let Some(table) = table {
             out.push(check_one("table", self.table.as_ref(), table));
@@ -207,7 +217,10 @@ due = 2099-01-01
         let c = station().check_serials(Some("SIM0001"), None);
         assert!(c[0].is_mismatch());
         let w = c[0].words("bench-2");
-        assert!(w.contains("3146A12345") && w.contains("SIM0001") && w.contains("DMM-0042"), "{w}");
+        assert!(
+            w.contains("3146A12345") && w.contains("SIM0001") && w.contains("DMM-0042"),
+            "{w}"
+        );
     }
 
     #[test]

@@ -23,7 +23,10 @@ pub struct CheckArgs {
     #[arg(long)]
     pub json: bool,
     /// Also open each instrument, identify it, read the table's mode and rate (nothing
-    /// moves); on silence, say what to check on that link. Exit 1 when one does not answer.
+    /// moves). Both ports are probed; when one fails, say who answered there (ports given the
+    /// wrong way round are said as swapped) and, when nothing did, what to check on that
+    /// link. With a station file, its serials are compared with the instruments'. Exit 1 when
+    /// an instrument is not found on its port.
     #[arg(long)]
     pub probe: bool,
     /// With --probe: the multimeter's port instead of the plan's.

@@ -183,9 +183,7 @@ pub async fn probe(plan: &Plan, flags: PortFlags) -> anyhow::Result<Found> {
         }
         Some(
             match gyrocal_link::open_port(&t.port, &table_link_options(plan)).await {
-                Ok(link) => {
-                    Ok(crate::instruments::identify_table(plan, link, PROBE_TIMEOUT).await)
-                }
+                Ok(link) => Ok(crate::instruments::identify_table(plan, link, PROBE_TIMEOUT).await),
                 Err(e) => Err(e),
             },
         )
@@ -346,9 +344,8 @@ fn found(id: gyrocal_meter::Identity, table: Option<crate::instruments::TableAns
 
 /// What the two ports' answers mean, said as the thing to do.
 fn diagnose(plan: &Plan, dmm: PortReport, table: Option<PortReport>) -> ProbeError {
-    let is = |p: Option<&PortReport>, f: fn(&Who) -> bool| {
-        p.and_then(|p| p.who.as_ref()).is_some_and(f)
-    };
+    let is =
+        |p: Option<&PortReport>, f: fn(&Who) -> bool| p.and_then(|p| p.who.as_ref()).is_some_and(f);
     let meter_on_table_port = is(table.as_ref(), |w| matches!(w, Who::Meter { .. }));
     let table_on_meter_port = is(Some(&dmm), |w| matches!(w, Who::Table { .. }));
     let (kind, headline) = if meter_on_table_port && table_on_meter_port {

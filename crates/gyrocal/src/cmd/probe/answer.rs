@@ -138,7 +138,9 @@ pub fn classify(reply: &str) -> Who {
                 reply: r.to_string(),
             };
         }
-        if maker.contains("ACUTRONIC") || model.starts_with("ACUTROL") || maker.contains("AEROSMITH")
+        if maker.contains("ACUTRONIC")
+            || model.starts_with("ACUTROL")
+            || maker.contains("AEROSMITH")
         {
             return Who::Table {
                 reply: r.to_string(),
@@ -227,7 +229,10 @@ mod tests {
     fn anything_else_is_other_or_nothing() {
         assert_eq!(classify(""), Who::Nothing);
         assert_eq!(classify(" \r\n"), Who::Nothing);
-        assert!(matches!(classify("\u{fffd}\u{fffd}x\u{fffd}"), Who::Other { .. }));
+        assert!(matches!(
+            classify("\u{fffd}\u{fffd}x\u{fffd}"),
+            Who::Other { .. }
+        ));
         assert!(matches!(
             classify("FLUKE,8846A,1234,1.0"),
             Who::Other { .. }
