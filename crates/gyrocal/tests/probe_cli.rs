@@ -426,3 +426,81 @@ fn check_probe_compares_serials_and_a_meter_reporting_none_is_not_compared() {
     assert_eq!(serials[0]["result"], "not-compared");
     assert_eq!(serials[1]["result"], "mismatch");
 }
+
+#[test]
+fn a_resume_on_the_same_mismatching_bench_records_the_deviation_once() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_plan(tmp.path(), "acl");
+    let sim = Sim::start(&plan);
+    let station = tmp.path().join("station.toml");
+    std::fs::write(&station, common::stations::bench_2("")).unwrap();
+    let dir = tmp.path().join("run");
+    let run = |args: &[&str]| {
+        common::gyrocal()
+            .arg("run")
+            .args(["--dmm-port", sim.dmm(), "--table-port", sim.table()])
+            .arg("--station")
+            .arg(&station)
+            .arg("--no-report")
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    // the first session, stopped by SIGINT once a step is recorded
+    let mut first = run(&[plan.to_str().unwrap(), "--out", dir.to_str().unwrap()]);
+    let stderr = first.stderr.take().unwrap();
+    let (tx, lines) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines() {
+            let Ok(line) = line else { break };
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    loop {
+        let line = lines
+            .recv_timeout(Duration::from_secs(20))
+            .expect("a step recorded");
+        if line.trim_start().starts_with("step 1 done") {
+            break;
+        }
+    }
+    let pid = nix::unistd::Pid::from_raw(i32::try_from(first.id()).unwrap());
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGINT).unwrap();
+    assert_eq!(first.wait().unwrap().code(), Some(130));
+    // resumed on the same instruments: warned again, recorded once
+    let second = run(&["--resume", dir.to_str().unwrap()])
+        .wait_with_output()
+        .unwrap();
+    let stderr = text(&second.stderr);
+    assert_eq!(second.status.code(), Some(0), "{stderr}");
+    assert!(stderr.contains("reports serial SIM0001"), "{stderr}");
+    let m = common::manifest(&dir);
+    assert_eq!(m["status"], "complete", "{m}");
+    let kinds: Vec<&Value> = m["deviations"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|d| d["kind"] == "instrument-serial-mismatch")
+        .collect();
+    // the meter's and the table's (bench-2 names other serials for both), each once
+    assert_eq!(kinds.len(), 2, "{m}");
+    assert!(
+        kinds[0]["text"]
+            .as_str()
+            .unwrap()
+            .contains("multimeter DMM-0042")
+    );
+    assert!(
+        kinds[1]["text"]
+            .as_str()
+            .unwrap()
+            .contains("rate table TBL-0007")
+    );
+    let last = sim.finish();
+    assert_eq!(last["table"]["stopped"], true, "{last}");
+}
