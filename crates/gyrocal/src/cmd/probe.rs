@@ -403,6 +403,14 @@ fn diagnose(plan: &Plan, dmm: PortReport, table: Option<PortReport>) -> ProbeErr
                      {what}'s port there",
                     p.name()
                 ));
+            } else if who.is_instrument() && error.starts_with("it identified as") {
+                // its own driver knew it, then a read failed: not a question of model
+                kinds.push(ProbeErrorKind::Refused);
+                parts.push(format!(
+                    "the {what} at {} identified itself but did not complete the probe \
+                     ({error})",
+                    p.port
+                ));
             } else if who.is_instrument() {
                 // the right instrument, refused by its driver: another model or dialect
                 kinds.push(ProbeErrorKind::Refused);
