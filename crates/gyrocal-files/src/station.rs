@@ -51,6 +51,15 @@
 //! A station without a `[multimeter]` (or, for a plan with a table, a `[table]`) section is
 //! accepted, and `gyrocal run` and `gyrocal check` say at the terminal what is missing
 //! ([`Station::missing_sections`]).
+//!
+//! The serials are checked against the instruments ([`Station::check_serials`], in
+//! `serials`): once the instruments have identified themselves, a serial that differs from
+//! the record is a warning and a recorded deviation, since the certificate would otherwise
+//! name another instrument's calibration.
+
+mod serials;
+
+pub use serials::{SERIAL_MISMATCH, SerialCheck, reported_serial};
 
 use std::ffi::OsString;
 use std::fmt;

@@ -193,3 +193,143 @@ where
         }
     }
 }
+
+/// What the probe learnt from the table's driver.
+#[derive(Debug, Clone)]
+pub struct TableAnswer {
+    /// The identity it gave.
+    pub identity: gyrocal_table::Identity,
+    /// Its mode, read after the identity.
+    pub mode: gyrocal_table::TableMode,
+    /// Its measured rate, °/s.
+    pub rate_dps: f64,
+}
+
+/// Why the table's driver did not complete the probe: it did not identify the table
+/// (`identity` is `None`), or it did and a read that followed failed.
+#[derive(Debug, Clone)]
+pub struct TableRefusal {
+    /// The identity, when the driver got that far.
+    pub identity: Option<gyrocal_table::Identity>,
+    /// The driver's error, or "no answer within ..." when the time ran out.
+    pub error: String,
+}
+
+/// Builds the plan's multimeter on `link` alone, connects it (identified, reset: nothing
+/// measured) within `timeout` and gives it back to its front panel. The probe's meter half:
+/// it runs whatever the table's port does.
+pub async fn identify_meter<D>(
+    plan: &Plan,
+    link: D,
+    timeout: std::time::Duration,
+) -> Result<gyrocal_meter::Identity, String>
+where
+    D: Transport + 'static,
+{
+    async fn connect<M: Multimeter>(
+        mut m: M,
+        timeout: std::time::Duration,
+    ) -> Result<gyrocal_meter::Identity, String> {
+        let id = match tokio::time::timeout(timeout, m.connect()).await {
+            Ok(Ok(id)) => id,
+            Ok(Err(e)) => return Err(e.to_string()),
+            Err(_) => return Err(format!("no answer within {} s", timeout.as_secs())),
+        };
+        let _ = tokio::time::timeout(timeout, m.release()).await;
+        Ok(id)
+    }
+    match truevolt_model(plan) {
+        None => {
+            let m = gyrocal_hp34401a::Hp34401aMeter::new(
+                link,
+                DriverOptions::default(),
+                hp34401a_strategy(plan),
+                plan.dmm().baud,
+            )
+            .over_gpib(plan.dmm().port.is_gpib());
+            connect(m, timeout).await
+        }
+        Some(model) => {
+            connect(
+                gyrocal_truevolt::TruevoltMeter::new(link, truevolt_options(model, plan)),
+                timeout,
+            )
+            .await
+        }
+    }
+}
+
+/// Builds the plan's table on `link` alone (its dialect), identifies it and reads its mode and
+/// rate, within `timeout` each; nothing moves. The probe's table half.
+pub async fn identify_table<L>(
+    plan: &Plan,
+    link: L,
+    timeout: std::time::Duration,
+) -> Result<TableAnswer, TableRefusal>
+where
+    L: Transport + 'static,
+{
+    async fn ask<T: gyrocal_table::RateTable>(
+        mut t: T,
+        timeout: std::time::Duration,
+    ) -> Result<TableAnswer, TableRefusal> {
+        let late = || format!("no answer within {} s", timeout.as_secs());
+        let identity = match tokio::time::timeout(timeout, t.connect()).await {
+            Ok(Ok(id)) => id,
+            Ok(Err(e)) => {
+                return Err(TableRefusal {
+                    identity: None,
+                    error: e.to_string(),
+                });
+            }
+            Err(_) => {
+                return Err(TableRefusal {
+                    identity: None,
+                    error: late(),
+                });
+            }
+        };
+        let refused = |error: String| TableRefusal {
+            identity: Some(identity.clone()),
+            error,
+        };
+        let rate = match tokio::time::timeout(timeout, t.read_rate()).await {
+            Ok(Ok(r)) => r,
+            Ok(Err(e)) => return Err(refused(e.to_string())),
+            Err(_) => return Err(refused(late())),
+        };
+        let status = match tokio::time::timeout(timeout, t.status()).await {
+            Ok(Ok(s)) => s,
+            Ok(Err(e)) => return Err(refused(e.to_string())),
+            Err(_) => return Err(refused(late())),
+        };
+        Ok(TableAnswer {
+            identity,
+            mode: status.mode,
+            rate_dps: rate,
+        })
+    }
+    match plan.table().dialect {
+        TableDialect::Acl => {
+            let config = gyrocal_acl::AclConfig {
+                limits: table_limits(plan),
+                ..gyrocal_acl::AclConfig::default()
+            };
+            ask(gyrocal_acl::AclTable::new(link, config), timeout).await
+        }
+        TableDialect::Aerosmith => {
+            let config = gyrocal_aerosmith::AerosmithConfig {
+                policy: gyrocal_table::PolicyConfig {
+                    limits: table_limits(plan),
+                    ..gyrocal_table::PolicyConfig::default()
+                },
+                ..gyrocal_aerosmith::AerosmithConfig::default()
+            };
+            ask(
+                gyrocal_aerosmith::AerosmithTable::new(link, config),
+                timeout,
+            )
+            .await
+        }
+    }
+}

@@ -23,7 +23,10 @@ pub struct CheckArgs {
     #[arg(long)]
     pub json: bool,
     /// Also open each instrument, identify it, read the table's mode and rate (nothing
-    /// moves); on silence, say what to check on that link. Exit 1 when one does not answer.
+    /// moves). Both ports are probed; when one fails, say who answered there (ports given the
+    /// wrong way round are said as swapped) and, when nothing did, what to check on that
+    /// link. With a station file, its serials are compared with the instruments'. Exit 1 when
+    /// an instrument is not found on its port.
     #[arg(long)]
     pub probe: bool,
     /// With --probe: the multimeter's port instead of the plan's.
@@ -87,10 +90,10 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
         ));
     }
     // the station `gyrocal run` would use, read the same way (a bad one is bad input)
-    if let Some((path, station)) = gyrocal_files::station::Station::resolve(args.station.as_deref())
-        .map_err(|e| BadInput(format!("station: {e}")))?
-    {
-        warnings.extend(station_warnings(&station, &path, plan.has_table()));
+    let station = gyrocal_files::station::Station::resolve(args.station.as_deref())
+        .map_err(|e| BadInput(format!("station: {e}")))?;
+    if let Some((path, station)) = &station {
+        warnings.extend(station_warnings(station, path, plan.has_table()));
     }
     let probe = if args.probe {
         use anyhow::Context as _;
@@ -98,10 +101,24 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
             .enable_all()
             .build()
             .context("starting the async runtime")?;
-        Some(rt.block_on(crate::cmd::probe::probe(&plan)))
+        let flags = crate::cmd::probe::PortFlags {
+            dmm: args.dmm_port.is_some(),
+            table: args.table_port.is_some(),
+        };
+        Some(rt.block_on(crate::cmd::probe::probe(&plan, flags)))
     } else {
         None
     };
+    // the station's serials against the instruments' identities, once both are known
+    let serials = match (&probe, &station) {
+        (Some(Ok(found)), Some((_, station))) => crate::cmd::probe::serial_checks(station, found),
+        _ => Vec::new(),
+    };
+    for c in serials.iter().filter(|c| c.is_mismatch()) {
+        if let Some((_, station)) = &station {
+            warnings.push(c.words(&station.id));
+        }
+    }
     if args.json {
         let mut doc = json(&plan, &args.plan, &est, &warnings);
         if let Some(p) = &probe {
@@ -113,8 +130,29 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
                     "table_mode": f.table_mode,
                     "table_rate_dps": f.table_rate_dps,
                 }),
-                Err(e) => serde_json::json!({ "answered": false, "error": format!("{e:#}") }),
+                Err(e) => {
+                    let mut p = serde_json::json!({ "answered": false, "error": format!("{e:#}") });
+                    if let Some(pe) = e.downcast_ref::<crate::cmd::probe::ProbeError>() {
+                        p["diagnosis"] = pe.headline().into();
+                        p["swapped"] =
+                            (pe.kind() == crate::cmd::probe::ProbeErrorKind::Swapped).into();
+                        p["ports"] = pe.ports_json();
+                    }
+                    p
+                }
             };
+            if let (Some((_, station)), false) = (&station, serials.is_empty()) {
+                doc["probe"]["serials"] = serials
+                    .iter()
+                    .map(|c| {
+                        serde_json::json!({
+                            "role": c.role(),
+                            "result": c.key(),
+                            "text": c.words(&station.id),
+                        })
+                    })
+                    .collect();
+            }
         }
         println!("{doc:#}");
     } else {
@@ -129,6 +167,11 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
                 "probe: rate table {} (mode {}, {:+.4} °/s)",
                 found.table, found.table_mode, found.table_rate_dps
             );
+            if let Some((_, station)) = &station {
+                for c in serials.iter().filter(|c| !c.is_mismatch()) {
+                    println!("station: {}", c.words(&station.id));
+                }
+            }
         }
     }
     // a silent instrument is an error (exit 1) whatever the output format

@@ -12,7 +12,7 @@ pub(super) async fn execute(
     args: &RunArgs,
     plan: Plan,
     faults: &[gyrocal_sim::faults::FaultSpec],
-    records: Records,
+    mut records: Records,
 ) -> anyhow::Result<(
     PathBuf,
     RunSummary,
@@ -85,12 +85,33 @@ pub(super) async fn execute(
         Ok((dir, summary, run, signal, Some(state)))
     } else {
         // Every instrument must answer before anything is created on disk.
-        let found = crate::cmd::probe::probe(&plan).await?;
+        let flags = crate::cmd::probe::PortFlags {
+            dmm: args.dmm_port.is_some(),
+            table: args.table_port.is_some(),
+        };
+        let found = crate::cmd::probe::probe(&plan, flags).await?;
         say!(
             "probe: both instruments answer (the table in mode {} at {:+.4} °/s)",
             found.table_mode,
             found.table_rate_dps
         );
+        if let Some(station) = &records.station {
+            // the station's records must be these instruments': a mismatch is recorded
+            for c in crate::cmd::probe::serial_checks(station, &found) {
+                if c.is_mismatch() {
+                    say!(
+                        "gyrocal: warning: {} (recorded as a deviation)",
+                        c.words(&station.id)
+                    );
+                    records.deviations.push((
+                        gyrocal_files::station::SERIAL_MISMATCH.to_string(),
+                        c.words(&station.id),
+                    ));
+                } else {
+                    say!("station: {}", c.words(&station.id));
+                }
+            }
+        }
         let d = plan.dmm();
         let dmm = gyrocal_link::open_port(&d.port, &crate::cmd::probe::dmm_link_options(&plan))
             .await

@@ -150,6 +150,15 @@ pub(super) fn open_run_dir(
 ) -> anyhow::Result<(PathBuf, RunDir)> {
     let (dir, mut run) = open_run_dir_inner(args, plan, records.dut, records.station)?;
     for (kind, text) in &records.deviations {
+        // a resume on the same instruments finds the same departure: recorded once
+        if run
+            .manifest()
+            .deviations
+            .iter()
+            .any(|d| d.kind == *kind && d.text == *text)
+        {
+            continue;
+        }
         run.add_deviation(kind, text)
             .map_err(|e| anyhow::anyhow!("{}: recording a deviation: {e}", dir.display()))?;
     }

@@ -1,0 +1,506 @@
+//! The operator's checks at the instruments (issue 25, item 6), through the binary against
+//! `gyrocal sim` on pseudo-terminals: ports given the wrong way round are said as swapped
+//! (both probed, both named, a non-zero exit, nothing created and nothing moved), by
+//! `gyrocal check --probe` and by `gyrocal run`; and the station file's serials are compared
+//! with the serials the instruments report (a mismatch is a warning and a recorded deviation
+//! the certificate shows; a match is no warning; a meter that reports no serial is "not
+//! compared").
+#![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Output, Stdio};
+use std::sync::mpsc;
+use std::time::Duration;
+
+use serde_json::Value;
+
+/// A small plan (five steps, fast settings) for `dialect`; its ports are placeholders that the
+/// command line overrides.
+fn write_plan(dir: &Path, dialect: &str) -> PathBuf {
+    let text = format!(
+        r#"[plan]
+name = "probe checks"
+rates_dps = [0, 2, -2, 5, -5]
+samples_per_rate = 30
+settle_s = 0.2
+repeat = 1
+whole_revolutions = 0
+
+[table]
+dialect = "{dialect}"
+port = "/dev/ttyUSB1"
+baud = 9600
+max_rate_dps = 10
+acceleration_dps2 = 20
+rate_tolerance_dps = 0.01
+stability_window_s = 0.2
+at_rate_timeout_s = 10
+
+[dmm]
+port = "/dev/ttyUSB0"
+baud = 9600
+framing = "8N2"
+range_v = 10
+nplc = 1
+autozero = true
+line_hz = 50
+acquisition = "stream"
+
+[simulation]
+seed = 3
+scale_factor = 0.3612
+bias = 0.0088
+noise_v = 0.002
+rate_noise_dps = 0.0002
+"#
+    );
+    let path = dir.join(format!("plan-{dialect}.toml"));
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// A running `gyrocal sim` (killed on drop if still running).
+struct Sim {
+    child: Child,
+    lines: mpsc::Receiver<String>,
+    info: Value,
+}
+
+impl Sim {
+    /// `gyrocal sim --config CONFIG` (a plan, or a bench TOML), sped up 30 times.
+    fn start(config: &Path) -> Sim {
+        let mut child = common::gyrocal()
+            .arg("sim")
+            .arg("--config")
+            .arg(config)
+            .args(["--time-scale", "30", "--seed", "11"])
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .unwrap();
+        let stdout = child.stdout.take().unwrap();
+        let (tx, lines) = mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines() {
+                let Ok(line) = line else { break };
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        let first = lines
+            .recv_timeout(Duration::from_secs(10))
+            .expect("the simulator's JSON line with the device paths");
+        let info: Value = serde_json::from_str(&first).unwrap();
+        Sim { child, lines, info }
+    }
+
+    fn dmm(&self) -> &str {
+        self.info["dmm"].as_str().unwrap()
+    }
+
+    fn table(&self) -> &str {
+        self.info["table"].as_str().unwrap()
+    }
+
+    /// SIGINT; the simulator's final-state line.
+    fn finish(mut self) -> Value {
+        let pid = nix::unistd::Pid::from_raw(i32::try_from(self.child.id()).unwrap());
+        nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGINT).unwrap();
+        let last = self
+            .lines
+            .recv_timeout(Duration::from_secs(5))
+            .expect("the simulator's final-state line");
+        let _ = self.child.wait();
+        serde_json::from_str(&last).unwrap()
+    }
+}
+
+impl Drop for Sim {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// `gyrocal check PLAN --probe --dmm-port DMM --table-port TABLE` plus `extra`.
+fn check_probe(plan: &Path, dmm: &str, table: &str, extra: &[&str]) -> Output {
+    common::gyrocal()
+        .arg("check")
+        .arg(plan)
+        .args(["--probe", "--dmm-port", dmm, "--table-port", table])
+        .args(extra)
+        .output()
+        .unwrap()
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+/// What the swapped-ports diagnosis must say, whatever the command: both ports by the flag
+/// that named them, both instruments by what they answered, the thing to do, and no cable or
+/// baud advice (an instrument did answer on each port).
+fn assert_said_swapped(stderr: &str, sim: &Sim, table_identity: &str) {
+    assert!(
+        stderr.contains(&format!(
+            "the ports look swapped: the multimeter answered on --table-port {} and the rate \
+             table on --dmm-port {}; swap them",
+            sim.dmm(),
+            sim.table()
+        )),
+        "{stderr}"
+    );
+    // both probed: each instrument is quoted from its own answer
+    assert!(
+        stderr.contains("HEWLETT-PACKARD,34401A,SIM0001"),
+        "{stderr}"
+    );
+    assert!(stderr.contains(table_identity), "{stderr}");
+    assert!(!stderr.contains("did not answer"), "{stderr}");
+    assert!(
+        !stderr.contains("baud") && !stderr.contains("null-modem"),
+        "no cable advice when both instruments answered: {stderr}"
+    );
+}
+
+#[test]
+fn check_probe_says_swapped_ports_probes_both_and_fails() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_plan(tmp.path(), "acl");
+    let sim = Sim::start(&plan);
+
+    // the ports the right way round still pass
+    let out = check_probe(&plan, sim.dmm(), sim.table(), &[]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stdout).contains("probe: rate table ACUTRONIC,ACUTROL3000,SIM0001"),
+        "{}",
+        text(&out.stdout)
+    );
+
+    // swapped
+    let out = check_probe(&plan, sim.table(), sim.dmm(), &[]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert_said_swapped(&stderr, &sim, "ACUTRONIC,ACUTROL3000,SIM0001");
+
+    // the same in the --json document, for scripts
+    let out = check_probe(&plan, sim.table(), sim.dmm(), &["--json"]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));
+    let doc: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let probe = &doc["probe"];
+    assert_eq!(probe["answered"], false, "{probe}");
+    assert_eq!(probe["swapped"], true, "{probe}");
+    assert_eq!(probe["ports"]["dmm"]["answered"], "table", "{probe}");
+    assert_eq!(probe["ports"]["dmm"]["port"], sim.table(), "{probe}");
+    assert_eq!(probe["ports"]["table"]["answered"], "multimeter", "{probe}");
+    assert!(
+        probe["diagnosis"]
+            .as_str()
+            .unwrap()
+            .starts_with("the ports look swapped"),
+        "{probe}"
+    );
+
+    // nothing moved
+    let last = sim.finish();
+    assert_eq!(last["table"]["demands_seen"], 0, "{last}");
+}
+
+#[test]
+fn check_probe_says_swapped_ports_with_an_aerosmith_table() {
+    // an Ideal Aerosmith controller has no *IDN?: its prompt identifies it
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_plan(tmp.path(), "aerosmith");
+    let sim = Sim::start(&plan);
+    let out = check_probe(&plan, sim.dmm(), sim.table(), &[]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+
+    let out = check_probe(&plan, sim.table(), sim.dmm(), &[]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert_said_swapped(&stderr, &sim, "Aerosmith-style prompt");
+    let last = sim.finish();
+    assert_eq!(last["table"]["demands_seen"], 0, "{last}");
+}
+
+#[test]
+fn a_table_on_the_meters_port_is_said_and_the_silent_table_port_gets_its_advice() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_plan(tmp.path(), "acl");
+    let sim = Sim::start(&plan);
+    // a table port where nothing answers (a pseudo-terminal nobody serves)
+    let pty = nix::pty::openpty(None, None).unwrap();
+    let silent = nix::unistd::ttyname(&pty.slave).unwrap();
+    let silent = silent.to_str().unwrap();
+    let out = check_probe(&plan, sim.table(), silent, &[]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "a rate table answered on the multimeter's port (--dmm-port {}), not the multimeter",
+            sim.table()
+        )),
+        "{stderr}"
+    );
+    // the other port was probed too, and gets the advice for a silent link
+    assert!(
+        stderr.contains(&format!("the rate table at {silent} did not answer")),
+        "{stderr}"
+    );
+    assert!(stderr.contains("set to 9600 baud"), "{stderr}");
+    drop(pty);
+}
+
+#[test]
+fn run_with_swapped_ports_says_so_creates_nothing_and_moves_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_plan(tmp.path(), "acl");
+    let sim = Sim::start(&plan);
+    let dir = tmp.path().join("run");
+    let out = common::gyrocal()
+        .arg("run")
+        .arg(&plan)
+        .args(["--dmm-port", sim.table(), "--table-port", sim.dmm()])
+        .args(["--no-report", "--out", dir.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert_said_swapped(&stderr, &sim, "ACUTRONIC,ACUTROL3000,SIM0001");
+    assert!(!dir.exists(), "nothing created on disk: {stderr}");
+    // the table never got a demand and is at rest
+    let last = sim.finish();
+    assert_eq!(last["table"]["demands_seen"], 0, "{last}");
+    assert_eq!(last["table"]["stopped"], true, "{last}");
+}
+
+/// `gyrocal run` on the simulator's ports with `station`; the run directory.
+fn run_with_station(tmp: &Path, station: &str, sim: &Sim, plan: &Path) -> (Output, PathBuf) {
+    let station_path = tmp.join("station.toml");
+    std::fs::write(&station_path, station).unwrap();
+    let dir = tmp.join("run");
+    let out = common::gyrocal()
+        .arg("run")
+        .arg(plan)
+        .args(["--dmm-port", sim.dmm(), "--table-port", sim.table()])
+        .arg("--station")
+        .arg(&station_path)
+        .args(["--out", dir.to_str().unwrap()])
+        .output()
+        .unwrap();
+    (out, dir)
+}
+
+#[test]
+fn a_station_with_another_meter_serial_warns_and_records_a_deviation_the_certificate_shows() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_plan(tmp.path(), "acl");
+    let sim = Sim::start(&plan);
+    // the station's meter is 3146A12345; the simulated meter reports SIM0001 (its table too)
+    let station = common::stations::bench_2("").replace("AC-1120-77", "SIM0001");
+    let (out, dir) = run_with_station(tmp.path(), &station, &sim, &plan);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "the run goes on: {stderr}");
+    let warning = stderr
+        .lines()
+        .find(|l| l.starts_with("gyrocal: warning: the multimeter DMM-0042"))
+        .unwrap_or_else(|| panic!("no serial warning: {stderr}"));
+    assert!(
+        warning.contains("says serial 3146A12345")
+            && warning.contains("reports serial SIM0001")
+            && warning.contains("recorded as a deviation"),
+        "{warning}"
+    );
+    // the table's serial matches: said, not warned
+    assert!(
+        stderr.contains("station: the rate table's serial SIM0001 matches station bench-2"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("warning: the rate table"), "{stderr}");
+
+    let m = common::manifest(&dir);
+    let deviations = m["deviations"].as_array().unwrap();
+    let serial: Vec<&Value> = deviations
+        .iter()
+        .filter(|d| d["kind"] == "instrument-serial-mismatch")
+        .collect();
+    assert_eq!(serial.len(), 1, "{deviations:?}");
+    let t = serial[0]["text"].as_str().unwrap();
+    assert!(t.contains("3146A12345") && t.contains("SIM0001"), "{t}");
+
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    let list = common::between(&html, "id=\"deviations-list\"", "</ul>");
+    assert!(
+        list.contains("says serial 3146A12345") && list.contains("reports serial SIM0001"),
+        "{list}"
+    );
+    let last = sim.finish();
+    assert_eq!(last["table"]["stopped"], true, "{last}");
+}
+
+#[test]
+fn a_station_matching_the_instruments_gives_no_warning_and_no_deviation() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_plan(tmp.path(), "acl");
+    let sim = Sim::start(&plan);
+    let station = common::stations::bench_2("")
+        .replace("3146A12345", "SIM0001")
+        .replace("AC-1120-77", "sim0001");
+    let (out, dir) = run_with_station(tmp.path(), &station, &sim, &plan);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(
+        !stderr
+            .lines()
+            .any(|l| l.starts_with("gyrocal: warning:") && l.contains("serial")),
+        "no warning: {stderr}"
+    );
+    // serials compared without regard to case
+    assert!(
+        stderr.contains("station: the multimeter's serial SIM0001 matches station bench-2")
+            && stderr.contains("station: the rate table's serial SIM0001 matches"),
+        "{stderr}"
+    );
+    let m = common::manifest(&dir);
+    assert!(
+        m["deviations"]
+            .as_array()
+            .is_none_or(|d| d.iter().all(|d| d["kind"] != "instrument-serial-mismatch")),
+        "{m}"
+    );
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert!(!html.contains("reports serial"), "no serial deviation");
+    drop(sim);
+}
+
+#[test]
+fn check_probe_compares_serials_and_a_meter_reporting_none_is_not_compared() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_plan(tmp.path(), "acl");
+    // a bench whose meter answers as a real 34401A does: 0 in its serial field
+    let bench = tmp.path().join("bench.toml");
+    std::fs::write(
+        &bench,
+        "[dmm]\nidentity = \"HEWLETT-PACKARD,34401A,0,11-5-2\"\n[table]\nidentity = \"ACUTRONIC,ACUTROL3000,AC-1120-99,1.0\"\n",
+    )
+    .unwrap();
+    let sim = Sim::start(&bench);
+    let station = tmp.path().join("station.toml");
+    std::fs::write(&station, common::stations::bench_2("")).unwrap();
+    let out = check_probe(
+        &plan,
+        sim.dmm(),
+        sim.table(),
+        &["--station", station.to_str().unwrap()],
+    );
+    let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
+    assert!(out.status.success(), "a warning, not a failure: {stderr}");
+    assert!(
+        stdout.contains("station: the multimeter's serial was not compared: the instrument reports no serial (\"0\""),
+        "{stdout}"
+    );
+    assert!(!stderr.contains("multimeter DMM-0042"), "{stderr}");
+    assert!(
+        stderr.contains(
+            "gyrocal: warning: the rate table TBL-0007: station bench-2 says serial AC-1120-77, \
+             but the instrument that answered reports serial AC-1120-99"
+        ),
+        "{stderr}"
+    );
+    // the same in --json
+    let out = check_probe(
+        &plan,
+        sim.dmm(),
+        sim.table(),
+        &["--json", "--station", station.to_str().unwrap()],
+    );
+    let doc: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let serials = doc["probe"]["serials"].as_array().unwrap();
+    assert_eq!(serials[0]["role"], "multimeter");
+    assert_eq!(serials[0]["result"], "not-compared");
+    assert_eq!(serials[1]["result"], "mismatch");
+}
+
+#[test]
+fn a_resume_on_the_same_mismatching_bench_records_the_deviation_once() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_plan(tmp.path(), "acl");
+    let sim = Sim::start(&plan);
+    let station = tmp.path().join("station.toml");
+    std::fs::write(&station, common::stations::bench_2("")).unwrap();
+    let dir = tmp.path().join("run");
+    let run = |args: &[&str]| {
+        common::gyrocal()
+            .arg("run")
+            .args(["--dmm-port", sim.dmm(), "--table-port", sim.table()])
+            .arg("--station")
+            .arg(&station)
+            .arg("--no-report")
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    // the first session, stopped by SIGINT once a step is recorded
+    let mut first = run(&[plan.to_str().unwrap(), "--out", dir.to_str().unwrap()]);
+    let stderr = first.stderr.take().unwrap();
+    let (tx, lines) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines() {
+            let Ok(line) = line else { break };
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    loop {
+        let line = lines
+            .recv_timeout(Duration::from_secs(20))
+            .expect("a step recorded");
+        if line.trim_start().starts_with("step 1 done") {
+            break;
+        }
+    }
+    let pid = nix::unistd::Pid::from_raw(i32::try_from(first.id()).unwrap());
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGINT).unwrap();
+    assert_eq!(first.wait().unwrap().code(), Some(130));
+    // resumed on the same instruments: warned again, recorded once
+    let second = run(&["--resume", dir.to_str().unwrap()])
+        .wait_with_output()
+        .unwrap();
+    let stderr = text(&second.stderr);
+    assert_eq!(second.status.code(), Some(0), "{stderr}");
+    assert!(stderr.contains("reports serial SIM0001"), "{stderr}");
+    let m = common::manifest(&dir);
+    assert_eq!(m["status"], "complete", "{m}");
+    let kinds: Vec<&Value> = m["deviations"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|d| d["kind"] == "instrument-serial-mismatch")
+        .collect();
+    // the meter's and the table's (bench-2 names other serials for both), each once
+    assert_eq!(kinds.len(), 2, "{m}");
+    assert!(
+        kinds[0]["text"]
+            .as_str()
+            .unwrap()
+            .contains("multimeter DMM-0042")
+    );
+    assert!(
+        kinds[1]["text"]
+            .as_str()
+            .unwrap()
+            .contains("rate table TBL-0007")
+    );
+    let last = sim.finish();
+    assert_eq!(last["table"]["stopped"], true, "{last}");
+}
