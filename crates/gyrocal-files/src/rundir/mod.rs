@@ -124,6 +124,7 @@ use crate::open::open_regular;
 use crate::plan::{Plan, Step};
 use crate::time::{ClockAnchor, now_utc};
 
+mod columns;
 mod csvfile;
 mod error;
 mod integrity;
@@ -138,7 +139,7 @@ mod writer;
 // the modules' crate-private helpers, for one another (each `use super::*`)
 #[allow(unused_imports)]
 use {
-    csvfile::*, error::*, lock::*, manifest::*, read::*, records::*, results::*, resume::*,
+    columns::*, csvfile::*, error::*, lock::*, manifest::*, read::*, records::*, results::*, resume::*,
     writer::*,
 };
 
@@ -176,27 +177,65 @@ pub const REPORT_HTML: &str = "report.html";
 pub const ALLAN_JSON: &str = "allan.json";
 /// File name of a drift record's Allan page (written and recorded as [`ALLAN_JSON`]).
 pub const ALLAN_HTML: &str = "allan.html";
-/// Version of the run-directory format written, recorded in the manifest. Version 1
-/// (gyrocal before the UTC columns and the slim manifest) is still read: see
-/// [`FORMAT_VERSIONS_READ`].
-pub const FORMAT_VERSION: u32 = 2;
+/// Version of the run-directory format written, recorded in the manifest. Version 3 counts
+/// steps, readings and passes from 1 in the CSV files (`step_no`, `sample_no`, `pass_no`);
+/// version 2 (`step`, `index`, `pass`, from 0) and version 1 (before the UTC columns and the
+/// slim manifest) are still read: see [`FORMAT_VERSIONS_READ`] and the module docs, *Formats
+/// read*.
+pub const FORMAT_VERSION: u32 = 3;
 /// The manifest versions this gyrocal reads.
-pub const FORMAT_VERSIONS_READ: [u32; 2] = [1, 2];
+pub const FORMAT_VERSIONS_READ: [u32; 3] = [1, 2, 3];
 
-/// Columns of `samples.csv`, in order; `t_utc` is the run directory's conversion of `t_s`
-/// (see the module docs, *Times*), last so that readers by position keep working.
+/// Columns of `samples.csv`, in order; `step_no` and `sample_no` count from 1 (the plan's step
+/// number, the reading's number within its step); `t_utc` is the run directory's conversion of
+/// `t_s` (see the module docs, *Times*), last so that readers by position keep working.
 pub const SAMPLES_HEADER: [&str; 7] = [
+    "step_no",
+    "sample_no",
+    "t_s",
+    "rate_dps",
+    "volts",
+    "overload",
+    "t_utc",
+];
+/// Columns of `samples.csv` of format 2: `step` and `index` counted from 0. Such a file still
+/// reads (its values as before), and a resume keeps appending rows of these columns to it (the
+/// file is never rewritten: it can hold gigabytes).
+pub const SAMPLES_HEADER_V2: [&str; 7] = [
     "step", "index", "t_s", "rate_dps", "volts", "overload", "t_utc",
 ];
-/// Columns of `samples.csv` before `t_utc` existed. Such a file still reads, and a resume
-/// keeps appending rows of these columns to it (the file is never rewritten: it can hold
-/// gigabytes).
+/// Columns of `samples.csv` before `t_utc` existed (counted from 0). Such a file still reads,
+/// and a resume keeps appending rows of these columns to it.
 pub const SAMPLES_HEADER_V1: [&str; 6] = ["step", "index", "t_s", "rate_dps", "volts", "overload"];
-/// Columns of `steps.csv`, in order: the [`StepRecord`]'s fields, then `t_start_utc` and
+/// Columns of `steps.csv`, in order: the [`StepRecord`]'s fields (`step_no` and `pass_no`
+/// counted from 1, the record's `step` and `pass` plus one), then `t_start_utc` and
 /// `t_end_utc`, which the run directory computes from `t_start_s` and `t_end_s` (see the
 /// module docs, *Times*). New columns go at the end, so a script that reads columns by
 /// position keeps working.
 pub const STEPS_HEADER: [&str; 17] = [
+    "step_no",
+    "pass_no",
+    "rate_dps",
+    "rate_meas_dps",
+    "rate_meas_std_dps",
+    "rate_meas_min_dps",
+    "rate_meas_max_dps",
+    "rate_samples",
+    "volts",
+    "volts_std",
+    "n",
+    "overloads",
+    "retries",
+    "t_start_s",
+    "t_end_s",
+    "t_start_utc",
+    "t_end_utc",
+];
+
+/// Columns of `steps.csv` of format 2: [`STEPS_HEADER`]'s with `step` and `pass` counted from
+/// 0. Such a file still reads; a resume rewrites it with [`STEPS_HEADER`] (the old rows' step
+/// and pass numbers plus one, every other cell as it was) before appending.
+pub const STEPS_HEADER_V3: [&str; 17] = [
     "step",
     "pass",
     "rate_dps",
@@ -257,9 +296,15 @@ pub const STEPS_HEADER_V1: [&str; 14] = [
 ];
 
 /// Every `steps.csv` header read, current first.
-pub(super) const STEPS_HEADERS: &[&[&str]] = &[&STEPS_HEADER, &STEPS_HEADER_V2, &STEPS_HEADER_V1];
+pub(super) const STEPS_HEADERS: &[&[&str]] = &[
+    &STEPS_HEADER,
+    &STEPS_HEADER_V3,
+    &STEPS_HEADER_V2,
+    &STEPS_HEADER_V1,
+];
 /// Every `samples.csv` header read, current first.
-pub(super) const SAMPLES_HEADERS: &[&[&str]] = &[&SAMPLES_HEADER, &SAMPLES_HEADER_V1];
+pub(super) const SAMPLES_HEADERS: &[&[&str]] =
+    &[&SAMPLES_HEADER, &SAMPLES_HEADER_V2, &SAMPLES_HEADER_V1];
 
 /// The most bytes read from `manifest.json` (64 MiB; a manifest is kilobytes, a megabyte or
 /// two with a large fit document).
