@@ -68,7 +68,10 @@ fn a_fresh_run_counts_from_one_in_columns_that_say_so_as_the_terminal_does() {
     let (th, trows) = table(&dir.join("steps.csv"));
     assert_eq!(th[..3], ["step_no", "pass_no", "rate_dps"]);
     for old in ["step", "index", "pass"] {
-        assert!(!sh.iter().chain(&th).any(|c| c == old), "{old} in {sh:?} {th:?}");
+        assert!(
+            !sh.iter().chain(&th).any(|c| c == old),
+            "{old} in {sh:?} {th:?}"
+        );
     }
 
     // steps.csv: step_no 1..=5, pass_no 1 (quick.toml runs its rates once)
@@ -88,7 +91,10 @@ fn a_fresh_run_counts_from_one_in_columns_that_say_so_as_the_terminal_does() {
         assert_eq!(*r, rates[*s as usize - 1], "step_no {s} sample_no {n}");
         per_step.entry(*s).or_default().push(*n);
     }
-    assert_eq!(per_step.keys().copied().collect::<Vec<_>>(), [1, 2, 3, 4, 5]);
+    assert_eq!(
+        per_step.keys().copied().collect::<Vec<_>>(),
+        [1, 2, 3, 4, 5]
+    );
     for (s, n) in &per_step {
         assert_eq!(*n, (1..=50).collect::<Vec<_>>(), "step_no {s}");
     }
@@ -207,7 +213,10 @@ fn a_run_of_the_old_format_resumed_appends_in_its_own_format_and_verifies_and_fi
     // samples.csv: the old rows byte for byte, then the new session's rows in the file's own
     // columns, counted from 0: steps 2, 3, 4 with index 0..20 each
     let after = std::fs::read_to_string(dir.join("samples.csv")).unwrap();
-    assert!(after.starts_with(&samples_before), "the kept rows are not kept");
+    assert!(
+        after.starts_with(&samples_before),
+        "the kept rows are not kept"
+    );
     let (sh, srows) = table(&dir.join("samples.csv"));
     assert_eq!(sh[..2], ["step", "index"]);
     let steps = column(&sh, &srows, "step");
@@ -234,13 +243,23 @@ fn a_run_of_the_old_format_resumed_appends_in_its_own_format_and_verifies_and_fi
         .arg(&dir)
         .output()
         .unwrap();
-    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     let o = gyrocal()
         .args(["fit", "--json"])
         .arg(&dir)
         .output()
         .unwrap();
-    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     let mut refit: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     refit.as_object_mut().unwrap().remove("source");
     let compared = same_numbers(&json(&dir, "fit.json"), &refit, "fit.json");
@@ -258,16 +277,31 @@ fn a_complete_run_of_the_old_format_reads_as_before() {
         .arg(&dir)
         .output()
         .unwrap();
-    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     let o = gyrocal().arg("verify").arg(&dir).output().unwrap();
-    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stdout));
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
     // the Allan analysis of its samples (by `t_s` and `volts`, whatever the counted columns)
     let o = gyrocal()
         .args(["allan", "--json"])
         .arg(&dir)
         .output()
         .unwrap();
-    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!(doc.is_object(), "{doc}");
 }

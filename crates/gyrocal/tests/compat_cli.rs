@@ -77,7 +77,11 @@ fn kept_converted(fixture: &str, dir: &Path) {
             let was: u64 = o[k].parse().unwrap();
             assert_eq!(n[k], (was + 1).to_string(), "{fixture}: {o:?} became {n:?}");
         }
-        assert_eq!(o[2..], n[2..], "{fixture}: the other cells are kept as they were");
+        assert_eq!(
+            o[2..],
+            n[2..],
+            "{fixture}: the other cells are kept as they were"
+        );
     }
 }
 

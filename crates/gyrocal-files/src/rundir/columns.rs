@@ -20,8 +20,11 @@ use super::*;
 
 /// Each counted column: its name since format 3 (counted from 1) and its name before (counted
 /// from 0), which is also the in-memory field's name.
-pub(super) const COUNTED: [(&str, &str); 3] =
-    [("step_no", "step"), ("sample_no", "index"), ("pass_no", "pass")];
+pub(super) const COUNTED: [(&str, &str); 3] = [
+    ("step_no", "step"),
+    ("sample_no", "index"),
+    ("pass_no", "pass"),
+];
 
 /// How a CSV file counts its steps, readings and passes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -78,12 +81,9 @@ impl Counting {
 
     /// The file's value of column `field` as a 0-based index; a `_no` column's 0 is an error.
     pub(super) fn to_index(self, field: &'static str, value: u64) -> Result<u64, String> {
-        value.checked_sub(self.offset()).ok_or_else(|| {
-            format!(
-                "{} is counted from 1 (got {value})",
-                self.column(field)
-            )
-        })
+        value
+            .checked_sub(self.offset())
+            .ok_or_else(|| format!("{} is counted from 1 (got {value})", self.column(field)))
     }
 
     /// The 0-based index `i` as this counting writes it.
@@ -301,7 +301,14 @@ mod tests {
     #[test]
     fn an_old_steps_file_is_upgraded_to_numbers_counted_from_one() {
         let old = b"step,pass,rate_dps,volts,n\n0,0,10,0.1,5\n4,1,-10,0.2,5\n";
-        let new = ["step_no", "pass_no", "rate_dps", "rate_samples", "volts", "n"];
+        let new = [
+            "step_no",
+            "pass_no",
+            "rate_dps",
+            "rate_samples",
+            "volts",
+            "n",
+        ];
         let up = upgrade_steps(
             Path::new("steps.csv"),
             old,

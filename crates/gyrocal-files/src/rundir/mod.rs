@@ -152,8 +152,8 @@ mod writer;
 // the modules' crate-private helpers, for one another (each `use super::*`)
 #[allow(unused_imports)]
 use {
-    columns::*, csvfile::*, error::*, lock::*, manifest::*, read::*, records::*, results::*, resume::*,
-    writer::*,
+    columns::*, csvfile::*, error::*, lock::*, manifest::*, read::*, records::*, results::*,
+    resume::*, writer::*,
 };
 
 pub use error::{RunError, RunErrorKind};

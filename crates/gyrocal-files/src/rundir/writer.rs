@@ -383,10 +383,7 @@ impl RunDir {
                 rate_dps: s.rate_dps,
                 volts: round_opt(smp.volts),
                 overload: u8::from(smp.volts.is_none()),
-                t_utc: self
-                    .samples_columns
-                    .utc
-                    .then(|| self.clock.utc(smp.t_s)),
+                t_utc: self.samples_columns.utc.then(|| self.clock.utc(smp.t_s)),
             };
             let written = write_sample(&mut self.samples, &row, self.samples_columns);
             written.map_err(|e| csv_write(&path, e))?;
