@@ -313,7 +313,7 @@ fn make_format_1(dir: &Path) {
                 format!("{}\n", cells[..cells.len() - k].join(","))
             })
             .collect();
-        fs::write(dir.join(name), out).unwrap();
+        fs::write(dir.join(name), common::counted_from_zero(&out)).unwrap();
     };
     drop_cols(SAMPLES_CSV, 1);
     drop_cols(STEPS_CSV, 2);
@@ -357,15 +357,22 @@ fn a_run_directory_of_the_previous_format_loads_and_resumes() {
     drop(rd);
     let data = load(&dir).unwrap();
     assert_eq!(data.steps.len(), 5);
-    assert_eq!(data.manifest.format_version, 2);
+    assert_eq!(data.manifest.format_version, 3);
     let samples = load_samples(&dir).unwrap();
     assert_eq!(samples.len(), 20);
+    // read back 0-based like the schedule, the old rows and the resumed ones alike
+    let steps: Vec<usize> = samples.iter().map(|s| s.step).collect();
+    assert_eq!(steps, (0..5).flat_map(|s| [s; 4]).collect::<Vec<_>>());
+    assert!(samples.iter().all(|s| s.index < 4));
     let text = fs::read_to_string(dir.join(SAMPLES_CSV)).unwrap();
     assert!(
         text.starts_with("step,index,t_s,rate_dps,volts,overload\n"),
         "{text}"
     );
     assert!(text.lines().all(|l| l.split(',').count() == 6), "{text}");
+    // the resumed session's rows are in the file's own format: counted from 0
+    assert!(text.lines().any(|l| l.starts_with("4,0,")), "{text}");
+    assert!(!text.lines().any(|l| l.starts_with("5,")), "{text}");
     let mut rdr = csv::Reader::from_path(dir.join(STEPS_CSV)).unwrap();
     let h = rdr.headers().unwrap().clone();
     let u = h.iter().position(|x| x == "t_start_utc").unwrap();

@@ -96,12 +96,13 @@ fn a_full_run_writes_what_the_fit_needs() {
     assert!(ov.iter().all(|s| s.volts.is_none() && s.index == 4));
     let text = fs::read_to_string(dir.join(SAMPLES_CSV)).unwrap();
     assert!(
-        text.starts_with("step,index,t_s,rate_dps,volts,overload,t_utc\n"),
+        text.starts_with("step_no,sample_no,t_s,rate_dps,volts,overload,t_utc\n"),
         "{text}"
     );
+    // counted from 1: the first step's fifth reading (`index` 4 in memory)
     assert!(
         text.lines()
-            .any(|l| l.starts_with("0,4,") && l.contains(",,1,")),
+            .any(|l| l.starts_with("1,5,") && l.contains(",,1,")),
         "{text}"
     );
 
@@ -544,6 +545,7 @@ fn rate_samples_round_trip_and_older_steps_csv_still_read_and_resume() {
             cells.join(",") + "\n"
         })
         .collect();
+    let old = common::counted_from_zero(&old);
     fs::write(dir.join(STEPS_CSV), &old).unwrap();
     let data = load(&dir).unwrap();
     assert_eq!(data.steps.len(), 2);
@@ -557,6 +559,9 @@ fn rate_samples_round_trip_and_older_steps_csv_still_read_and_resume() {
     let text = fs::read_to_string(dir.join(STEPS_CSV)).unwrap();
     assert!(text.starts_with(&gyrocal_files::rundir::STEPS_HEADER.join(",")));
     assert!(text.lines().all(|l| l.split(',').count() == 17), "{text}");
+    // the old rows' step and pass re-based: step_no 1, 2, then the new row's 3
+    let nos: Vec<&str> = text.lines().skip(1).map(|l| &l[..4]).collect();
+    assert_eq!(nos, ["1,1,", "2,1,", "3,1,"], "{text}");
     let steps = load(&dir).unwrap().steps;
     assert_eq!(
         steps.iter().map(|s| s.rate_samples).collect::<Vec<_>>(),
@@ -681,5 +686,32 @@ fn the_run_clock_resumes_after_the_last_finished_step_even_when_the_manifest_lag
         rd.manifest().elapsed_s >= 10.3,
         "resumed clock {} s is before the end of the last kept step (10.3 s)",
         rd.manifest().elapsed_s
+    );
+}
+
+#[test]
+fn a_step_no_of_zero_is_refused_naming_the_column_and_line() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let p = plan();
+    let mut rd = RunDir::create(&dir, &p, meta()).unwrap();
+    run_step(&mut rd, 0, true);
+    drop(rd);
+    // step_no counts from 1: a 0 is not the first step of an older file, it is an error
+    let text = fs::read_to_string(dir.join(STEPS_CSV)).unwrap();
+    let bad = text.replacen("\n1,1,", "\n0,1,", 1);
+    assert_ne!(bad, text);
+    fs::write(dir.join(STEPS_CSV), bad).unwrap();
+    let err = load(&dir).unwrap_err().to_string();
+    assert!(
+        err.contains("steps.csv:2:") && err.contains("step_no is counted from 1 (got 0)"),
+        "{err}"
+    );
+    let text = fs::read_to_string(dir.join(SAMPLES_CSV)).unwrap();
+    fs::write(dir.join(SAMPLES_CSV), text.replacen("\n1,1,", "\n1,0,", 1)).unwrap();
+    let err = load_samples(&dir).unwrap_err().to_string();
+    assert!(
+        err.contains("samples.csv:2:") && err.contains("sample_no is counted from 1 (got 0)"),
+        "{err}"
     );
 }

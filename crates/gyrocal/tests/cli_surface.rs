@@ -221,9 +221,13 @@ fn check_json_is_one_document_with_the_schedule() {
     let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let steps = doc["steps"].as_array().unwrap();
     assert_eq!(steps.len(), 19);
-    assert_eq!(steps[0]["number"], 1);
-    assert_eq!(steps[18]["number"], 19);
-    assert_eq!(steps[18]["index"], 18);
+    // counted from 1 like the terminal and the run directory's files (`step_no`, `pass_no`)
+    assert_eq!(steps[0]["step_no"], 1);
+    assert_eq!(steps[0]["pass_no"], 1);
+    assert_eq!(steps[18]["step_no"], 19);
+    for old in ["number", "index", "pass"] {
+        assert!(steps[18].get(old).is_none(), "{old} in {}", steps[18]);
+    }
     assert_eq!(doc["readings"], 19 * 500);
     let (est, bound) = (
         doc["estimated_s"].as_f64().unwrap(),

@@ -3,12 +3,16 @@
 //! `tests/fixtures/rundirs/make.sh`, see the README there) are copied to a temporary directory
 //! and driven through the binary as an operator would. An interrupted sweep and an
 //! interrupted drift record resume to completion on the simulated bench (the table ends at
-//! rest, the kept rows stay byte for byte, nothing is lost or doubled), then `gyrocal verify`
-//! passes and `gyrocal report` renders; the complete sweep verifies and reports as it is, and
-//! its `fit.json` is the fit `gyrocal fit` computes again from its `steps.csv`.
+//! rest, nothing is lost or doubled, samples.csv's kept rows stay byte for byte and the new
+//! ones are in its own columns, `step` and `index` counted from 0; steps.csv is rewritten in
+//! format 3, its kept rows' `step` and `pass` become `step_no` and `pass_no` plus one, every
+//! other cell as it was), then `gyrocal verify` passes and `gyrocal report` renders; the
+//! complete sweep verifies and reports as it is, and its `fit.json` is the fit `gyrocal fit`
+//! computes again from its `steps.csv`.
 //!
 //! These are the compatibility net of a restructuring: they must pass unchanged on every
-//! later release that keeps the run directory's format.
+//! later release that keeps the run directory's format. (Format 3, which counts from 1 in the
+//! CSV files, changed the two things a resume does to steps.csv and these tests say so.)
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a panic is a failed test
 
@@ -19,7 +23,9 @@ use std::path::Path;
 
 use common::{RunOutput, final_table_state, fixture_rundir, gyrocal, json, run_json};
 
-/// `(step, index)` of every row of samples.csv, and the run clock `t_s` of each, in file order.
+/// `(step, index)` of every row of samples.csv, and the run clock `t_s` of each, in file order:
+/// the earlier release's columns, counted from 0 (a resume keeps appending rows of the file's
+/// own columns).
 fn samples(dir: &Path) -> Vec<((u64, u64), f64)> {
     let mut r = csv::Reader::from_path(dir.join("samples.csv")).unwrap();
     let h = r.headers().unwrap().clone();
@@ -36,12 +42,47 @@ fn samples(dir: &Path) -> Vec<((u64, u64), f64)> {
         .collect()
 }
 
-/// The `step` column of steps.csv, in file order.
+/// The steps of steps.csv, 0-based, in file order: a resume rewrote it in format 3, whose
+/// first column is `step_no`, counted from 1.
 fn steps(dir: &Path) -> Vec<u64> {
     let mut r = csv::Reader::from_path(dir.join("steps.csv")).unwrap();
+    assert_eq!(&r.headers().unwrap()[0], "step_no");
     r.records()
-        .map(|rec| rec.unwrap()[0].parse().unwrap())
+        .map(|rec| rec.unwrap()[0].parse::<u64>().unwrap() - 1)
         .collect()
+}
+
+/// The fixture's steps.csv rows are the first rows of the resumed run's, converted to format
+/// 3: `step_no` and `pass_no` are its `step` and `pass` plus one, every other cell as it was.
+fn kept_converted(fixture: &str, dir: &Path) {
+    let before = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../tests/fixtures/rundirs")
+            .join(fixture)
+            .join("steps.csv"),
+    )
+    .unwrap();
+    let after = std::fs::read_to_string(dir.join("steps.csv")).unwrap();
+    let (old, new): (Vec<&str>, Vec<&str>) = (before.lines().collect(), after.lines().collect());
+    assert!(old[0].starts_with("step,pass,"), "{}", old[0]);
+    assert_eq!(
+        new[0],
+        old[0].replacen("step,pass,", "step_no,pass_no,", 1),
+        "{fixture}: the header"
+    );
+    assert!(new.len() > old.len(), "{fixture}: rows appended");
+    for (o, n) in old.iter().zip(&new).skip(1) {
+        let (o, n): (Vec<&str>, Vec<&str>) = (o.split(',').collect(), n.split(',').collect());
+        for k in 0..2 {
+            let was: u64 = o[k].parse().unwrap();
+            assert_eq!(n[k], (was + 1).to_string(), "{fixture}: {o:?} became {n:?}");
+        }
+        assert_eq!(
+            o[2..],
+            n[2..],
+            "{fixture}: the other cells are kept as they were"
+        );
+    }
 }
 
 /// The fixture's `file` is kept byte for byte at the start of the resumed run's `file`.
@@ -146,7 +187,7 @@ fn an_interrupted_sweep_of_the_earlier_release_resumes_verifies_and_reports() {
     assert_eq!(resumes[0]["previous_status"], "failed");
     check_complete_data(&dir, 5, 20);
     kept_as_prefix("sweep-interrupted", &dir, "samples.csv");
-    kept_as_prefix("sweep-interrupted", &dir, "steps.csv");
+    kept_converted("sweep-interrupted", &dir);
 
     verify_passes(&dir, &["samples.csv", "steps.csv", "fit.json"]);
     std::fs::remove_file(dir.join("report.html")).unwrap();
@@ -190,7 +231,7 @@ fn an_interrupted_drift_record_of_the_earlier_release_resumes_verifies_and_repor
     assert_eq!(resumes[0]["from_step"], 3);
     check_complete_data(&dir, 8, 200);
     kept_as_prefix("drift-interrupted", &dir, "samples.csv");
-    kept_as_prefix("drift-interrupted", &dir, "steps.csv");
+    kept_converted("drift-interrupted", &dir);
     // the record is analysed: the Allan deviation of the whole record, in °/h (a simulated K)
     let allan = json(&dir, "allan.json");
     assert_eq!(allan["unit"], "deg/h", "{allan}");

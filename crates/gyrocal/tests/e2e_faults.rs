@@ -348,6 +348,11 @@ fn samples(dir: &Path) -> Vec<BTreeMap<String, String>> {
     csv_rows(&dir.join("samples.csv"))
 }
 
+/// The 0-based schedule index of a row of steps.csv or samples.csv (its `step_no` minus one).
+fn step_of(row: &BTreeMap<String, String>) -> usize {
+    num::<usize>(row, "step_no") - 1
+}
+
 fn num<T: std::str::FromStr>(row: &BTreeMap<String, String>, key: &str) -> T
 where
     T::Err: std::fmt::Debug,
@@ -363,14 +368,14 @@ fn check_recorded_steps_whole(dir: &Path) -> Vec<usize> {
     let mut per_step: BTreeMap<usize, BTreeSet<u64>> = BTreeMap::new();
     for s in samples(dir) {
         let fresh = per_step
-            .entry(num(&s, "step"))
+            .entry(step_of(&s))
             .or_default()
-            .insert(num(&s, "index"));
+            .insert(num::<u64>(&s, "sample_no") - 1);
         assert!(fresh, "duplicated sample {s:?}");
     }
     let mut done = Vec::new();
     for row in steps(dir) {
-        let step: usize = num(&row, "step");
+        let step = step_of(&row);
         let n: u64 = num(&row, "n");
         let overloads: u64 = num(&row, "overloads");
         assert_eq!(n + overloads, SAMPLES, "step row {row:?}");
@@ -404,7 +409,7 @@ fn check_complete(dir: &Path) {
         "no lost or duplicated sample"
     );
     for row in steps(dir) {
-        let step: usize = num(&row, "step");
+        let step = step_of(&row);
         assert_eq!(num::<f64>(&row, "rate_dps"), RATES[step], "{row:?}");
     }
     assert!(dir.join("fit.json").exists(), "fit.json written");
@@ -656,23 +661,23 @@ fn e2e_overload_readings_are_counted_and_excluded_not_repeated() {
     let end = Run::start(&plan, &sim, &out_args(&dir), None).wait();
     assert_eq!(end.code, Some(0), "{end:?}");
     check_complete(&dir);
-    // readings 40..42 are the 10th..12th of step 1
+    // readings 40..42 are the 10th..12th of the second step (`step_no` 2)
     for row in steps(&dir) {
-        let step: usize = num(&row, "step");
+        let step = step_of(&row);
         let want = if step == 1 { 3 } else { 0 };
         assert_eq!(num::<u64>(&row, "overloads"), want, "{row:?}");
         assert_eq!(num::<u64>(&row, "n"), SAMPLES - want, "{row:?}");
     }
     let s1: Vec<_> = samples(&dir)
         .into_iter()
-        .filter(|s| s["step"] == "1")
+        .filter(|s| s["step_no"] == "2")
         .collect();
     let over: Vec<u64> = s1
         .iter()
         .filter(|s| s["overload"] == "1")
-        .map(|s| num(s, "index"))
+        .map(|s| num(s, "sample_no"))
         .collect();
-    assert_eq!(over, vec![9, 10, 11], "overloads recorded as such");
+    assert_eq!(over, vec![10, 11, 12], "overloads recorded as such");
     assert!(
         s1.iter()
             .filter(|s| s["overload"] == "1")

@@ -251,8 +251,35 @@ fn make_format_1(dir: &Path) {
                 format!("{}\n", cells[..cells.len() - k].join(","))
             })
             .collect();
-        std::fs::write(dir.join(name), out).unwrap();
+        std::fs::write(dir.join(name), counted_from_zero(&out)).unwrap();
     }
+}
+
+/// A CSV of the current format with its counted columns as gyrocal wrote them before format
+/// 3: `step_no`, `sample_no`, `pass_no` named `step`, `index`, `pass` and counted from 0.
+fn counted_from_zero(text: &str) -> String {
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let old = |h: &str| match h {
+        "step_no" => Some("step"),
+        "sample_no" => Some("index"),
+        "pass_no" => Some("pass"),
+        _ => None,
+    };
+    let renamed: Vec<&str> = header.iter().map(|h| old(h).unwrap_or(h)).collect();
+    let mut out = renamed.join(",") + "\n";
+    for l in lines {
+        let cells: Vec<String> = l
+            .split(',')
+            .zip(&header)
+            .map(|(c, h)| match old(h) {
+                Some(_) => (c.parse::<u64>().unwrap() - 1).to_string(),
+                None => c.to_string(),
+            })
+            .collect();
+        out += &(cells.join(",") + "\n");
+    }
+    out
 }
 
 #[test]
@@ -290,11 +317,16 @@ fn run_directories_of_the_previous_format_still_report_and_resume() {
     assert!(out.status.success(), "{}", text(&out));
     let m = manifest(&dir);
     assert_eq!(m["status"], "complete");
-    assert_eq!(m["format_version"], 2);
+    assert_eq!(m["format_version"], 3);
     assert!(dir.join("fit.json").is_file() && dir.join("report.html").is_file());
     assert!(!dir.join(".lock").exists());
     let body = std::fs::read_to_string(dir.join("samples.csv")).unwrap();
     assert_eq!(body.lines().count(), 1 + 5 * 50);
+    // the resumed session's rows in the file's own columns: counted from 0, no t_utc
+    assert!(body.starts_with("step,index,t_s,rate_dps,volts,overload\n"));
+    assert!(body.lines().any(|l| l.starts_with("4,49,")), "{body}");
+    let steps = std::fs::read_to_string(dir.join("steps.csv")).unwrap();
+    assert!(steps.starts_with("step_no,pass_no,"), "{steps}");
 }
 
 #[test]

@@ -94,17 +94,18 @@ fn run(
     }
 }
 
-/// (step, n + overloads, retries) of each row of steps.csv.
+/// (step, n + overloads, retries) of each row of steps.csv; the step 0-based (the file's
+/// `step_no` minus one).
 fn steps(dir: &Path) -> Vec<(usize, u64, u64)> {
     let mut r = csv::Reader::from_path(dir.join("steps.csv")).unwrap();
     let h = r.headers().unwrap().clone();
     let col = |name: &str| h.iter().position(|c| c == name).unwrap();
-    let (s, n, o, re) = (col("step"), col("n"), col("overloads"), col("retries"));
+    let (s, n, o, re) = (col("step_no"), col("n"), col("overloads"), col("retries"));
     r.records()
         .map(|rec| {
             let rec = rec.unwrap();
             let num = |i: usize| rec[i].parse::<u64>().unwrap();
-            (num(s) as usize, num(n) + num(o), num(re))
+            (num(s) as usize - 1, num(n) + num(o), num(re))
         })
         .collect()
 }

@@ -14,12 +14,12 @@ use nix::unistd::Pid;
 
 use common::{config, final_table_state, gyrocal, manifest, steps_done};
 
-/// (step, index) of every sample row, and the set of step rows.
+/// (step_no, sample_no) of every sample row (counted from 1, as the files count).
 fn samples(dir: &Path) -> Vec<(usize, u64)> {
     let mut r = csv::Reader::from_path(dir.join("samples.csv")).unwrap();
     let h = r.headers().unwrap().clone();
-    let si = h.iter().position(|c| c == "step").unwrap();
-    let ii = h.iter().position(|c| c == "index").unwrap();
+    let si = h.iter().position(|c| c == "step_no").unwrap();
+    let ii = h.iter().position(|c| c == "sample_no").unwrap();
     r.records()
         .map(|rec| {
             let rec = rec.unwrap();
@@ -28,11 +28,14 @@ fn samples(dir: &Path) -> Vec<(usize, u64)> {
         .collect()
 }
 
+/// The steps recorded in steps.csv, sorted, as 0-based schedule indices (the file's
+/// `step_no` counts from 1: its first column, minus one).
 fn step_indices(dir: &Path) -> Vec<usize> {
     let mut r = csv::Reader::from_path(dir.join("steps.csv")).unwrap();
+    assert_eq!(&r.headers().unwrap()[0], "step_no");
     let mut v: Vec<usize> = r
         .records()
-        .map(|rec| rec.unwrap()[0].parse().unwrap())
+        .map(|rec| rec.unwrap()[0].parse::<usize>().unwrap() - 1)
         .collect();
     v.sort_unstable();
     v

@@ -74,13 +74,14 @@ fn run(tmp: &Path, name: &str, meter: &str, mode: &str, faults: &[&str]) -> Outc
     }
 }
 
-/// (step, rate, mean volts, n + overloads) of each row of steps.csv.
+/// (step, rate, mean volts, n + overloads) of each row of steps.csv; the step 0-based (the
+/// file's `step_no` minus one).
 fn steps(dir: &Path) -> Vec<(usize, f64, f64, u64)> {
     let mut r = csv::Reader::from_path(dir.join("steps.csv")).unwrap();
     let h = r.headers().unwrap().clone();
     let col = |name: &str| h.iter().position(|c| c == name).unwrap();
     let (s, rate, v, n, o) = (
-        col("step"),
+        col("step_no"),
         col("rate_dps"),
         col("volts"),
         col("n"),
@@ -90,7 +91,12 @@ fn steps(dir: &Path) -> Vec<(usize, f64, f64, u64)> {
         .map(|rec| {
             let rec = rec.unwrap();
             let num = |i: usize| rec[i].parse::<f64>().unwrap();
-            (num(s) as usize, num(rate), num(v), (num(n) + num(o)) as u64)
+            (
+                num(s) as usize - 1,
+                num(rate),
+                num(v),
+                (num(n) + num(o)) as u64,
+            )
         })
         .collect()
 }

@@ -8,7 +8,8 @@
 //! Synchronous, no runtime: callable at the end of a drift run.
 //!
 //! # Input
-//! * A run directory: `samples.csv` (`step,index,t_s,rate_dps,volts,overload,t_utc`), time `t_s`,
+//! * A run directory: `samples.csv` (`step_no,sample_no,t_s,rate_dps,volts,overload,t_utc`, or
+//!   `step,index,...` in a run of format 2 or earlier), time `t_s`,
 //!   value `volts`; rows with `overload = 1` are skipped and counted (each leaves a gap).
 //!   When no scale factor is given, the run's `fit.json` (`metrics.scale_factor`) supplies it.
 //! * A CSV file with a header: the value column is `--column`, else the first of `volts`,

@@ -1,6 +1,6 @@
 //! The schedule a plan expands into: one [`Step`] per rate of each pass, in order, with what
 //! it acquires ([`Acquire`]). A step's index is stable for a given plan: it is the run
-//! directory's `step` and the key a resume continues from.
+//! directory's `step_no` minus one and the key a resume continues from.
 
 use std::time::Duration;
 
@@ -25,7 +25,8 @@ pub enum Acquire {
 /// One step of the schedule: one rate of one pass.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Step {
-    /// 0-based position in the schedule; stable for a given plan (the run directory's `step`).
+    /// 0-based position in the schedule; stable for a given plan (the run directory's
+    /// `step_no` minus one).
     pub index: usize,
     /// 0-based pass (`0..repeat`).
     pub pass: u32,

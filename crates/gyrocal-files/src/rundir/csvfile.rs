@@ -65,8 +65,12 @@ pub(super) fn parse_steps(
     let mut seen = BTreeSet::new();
     let mut out = Vec::new();
     let mut rec = csv::StringRecord::new();
-    // by name: files written before `rate_samples` existed lack that column
+    // by name: files written before `rate_samples` existed lack that column; the counted
+    // columns by their in-memory names, re-based by the header's counting
     let headers = rdr.headers().map_err(|e| csv_read(path, &e))?.clone();
+    let counting = Counting::of_header(headers.iter());
+    let fields = Counting::field_names(&headers);
+    let step_no = |i: usize| counting.show("step", i as u64);
     loop {
         match rdr.read_record(&mut rec) {
             Ok(false) => break,
@@ -81,32 +85,36 @@ pub(super) fn parse_steps(
             line,
             message,
         };
-        let r: StepRecord = rec
-            .deserialize(Some(&headers))
-            .map_err(|e| bad(e.to_string()))?;
+        let r = read_step(&rec, &fields, counting).map_err(bad)?;
         let Some(s) = schedule.get(r.step) else {
             return Err(bad(format!(
-                "step {} is not in the plan's schedule",
-                r.step
+                "{} is not in the plan's schedule ({} steps)",
+                step_no(r.step),
+                schedule.len()
             )));
         };
         if r.pass != s.pass || r.rate_dps.to_bits() != s.rate_dps.to_bits() {
             return Err(bad(format!(
-                "step {} has pass {} rate {}, the schedule pass {} rate {}",
-                r.step, r.pass, r.rate_dps, s.pass, s.rate_dps
+                "{} has {} rate {}, the schedule {} rate {}",
+                step_no(r.step),
+                counting.show("pass", u64::from(r.pass)),
+                r.rate_dps,
+                counting.show("pass", u64::from(s.pass)),
+                s.rate_dps
             )));
         }
         if !seen.insert(r.step) {
-            return Err(bad(format!("step {} appears twice", r.step)));
+            return Err(bad(format!("{} appears twice", step_no(r.step))));
         }
         if r.n == 0 || r.n.checked_add(r.overloads).is_none() {
             return Err(bad(format!(
-                "step {}: n must be >= 1 (got {})",
-                r.step, r.n
+                "{}: n must be >= 1 (got {})",
+                step_no(r.step),
+                r.n
             )));
         }
         if let Some(msg) = record_problem(&r) {
-            return Err(bad(format!("step {}: {msg}", r.step)));
+            return Err(bad(format!("{}: {msg}", step_no(r.step))));
         }
         out.push(r);
     }

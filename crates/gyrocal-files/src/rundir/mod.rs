@@ -3,18 +3,25 @@
 //!
 //! # Files
 //!
-//! - `samples.csv`: `step,index,t_s,rate_dps,volts,overload,t_utc`, one row per raw reading in
-//!   the order taken. `step` is the schedule's 0-based index of the step (its position in the
-//!   plan's `repeat × rates_dps`; gyrocal's messages, display and report say `step + 1`, the
-//!   plan's step number: `step 4/19` is `step = 3` here); `index` is 0-based and contiguous within a step; `t_s` is the
-//!   run clock (seconds, see `elapsed_s` below); `rate_dps` the demanded rate. **Overloads are
-//!   written, never dropped**: the row has `overload = 1` and an *empty* `volts` (the meter's
-//!   `9.9E+37` is a marker, not a voltage; an empty field makes a naive reader fail loudly
-//!   instead of averaging it), so the indices stay contiguous and the overload count is
-//!   auditable.
-//! - `steps.csv`: one row per finished step, see [`StepRecord`] and [`STEPS_HEADER`]. It is a
-//!   valid input of `gyrocal fit`, which reads `rate_dps`, `volts`, `volts_std` (optional,
-//!   empty when `n = 1`) and `n` by name.
+//! - `samples.csv`: `step_no,sample_no,t_s,rate_dps,volts,overload,t_utc`, one row per raw
+//!   reading in the order taken. The `_no` columns count from 1, as the terminal and the
+//!   report do: `step_no` is the plan's step number (its position in the plan's `repeat ×
+//!   rates_dps`; "step 4 of 19" on the terminal is `step_no` 4 here), `sample_no` the
+//!   reading's number within its step, contiguous (1, 2, 3, ...); `t_s` is the run clock
+//!   (seconds, see `elapsed_s` below); `rate_dps` the demanded rate. **Overloads are written,
+//!   never dropped**: the row has `overload = 1` and an *empty* `volts` (the meter's `9.9E+37`
+//!   is a marker, not a voltage; an empty field makes a naive reader fail loudly instead of
+//!   averaging it), so the numbers stay contiguous and the overload count is auditable.
+//! - `steps.csv`: one row per finished step, see [`StepRecord`] and [`STEPS_HEADER`]; its
+//!   `step_no` and `pass_no` count from 1 too. It is a valid input of `gyrocal fit`, which
+//!   reads `rate_dps`, `volts`, `volts_std` (optional, empty when `n = 1`) and `n` by name.
+//!
+//! In memory ([`StepRecord`], [`SampleRow`], the manifest's `steps_done` and `from_step`)
+//! steps, readings and passes are 0-based, the schedule's index; the conversion is made at the
+//! CSV boundary only, in `columns` (a private module), by the file's header. Why the columns
+//! are named `_no` and not `step`, `index`, `pass`: the suffix says "counted from 1" where a
+//! bare name would not, and `index` and `pass` collide with pandas (`df.index` is the
+//! DataFrame's own index, `df.pass` a syntax error).
 //! - `manifest.json`: [`Manifest`], replaced atomically (temp file in the same directory,
 //!   fsync, rename, fsync of the directory) at every change, so it always parses. It holds the
 //!   run's state, the plan, the instruments, the times and, once fitted, a [`FitSummary`]: the
@@ -68,11 +75,16 @@
 //!
 //! Files written by earlier gyrocal versions still load, resume and report: a manifest of
 //! format 1 (the plan nested as `plan.plan`, `timing.elapsed_s`, the whole fit embedded as
-//! `fit`, read into [`Manifest::legacy_fit`]); a `steps.csv` without the UTC columns or
-//! without `rate_samples` (a resume rewrites it with the current header, the old rows' new
-//! cells empty); a `samples.csv` without `t_utc` (a resume keeps appending rows of its
-//! columns: the file is never rewritten, it can be gigabytes). A resume rewrites the manifest
-//! in the current format.
+//! `fit`, read into [`Manifest::legacy_fit`]); CSV files of formats 1 and 2, whose counted
+//! columns are `step`, `index` and `pass`, counted from 0 ([`STEPS_HEADER_V3`],
+//! [`SAMPLES_HEADER_V2`]), read with their values as before; a `steps.csv` without the UTC
+//! columns or without `rate_samples`; a `samples.csv` without `t_utc`. Which format a CSV
+//! file has is told by its header, never by its values. A resume rewrites `steps.csv` with the
+//! current header (the old rows' `step` and `pass` plus one, their new cells empty, every other
+//! cell as it was) and keeps appending rows of `samples.csv`'s own columns to it, counted as
+//! its header counts (the file is never rewritten: it can be gigabytes), so a run an older
+//! gyrocal began stays consistent and verifies. A resume rewrites the manifest in the current
+//! format: its `format_version` is then 3 while such a `samples.csv` keeps its older header.
 //!
 //! # Durability rules
 //!
@@ -109,7 +121,8 @@
 //! `error` ([`RunError`] and its kind), `records` (the rows of the CSV files), `manifest`
 //! ([`Manifest`], read and stored atomically), `lock` (one writer at a time), `writer`
 //! ([`RunDir`]: create, append, finish), `resume` ([`RunDir::open_for_resume`]), `csvfile`
-//! (lines, headers and rows of the CSV files), `read` ([`load`], [`load_fit`],
+//! (lines, headers and rows of the CSV files), `columns` (the counted columns across formats:
+//! from 1 in the files since format 3, 0-based in memory), `read` ([`load`], [`load_fit`],
 //! [`load_samples`]), `results` (result files written through the run directory:
 //! [`WriteResult`], [`RunResults`]), `integrity` (the checksums checked: [`verify`]).
 
@@ -124,6 +137,7 @@ use crate::open::open_regular;
 use crate::plan::{Plan, Step};
 use crate::time::{ClockAnchor, now_utc};
 
+mod columns;
 mod csvfile;
 mod error;
 mod integrity;
@@ -138,8 +152,8 @@ mod writer;
 // the modules' crate-private helpers, for one another (each `use super::*`)
 #[allow(unused_imports)]
 use {
-    csvfile::*, error::*, lock::*, manifest::*, read::*, records::*, results::*, resume::*,
-    writer::*,
+    columns::*, csvfile::*, error::*, lock::*, manifest::*, read::*, records::*, results::*,
+    resume::*, writer::*,
 };
 
 pub use error::{RunError, RunErrorKind};
@@ -176,27 +190,65 @@ pub const REPORT_HTML: &str = "report.html";
 pub const ALLAN_JSON: &str = "allan.json";
 /// File name of a drift record's Allan page (written and recorded as [`ALLAN_JSON`]).
 pub const ALLAN_HTML: &str = "allan.html";
-/// Version of the run-directory format written, recorded in the manifest. Version 1
-/// (gyrocal before the UTC columns and the slim manifest) is still read: see
-/// [`FORMAT_VERSIONS_READ`].
-pub const FORMAT_VERSION: u32 = 2;
+/// Version of the run-directory format written, recorded in the manifest. Version 3 counts
+/// steps, readings and passes from 1 in the CSV files (`step_no`, `sample_no`, `pass_no`);
+/// version 2 (`step`, `index`, `pass`, from 0) and version 1 (before the UTC columns and the
+/// slim manifest) are still read: see [`FORMAT_VERSIONS_READ`] and the module docs, *Formats
+/// read*.
+pub const FORMAT_VERSION: u32 = 3;
 /// The manifest versions this gyrocal reads.
-pub const FORMAT_VERSIONS_READ: [u32; 2] = [1, 2];
+pub const FORMAT_VERSIONS_READ: [u32; 3] = [1, 2, 3];
 
-/// Columns of `samples.csv`, in order; `t_utc` is the run directory's conversion of `t_s`
-/// (see the module docs, *Times*), last so that readers by position keep working.
+/// Columns of `samples.csv`, in order; `step_no` and `sample_no` count from 1 (the plan's step
+/// number, the reading's number within its step); `t_utc` is the run directory's conversion of
+/// `t_s` (see the module docs, *Times*), last so that readers by position keep working.
 pub const SAMPLES_HEADER: [&str; 7] = [
+    "step_no",
+    "sample_no",
+    "t_s",
+    "rate_dps",
+    "volts",
+    "overload",
+    "t_utc",
+];
+/// Columns of `samples.csv` of format 2: `step` and `index` counted from 0. Such a file still
+/// reads (its values as before), and a resume keeps appending rows of these columns to it (the
+/// file is never rewritten: it can hold gigabytes).
+pub const SAMPLES_HEADER_V2: [&str; 7] = [
     "step", "index", "t_s", "rate_dps", "volts", "overload", "t_utc",
 ];
-/// Columns of `samples.csv` before `t_utc` existed. Such a file still reads, and a resume
-/// keeps appending rows of these columns to it (the file is never rewritten: it can hold
-/// gigabytes).
+/// Columns of `samples.csv` before `t_utc` existed (counted from 0). Such a file still reads,
+/// and a resume keeps appending rows of these columns to it.
 pub const SAMPLES_HEADER_V1: [&str; 6] = ["step", "index", "t_s", "rate_dps", "volts", "overload"];
-/// Columns of `steps.csv`, in order: the [`StepRecord`]'s fields, then `t_start_utc` and
+/// Columns of `steps.csv`, in order: the [`StepRecord`]'s fields (`step_no` and `pass_no`
+/// counted from 1, the record's `step` and `pass` plus one), then `t_start_utc` and
 /// `t_end_utc`, which the run directory computes from `t_start_s` and `t_end_s` (see the
 /// module docs, *Times*). New columns go at the end, so a script that reads columns by
 /// position keeps working.
 pub const STEPS_HEADER: [&str; 17] = [
+    "step_no",
+    "pass_no",
+    "rate_dps",
+    "rate_meas_dps",
+    "rate_meas_std_dps",
+    "rate_meas_min_dps",
+    "rate_meas_max_dps",
+    "rate_samples",
+    "volts",
+    "volts_std",
+    "n",
+    "overloads",
+    "retries",
+    "t_start_s",
+    "t_end_s",
+    "t_start_utc",
+    "t_end_utc",
+];
+
+/// Columns of `steps.csv` of format 2: [`STEPS_HEADER`]'s with `step` and `pass` counted from
+/// 0. Such a file still reads; a resume rewrites it with [`STEPS_HEADER`] (the old rows' step
+/// and pass numbers plus one, every other cell as it was) before appending.
+pub const STEPS_HEADER_V3: [&str; 17] = [
     "step",
     "pass",
     "rate_dps",
@@ -257,9 +309,15 @@ pub const STEPS_HEADER_V1: [&str; 14] = [
 ];
 
 /// Every `steps.csv` header read, current first.
-pub(super) const STEPS_HEADERS: &[&[&str]] = &[&STEPS_HEADER, &STEPS_HEADER_V2, &STEPS_HEADER_V1];
+pub(super) const STEPS_HEADERS: &[&[&str]] = &[
+    &STEPS_HEADER,
+    &STEPS_HEADER_V3,
+    &STEPS_HEADER_V2,
+    &STEPS_HEADER_V1,
+];
 /// Every `samples.csv` header read, current first.
-pub(super) const SAMPLES_HEADERS: &[&[&str]] = &[&SAMPLES_HEADER, &SAMPLES_HEADER_V1];
+pub(super) const SAMPLES_HEADERS: &[&[&str]] =
+    &[&SAMPLES_HEADER, &SAMPLES_HEADER_V2, &SAMPLES_HEADER_V1];
 
 /// The most bytes read from `manifest.json` (64 MiB; a manifest is kilobytes, a megabyte or
 /// two with a large fit document).

@@ -40,7 +40,8 @@ pub fn load_fit(dir: &Path) -> Result<Option<gyrocal_fit::Analysis>, RunError> {
         })
 }
 
-/// Reads every complete row of samples.csv (a torn last line is ignored).
+/// Reads every complete row of samples.csv (a torn last line is ignored), 0-based whatever the
+/// file's counting (see [`SampleRow`]).
 pub fn load_samples(dir: &Path) -> Result<Vec<SampleRow>, RunError> {
     let path = dir.join(SAMPLES_CSV);
     let bytes = read_capped(&path, MAX_SAMPLES_BYTES)?;
@@ -49,10 +50,25 @@ pub fn load_samples(dir: &Path) -> Result<Vec<SampleRow>, RunError> {
     let mut rdr = csv::ReaderBuilder::new()
         .has_headers(true)
         .from_reader(bytes);
-    // by name: files written before `t_utc` existed lack that column
+    // by name: files written before `t_utc` existed lack that column; the counted columns by
+    // their in-memory names, re-based by the header's counting
+    let headers = rdr.headers().map_err(|e| csv_read(&path, &e))?.clone();
+    let counting = Counting::of_header(headers.iter());
+    let fields = Counting::field_names(&headers);
     let mut out = Vec::new();
-    for row in rdr.deserialize::<SampleRow>() {
-        out.push(row.map_err(|e| csv_read(&path, &e))?);
+    let mut rec = csv::StringRecord::new();
+    loop {
+        match rdr.read_record(&mut rec) {
+            Ok(false) => break,
+            Ok(true) => {}
+            Err(e) => return Err(csv_read(&path, &e)),
+        }
+        let row = read_sample(&rec, &fields, counting).map_err(|message| RunError::Csv {
+            path: path.clone(),
+            line: rec.position().map_or(0, csv::Position::line),
+            message,
+        })?;
+        out.push(row);
     }
     Ok(out)
 }

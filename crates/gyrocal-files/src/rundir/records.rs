@@ -15,12 +15,14 @@ pub struct Sample {
     pub volts: Option<f64>,
 }
 
-/// One row of `samples.csv`, as read back by [`load_samples`].
+/// One row of `samples.csv`, as read back by [`load_samples`]: 0-based like the schedule,
+/// whatever the file's counting (the file's `step_no` 4 and `sample_no` 1 are `step` 3 and
+/// `index` 0 here; a file of format 2 or earlier has `step` and `index` as they are here).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SampleRow {
-    /// Step index in the schedule.
+    /// Step index in the schedule (0-based; the file's `step_no` minus 1).
     pub step: usize,
-    /// Reading index within the step.
+    /// Reading index within the step (0-based; the file's `sample_no` minus 1).
     pub index: u64,
     /// Run clock, seconds.
     pub t_s: f64,
@@ -36,12 +38,13 @@ pub struct SampleRow {
     pub t_utc: Option<String>,
 }
 
-/// A row of `steps.csv` as written: the sequencer's [`StepRecord`] with its times converted
-/// to UTC by the run directory and its computed numbers rounded (see [`crate::num`]).
+/// A row of `steps.csv` as written: the sequencer's [`StepRecord`] with its step and pass
+/// counted from 1 (see `columns`), its times converted to UTC by the run directory and its
+/// computed numbers rounded (see [`crate::num`]). Built by `step_row`.
 #[derive(Debug, Serialize)]
 pub(super) struct StepRow<'a> {
-    pub(super) step: usize,
-    pub(super) pass: u32,
+    pub(super) step_no: u64,
+    pub(super) pass_no: u64,
     pub(super) rate_dps: f64,
     pub(super) rate_meas_dps: Option<f64>,
     pub(super) rate_meas_std_dps: Option<f64>,
@@ -76,10 +79,11 @@ pub(super) fn rounded(rec: &StepRecord) -> StepRecord {
 }
 
 /// One row of `steps.csv`: a finished step. The sequencer fills it; [`RunDir::append_step`]
-/// checks it against the schedule and the samples written.
+/// checks it against the schedule and the samples written. 0-based like the schedule: the
+/// file's `step_no` and `pass_no` are `step + 1` and `pass + 1` (see [`STEPS_HEADER`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StepRecord {
-    /// Step index in the schedule.
+    /// Step index in the schedule (0-based).
     pub step: usize,
     /// Pass (0-based).
     pub pass: u32,

@@ -67,7 +67,7 @@ impl RunDir {
 
         // samples.csv: keep the finished steps' rows, drop everything from the first other row.
         let sapath = path.join(SAMPLES_CSV);
-        let (samples_len, torn_samples, samples_utc) = repair_samples(&sapath)?;
+        let (samples_len, torn_samples, samples_columns) = repair_samples(&sapath)?;
         let (keep_len, dropped) = scan_samples(&sapath, samples_len, &schedule, &expected)?;
         truncate(&sapath, keep_len)?;
         truncate(&spath, steps_bytes.len() as u64)?;
@@ -122,7 +122,7 @@ impl RunDir {
             schedule,
             manifest,
             samples,
-            samples_utc,
+            samples_columns,
             steps,
             done,
             current: None,
@@ -136,7 +136,8 @@ impl RunDir {
 /// Reads a CSV for resume: drops a torn last line; an empty file (or one with only a torn
 /// header) gets its header back; a file with an older accepted header (`accepted[1..]`) is
 /// rewritten, atomically, with the current one (`accepted[0]`), each old row getting an empty
-/// cell in every column the old header lacks (see `upgrade_steps`). Returns the repaired
+/// cell in every column the old header lacks and its counted cells re-based (`step` 0 becomes
+/// `step_no` 1; see `upgrade_steps`). Returns the repaired
 /// content and the bytes dropped.
 pub(super) fn read_repaired(
     path: &Path,
@@ -160,7 +161,7 @@ pub(super) fn read_repaired(
         return Ok((keep.to_vec(), torn));
     }
     let old = accepted.get(which).copied().unwrap_or_default();
-    let upgraded = upgrade_steps(keep, old, header);
+    let upgraded = upgrade_steps(path, keep, old, header)?;
     let dir = path.parent().unwrap_or(Path::new("."));
     let name = path
         .file_name()
@@ -174,8 +175,8 @@ pub(super) fn read_repaired(
 /// Prepares samples.csv for a resume without reading it whole: finds the end of its last
 /// complete line (a torn tail is dropped later by the truncation), checks the header, and
 /// writes the header into an empty file. Returns (length of the complete lines, torn bytes,
-/// whether the header has `t_utc`).
-pub(super) fn repair_samples(path: &Path) -> Result<(u64, u64, bool), RunError> {
+/// the file's columns, which the resumed session's rows keep).
+pub(super) fn repair_samples(path: &Path) -> Result<(u64, u64, SampleColumns), RunError> {
     use std::io::{Read as _, Seek as _, SeekFrom};
     let mut file = open_regular(path).map_err(opened)?;
     let meta = file.metadata().map_err(io(path, "read"))?;
@@ -208,7 +209,7 @@ pub(super) fn repair_samples(path: &Path) -> Result<(u64, u64, bool), RunError> 
         let mut h = SAMPLES_HEADER.join(",").into_bytes();
         h.push(b'\n');
         fs::write(path, &h).map_err(io(path, "write"))?;
-        return Ok((h.len() as u64, torn, true));
+        return Ok((h.len() as u64, torn, SampleColumns::CURRENT));
     }
     let mut first = Vec::new();
     file.seek(SeekFrom::Start(0)).map_err(io(path, "read"))?;
@@ -220,39 +221,19 @@ pub(super) fn repair_samples(path: &Path) -> Result<(u64, u64, bool), RunError> 
     if torn > 0 {
         tracing::warn!(file = %path.display(), bytes = torn, "dropping a torn last line");
     }
+    let header = SAMPLES_HEADERS
+        .get(which)
+        .copied()
+        .unwrap_or(&SAMPLES_HEADER);
+    let columns = SampleColumns::of_header(header);
     if which != 0 {
-        tracing::info!(file = %path.display(), "samples.csv has no t_utc column (an older gyrocal began it); its rows stay without one");
+        tracing::info!(
+            file = %path.display(),
+            header = %header.join(","),
+            "samples.csv was begun by an older gyrocal; its rows keep its columns"
+        );
     }
-    Ok((keep, torn, which == 0))
-}
-
-/// Rewrites CSV rows written with the columns `old` for the columns `new` (which contain every
-/// column of `old`): an empty cell for each new column. The rows are gyrocal's own (numbers,
-/// no quoting), so a row is one line and a cell is between commas.
-pub(super) fn upgrade_steps(bytes: &[u8], old: &[&str], new: &[&str]) -> Vec<u8> {
-    let map: Vec<Option<usize>> = new
-        .iter()
-        .map(|c| old.iter().position(|o| o == c))
-        .collect();
-    let mut out = new.join(",").into_bytes();
-    out.push(b'\n');
-    for line in bytes.split(|&b| b == b'\n').skip(1) {
-        let line = line.strip_suffix(b"\r").unwrap_or(line);
-        if line.is_empty() {
-            continue;
-        }
-        let cells: Vec<&[u8]> = line.split(|&b| b == b',').collect();
-        for (k, m) in map.iter().enumerate() {
-            if k > 0 {
-                out.push(b',');
-            }
-            if let Some(cell) = m.and_then(|i| cells.get(i)) {
-                out.extend_from_slice(cell);
-            }
-        }
-        out.push(b'\n');
-    }
-    out
+    Ok((keep, torn, columns))
 }
 
 /// Checks the finished steps' rows in samples.csv and finds where the unfinished rows start.
@@ -278,6 +259,9 @@ pub(super) fn scan_samples(
     // The header's end, in case there is no row at all; rows are read by name (files written
     // before `t_utc` existed lack that column).
     let headers = rdr.headers().map_err(|e| csv_read(path, &e))?.clone();
+    let counting = Counting::of_header(headers.iter());
+    let fields = Counting::field_names(&headers);
+    let step_no = |i: usize| counting.show("step", i as u64);
     let mut keep = rdr.position().byte();
     loop {
         match rdr.read_record(&mut rec) {
@@ -302,19 +286,21 @@ pub(super) fn scan_samples(
         if cut.is_some() {
             // Rows of the partial step: dropped, but a finished step's row here means the
             // file is not what this program writes.
-            let step = rec.get(0).and_then(|s| s.parse::<usize>().ok());
-            if step.is_some_and(|s| expected.contains_key(&s)) {
+            let step = rec
+                .get(0)
+                .and_then(|s| s.parse::<u64>().ok())
+                .and_then(|s| counting.to_index("step", s).ok())
+                .and_then(|s| usize::try_from(s).ok());
+            if let Some(s) = step.filter(|s| expected.contains_key(s)) {
                 return Err(bad(format!(
-                    "a row of finished step {} follows rows of an unfinished step",
-                    step.unwrap_or_default()
+                    "a row of finished {} follows rows of an unfinished step",
+                    step_no(s)
                 )));
             }
             dropped += 1;
             continue;
         }
-        let row: SampleRow = rec
-            .deserialize(Some(&headers))
-            .map_err(|e| bad(e.to_string()))?;
+        let row = read_sample(&rec, &fields, counting).map_err(bad)?;
         if !expected.contains_key(&row.step) {
             cut = Some(pos.byte());
             dropped += 1;
@@ -322,27 +308,31 @@ pub(super) fn scan_samples(
         }
         let Some(s) = schedule.get(row.step) else {
             return Err(bad(format!(
-                "step {} is not in the plan's schedule",
-                row.step
+                "{} is not in the plan's schedule",
+                step_no(row.step)
             )));
         };
         if row.rate_dps.to_bits() != s.rate_dps.to_bits() {
             return Err(bad(format!(
-                "step {} has rate {}, the schedule {}",
-                row.step, row.rate_dps, s.rate_dps
+                "{} has rate {}, the schedule {}",
+                step_no(row.step),
+                row.rate_dps,
+                s.rate_dps
             )));
         }
         let c = counts.entry(row.step).or_insert(0);
         if row.index != *c {
             return Err(bad(format!(
-                "step {}: sample index {} where {} was due (duplicate or missing reading)",
-                row.step, row.index, c
+                "{}: {} where {} was due (duplicate or missing reading)",
+                step_no(row.step),
+                counting.show("index", row.index),
+                counting.show("index", *c)
             )));
         }
         if row.volts.is_none() != (row.overload == 1) || row.overload > 1 {
             return Err(bad(format!(
-                "step {}: overload must be 1 exactly when volts is empty",
-                row.step
+                "{}: overload must be 1 exactly when volts is empty",
+                step_no(row.step)
             )));
         }
         *c += 1;
@@ -354,7 +344,8 @@ pub(super) fn scan_samples(
             return Err(RunError::Inconsistent {
                 path: path.to_path_buf(),
                 message: format!(
-                    "step {step}: steps.csv records {want} readings (n + overloads), samples.csv holds {got}"
+                    "plan step {}: steps.csv records {want} readings (n + overloads), samples.csv holds {got}",
+                    step + 1
                 ),
             });
         }

@@ -66,9 +66,9 @@ pub struct RunDir {
     pub(super) schedule: Vec<Step>,
     pub(super) manifest: Manifest,
     pub(super) samples: csv::Writer<File>,
-    /// Whether samples.csv has the `t_utc` column (not when a resume appends to a file an
-    /// older gyrocal began).
-    pub(super) samples_utc: bool,
+    /// The columns of samples.csv: the current ones, or the older ones of a file an older
+    /// gyrocal began, whose rows a resume keeps appending in that file's format.
+    pub(super) samples_columns: SampleColumns,
     pub(super) steps: csv::Writer<File>,
     pub(super) done: BTreeSet<usize>,
     pub(super) current: Option<Current>,
@@ -256,7 +256,7 @@ impl RunDir {
             schedule: plan.schedule(),
             manifest,
             samples,
-            samples_utc: true,
+            samples_columns: SampleColumns::CURRENT,
             steps,
             done: BTreeSet::new(),
             current: None,
@@ -383,21 +383,9 @@ impl RunDir {
                 rate_dps: s.rate_dps,
                 volts: round_opt(smp.volts),
                 overload: u8::from(smp.volts.is_none()),
-                t_utc: self.samples_utc.then(|| self.clock.utc(smp.t_s)),
+                t_utc: self.samples_columns.utc.then(|| self.clock.utc(smp.t_s)),
             };
-            let written = if self.samples_utc {
-                self.samples.serialize(row)
-            } else {
-                // an older file's columns: no t_utc
-                self.samples.serialize((
-                    row.step,
-                    row.index,
-                    row.t_s,
-                    row.rate_dps,
-                    row.volts,
-                    row.overload,
-                ))
-            };
+            let written = write_sample(&mut self.samples, &row, self.samples_columns);
             written.map_err(|e| csv_write(&path, e))?;
         }
         self.samples.flush().map_err(io(&path, "write"))?;
@@ -470,25 +458,7 @@ impl RunDir {
         let start_utc = self.clock.utc(rec.t_start_s);
         let end_utc = self.clock.utc(rec.t_end_s);
         let r = rounded(&rec);
-        let row = StepRow {
-            step: r.step,
-            pass: r.pass,
-            rate_dps: r.rate_dps,
-            rate_meas_dps: r.rate_meas_dps,
-            rate_meas_std_dps: r.rate_meas_std_dps,
-            rate_meas_min_dps: r.rate_meas_min_dps,
-            rate_meas_max_dps: r.rate_meas_max_dps,
-            rate_samples: r.rate_samples,
-            volts: r.volts,
-            volts_std: r.volts_std,
-            n: r.n,
-            overloads: r.overloads,
-            retries: r.retries,
-            t_start_s: r.t_start_s,
-            t_end_s: r.t_end_s,
-            t_start_utc: &start_utc,
-            t_end_utc: &end_utc,
-        };
+        let row = step_row(&r, &start_utc, &end_utc);
         self.steps
             .serialize(&row)
             .map_err(|e| csv_write(&spath, e))?;

@@ -21,7 +21,7 @@
 //! [`compile`] goes through the one dispatch on the plan's kind (`plan/kind.rs`); each kind's
 //! compile lives in that kind's own plan module (`plan/sweep.rs`, `plan/drift.rs`), beside its
 //! keys and rules. Resume keys are unchanged: every step that
-//! records carries the plan schedule's [`Step`] (its `index` is the run directory's `step`).
+//! records carries the plan schedule's [`Step`] (its `index` is the run directory's `step_no` minus one).
 
 use std::time::Duration;
 

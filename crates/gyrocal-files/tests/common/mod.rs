@@ -68,3 +68,40 @@ pub fn run_step(rd: &mut RunDir, step: usize, record: bool) {
         .unwrap();
     }
 }
+
+/// `text` (a samples.csv or steps.csv of the current format) as gyrocal wrote it before
+/// format 3: the counted columns named `step`, `index`, `pass` and counted from 0.
+#[allow(dead_code)] // not every test file uses every helper
+pub fn counted_from_zero(text: &str) -> String {
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let counted: Vec<bool> = header
+        .iter()
+        .map(|h| ["step_no", "sample_no", "pass_no"].contains(h))
+        .collect();
+    let renamed: Vec<&str> = header
+        .iter()
+        .map(|h| match *h {
+            "step_no" => "step",
+            "sample_no" => "index",
+            "pass_no" => "pass",
+            h => h,
+        })
+        .collect();
+    let mut out = renamed.join(",") + "\n";
+    for l in lines {
+        let cells: Vec<String> = l
+            .split(',')
+            .zip(&counted)
+            .map(|(c, &k)| {
+                if k {
+                    (c.parse::<u64>().unwrap() - 1).to_string()
+                } else {
+                    c.to_string()
+                }
+            })
+            .collect();
+        out += &(cells.join(",") + "\n");
+    }
+    out
+}

@@ -43,8 +43,8 @@ pub enum Event {
         acquisition: &'static str,
     },
     /// A step begins. Operators see one numbering, the plan's: `number` of `of` (`step 4/19`),
-    /// the same in every session of a resumed run; the run directory's `step` column is the
-    /// 0-based index (`number - 1`).
+    /// the same in every session of a resumed run, and the run directory's `step_no` column
+    /// (the 0-based index is `number - 1`).
     StepStarted {
         /// The step.
         step: Step,

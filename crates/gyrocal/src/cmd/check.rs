@@ -226,8 +226,9 @@ pub fn hms(s: f64) -> String {
     }
 }
 
-/// The `--json` document: what `render` says, for scripts. Steps carry the plan's 1-based
-/// `number` and the 0-based `index` of the run directory's files.
+/// The `--json` document: what `render` says, for scripts. Steps carry `step_no` and `pass_no`,
+/// counted from 1 like the terminal and the run directory's files (`step_no` 3 is "step 3 of
+/// 19" and the `step_no` 3 rows of samples.csv and steps.csv).
 fn json(
     plan: &Plan,
     path: &std::path::Path,
@@ -239,9 +240,8 @@ fn json(
         .iter()
         .map(|s| {
             serde_json::json!({
-                "number": s.step.index + 1,
-                "index": s.step.index,
-                "pass": s.step.pass + 1,
+                "step_no": s.step.index + 1,
+                "pass_no": s.step.pass + 1,
                 "rate_dps": s.step.rate_dps,
                 "samples": s.samples,
                 "ramp_s": s.ramp.as_secs_f64(),
@@ -328,8 +328,8 @@ fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
     let _ = writeln!(o);
     let _ = writeln!(
         o,
-        "{:>4} {:>4} {:>9} {:>8} {:>8} {:>8} {:>9} {:>10}",
-        "step", "pass", "rate °/s", "samples", "ramp s", "dwell s", "acquire s", "at s"
+        "{:>7} {:>7} {:>9} {:>8} {:>8} {:>8} {:>9} {:>10}",
+        "step_no", "pass_no", "rate °/s", "samples", "ramp s", "dwell s", "acquire s", "at s"
     );
     // A run of identical steps (a drift record's segments, a plan repeated at one rate) is
     // shown by its first and last rows and one line between: 167 identical rows say nothing
@@ -355,7 +355,7 @@ fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
             s.acquire.as_secs_f64(),
         );
         let row = format!(
-            "{:>4} {:>4} {what} {at:>10.1}{turns}",
+            "{:>7} {:>7} {what} {at:>10.1}{turns}",
             s.step.index + 1,
             s.step.pass + 1,
         );
