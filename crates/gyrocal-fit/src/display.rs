@@ -51,7 +51,17 @@ fn scaled(v: f64, u: f64) -> Scaled {
         Some(e) => (v / 10f64.powi(e), u / 10f64.powi(e)),
         None => (v, u),
     };
+    // U to two significant digits first (0.0996 is 0.10: its decade is the rounded one's)
+    let u = format!("{u:.1e}").parse::<f64>().unwrap_or(u);
     let eu = decade(u);
+    // above 100 the digits to drop are before the point: U = 131 is 130, and a value beside
+    // U = 1300 is rounded to tens
+    let (v, u) = if eu >= 2 {
+        let to = |x: f64, e: i32| (x / 10f64.powi(e)).round() * 10f64.powi(e);
+        (if eu >= 3 { to(v, eu - 2) } else { v }, to(u, eu - 1))
+    } else {
+        (v, u)
+    };
     let decimals = (2 - eu).clamp(0, 15) as usize;
     let u_decimals = (1 - eu).clamp(0, 15) as usize;
     Scaled {

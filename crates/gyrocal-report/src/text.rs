@@ -295,7 +295,7 @@ pub fn fit_summary(out: &mut String, a: &Analysis) {
         (Some(asym), Some(kp), Some(kn)) => {
             let _ = writeln!(
                 out,
-                "  asymmetry (GJB)       {} ppm (K+ = {}, K− = {} V/(°/s))",
+                "  asymmetry             {} ppm (GJB two lines; K+ = {}, K− = {} V/(°/s))",
                 like("asymmetry_ppm", asym),
                 like("k_pos", kp),
                 like("k_neg", kn)
@@ -307,14 +307,19 @@ pub fn fit_summary(out: &mut String, a: &Analysis) {
                 .iter()
                 .find(|n| n.metric == "asymmetry_ppm")
                 .map_or("needs both turning directions", |n| n.reason.as_str());
-            let _ = writeln!(out, "  asymmetry (GJB)       not computed: {reason}");
+            let _ = writeln!(out, "  asymmetry             not computed: {reason}");
         }
     }
     if let Some(c) = &m.asymmetry_common_k2 {
         let _ = writeln!(
             out,
-            "  asymmetry, common K2  {} (1σ; one fit K0 + K+·ω⁺ + K−·ω⁻ + K2·ω², K2 = {} V/(°/s)²: not biased by the even-order term as the line pair above is){}",
-            value_pm_u(c.asymmetry_ppm, Some(c.asymmetry_std_error_ppm), "ppm"),
+            "  asymmetry, common K2  {} (U, k = 2; one fit K0 + K+·ω⁺ + K−·ω⁻ + K2·ω², K2 = {} V/(°/s)²: not biased by the even-order term as the line pair above is){}",
+            value_pm_u(
+                c.asymmetry_ppm,
+                unc.and_then(|u| u.expanded("asymmetry_common_k2"))
+                    .or(Some(2.0 * c.asymmetry_std_error_ppm)),
+                "ppm"
+            ),
             significant(c.k2, 4),
             crate::certificate::few_dof(c.degrees_of_freedom)
         );
