@@ -65,9 +65,9 @@ h3 { font-size: 1.1rem; margin-top: 1.5rem; }
 table { border-collapse: collapse; margin: 0.5rem 0 1rem; font-size: 0.92rem; }
 table.history { font-size: 0.85rem; }
 table.history th, table.history td { padding: 0.2rem 0.4rem; }
-/* a date, a run id and a station id read whole; the plan's words wrap instead */
-table.history td:nth-child(-n+3) { white-space: nowrap; }
-table.history td:nth-child(4) { min-width: 10rem; }
+/* a station id reads whole; the plan's words wrap instead (a wider column would push the
+   verdict off a printed page) */
+table.history td:nth-child(3) { white-space: nowrap; }
 th, td { border: 1px solid #ccc; padding: 0.25rem 0.6rem; text-align: left; vertical-align: top; }
 th { background: #f2f2f2; }
 td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
@@ -93,6 +93,7 @@ code { font-size: 0.9em; word-break: break-all; }
   table.cert td, table.cert th, table.results td { padding: 0.12rem 0.45rem; }
   h1 { margin-top: 0; }
   .signatures { break-inside: avoid; }
+  table.history { font-size: 0.75rem; }
 }
 table.cert th { width: 11rem; background: #f7f7f7; }
 #acceptance-table th, #instruments-table th, table.cert.results th { width: auto; }
