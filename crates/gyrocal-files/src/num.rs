@@ -54,43 +54,9 @@ pub fn round_json(v: &mut serde_json::Value) {
     }
 }
 
-/// A value and its expanded uncertainty as a certificate prints them (for people, not files): U to two significant
-/// digits, the value to one digit more than U's last (GUM 7.2.6 rounds to U's digits; the
-/// extra digit keeps the rounding error well under U). Small or huge values in exponent form.
-pub fn value_and_u(v: f64, u: Option<f64>) -> (String, String) {
-    let Some(u) = u.filter(|u| u.is_finite() && *u > 0.0) else {
-        return (significant(v, 7), "—".to_string());
-    };
-    let eu = u.log10().floor() as i32;
-    let av = v.abs();
-    if av != 0.0 && !(1e-3..1e6).contains(&av) {
-        let ev = av.log10().floor() as i32;
-        let digits = (ev - eu + 2).clamp(1, 15) as usize;
-        return (format!("{v:.digits$e}"), format!("{u:.1e}"));
-    }
-    let decimals = (2 - eu).clamp(0, 15) as usize;
-    let u_decimals = (1 - eu).clamp(0, 15) as usize;
-    (format!("{v:.decimals$}"), format!("{u:.u_decimals$}"))
-}
-
-/// `v` to `n` significant digits (exponent form outside 1e-3..1e6).
-pub fn significant(v: f64, n: i32) -> String {
-    if !v.is_finite() {
-        return "—".to_string();
-    }
-    let av = v.abs();
-    if av != 0.0 && !(1e-3..1e6).contains(&av) {
-        let digits = (n - 1).clamp(0, 15) as usize;
-        return format!("{v:.digits$e}");
-    }
-    let e = if av == 0.0 {
-        0
-    } else {
-        av.log10().floor() as i32
-    };
-    let decimals = (n - 1 - e).clamp(0, 15) as usize;
-    format!("{v:.decimals$}")
-}
+/// How a person reads a value with its uncertainty: the rule lives with the other display
+/// rules in [`gyrocal_fit::display`] (re-exported here for the callers that found it here).
+pub use gyrocal_fit::display::{significant, value_and_u};
 
 #[cfg(test)]
 mod tests {
@@ -111,23 +77,5 @@ mod tests {
             serde_json::json!({"k": 0.30000000000000004, "n": 7, "a": [1.0000000000000002]});
         round_json(&mut doc);
         assert_eq!(doc.to_string(), r#"{"a":[1.0],"k":0.3,"n":7}"#);
-    }
-
-    #[test]
-    fn a_value_is_shown_to_a_digit_beyond_its_uncertainty() {
-        assert_eq!(
-            value_and_u(0.3611966, Some(1.452e-4)),
-            ("0.361197".to_string(), "0.00015".to_string())
-        );
-        assert_eq!(
-            value_and_u(116.91155, Some(13.2)),
-            ("116.9".to_string(), "13".to_string())
-        );
-        assert_eq!(value_and_u(2.0797e-5, Some(3.3e-7)).0, "2.0797e-5");
-        assert_eq!(
-            value_and_u(1.5, None),
-            ("1.500000".to_string(), "—".to_string())
-        );
-        assert_eq!(significant(931.3412055, 7), "931.3412");
     }
 }

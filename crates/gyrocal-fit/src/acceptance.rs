@@ -26,6 +26,8 @@
 use std::collections::BTreeMap;
 use std::fmt;
 
+use crate::display;
+
 use serde::de::{MapAccess, Visitor};
 use serde::ser::SerializeMap;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
@@ -457,7 +459,10 @@ fn decide(rule: Rule, quantity: Quantity, l: &Limits, m: Measured) -> (Verdict, 
             Some(format!("not measured: the value is not finite ({v})")),
         );
     }
-    let vs = short(v, 7);
+    // The value as a person reads it everywhere else: rounded by the one rule beside its U
+    // (`931.3 ± 21 ppm`), never to another number of digits (crate::display).
+    let vs = display::value_as_with_u(v, m.expanded_uncertainty);
+    let lim = |x: f64| format!("{} {unit}", display::plain(x));
     match rule {
         Rule::Simple => {
             if let Some(min) = l.min
@@ -465,7 +470,7 @@ fn decide(rule: Rule, quantity: Quantity, l: &Limits, m: Measured) -> (Verdict, 
             {
                 return (
                     Verdict::Fail,
-                    Some(format!("{vs} {unit} is below min {min}")),
+                    Some(format!("{vs} {unit} is below min {}", lim(min))),
                 );
             }
             if let Some(max) = l.max
@@ -473,7 +478,7 @@ fn decide(rule: Rule, quantity: Quantity, l: &Limits, m: Measured) -> (Verdict, 
             {
                 return (
                     Verdict::Fail,
-                    Some(format!("{vs} {unit} is above max {max}")),
+                    Some(format!("{vs} {unit} is above max {}", lim(max))),
                 );
             }
             if let Some(mmin) = l.marginal_min
@@ -481,7 +486,7 @@ fn decide(rule: Rule, quantity: Quantity, l: &Limits, m: Measured) -> (Verdict, 
             {
                 return (
                     Verdict::Marginal,
-                    Some(format!("{vs} {unit} is below marginal_min {mmin}")),
+                    Some(format!("{vs} {unit} is below marginal_min {}", lim(mmin))),
                 );
             }
             if let Some(mmax) = l.marginal_max
@@ -489,7 +494,7 @@ fn decide(rule: Rule, quantity: Quantity, l: &Limits, m: Measured) -> (Verdict, 
             {
                 return (
                     Verdict::Marginal,
-                    Some(format!("{vs} {unit} is above marginal_max {mmax}")),
+                    Some(format!("{vs} {unit} is above marginal_max {}", lim(mmax))),
                 );
             }
             (Verdict::Pass, None)
@@ -499,10 +504,10 @@ fn decide(rule: Rule, quantity: Quantity, l: &Limits, m: Measured) -> (Verdict, 
                 if lo.is_finite() && hi.is_finite() && lo <= v && v <= hi {
                     let interval = format!(
                         "{vs} {unit} (95 % interval {} .. {})",
-                        short(lo, 3),
-                        short(hi, 3)
+                        display::significant(lo, 3),
+                        display::significant(hi, 3)
                     );
-                    return guarded(l, lo, hi, &interval);
+                    return guarded(l, lo, hi, &interval, unit);
                 }
                 return (
                     Verdict::Indeterminate,
@@ -533,20 +538,21 @@ fn decide(rule: Rule, quantity: Quantity, l: &Limits, m: Measured) -> (Verdict, 
                     );
                 }
             };
-            let interval = format!("{vs} ± {} {unit}", short(u, 3));
-            guarded(l, v - u, v + u, &interval)
+            let interval = display::value_pm_u(v, Some(u), unit);
+            guarded(l, v - u, v + u, &interval, unit)
         }
     }
 }
 
 /// The guarded rule on the interval `[lo, hi]` (`interval` in words, for the reasons).
-fn guarded(l: &Limits, lo: f64, hi: f64, interval: &str) -> (Verdict, Option<String>) {
+fn guarded(l: &Limits, lo: f64, hi: f64, interval: &str, unit: &str) -> (Verdict, Option<String>) {
+    let lim = |x: f64| format!("{} {unit}", display::plain(x));
     if let Some(max) = l.max
         && lo > max
     {
         return (
             Verdict::Fail,
-            Some(format!("{interval} lies wholly above max {max}")),
+            Some(format!("{interval} lies wholly above max {}", lim(max))),
         );
     }
     if let Some(min) = l.min
@@ -554,7 +560,7 @@ fn guarded(l: &Limits, lo: f64, hi: f64, interval: &str) -> (Verdict, Option<Str
     {
         return (
             Verdict::Fail,
-            Some(format!("{interval} lies wholly below min {min}")),
+            Some(format!("{interval} lies wholly below min {}", lim(min))),
         );
     }
     if let Some(min) = l.min
@@ -563,7 +569,8 @@ fn guarded(l: &Limits, lo: f64, hi: f64, interval: &str) -> (Verdict, Option<Str
         return (
             Verdict::Indeterminate,
             Some(format!(
-                "{interval} straddles min {min}: within the uncertainty of the limit"
+                "{interval} straddles min {}: within the uncertainty of the limit",
+                lim(min)
             )),
         );
     }
@@ -573,7 +580,8 @@ fn guarded(l: &Limits, lo: f64, hi: f64, interval: &str) -> (Verdict, Option<Str
         return (
             Verdict::Indeterminate,
             Some(format!(
-                "{interval} straddles max {max}: within the uncertainty of the limit"
+                "{interval} straddles max {}: within the uncertainty of the limit",
+                lim(max)
             )),
         );
     }
@@ -582,7 +590,10 @@ fn guarded(l: &Limits, lo: f64, hi: f64, interval: &str) -> (Verdict, Option<Str
     {
         return (
             Verdict::Marginal,
-            Some(format!("{interval} reaches below marginal_min {mmin}")),
+            Some(format!(
+                "{interval} reaches below marginal_min {}",
+                lim(mmin)
+            )),
         );
     }
     if let Some(mmax) = l.marginal_max
@@ -590,19 +601,13 @@ fn guarded(l: &Limits, lo: f64, hi: f64, interval: &str) -> (Verdict, Option<Str
     {
         return (
             Verdict::Marginal,
-            Some(format!("{interval} reaches above marginal_max {mmax}")),
+            Some(format!(
+                "{interval} reaches above marginal_max {}",
+                lim(mmax)
+            )),
         );
     }
     (Verdict::Pass, None)
-}
-
-/// `v` rounded to `digits` significant digits, written in the shortest form that reads back
-/// as that rounded value (`931.3412`, not `931.3412055009304`): for the reasons people read.
-fn short(v: f64, digits: usize) -> String {
-    let rounded: f64 = format!("{v:.*e}", digits.saturating_sub(1))
-        .parse()
-        .unwrap_or(v);
-    format!("{rounded}")
 }
 
 #[cfg(test)]
@@ -864,7 +869,7 @@ mod tests {
             "{\"verdict\":\"fail\",\"rule\":\"guarded\",\"checks\":[{\"quantity\":\"scale_factor\",\
              \"value\":0.06,\"unit\":\"V/(°/s)\",\"expanded_uncertainty\":0.001,\"min\":0.049,\
              \"max\":0.051,\"marginal_min\":0.0495,\"marginal_max\":0.0505,\"verdict\":\"fail\",\
-             \"reason\":\"0.06 ± 0.001 V/(°/s) lies wholly above max 0.051\",\
+             \"reason\":\"0.06000 ± 0.0010 V/(°/s) lies wholly above max 0.051 V/(°/s)\",\
              \"figure\":\"metrics.scale_factor: K of the least-squares line; U from the \
              uncertainty budget\"}]}"
         );

@@ -60,6 +60,7 @@ pub mod acceptance;
 mod analysis;
 mod asymmetry;
 mod data;
+pub mod display;
 mod error;
 pub mod input;
 mod lsq;

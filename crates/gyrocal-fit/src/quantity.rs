@@ -90,6 +90,12 @@ impl Quantity {
         }
     }
 
+    /// The quantity in words (`scale factor K`), from the one table of display names
+    /// ([`crate::display::QUANTITIES`]): what a person reads on the terminal and the pages.
+    pub fn title(self) -> String {
+        crate::display::quantity_words(self.name()).0
+    }
+
     /// The unit of the quantity's value (and of its limits).
     pub fn unit(self) -> &'static str {
         match self {

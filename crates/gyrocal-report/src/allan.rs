@@ -13,6 +13,7 @@ use gyrocal_allan::{NoiseTerms, Term};
 use gyrocal_analysis::DriftError;
 pub use gyrocal_analysis::drift::AllanDocument;
 use gyrocal_analysis::drift::{RunHeader, Warmup, fmt_num};
+use gyrocal_fit::display::{display_unit, value_pm_u};
 use plotters::prelude::*;
 
 use std::fs;
@@ -419,19 +420,44 @@ fn warmup_plot(doc: &AllanDocument, w: &Warmup) -> Result<String, ReportError> {
 }
 
 fn q(v: &gyrocal_allan::Quantity) -> String {
-    format!(
-        "{} ± {} {}",
-        fmt_g(v.value),
-        fmt_g(v.uncertainty),
-        esc(&v.unit.replace("deg", "°"))
-    )
+    esc(&pm(v))
+}
+
+/// A figure ± its uncertainty in the one rule of every `±` (gyrocal_fit::display), its unit
+/// spelled as on the pages (`°/√h`, not the file's `deg/sqrt(h)`).
+pub fn pm(v: &gyrocal_allan::Quantity) -> String {
+    value_pm_u(v.value, Some(v.uncertainty), &v.unit)
+}
+
+/// A note of the analysis as a person reads it: a term named by its code name
+/// (`RateRamp: ...`, as allan.json records it) is named in words (`rate ramp R: ...`), and
+/// units in the file's ASCII spelling get their symbols.
+pub fn note_words(n: &str) -> String {
+    let mut s = n.to_string();
+    for t in Term::ALL {
+        let code = format!("{t:?}:");
+        if let Some(rest) = s.strip_prefix(&code) {
+            s = format!("{}:{rest}", term_name(t));
+        }
+    }
+    // "local slope +1 ± 0.15" is a tolerance, not a value with its uncertainty: said so
+    const SLOPE: &str = "local slope ";
+    if let Some(i) = s.find(SLOPE) {
+        let after = &s[i + SLOPE.len()..];
+        let mut words = after.splitn(4, ' ');
+        if let (Some(slope), Some("±"), Some(tol)) = (words.next(), words.next(), words.next()) {
+            let rest = words.next().map_or_else(String::new, |r| format!(" {r}"));
+            s = format!("{}a local slope within {tol} of {slope}{rest}", &s[..i]);
+        }
+    }
+    s.replace("deg/h/sqrt(h)", "°/h/√h")
+        .replace("deg/sqrt(h)", "°/√h")
+        .replace("deg/h", "°/h")
 }
 
 /// The rows of the noise-term table: (term, slope read, five-term fit), plain text.
 pub fn noise_term_rows(nt: &NoiseTerms) -> Vec<(Term, String, String)> {
-    let plain = |v: &gyrocal_allan::Quantity| {
-        format!("{} ± {} {}", fmt_g(v.value), fmt_g(v.uncertainty), v.unit)
-    };
+    let plain = pm;
     Term::ALL
         .iter()
         .enumerate()
@@ -477,7 +503,7 @@ pub fn noise_term_rows(nt: &NoiseTerms) -> Vec<(Term, String, String)> {
                         format!(
                             "0 (held at zero; 1σ could be {} {})",
                             fmt_g(ft.value.uncertainty),
-                            ft.value.unit
+                            display_unit(&ft.value.unit)
                         )
                     } else {
                         plain(&ft.value)
@@ -621,7 +647,7 @@ pub fn render_allan(doc: &AllanDocument) -> Result<String, ReportError> {
     if !doc.notes.is_empty() {
         h.push_str("<div class=\"banner caution\"><ul>\n");
         for n in &doc.notes {
-            let _ = writeln!(h, "<li>{}</li>", esc(n));
+            let _ = writeln!(h, "<li>{}</li>", esc(&note_words(n)));
         }
         h.push_str("</ul></div>\n");
     }
@@ -640,8 +666,8 @@ pub fn render_allan(doc: &AllanDocument) -> Result<String, ReportError> {
                     h,
                     "<tr><td>{}</td><td>{}</td><td>{}</td></tr>",
                     esc(term_name(t)),
-                    esc(&slope.replace("deg", "°")),
-                    esc(&fit.replace("deg", "°"))
+                    esc(&slope),
+                    esc(&fit)
                 );
             }
             h.push_str("</table>\n");
@@ -654,12 +680,14 @@ pub fn render_allan(doc: &AllanDocument) -> Result<String, ReportError> {
                 );
             }
             for n in &nt.notes {
-                let _ = writeln!(h, "<p class=\"note\">{}</p>", esc(n));
+                let _ = writeln!(h, "<p class=\"note\">{}</p>", esc(&note_words(n)));
             }
         }
         None => h.push_str("<p class=\"banner caution\">No noise terms: the curve is not a rate in °/h. Give the scale factor (<code>--scale-factor K</code>, V/(°/s)).</p>\n"),
     }
-    h.push_str("<h2 id=\"bias\">Bias and bias stability (GJB 2426A)</h2>\n<table>\n");
+    h.push_str(
+        "<h2 id=\"bias\">Bias and bias stability (GJB 2426A)</h2>\n<table id=\"bias-table\">\n",
+    );
     let _ = writeln!(
         h,
         "<tr><th>bias (mean)</th><td class=\"num\">{}</td></tr>",
@@ -668,7 +696,7 @@ pub fn render_allan(doc: &AllanDocument) -> Result<String, ReportError> {
     if let Some(e) = &doc.earth_rate {
         let _ = writeln!(
             h,
-            "<tr><th>bias without the Earth rate</th><td class=\"num\" id=\"bias-earth-removed\">{} deg/h (Earth rate along the {:?} axis at latitude {}°: {} deg/h removed)</td></tr>",
+            "<tr><th>bias without the Earth rate</th><td class=\"num\" id=\"bias-earth-removed\">{} °/h (Earth rate along the {:?} axis at latitude {}°: {} °/h removed)</td></tr>",
             fmt_num(e.bias_dph),
             e.axis,
             fmt_g(e.latitude_deg),

@@ -14,6 +14,7 @@ use std::fmt::Write as _;
 use gyrocal_files::num::{significant, value_and_u};
 use gyrocal_files::{Manifest, Plan};
 use gyrocal_fit::acceptance::{Acceptance, Check, Quantity, Verdict};
+use gyrocal_fit::display::{metric_words, plain, quantity_words, value_pm_u};
 use gyrocal_fit::{Analysis, Method, Model};
 
 use crate::input::Input;
@@ -277,7 +278,10 @@ pub(crate) fn instruments(html: &mut String, m: &Manifest) {
         ("Multimeter", st.multimeter.as_ref(), &m.instruments.dmm),
         ("Rate table", st.table.as_ref(), &m.instruments.table),
     ] {
-        let reported = reported.as_deref().map_or_else(|| "—".into(), esc);
+        // an identity breaks after its commas, not inside a model name
+        let reported = reported
+            .as_deref()
+            .map_or_else(|| "—".into(), |r| esc(r).replace(',', ",<wbr>"));
         match record {
             Some(r) => {
                 let mut acc = Vec::new();
@@ -387,7 +391,7 @@ pub(crate) fn verdict_box(html: &mut String, acceptance: Option<&Acceptance>, so
     let deciding: Vec<String> = acc
         .deciding()
         .map(|c| {
-            let mut t = format!("<strong>{}</strong>", esc(check_label(c)));
+            let mut t = format!("<strong>{}</strong>", esc(&check_label(c)));
             if let Some(r) = &c.reason {
                 let _ = write!(t, " ({})", esc(r));
             }
@@ -418,27 +422,19 @@ pub(crate) fn verdict_box(html: &mut String, acceptance: Option<&Acceptance>, so
     );
 }
 
-/// A quantity's name for people: the asymmetries name their figure, as the results table
-/// does.
-pub(crate) fn quantity_label(q: Quantity) -> &'static str {
-    match q {
-        Quantity::ScaleFactor => "scale factor K",
-        Quantity::BiasV => "bias K0",
-        Quantity::BiasDph => "bias (as a rate)",
-        Quantity::NonlinearityPpm => "nonlinearity",
-        Quantity::AsymmetryPpm => "asymmetry (common K2, unbiased)",
-        Quantity::AsymmetryGjbPpm => "asymmetry (GJB two lines, biased by K2)",
-        Quantity::RepeatabilityPpm => "repeatability",
-        Quantity::K2 => "second-order coefficient K2",
-    }
+/// A quantity's name for people, from the one table of display names
+/// ([`gyrocal_fit::display::QUANTITIES`]): the asymmetries name their figure, as the results
+/// table does.
+pub(crate) fn quantity_label(q: Quantity) -> String {
+    q.title()
 }
 
 /// A check's quantity for people. A check recorded before checks named their figure judged
 /// the GJB two-line figure under `asymmetry_ppm`, and is labelled so.
-pub(crate) fn check_label(c: &Check) -> &'static str {
+pub(crate) fn check_label(c: &Check) -> String {
     match (c.quantity, &c.figure) {
         (Quantity::AsymmetryPpm, None) => {
-            "asymmetry (GJB two lines: recorded when asymmetry_ppm limited that figure)"
+            "asymmetry (GJB two lines: recorded when asymmetry_ppm limited that figure)".into()
         }
         (q, _) => quantity_label(q),
     }
@@ -464,9 +460,9 @@ pub(crate) fn acceptance_table(html: &mut String, acceptance: Option<&Acceptance
         // limits as the specification wrote them (shortest form: 0.35, not 0.3500000)
         let range = |lo: Option<f64>, hi: Option<f64>| match (lo, hi) {
             (None, None) => "—".to_string(),
-            (Some(a), None) => format!("≥ {a}"),
-            (None, Some(b)) => format!("≤ {b}"),
-            (Some(a), Some(b)) => format!("{a} to {b}"),
+            (Some(a), None) => format!("≥ {}", plain(a)),
+            (None, Some(b)) => format!("≤ {}", plain(b)),
+            (Some(a), Some(b)) => format!("{} to {}", plain(a), plain(b)),
         };
         let reason = c.reason.as_deref().map_or_else(String::new, |r| {
             format!("<br><span class=\"note\">{}</span>", esc(r))
@@ -474,7 +470,7 @@ pub(crate) fn acceptance_table(html: &mut String, acceptance: Option<&Acceptance
         let _ = writeln!(
             html,
             "<tr><td>{}</td><td class=\"num\" id=\"acc-{q}\">{v}</td><td class=\"num\">{u}</td><td>{}</td><td>{}</td><td>{}</td><td id=\"acc-{q}-verdict\" class=\"v-{}\"><strong>{}</strong>{reason}</td></tr>",
-            esc(check_label(c)),
+            esc(&check_label(c)),
             esc(&c.unit),
             range(c.min, c.max),
             range(c.marginal_min, c.marginal_max),
@@ -639,13 +635,14 @@ pub(crate) fn uncertainty(html: &mut String, a: &Analysis) {
         u.coverage_factor
     );
     for q in &u.quantities {
-        let (v, uu) = value_and_u(q.value, Some(q.expanded_uncertainty));
+        let figure = value_pm_u(q.value, Some(q.expanded_uncertainty), &q.unit);
+        let (name, _) = quantity_words(&q.quantity);
         let _ = writeln!(
             html,
-            "<table class=\"budget\" id=\"budget-{}\">\n<caption>{} = {v} ± {uu} {} (k = {}){}{}</caption>\n<tr><th>Source</th><th>Type</th><th>Distribution</th><th>Stated</th><th>Divisor</th><th>Sensitivity</th><th>Standard uncertainty ({})</th><th>Relative (ppm)</th><th>ν</th></tr>",
+            "<table class=\"budget\" id=\"budget-{}\">\n<caption>{} = {} (k = {}){}{}</caption>\n<tr><th>Source</th><th>Type</th><th>Distribution</th><th>Stated</th><th>Divisor</th><th>Sensitivity</th><th>Standard uncertainty ({})</th><th>Relative (ppm)</th><th>ν</th></tr>",
             esc(&q.quantity),
-            esc(&q.quantity),
-            esc(&q.unit),
+            esc(&capitalised(&name)),
+            esc(&figure),
             u.coverage_factor,
             q.relative_expanded_ppm
                 .map_or_else(String::new, |r| format!(", {} ppm", significant(r, 3))),
@@ -694,6 +691,14 @@ pub(crate) fn uncertainty(html: &mut String, a: &Analysis) {
     }
 }
 
+/// `s` with its first letter in capitals, as a table's first column or a caption begins.
+fn capitalised(s: &str) -> String {
+    let mut c = s.chars();
+    c.next()
+        .map(|f| f.to_uppercase().chain(c).collect())
+        .unwrap_or_default()
+}
+
 /// A coverage interval that is not `value ± U`, for the U column.
 fn interval_text([lo, hi]: [f64; 2]) -> String {
     format!(
@@ -730,7 +735,7 @@ fn metric_budget(html: &mut String, u: &gyrocal_fit::Uncertainty) {
             html,
             "<tr id=\"budget-metric-{}\"><td>{}</td><td class=\"num\">{v}</td><td class=\"num\">{uu}</td><td>{}</td><td>{}</td><td class=\"note\">{}</td></tr>",
             esc(&e.metric),
-            esc(&e.metric),
+            esc(&capitalised(&metric_words(&e.metric).0)),
             esc(&e.unit),
             esc(method),
             esc(&e.from)
@@ -741,7 +746,7 @@ fn metric_budget(html: &mut String, u: &gyrocal_fit::Uncertainty) {
             html,
             "<tr id=\"budget-metric-{}\"><td>{}</td><td>—</td><td>—</td><td></td><td colspan=\"2\" class=\"note\">no uncertainty: {}</td></tr>",
             esc(&n.metric),
-            esc(&n.metric),
+            esc(&capitalised(&metric_words(&n.metric).0)),
             esc(&n.reason)
         );
     }

@@ -6,7 +6,7 @@
 //! repeatability, trends and control bands into a typed [`History`]); this module only renders
 //! it, on the shared [`crate::page`] skeleton, stylesheet and escaper (`gyrocal history -o`).
 
-use gyrocal_files::num::{significant, value_and_u};
+use gyrocal_files::num::significant;
 use std::fmt::Write as _;
 
 use plotters::prelude::*;
@@ -23,24 +23,23 @@ const FONT: &str = "sans-serif";
 
 /// `v` to 6 significant digits without trailing zeros (`0.3616`, not `3.6160e-1`).
 fn short(v: f64) -> String {
-    let s = significant(v, 6);
-    if s.contains('e') || !s.contains('.') {
-        return s;
-    }
-    s.trim_end_matches('0').trim_end_matches('.').to_string()
+    gyrocal_fit::display::trimmed(v, 6)
 }
 
 fn num(v: Option<f64>) -> String {
     v.map_or_else(|| "—".to_string(), |x| significant(x, 7))
 }
 
+/// A figure in ppm to 0.1 ppm, as the terminal's metrics print it: a column of nonlinearities
+/// and asymmetries with the same decimals (never `931.3412` beside `2098.372`).
+fn ppm(v: Option<f64>) -> String {
+    v.map_or_else(|| "—".to_string(), |x| format!("{x:.1}"))
+}
+
 /// A value ± its expanded uncertainty, rounded as on the certificate.
 fn with_u(v: Option<f64>, u: Option<f64>) -> String {
     match (v, u) {
-        (Some(v), Some(u)) => {
-            let (v, u) = value_and_u(v, Some(u));
-            format!("{v} ± {u}")
-        }
+        (Some(v), Some(u)) => gyrocal_fit::display::value_pm_u(v, Some(u), ""),
         (v, _) => num(v),
     }
 }
@@ -140,8 +139,8 @@ pub fn render(h: &History) -> String {
                 esc(plan),
                 with_u(res.scale_factor, res.u_scale_factor),
                 with_u(res.bias_dph, res.u_bias_dph),
-                num(res.nonlinearity_ppm),
-                num(res.asymmetry_ppm),
+                ppm(res.nonlinearity_ppm),
+                ppm(res.asymmetry_ppm),
                 esc(c.run.verdict.as_deref().unwrap_or("")),
                 if c.run.simulated { "yes" } else { "" },
             );

@@ -65,6 +65,9 @@ h3 { font-size: 1.1rem; margin-top: 1.5rem; }
 table { border-collapse: collapse; margin: 0.5rem 0 1rem; font-size: 0.92rem; }
 table.history { font-size: 0.85rem; }
 table.history th, table.history td { padding: 0.2rem 0.4rem; }
+/* a station id reads whole; the plan's words wrap instead (a wider column would push the
+   verdict off a printed page) */
+table.history td:nth-child(3) { white-space: nowrap; }
 th, td { border: 1px solid #ccc; padding: 0.25rem 0.6rem; text-align: left; vertical-align: top; }
 th { background: #f2f2f2; }
 td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
@@ -81,11 +84,16 @@ code { font-size: 0.9em; word-break: break-all; }
   figure svg { max-width: 100%; border: none; }
   .banner { background: #fff; color: #000; border: 3px solid #000; }
   th { background: #fff; }
-  #conditions, #uncertainty, #fit { break-before: page; }
+  /* The budget starts a page; everything else flows, kept whole (a page of the acceptance
+     table alone, or a summary alone before a forced break, was mostly empty paper). */
+  #uncertainty { break-before: page; }
+  /* a heading and its introductory paragraph stay with what they introduce */
+  h2 + p, h3 + p, h2 + p.note, h3 + p.note { break-after: avoid; }
   .verdict { background: #fff; border-width: 3px; }
   table.cert td, table.cert th, table.results td { padding: 0.12rem 0.45rem; }
   h1 { margin-top: 0; }
   .signatures { break-inside: avoid; }
+  table.history { font-size: 0.75rem; }
 }
 table.cert th { width: 11rem; background: #f7f7f7; }
 #acceptance-table th, #instruments-table th, table.cert.results th { width: auto; }
@@ -108,6 +116,13 @@ table.budget td:first-child { min-width: 16rem; }
 #instruments-table th, #instruments-table td { padding: 0.2rem 0.35rem; }
 #instruments-table td { overflow-wrap: break-word; }
 #instruments-table td:last-child { overflow-wrap: anywhere; }
+/* ids and dates are read whole: SIM-34401A-0001 never on three lines */
+#instruments-table td:nth-child(3), #instruments-table td:nth-child(4),
+#instruments-table td:nth-child(6), #instruments-table td:nth-child(7) { white-space: nowrap; }
+/* a table's first column names a quantity: no word broken there */
+table.summary td:first-child, #acceptance-table td:first-child { min-width: 9rem; }
+#acceptance-table td:nth-child(5), #acceptance-table td:nth-child(6) { white-space: nowrap; }
+#bias-table th { white-space: nowrap; }
 .end { text-align: center; margin-top: 2rem; font-weight: 600; letter-spacing: 0.05em; }
 "#;
 

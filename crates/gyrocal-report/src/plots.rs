@@ -488,7 +488,10 @@ pub(crate) fn training_plot(neuron: &Fit, ls_sse: Option<f64>) -> Result<String,
         );
         if let Some(sse) = sse {
             legend.add(
-                format!("least-squares minimum SSE = {sse:.4e} V²"),
+                format!(
+                    "least-squares minimum SSE = {} V²",
+                    gyrocal_fit::display::significant(sse, 5)
+                ),
                 Swatch::Line {
                     color: b,
                     width: 2,
@@ -676,7 +679,7 @@ pub(crate) fn surface_plot(
                 [(10, y), (34, y + 18)],
                 BLACK.stroke_width(1),
             ))?;
-            text(&format!("{lvl:.3e}"), 42, y + 2)?;
+            text(&gyrocal_fit::display::significant(*lvl, 4), 42, y + 2)?;
         }
         let y = 44 + 24 * levels.len() as i32 + 16;
         l.draw(&Cross::new((22, y + 8), 7, BLACK.stroke_width(3)))?;

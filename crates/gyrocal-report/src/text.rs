@@ -3,13 +3,17 @@
 
 use std::fmt::Write as _;
 
+use gyrocal_fit::display::{
+    metric_words, quantity_words, significant, value_as_with_u, value_pm_u,
+};
 use gyrocal_fit::{Analysis, Fit, Method, Model, NeuronStatus, ResidualDetail, TrainingData};
 
-fn pm(v: Option<f64>, se: Option<f64>, digits: usize) -> String {
-    match (v, se) {
-        (Some(v), Some(se)) => format!("{v:.digits$} ± {se:.1e}"),
-        (Some(v), None) => format!("{v:.digits$}"),
-        _ => "-".to_string(),
+/// A coefficient ± its standard error, in the one rule of every `±` ([`value_pm_u`]); the
+/// units are in the heading.
+fn pm(v: Option<f64>, se: Option<f64>) -> String {
+    match v {
+        Some(v) => value_pm_u(v, se, ""),
+        None => "-".to_string(),
     }
 }
 
@@ -39,7 +43,10 @@ pub fn fit_summary(out: &mut String, a: &Analysis) {
     if !a.skipped.is_empty() {
         let _ = writeln!(out);
     }
-    let _ = writeln!(out, "fits (K [V/(°/s)], K0 [V]; ± one standard error)");
+    let _ = writeln!(
+        out,
+        "fits (K, K+, K− in V/(°/s); K0 in V; K2 in V/(°/s)²; K3 in V/(°/s)³; ± one standard error)"
+    );
     for f in &a.fits {
         let c = &f.coefficients;
         let s = &f.std_errors;
@@ -48,33 +55,28 @@ pub fn fit_summary(out: &mut String, a: &Analysis) {
             Model::Split => {
                 let _ = write!(
                     line,
-                    " K+ = {}  K- = {}  K0 = {}",
-                    pm(c.k_pos, s.k_pos, 7),
-                    pm(c.k_neg, s.k_neg, 7),
-                    pm(c.k0, s.k0, 6)
+                    " K+ = {}  K− = {}  K0 = {}",
+                    pm(c.k_pos, s.k_pos),
+                    pm(c.k_neg, s.k_neg),
+                    pm(c.k0, s.k0)
                 );
             }
             _ => {
-                let _ = write!(
-                    line,
-                    " K = {}  K0 = {}",
-                    pm(c.k1, s.k1, 7),
-                    pm(c.k0, s.k0, 6)
-                );
+                let _ = write!(line, " K = {}  K0 = {}", pm(c.k1, s.k1), pm(c.k0, s.k0));
                 if c.k2.is_some() {
-                    let _ = write!(line, "  K2 = {}", pm(c.k2, s.k2, 9));
+                    let _ = write!(line, "  K2 = {}", pm(c.k2, s.k2));
                 }
                 if c.k3.is_some() {
-                    let _ = write!(line, "  K3 = {}", pm(c.k3, s.k3, 11));
+                    let _ = write!(line, "  K3 = {}", pm(c.k3, s.k3));
                 }
             }
         }
         let _ = writeln!(out, "{line}");
         let _ = writeln!(
             out,
-            "  {:<24} SSE {:.4e} V²  RMS {:.4} mV  max|r| {:.4} mV  R² {:.10}",
+            "  {:<24} SSE {} V²  RMS {:.4} mV  max|r| {:.4} mV  R² {:.10}",
             "",
-            f.sse,
+            significant(f.sse, 5),
             f.rms_residual * 1e3,
             f.max_abs_residual * 1e3,
             f.r_squared
@@ -137,13 +139,13 @@ pub fn fit_summary(out: &mut String, a: &Analysis) {
                 nn.sse / ls.sse.max(f64::MIN_POSITIVE)
             )
         } else if rel.abs() <= 1e-9 {
-            "the neuron reaches the least-squares line (SSE equal within 1e-9 relative): \
+            "the neuron reaches the least-squares line (SSE equal within 10⁻⁹ relative): \
              it is the same estimate, not a better one"
                 .to_string()
         } else if rel > 0.0 {
             format!(
-                "the neuron's SSE is larger by {:.3e} relative: least squares fits better",
-                rel
+                "the neuron's SSE is larger by {} relative: least squares fits better",
+                significant(rel, 4)
             )
         } else {
             "the neuron's SSE is below least squares only by rounding: the same estimate"
@@ -152,7 +154,8 @@ pub fn fit_summary(out: &mut String, a: &Analysis) {
         let dk = (nn.scale_factor - ls.scale_factor) / ls.scale_factor;
         let _ = writeln!(
             out,
-            "neuron vs least squares (linear): {verdict}; ΔK/K = {dk:.2e}"
+            "neuron vs least squares (linear): {verdict}; ΔK/K = {}",
+            significant(dk, 3)
         );
         let _ = writeln!(out);
     }
@@ -261,17 +264,28 @@ pub fn fit_summary(out: &mut String, a: &Analysis) {
     let _ = writeln!(out);
 
     let m = &a.metrics;
+    let unc = a.uncertainty.as_ref();
+    // Each figure rounded as it is beside its U below (and on the certificate): the same
+    // quantity with the same decimals wherever it is read.
+    let like = |key: &str, v: f64| value_as_with_u(v, unc.and_then(|u| u.expanded(key)));
     let _ = writeln!(out, "metrics (least squares)");
-    let _ = writeln!(out, "  scale factor K        {:.7} V/(°/s)", m.scale_factor);
     let _ = writeln!(
         out,
-        "  bias K0               {:.6} V = {:.4} °/s = {:.1} °/h",
-        m.bias_volts, m.bias_dps, m.bias_dph
+        "  scale factor K        {} V/(°/s)",
+        like("scale_factor", m.scale_factor)
     );
     let _ = writeln!(
         out,
-        "  nonlinearity          {:.1} ppm of F_m = {:.4} V (max |line − F_j| / max |F_j|)",
-        m.nonlinearity_ppm, m.full_scale_output
+        "  bias K0               {} V = {:.4} °/s = {} °/h",
+        like("bias_v", m.bias_volts),
+        m.bias_dps,
+        like("bias_dph", m.bias_dph)
+    );
+    let _ = writeln!(
+        out,
+        "  nonlinearity          {} ppm of F_m = {:.4} V (max |line − F_j| / max |F_j|)",
+        like("nonlinearity_ppm", m.nonlinearity_ppm),
+        m.full_scale_output
     );
     match (
         m.asymmetry_ppm,
@@ -281,7 +295,10 @@ pub fn fit_summary(out: &mut String, a: &Analysis) {
         (Some(asym), Some(kp), Some(kn)) => {
             let _ = writeln!(
                 out,
-                "  asymmetry             {asym:.1} ppm (K+ = {kp:.7}, K- = {kn:.7} V/(°/s))"
+                "  asymmetry             {} ppm (GJB two lines; K+ = {}, K− = {} V/(°/s))",
+                like("asymmetry_ppm", asym),
+                like("k_pos", kp),
+                like("k_neg", kn)
             );
         }
         _ => {
@@ -296,60 +313,113 @@ pub fn fit_summary(out: &mut String, a: &Analysis) {
     if let Some(c) = &m.asymmetry_common_k2 {
         let _ = writeln!(
             out,
-            "  asymmetry, common K2  {:.1} ± {:.1} ppm (1σ; one fit K0 + K+·ω⁺ + K−·ω⁻ + K2·ω², K2 = {:.3e} V/(°/s)²: not biased by the even-order term as the line pair above is){}",
-            c.asymmetry_ppm,
-            c.asymmetry_std_error_ppm,
-            c.k2,
+            "  asymmetry, common K2  {} (U, k = 2; one fit K0 + K+·ω⁺ + K−·ω⁻ + K2·ω², K2 = {} V/(°/s)²: not biased by the even-order term as the line pair above is){}",
+            value_pm_u(
+                c.asymmetry_ppm,
+                unc.and_then(|u| u.expanded("asymmetry_common_k2"))
+                    .or(Some(2.0 * c.asymmetry_std_error_ppm)),
+                "ppm"
+            ),
+            significant(c.k2, 4),
             crate::certificate::few_dof(c.degrees_of_freedom)
         );
     }
     if let Some(r) = m.repeatability_ppm {
-        let _ = writeln!(out, "  repeatability         {r:.1} ppm");
+        let _ = writeln!(
+            out,
+            "  repeatability         {} ppm",
+            like("repeatability_ppm", r)
+        );
     }
     let _ = writeln!(out);
-    if let Some(u) = &a.uncertainty {
+    if let Some(u) = unc {
         let _ = writeln!(
             out,
             "expanded uncertainty (k = {}; budget in fit.json and the report)",
             u.coverage_factor
         );
-        for q in &u.quantities {
-            let _ = writeln!(
-                out,
-                "  {:<20}  {:.7e} ± {:.2e} {}{}",
-                q.quantity,
-                q.value,
-                q.expanded_uncertainty,
-                q.unit,
-                q.relative_expanded_ppm
-                    .map_or_else(String::new, |r| format!(" ({r:.1} ppm)"))
-            );
+        let mut rows: Vec<(String, String)> = u
+            .quantities
+            .iter()
+            .map(|q| {
+                (
+                    quantity_words(&q.quantity).0,
+                    format!(
+                        "{}{}",
+                        value_pm_u(q.value, Some(q.expanded_uncertainty), &q.unit),
+                        q.relative_expanded_ppm
+                            .map_or_else(String::new, |r| format!(" ({} ppm)", significant(r, 3)))
+                    ),
+                )
+            })
+            .collect();
+        rows.extend(u.metrics.entries.iter().map(|e| {
+            let text = match e.interval {
+                Some([lo, hi]) => format!(
+                    "{} {} (95 % interval {} .. {})",
+                    value_as_with_u(e.value, Some(e.expanded_uncertainty)),
+                    e.unit,
+                    significant(lo, 3),
+                    significant(hi, 3)
+                ),
+                None => value_pm_u(e.value, Some(e.expanded_uncertainty), &e.unit),
+            };
+            (metric_words(&e.metric).0, text)
+        }));
+        let width = rows
+            .iter()
+            .map(|(n, _)| n.chars().count())
+            .max()
+            .unwrap_or(0);
+        for (name, text) in rows {
+            let _ = writeln!(out, "  {name:<width$}  {text}");
         }
         let _ = writeln!(out);
     }
     if let Some(acc) = &a.acceptance {
         let _ = writeln!(out, "{}", verdict_line(acc));
+        let width = acc
+            .checks
+            .iter()
+            .map(|c| c.quantity.title().chars().count())
+            .max()
+            .unwrap_or(0);
         for c in &acc.checks {
             let _ = writeln!(
                 out,
-                "  {:<18} {:<13} {}{}",
-                c.quantity.name(),
+                "  {:<width$}  {:<13} {}",
+                c.quantity.title(),
                 c.verdict.label(),
-                c.value
-                    .map_or_else(|| "not measured".into(), |v| format!("{v:.7e} {}", c.unit)),
-                c.reason
-                    .as_deref()
-                    .map_or_else(String::new, |r| format!(": {r}"))
+                check_text(c)
             );
         }
         let _ = writeln!(out);
     }
 }
 
-/// "verdict: FAIL (simple rule): nonlinearity_ppm" — the run's verdict and the quantities
-/// that make it.
+/// What a check's line says after its verdict: the reason when there is one (it begins with
+/// the value ± U, or says why there is no value), else the value ± U.
+pub fn check_text(c: &gyrocal_fit::acceptance::Check) -> String {
+    if let Some(r) = &c.reason {
+        return r.clone();
+    }
+    match (c.value, c.interval) {
+        (Some(v), Some([lo, hi])) => format!(
+            "{} {} (95 % interval {} .. {})",
+            value_as_with_u(v, c.expanded_uncertainty),
+            c.unit,
+            significant(lo, 3),
+            significant(hi, 3)
+        ),
+        (Some(v), None) => value_pm_u(v, c.expanded_uncertainty, &c.unit),
+        (None, _) => "not measured".to_string(),
+    }
+}
+
+/// "verdict: FAIL (simple rule): nonlinearity" — the run's verdict and the quantities that
+/// make it, in words.
 pub fn verdict_line(acc: &gyrocal_fit::acceptance::Acceptance) -> String {
-    let deciding: Vec<&str> = acc.deciding().map(|c| c.quantity.name()).collect();
+    let deciding: Vec<String> = acc.deciding().map(|c| c.quantity.title()).collect();
     format!(
         "verdict: {} ({} rule){}",
         acc.verdict.label(),

@@ -28,7 +28,8 @@ fn json_is_one_document_with_every_fit_and_the_metrics() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    // one file: the first of `files` (fit --json has one shape for any number of files)
+    let v = serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()["files"][0].take();
     assert_eq!(v["points"], 19);
     let fits = v["fits"].as_array().unwrap();
     let names: Vec<String> = fits
@@ -93,7 +94,8 @@ fn selected_model_and_method_only() {
         example().to_str().unwrap(),
     ]);
     assert!(out.status.success());
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    // one file: the first of `files` (fit --json has one shape for any number of files)
+    let v = serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()["files"][0].take();
     let fits = v["fits"].as_array().unwrap();
     assert_eq!(fits.len(), 1);
     assert_eq!(fits[0]["model"], "quadratic");
@@ -253,7 +255,8 @@ fn three_rates_skip_the_cubic_model_with_the_reason_and_exit_0() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    // one file: the first of `files` (fit --json has one shape for any number of files)
+    let v = serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()["files"][0].take();
     let skipped = v["skipped"].as_array().unwrap();
     assert_eq!(skipped.len(), 1, "{skipped:?}");
     assert_eq!(skipped[0]["model"], "cubic");
@@ -292,7 +295,8 @@ fn one_direction_skips_split_and_says_why_asymmetry_is_missing() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    // one file: the first of `files` (fit --json has one shape for any number of files)
+    let v = serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()["files"][0].take();
     assert_eq!(v["skipped"][0]["model"], "split");
     assert!(
         v["skipped"][0]["reason"]
@@ -383,7 +387,8 @@ fn many_points_get_per_rate_summaries_unless_residuals_is_given() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    // one file: the first of `files` (fit --json has one shape for any number of files)
+    let v = serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()["files"][0].take();
     assert_eq!(v["points"], 14_000);
     assert_eq!(v["distinct_rates"], 7);
     assert_eq!(v["residual_detail"], "per-rate");
@@ -407,7 +412,8 @@ fn many_points_get_per_rate_summaries_unless_residuals_is_given() {
     assert!((nsse - ls).abs() <= 1e-9 * ls, "{nsse} vs {ls}");
 
     let out = gyrocal(&["fit", "--json", "--residuals", &path]);
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    // one file: the first of `files` (fit --json has one shape for any number of files)
+    let v = serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()["files"][0].take();
     assert_eq!(v["residual_detail"], "per-point");
     assert_eq!(v["fits"][0]["residuals"].as_array().unwrap().len(), 14_000);
 
@@ -438,7 +444,9 @@ fn a_run_directory_is_fitted_by_its_steps_and_another_directory_is_refused_in_wo
     );
     let by_file = gyrocal(&["fit", steps.to_str().unwrap(), "--json"]);
     let k = |o: &std::process::Output| {
-        let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        // one file: the first of `files` (fit --json has one shape for any number of files)
+        let doc =
+            serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()["files"][0].take();
         doc["metrics"]["scale_factor"].as_f64().unwrap()
     };
     assert_eq!(k(&by_dir), k(&by_file));

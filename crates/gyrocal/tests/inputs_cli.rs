@@ -155,7 +155,8 @@ fn fit_report_and_allan_accept_a_csv_with_a_byte_order_mark() {
         .output()
         .unwrap();
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
-    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    // one file: the first of `files` (fit --json has one shape for any number of files)
+    let doc = serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()["files"][0].take();
     let k = doc["metrics"]["scale_factor"].as_f64().unwrap();
     assert!((k - 0.3612).abs() < 1e-3, "{doc}");
 

@@ -73,9 +73,9 @@ pub(super) fn training_and_surface(
             let neuron = nn.map(|f| (f.scale_factor, f.bias));
             let distance = neuron.map_or_else(String::new, |(k, k0)| {
                 format!(
-                    " The neuron's result differs from the least-squares optimum by ΔK = {:.2e} V/(°/s) and ΔK0 = {:.2e} V.",
-                    k - l.scale_factor,
-                    k0 - l.bias
+                    " The neuron's result differs from the least-squares optimum by ΔK = {} V/(°/s) and ΔK0 = {} V.",
+                    gyrocal_fit::display::significant(k - l.scale_factor, 3),
+                    gyrocal_fit::display::significant(k0 - l.bias, 3)
                 )
             });
             doc.figure(

@@ -1,6 +1,7 @@
 //! Several runs in one report: each run's scale factor with its standard error, and the
 //! repeatability (or, for runs of different plans, the spread that is not one).
 
+use gyrocal_fit::display::value_and_u;
 use std::fmt::Write as _;
 
 use gyrocal_files::Status;
@@ -50,11 +51,11 @@ pub(super) fn repeatability(
                 ks.push((a.metrics.scale_factor, se));
                 let _ = writeln!(
                     doc.html,
-                    "<tr><td class=\"num\">{}</td><td><code>{}</code></td><td class=\"num\">{:.7}</td><td class=\"num\">{}</td><td class=\"num\">{:.6}</td><td>{status}</td></tr>",
+                    "<tr><td class=\"num\">{}</td><td><code>{}</code></td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{:.6}</td><td>{status}</td></tr>",
                     i + 1,
                     esc(&input.path.display().to_string()),
-                    a.metrics.scale_factor,
-                    opt(se, |s| format!("{s:.2e}")),
+                    value_and_u(a.metrics.scale_factor, se).0,
+                    opt(se, |s| value_and_u(a.metrics.scale_factor, Some(s)).1),
                     a.metrics.bias_volts
                 );
             }

@@ -2,6 +2,7 @@
 //! residual table, the estimator comparison and the plain-words verdict on neuron vs least
 //! squares. Formatting only: every figure comes from the run's `Analysis` (gyrocal-fit).
 
+use gyrocal_fit::display::value_and_u;
 use std::fmt::Write as _;
 
 use gyrocal_fit::{Analysis, Fit, Method, Model, NeuronStatus};
@@ -95,26 +96,33 @@ pub(super) fn summary(html: &mut String, a: &Analysis, sfx: &str, input: &Input)
             "<tr><td>{name}</td><td class=\"num\" id=\"sum-{key}{sfx}\">{value}</td>{se_cell}<td>{unit}</td><td class=\"note\">{def}</td></tr>"
         );
     };
+    // Each figure rounded as beside its U in the results (the same quantity, the same
+    // decimals); a figure without a U to 7 significant digits.
+    let unc = a.uncertainty.as_ref();
+    let like = |key: &str, v: f64| value_and_u(v, unc.and_then(|u| u.expanded(key))).0;
+    // value and standard error in the one rule of every ± (gyrocal_fit::display)
+    let (k, k_se) = value_and_u(m.scale_factor, se_k);
+    let (k0, k0_se) = value_and_u(m.bias_volts, se_k0);
     row(
         "k",
         "Scale factor K",
-        format!("{:.7}", m.scale_factor),
-        se_k.map(|s| format!("{s:.2e}")),
+        k,
+        se_k.map(|_| k_se),
         "V/(°/s)",
         "least-squares line D = K·ω + K0".into(),
     );
     row(
         "k0",
         "Bias K0",
-        format!("{:.6}", m.bias_volts),
-        se_k0.map(|s| format!("{s:.2e}")),
+        k0,
+        se_k0.map(|_| k0_se),
         "V",
         "intercept of the same line".into(),
     );
     row(
         "nonlinearity",
         "Nonlinearity",
-        format!("{:.1}", m.nonlinearity_ppm),
+        like("nonlinearity_ppm", m.nonlinearity_ppm),
         None,
         "ppm",
         format!(
@@ -126,7 +134,7 @@ pub(super) fn summary(html: &mut String, a: &Analysis, sfx: &str, input: &Input)
     row(
         "asymmetry",
         "Asymmetry",
-        opt(m.asymmetry_ppm, |v| format!("{v:.1}")),
+        opt(m.asymmetry_ppm, |v| like("asymmetry_ppm", v)),
         None,
         "ppm",
         format!("|K+ − K−| / ((K+ + K−)/2){}", why("asymmetry_ppm")),
@@ -134,7 +142,7 @@ pub(super) fn summary(html: &mut String, a: &Analysis, sfx: &str, input: &Input)
     row(
         "k-pos",
         "K+ (ω ≥ 0)",
-        opt(m.scale_factor_positive, |v| format!("{v:.7}")),
+        opt(m.scale_factor_positive, |v| like("k_pos", v)),
         None,
         "V/(°/s)",
         format!(
@@ -145,7 +153,7 @@ pub(super) fn summary(html: &mut String, a: &Analysis, sfx: &str, input: &Input)
     row(
         "k-neg",
         "K− (ω ≤ 0)",
-        opt(m.scale_factor_negative, |v| format!("{v:.7}")),
+        opt(m.scale_factor_negative, |v| like("k_neg", v)),
         None,
         "V/(°/s)",
         format!(
@@ -164,7 +172,7 @@ pub(super) fn summary(html: &mut String, a: &Analysis, sfx: &str, input: &Input)
     row(
         "bias-dph",
         "Bias as a rate",
-        format!("{:.2}", m.bias_dph),
+        like("bias_dph", m.bias_dph),
         None,
         "°/h",
         "K0 / K × 3600".into(),
@@ -172,7 +180,7 @@ pub(super) fn summary(html: &mut String, a: &Analysis, sfx: &str, input: &Input)
     row(
         "repeatability",
         "Repeatability",
-        opt(m.repeatability_ppm, |v| format!("{v:.1}")),
+        opt(m.repeatability_ppm, |v| like("repeatability_ppm", v)),
         None,
         "ppm",
         format!(
@@ -270,12 +278,12 @@ pub(super) fn estimators(html: &mut String, a: &Analysis, sfx: &str) {
         };
         let _ = writeln!(
             html,
-            "<tr{}><td>{}</td><td class=\"num\">{:.7}</td><td class=\"num\">{:.6}</td><td class=\"num\">{:.4e}</td><td class=\"num\">{:.4}</td><td class=\"num\">{:.4}</td><td class=\"num\">{}</td><td>{status}</td></tr>",
+            "<tr{}><td>{}</td><td class=\"num\">{:.7}</td><td class=\"num\">{:.6}</td><td class=\"num\">{}</td><td class=\"num\">{:.4}</td><td class=\"num\">{:.4}</td><td class=\"num\">{}</td><td>{status}</td></tr>",
             if best { " class=\"best\"" } else { "" },
             plots::fit_name(f),
             f.scale_factor,
             f.bias,
-            f.sse,
+            gyrocal_fit::display::significant(f.sse, 5),
             f.rms_residual * 1e3,
             f.max_abs_residual * 1e3,
             opt(f.residual_std_error, |v| format!("{:.4}", v * 1e3)),
@@ -299,15 +307,16 @@ pub(crate) fn verdict(a: &Analysis) -> String {
             if rel <= 1e-9 {
                 let _ = write!(
                     out,
-                    "The neuron reached the least-squares line: its SSE equals least squares' to rounding (relative difference {rel:.1e}). That is what a converged linear neuron must do, since the least-squares line is the minimum of this error; it is not better, only equal. "
+                    "The neuron reached the least-squares line: its SSE equals least squares' to rounding (relative difference {}). That is what a converged linear neuron must do, since the least-squares line is the minimum of this error; it is not better, only equal. ",
+                    gyrocal_fit::display::significant(rel, 2)
                 );
             } else {
                 let _ = write!(
                     out,
-                    "The neuron's SSE is <strong>larger</strong> than least squares' by {:.3} % ({:.4e} V² against {:.4e} V²): it stopped near, not at, the minimum. Least squares is the better estimate of the straight line. ",
+                    "The neuron's SSE is <strong>larger</strong> than least squares' by {:.3} % ({} V² against {} V²): it stopped near, not at, the minimum. Least squares is the better estimate of the straight line. ",
                     rel * 100.0,
-                    nn.sse,
-                    ls.sse
+                    gyrocal_fit::display::significant(nn.sse, 5),
+                    gyrocal_fit::display::significant(ls.sse, 5)
                 );
             }
         }

@@ -49,11 +49,11 @@ fn result_line(analysis: &gyrocal_fit::Analysis, m: &gyrocal_files::Manifest) ->
         .unwrap_or_default();
     let k = match figures.scale_factor {
         Some(k) => {
-            let (v, u) = gyrocal_files::num::value_and_u(k, figures.u_scale_factor);
+            let text = gyrocal_fit::display::value_pm_u(k, figures.u_scale_factor, "V/(°/s)");
             if figures.u_scale_factor.is_some() {
-                format!("K = {v} ± {u} V/(°/s) (k = 2)")
+                format!("K = {text} (k = 2)")
             } else {
-                format!("K = {v} V/(°/s) (no uncertainty budget)")
+                format!("K = {text} (no uncertainty budget)")
             }
         }
         None => "no scale factor".to_string(),

@@ -316,7 +316,7 @@ fn text(doc: &AllanDocument) -> String {
         );
     }
     for n in &doc.notes {
-        let _ = writeln!(s, "note: {n}");
+        let _ = writeln!(s, "note: {}", gyrocal_report::allan::note_words(n));
     }
     let _ = writeln!(
         s,
@@ -369,7 +369,7 @@ fn text(doc: &AllanDocument) -> String {
                 );
             }
             for n in &nt.notes {
-                let _ = writeln!(s, "  note: {n}");
+                let _ = writeln!(s, "  note: {}", gyrocal_report::allan::note_words(n));
             }
         }
         None => {
@@ -380,16 +380,11 @@ fn text(doc: &AllanDocument) -> String {
         }
     }
     let b = &doc.bias;
-    let _ = writeln!(
-        s,
-        "\nbias: {} ± {} {unit}",
-        fmt_num(b.bias.value),
-        fmt_num(b.bias.uncertainty)
-    );
+    let _ = writeln!(s, "\nbias: {}", gyrocal_report::allan::pm(&b.bias));
     if let Some(e) = &doc.earth_rate {
         let _ = writeln!(
             s,
-            "bias without the Earth rate: {} deg/h (along the {:?} axis at latitude {}°: {} deg/h removed)",
+            "bias without the Earth rate: {} °/h (along the {:?} axis at latitude {}°: {} °/h removed)",
             fmt_num(e.bias_dph),
             e.axis,
             e.latitude_deg,
@@ -401,9 +396,8 @@ fn text(doc: &AllanDocument) -> String {
             Some(x) => {
                 let _ = writeln!(
                     s,
-                    "bias stability ({label}, GJB 2426A): {} ± {} {unit} ({} windows)",
-                    fmt_num(x.stability.value),
-                    fmt_num(x.stability.uncertainty),
+                    "bias stability ({label}, GJB 2426A): {} ({} windows)",
+                    gyrocal_report::allan::pm(&x.stability),
                     x.windows
                 );
             }

@@ -398,11 +398,13 @@ fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
         Some(a) => {
             let _ = writeln!(o, "acceptance ({} rule):", a.rule.as_str());
             for (q, l) in &a.limits {
-                let bound = |v: Option<f64>| v.map_or_else(|| "—".to_string(), |v| v.to_string());
+                let bound =
+                    |v: Option<f64>| v.map_or_else(|| "—".to_string(), gyrocal_fit::display::plain);
+                // in words, then where the plan sets it (the key the operator edits)
                 let _ = writeln!(
                     o,
-                    "  {:<20} {} to {} {}{}",
-                    q.name(),
+                    "  {:<40} {} to {} {}{}  [acceptance.{}]",
+                    q.title(),
                     bound(l.min),
                     bound(l.max),
                     q.unit(),
@@ -414,7 +416,8 @@ fn render(plan: &Plan, path: &std::path::Path, est: &Estimate) -> String {
                         )
                     } else {
                         String::new()
-                    }
+                    },
+                    q.name()
                 );
             }
         }

@@ -8,7 +8,7 @@ use anyhow::Context as _;
 use clap::{Args, ValueEnum};
 use gyrocal_fit::{
     Columns, Method, Model, MultiAnalysis, MultiWithPointResiduals, NeuronOptions, Options,
-    POINT_RESIDUALS_MAX, Weighting, WithPointResiduals, analyze_columns, input,
+    POINT_RESIDUALS_MAX, Weighting, analyze_columns, input,
 };
 
 /// Above this many points the human report's table has one row per distinct rate (with the
@@ -73,7 +73,12 @@ pub struct FitArgs {
     /// reported.
     #[arg(required = true, value_name = "FILE")]
     pub files: Vec<PathBuf>,
-    /// Print exactly one JSON document on stdout instead of the human report.
+    /// Print exactly one JSON document on stdout instead of the human report, of one shape
+    /// whatever the number of files: `{"files": [ANALYSIS, ...], "scale_factors": [K, ...],
+    /// "repeatability_ppm": R}`, one ANALYSIS per FILE in the order given (the shape of a run's
+    /// fit.json; `jq '.files[0]'` for one file) and `repeatability_ppm` null for one file.
+    /// Changed after 0.1.0 (deprecation note): one file printed the bare ANALYSIS, several
+    /// this object; a script that read `.metrics` of one file reads `.files[0].metrics` now.
     #[arg(long)]
     pub json: bool,
     /// Model to fit (repeatable, or a comma list: `--model linear,quadratic`). Default: every
@@ -248,19 +253,12 @@ pub fn run(args: &FitArgs) -> anyhow::Result<()> {
     if args.json {
         // Straight to stdout: no copy of the document in memory; with --residuals each
         // point's residuals are computed as they are written.
-        match (analyses.len(), stream) {
-            (1, false) => serde_json::to_writer_pretty(&mut stdout, &analyses[0]),
-            (1, true) => serde_json::to_writer_pretty(
-                &mut stdout,
-                &WithPointResiduals::new(&analyses[0], &kept[0]),
-            ),
-            (_, false) => {
-                serde_json::to_writer_pretty(&mut stdout, &MultiAnalysis::from_analyses(analyses))
-            }
-            (_, true) => serde_json::to_writer_pretty(
-                &mut stdout,
-                &MultiWithPointResiduals::new(&MultiAnalysis::from_analyses(analyses), &kept),
-            ),
+        // One shape whatever the number of files (`{"files": [...], ...}`, see --json).
+        let multi = MultiAnalysis::from_analyses(analyses);
+        if stream {
+            serde_json::to_writer_pretty(&mut stdout, &MultiWithPointResiduals::new(&multi, &kept))
+        } else {
+            serde_json::to_writer_pretty(&mut stdout, &multi)
         }
         .context("writing the result to stdout")?;
         stdout.write_all(b"\n").context("writing to stdout")?;

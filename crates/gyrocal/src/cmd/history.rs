@@ -30,11 +30,8 @@ pub struct HistoryArgs {
 /// A value ± its expanded uncertainty, rounded as on the certificate.
 fn sci(v: Option<f64>, u: Option<f64>) -> String {
     match (v, u) {
-        (Some(v), Some(u)) => {
-            let (v, u) = gyrocal_files::num::value_and_u(v, Some(u));
-            format!("{v} ± {u}")
-        }
-        (Some(v), None) => gyrocal_files::num::significant(v, 7),
+        (Some(v), Some(u)) => gyrocal_fit::display::value_pm_u(v, Some(u), ""),
+        (Some(v), None) => gyrocal_fit::display::significant(v, 7),
         _ => "—".to_string(),
     }
 }
