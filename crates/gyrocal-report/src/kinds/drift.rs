@@ -109,10 +109,7 @@ fn ending(
 fn result_line(doc: &gyrocal_analysis::drift::AllanDocument, dir: &Path) -> String {
     let f = gyrocal_analysis::drift::DriftFigures::of(doc).figures();
     let term = |name: &str, v: Option<f64>, u: Option<f64>, unit: &str| {
-        v.map(|v| {
-            let (v, u) = gyrocal_files::num::value_and_u(v, u);
-            format!("{name} = {v} ± {u} {unit}")
-        })
+        v.map(|v| format!("{name} = {}", gyrocal_fit::display::value_pm_u(v, u, unit)))
     };
     let terms: Vec<String> = [
         term("N", f.arw_deg_rt_h, f.u_arw_deg_rt_h, "°/√h"),
