@@ -103,7 +103,7 @@ fn the_run_display_fits_80_columns_names_the_plan_step_and_counts_time() {
     let mut bars = Vec::new();
     for segment in raw.split("\u{1b}[2K") {
         let frame = strip_ansi(segment).replace(['\r', '\n'], "");
-        let Some(at) = frame.rfind("] run clock ") else {
+        let Some(at) = frame.rfind("] at ") else {
             continue;
         };
         let start = frame[..at]
@@ -119,12 +119,17 @@ fn the_run_display_fits_80_columns_names_the_plan_step_and_counts_time() {
         bars.push(bar);
     }
     let text = strip_ansi(&raw);
-    // the bar: the plan's step numbering, the run clock (said so: no wall-clock elapsed time
-    // beside a run-clock ETA), the time left on it, the phase
+    // the bar: the plan's step numbering, the run clock (no wall-clock elapsed time beside a
+    // run-clock ETA: the run said which clock its times are on), the time left on it, the
+    // phase
     let bar = bars
         .iter()
         .find(|f| f.starts_with("step ") && f.contains(" left · ") && f.contains('['))
         .unwrap_or_else(|| panic!("no progress bar frame in:\n{text}"));
+    assert!(
+        text.contains("times are on the run clock"),
+        "the run says which clock: {text}"
+    );
     assert!(bar.contains("/5 "), "{bar}");
     assert!(
         bars.iter().any(|b| b.contains("waiting for at-rate (")),

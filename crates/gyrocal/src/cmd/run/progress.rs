@@ -142,7 +142,9 @@ impl Progress {
     }
 
     fn redraw(&self) {
-        let clock = format!("run clock {}", short_hms(self.run_clock()));
+        // on the run clock, as the line before the schedule says (80 columns: no room for
+        // the words here)
+        let clock = format!("at {}", short_hms(self.run_clock()));
         let eta = match self.remaining() {
             Some(r) => {
                 let done = self.estimate.saturating_sub(r);
