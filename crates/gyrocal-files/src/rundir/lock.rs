@@ -156,3 +156,37 @@ pub fn host_name() -> String {
         .find(|s| !s.is_empty() && s.len() < 256)
         .unwrap_or_else(|| "unknown".into())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_lock_names_its_holder_and_a_dead_one_reads_as_dead() {
+        let tmp = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+        let dir = tmp.path();
+        assert_eq!(lock_holder(dir).ok(), Some(None), "no .lock: no holder");
+        let file = lock_dir(dir).unwrap_or_else(|e| panic!("{e}"));
+        let holder = lock_holder(dir).ok().flatten().expect("the holder");
+        assert_eq!(holder.pid, std::process::id());
+        assert_eq!(holder.host, host_name());
+        assert_eq!(holder.state(), HolderState::Alive);
+        drop(file);
+        // a process that is gone (PIDs stop far below u32::MAX), on this host and another
+        let gone = LockHolder {
+            pid: u32::MAX - 1,
+            ..holder.clone()
+        };
+        assert_eq!(gone.state(), HolderState::Dead);
+        let elsewhere = LockHolder {
+            host: format!("{}-elsewhere", holder.host),
+            ..gone
+        };
+        assert_eq!(elsewhere.state(), HolderState::Unknown);
+        // what the file says is untrusted: garbage is no holder, a huge file an error
+        fs::write(dir.join(LOCK_FILE), "\u{0}not json").unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(lock_holder(dir).ok(), Some(None));
+        fs::write(dir.join(LOCK_FILE), vec![b'x'; 10_000]).unwrap_or_else(|e| panic!("{e}"));
+        assert!(lock_holder(dir).is_err());
+    }
+}
