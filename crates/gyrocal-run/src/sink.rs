@@ -196,7 +196,10 @@ impl Sink for RunDir {
 
     fn recorded(&mut self, r: &Recorded<'_>, _: &mut Vec<Event>) -> Result<(), SinkError> {
         self.append_step(r.row.clone())?;
-        Ok(self.set_elapsed(r.elapsed_s)?)
+        self.set_elapsed(r.elapsed_s)?;
+        // run.log: one line per durable step, so `tail -f run.log` follows the run
+        tracing::info!("{}", recorded_line(r, self.schedule().len()));
+        Ok(())
     }
 
     fn event(&mut self, event: &Event) -> Result<(), SinkError> {
@@ -223,6 +226,33 @@ impl Sink for RunDir {
             f.elapsed_s,
         )?)
     }
+}
+
+/// The log's line for a recorded step: the plan's numbering (`step 4/19`, `segment 12/167`),
+/// the files' 0-based `step`, and its key figures.
+pub fn recorded_line(r: &Recorded<'_>, of: usize) -> String {
+    let what = match r.record {
+        Record::Segment(_) => "segment",
+        Record::Row(_) | Record::Warmup => "step",
+    };
+    let row = r.row;
+    let spread = row
+        .volts_std
+        .map_or(String::new(), |s| format!(", σ {s:.2e} V"));
+    let overloads = if row.overloads > 0 {
+        format!(", {} overloads", row.overloads)
+    } else {
+        String::new()
+    };
+    format!(
+        "{what} {}/{of} recorded (steps.csv step {}): {:+} °/s, mean {:.6} V{spread}, n {}{overloads}, run clock {:.1} s",
+        row.step + 1,
+        row.step,
+        row.rate_dps,
+        row.volts,
+        row.n,
+        r.t_end
+    )
 }
 
 /// The progress display's feed: every event on an unbounded channel, so a display never

@@ -215,7 +215,8 @@ fn an_interrupted_drift_record_of_the_earlier_release_resumes_verifies_and_repor
 
     let out = resume_to_completion(&dir);
     assert!(
-        out.stderr.contains("3 of 8 steps done, 5 to go"),
+        // a drift record's steps are its segments, one word for them (issue 25 item 5)
+        out.stderr.contains("3 of 8 segments done, 5 to go"),
         "{}",
         out.stderr
     );

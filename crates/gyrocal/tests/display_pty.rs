@@ -1,7 +1,7 @@
 //! The interactive display, seen through a pseudo-terminal 80 columns wide as an operator's
 //! terminal would show it: a bar that names the step in the plan's numbering (`step 3/5`),
-//! counts time (elapsed and ETA), fits 80 columns without wrapping, and ends with the
-//! table's state.
+//! counts time on the run clock (said so) and the time left, fits 80 columns without
+//! wrapping, and ends with the table's state.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a panic is a failed test
 
@@ -97,18 +97,18 @@ fn the_run_display_fits_80_columns_names_the_plan_step_and_counts_time() {
     let raw = String::from_utf8_lossy(&raw).into_owned();
     assert!(status.success(), "{raw}");
     // indicatif redraws the bar after `ESC [2K` (erase the line); lines printed above it are
-    // padded to the terminal's width, so the bar is what follows the last elapsed-time field.
-    // A bar wider than 80 columns wraps, and the next erase clears only its last row: the
-    // old lines pile up. Each bar frame must fit.
+    // padded to the terminal's width, so the bar is what follows the last step label before
+    // the run clock. A bar wider than 80 columns wraps, and the next erase clears only its
+    // last row: the old lines pile up. Each bar frame must fit.
     let mut bars = Vec::new();
     for segment in raw.split("\u{1b}[2K") {
         let frame = strip_ansi(segment).replace(['\r', '\n'], "");
-        let Some(at) = frame.rfind("00:00:").or_else(|| frame.rfind("00:01:")) else {
+        let Some(at) = frame.rfind("] at ") else {
             continue;
         };
         let start = frame[..at]
             .rfind("step ")
-            .filter(|s| at - s < 30)
+            .filter(|s| at - s < 50)
             .unwrap_or(at.saturating_sub(1));
         let bar = frame[start..].to_string();
         assert!(
@@ -119,11 +119,17 @@ fn the_run_display_fits_80_columns_names_the_plan_step_and_counts_time() {
         bars.push(bar);
     }
     let text = strip_ansi(&raw);
-    // the bar: the plan's step numbering, elapsed time, an ETA, the phase
+    // the bar: the plan's step numbering, the run clock (no wall-clock elapsed time beside a
+    // run-clock ETA: the run said which clock its times are on), the time left on it, the
+    // phase
     let bar = bars
         .iter()
-        .find(|f| f.starts_with("step ") && f.contains("ETA") && f.contains('['))
+        .find(|f| f.starts_with("step ") && f.contains(" left · ") && f.contains('['))
         .unwrap_or_else(|| panic!("no progress bar frame in:\n{text}"));
+    assert!(
+        text.contains("times are on the run clock"),
+        "the run says which clock: {text}"
+    );
     assert!(bar.contains("/5 "), "{bar}");
     assert!(
         bars.iter().any(|b| b.contains("waiting for at-rate (")),

@@ -295,8 +295,9 @@ pub struct Manifest {
     pub simulated_by: Option<String>,
     /// Whether a session of the run ran the simulated bench in virtual time: the run clock
     /// (`elapsed_s`, every `t_s`, and the `t_utc` derived from it) then counts the time a
-    /// real bench would have taken, while the wall clock (`started_utc` to `ended_utc`) shows
-    /// the seconds the simulation took. Absent (false) in manifests of format 1.
+    /// real bench would have taken, and `ended_utc` is on that clock too (`started_utc` plus
+    /// the run clock, like the stamps: ahead of the wall clock), while `updated_utc` is the
+    /// wall clock of the last write. Absent (false) in manifests of format 1.
     #[serde(default)]
     pub virtual_time: bool,
     /// The gyro under test, as entered (absent: not named).
@@ -316,7 +317,8 @@ pub struct Manifest {
     pub deviations: Vec<Deviation>,
     /// Wall-clock start, RFC 3339 UTC.
     pub started_utc: String,
-    /// Wall-clock end (set when the run stops), RFC 3339 UTC.
+    /// The end (set when the run stops), RFC 3339 UTC: the wall clock, or in virtual time
+    /// the run clock's end on the clock of the `t_utc` stamps (see `virtual_time`).
     pub ended_utc: Option<String>,
     /// Wall-clock time of the last manifest write, RFC 3339 UTC.
     pub updated_utc: String,

@@ -161,7 +161,7 @@ pub use integrity::{
     DATA_FILES, Discrepancy, FileCheck, FileState, RESULT_FILES, Verification, check_files,
     sha256_file, sha256_hex, verify,
 };
-pub use lock::LOCK_FILE;
+pub use lock::{HolderState, LOCK_FILE, LockHolder, host_name, lock_holder};
 pub use manifest::{
     Deviation, Dut, FitSummary, Instruments, Manifest, Resume, Retry, RunContext, RunData, RunMeta,
     Status, Timing, WarmupRecord,

@@ -569,7 +569,9 @@ impl RunDir {
     }
 
     /// Closes the run with `status` (not `running`) and its reason, the run-clock elapsed
-    /// time and the wall-clock end. `complete` is refused while steps remain.
+    /// time and the end (`ended_utc`: the wall clock now; in virtual time, the run clock's
+    /// `elapsed_s` on the clock of the `t_utc` stamps). `complete` is refused while steps
+    /// remain.
     pub fn finish(
         &mut self,
         status: Status,
@@ -611,7 +613,14 @@ impl RunDir {
         self.manifest.status = status;
         self.manifest.reason = reason;
         self.manifest.elapsed_s = round_significant(elapsed_s);
-        self.manifest.ended_utc = Some(now_utc());
+        // one clock for the stamps and the end: in virtual time the run clock runs ahead of
+        // the wall clock, and `t_utc` is the anchor plus the run clock (see "Times"), so the
+        // end is too; otherwise the wall clock now (the same to a few milliseconds)
+        self.manifest.ended_utc = Some(if self.manifest.virtual_time {
+            self.clock.utc(elapsed_s)
+        } else {
+            now_utc()
+        });
         self.write_manifest()
     }
 

@@ -192,15 +192,10 @@ pub(super) fn finish_complete(
         human(ending.results);
     }
     if let Some(t) = &summary.timing {
-        human(format!(
-            "timing: schedule {} (run clock), physical bound {}, ratio {:.4} (acquisition {}); \
-             elapsed {} with connecting and the stop",
-            hms(t.elapsed_s),
-            hms(t.bound_s),
-            t.ratio,
-            t.acquisition.as_deref().unwrap_or("?"),
-            hms(summary.elapsed_s)
-        ));
+        // which clock each figure is on, this session apart from the whole run (see clock)
+        for line in timing_lines(t, summary.elapsed_s) {
+            human(line);
+        }
     }
     for w in &ending.warnings {
         say!("gyrocal: warning: {w}");

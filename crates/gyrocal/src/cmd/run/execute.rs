@@ -195,6 +195,7 @@ where
     B: Bench + 'static,
 {
     let (tx, rx) = mpsc::unbounded_channel();
+    let view = ViewContext::of(&plan, &run);
     let mut seq = Engine::on_bench(plan, bench, run, SequencerOptions::default()).with_events(tx);
     let (stop_tx, stop_rx) = watch::channel(StopRequest::None);
     let stop_handle = seq.stop_handle();
@@ -207,7 +208,7 @@ where
         stop_handle.clone(),
         first_signal.clone(),
     ));
-    let display = tokio::spawn(show_progress(rx));
+    let display = tokio::spawn(show_progress(rx, view));
     // The sequencer catches a panic in its steps itself (and still brings the table to
     // rest); running it as a task of its own is the second line: a panic anywhere else in
     // it comes back here, with the runtime still alive to stop the table.

@@ -158,11 +158,13 @@ macro_rules! out {
 }
 
 // Split by concern (the macros above are visible in each):
+mod clock;
 mod ending;
 mod execute;
 mod progress;
 mod records;
 
+use clock::*;
 use ending::*;
 use execute::*;
 use progress::*;

@@ -149,6 +149,7 @@ pub(super) fn open_run_dir(
     records: Records,
 ) -> anyhow::Result<(PathBuf, RunDir)> {
     let (dir, mut run) = open_run_dir_inner(args, plan, records.dut, records.station)?;
+    SessionClock::note(&run, args);
     for (kind, text) in &records.deviations {
         // a resume on the same instruments finds the same departure: recorded once
         if run
@@ -228,11 +229,18 @@ pub(super) fn open_run_dir_inner(
                 .map_err(|e| crate::run_dir_error(e, Some("--resume")))?;
         }
         let done = run.done_steps().len();
+        let noun = if plan.kind() == gyrocal_files::PlanKind::Drift {
+            "segments"
+        } else {
+            "steps"
+        };
         say!(
-            "resuming {}: {done} of {} steps done, {} to go",
+            "resuming {}: {done} of {} {noun} done, {} to go; the run clock goes on from {} \
+             (this session's times count from there)",
             dir.display(),
             run.schedule().len(),
-            run.remaining_steps().len()
+            run.remaining_steps().len(),
+            hms(run.manifest().elapsed_s)
         );
         attach_log(dir);
         return Ok((dir.clone(), run));
