@@ -236,9 +236,9 @@ pub fn recorded_line(r: &Recorded<'_>, of: usize) -> String {
         Record::Row(_) | Record::Warmup => "step",
     };
     let row = r.row;
-    let spread = row
-        .volts_std
-        .map_or(String::new(), |s| format!(", σ {s:.2e} V"));
+    let spread = row.volts_std.map_or(String::new(), |s| {
+        format!(", σ {} V", gyrocal_fit::display::significant(s, 3))
+    });
     let overloads = if row.overloads > 0 {
         format!(", {} overloads", row.overloads)
     } else {

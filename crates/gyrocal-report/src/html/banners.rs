@@ -142,11 +142,11 @@ pub(super) fn simulated_banner(html: &mut String, input: &Input, run: Option<usi
          they calibrate nothing."
     );
     if m.virtual_time {
+        // `ended_utc` of a virtual-time run is on the run clock (like the t_utc stamps); the
+        // wall clock of its last write is `updated_utc`
         let wall = match (
             gyrocal_files::parse_rfc3339_utc(&m.started_utc),
-            m.ended_utc
-                .as_deref()
-                .and_then(gyrocal_files::parse_rfc3339_utc),
+            gyrocal_files::parse_rfc3339_utc(&m.updated_utc),
         ) {
             (Some(a), Some(b)) => b
                 .duration_since(a)
@@ -156,10 +156,11 @@ pub(super) fn simulated_banner(html: &mut String, input: &Input, run: Option<usi
         };
         let _ = write!(
             text,
-            " It ran in <em>virtual time</em>: the simulation skipped every wait, so the run \
-             clock counts the {:.1} s a real bench would have taken (the elapsed time, every \
-             <code>t_s</code> and the <code>t_utc</code> times derived from it) while the \
-             simulation itself took {} of wall-clock time (started to ended{}).",
+            " It ran in <em>virtual time</em>: every time in it (each <code>t_s</code>, the \
+             <code>t_utc</code> times derived from it, the elapsed {:.1} s and the schedule) is \
+             on the simulated bench's clock, paced or as fast as the computer allows, counting \
+             what a real bench would have taken, not the wall clock; the simulation itself took \
+             {} of wall-clock time (from its start to its last write{}).",
             m.elapsed_s,
             wall.as_deref().unwrap_or("a fraction of that"),
             match m.resumes.len() {

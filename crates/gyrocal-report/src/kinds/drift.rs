@@ -68,20 +68,21 @@ fn ending(
                     "warmup": a.warmup,
                 }),
             );
+            // short lines (the run directory is printed beside them): the files by name
             end.results = format!(
-                "drift record complete: Allan analysis in {}{}",
+                "drift record complete: its Allan analysis is {} in the run directory\n{}",
                 files
                     .iter()
-                    .map(|f| f.display().to_string())
+                    .filter_map(|f| f.file_name().map(|n| n.to_string_lossy().into_owned()))
                     .collect::<Vec<_>>()
                     .join(" and "),
                 match &a.scale_factor {
                     Some(k) => format!(
-                        " (K = {} V/(°/s), {}, converts to °/h)",
+                        "  in °/h with K = {} V/(°/s): {}",
                         k.v_per_dps, k.source
                     ),
                     None => format!(
-                        " (in volts: `gyrocal allan {} --scale-factor K` for °/h)",
+                        "  in volts: `gyrocal allan {} --scale-factor K` for °/h",
                         dir.display()
                     ),
                 }

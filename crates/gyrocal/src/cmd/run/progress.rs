@@ -8,6 +8,7 @@
 //! when it is not). Every line fits 100 columns.
 
 use super::*;
+use gyrocal_fit::display::significant;
 
 /// A drift record prints at most one progress line per this much run clock (a few a minute).
 pub(super) const DRIFT_LINE_EVERY: Duration = Duration::from_secs(20);
@@ -252,7 +253,7 @@ impl Progress {
                     open.2 = done;
                 }
                 let latest = latest.map_or("overload".into(), |v| format!("{v:.6} V"));
-                let spread = std.map_or(String::new(), |s| format!(", σ {s:.1e}"));
+                let spread = std.map_or(String::new(), |s| format!(", σ {}", significant(s, 2)));
                 self.phase = format!("{done}/{total}: {latest} (mean {mean:.6}{spread})");
                 if self.tty {
                     self.redraw();
@@ -269,7 +270,7 @@ impl Progress {
                 }
                 let spread = r
                     .volts_std
-                    .map_or(String::new(), |s| format!("σ {s:.1e} V, "));
+                    .map_or(String::new(), |s| format!("σ {} V, ", significant(s, 2)));
                 let overloads = if r.overloads > 0 {
                     format!(", {} overloads", r.overloads)
                 } else {
@@ -284,10 +285,12 @@ impl Progress {
                 ));
             }
             Event::Warmup(w) => {
-                let tol = w
-                    .tolerance_v
-                    .map_or("not yet estimated".into(), |t| format!("{t:.1e} V"));
-                let change = w.last_change_v.map_or("-".into(), |c| format!("{c:.1e} V"));
+                let tol = w.tolerance_v.map_or("not yet estimated".into(), |t| {
+                    format!("{} V", significant(t, 2))
+                });
+                let change = w
+                    .last_change_v
+                    .map_or("-".into(), |c| format!("{} V", significant(c, 2)));
                 if !w.complete {
                     self.phase = format!(
                         "warm-up: window means change {change} (settled below {tol}), at most {}",
@@ -485,7 +488,8 @@ pub(super) fn drift_line(
     }
 }
 
-/// Two significant digits (`0.31`, `1.4`, `89`, `1.2e-5`).
+/// Two significant digits (`0.31`, `1.4`, `89`, `1.2 × 10⁻⁵`: no e-notation, as every figure
+/// gyrocal prints).
 pub(super) fn sig2(v: f64) -> String {
     let a = v.abs();
     if !v.is_finite() {
@@ -493,7 +497,7 @@ pub(super) fn sig2(v: f64) -> String {
     } else if a == 0.0 {
         "0".into()
     } else if !(1e-3..1e4).contains(&a) {
-        format!("{v:.1e}")
+        significant(v, 2)
     } else {
         let decimals = (1.0 - a.log10().floor()).max(0.0) as usize;
         format!("{v:.decimals$}")
@@ -508,7 +512,8 @@ pub(super) fn signed3(v: f64) -> String {
     } else if a == 0.0 {
         "0".into()
     } else if !(1e-3..1e5).contains(&a) {
-        format!("{v:+.2e}")
+        let s = significant(v, 3);
+        if v > 0.0 { format!("+{s}") } else { s }
     } else {
         let decimals = (2.0 - a.log10().floor()).max(0.0) as usize;
         format!("{v:+.decimals$}")
@@ -621,7 +626,7 @@ mod tests {
         assert_eq!(sig2(0.3123), "0.31");
         assert_eq!(sig2(1.39), "1.4");
         assert_eq!(sig2(88.8), "89");
-        assert_eq!(sig2(2.2e-6), "2.2e-6");
+        assert_eq!(sig2(2.2e-6), "2.2 × 10⁻⁶");
         assert_eq!(signed3(10.64), "+10.6");
         assert_eq!(signed3(-0.5123), "-0.512");
     }
