@@ -260,7 +260,9 @@ fn a_run_of_the_old_format_resumed_appends_in_its_own_format_and_verifies_and_fi
         "{}",
         String::from_utf8_lossy(&o.stderr)
     );
-    let mut refit: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    // `fit --json` prints {"files": [ANALYSIS, ...], ...}: one file's analysis is files[0]
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let mut refit = doc["files"][0].clone();
     refit.as_object_mut().unwrap().remove("source");
     let compared = same_numbers(&json(&dir, "fit.json"), &refit, "fit.json");
     assert!(compared > 100, "only {compared} numbers compared");
