@@ -94,6 +94,31 @@ impl ClockAnchor {
         }
     }
 
+    /// This anchor, or `floor` when `floor` puts this anchor's run clock at a later wall time:
+    /// of two mappings of the run clock to UTC, the later one.
+    pub fn at_least(self, floor: Option<ClockAnchor>) -> ClockAnchor {
+        let Some(f) = floor else {
+            return self;
+        };
+        let d = self.run_clock_s - f.run_clock_s;
+        let floor_wall = if d >= 0.0 {
+            Duration::try_from_secs_f64(d)
+                .ok()
+                .and_then(|d| f.wall.checked_add(d))
+        } else {
+            Duration::try_from_secs_f64(-d)
+                .ok()
+                .and_then(|d| f.wall.checked_sub(d))
+        };
+        match floor_wall {
+            Some(w) if w > self.wall => ClockAnchor {
+                wall: w,
+                run_clock_s: self.run_clock_s,
+            },
+            _ => self,
+        }
+    }
+
     /// `t_s` on the run clock as RFC 3339 UTC with milliseconds. A non-finite `t_s` (never
     /// written: the writers refuse it) gives the anchor's own time.
     pub fn utc(&self, t_s: f64) -> String {

@@ -245,6 +245,30 @@ fn a_resume_tells_this_session_from_the_whole_run() {
     assert!(whole.contains("over 2 sessions"), "{whole}");
     let total = manifest(&dir)["elapsed_s"].as_f64().unwrap();
     assert!(total > first);
+    // the stamps go on from the first session's (virtual, ahead of the wall clock): they never
+    // run backwards at the resume, and they stay within the manifest's start and end
+    let m = manifest(&dir);
+    let utc = |s: &str| gyrocal_files::parse_rfc3339_utc(s).unwrap_or_else(|| panic!("{s}"));
+    let (started, ended) = (
+        utc(m["started_utc"].as_str().unwrap()),
+        utc(m["ended_utc"].as_str().unwrap()),
+    );
+    let mut r = csv::Reader::from_path(dir.join("samples.csv")).unwrap();
+    let col = r
+        .headers()
+        .unwrap()
+        .iter()
+        .position(|c| c == "t_utc")
+        .unwrap();
+    let stamps: Vec<_> = r.records().map(|rec| utc(&rec.unwrap()[col])).collect();
+    assert!(
+        stamps.windows(2).all(|w| w[0] <= w[1]),
+        "t_utc runs backwards across the resume"
+    );
+    assert!(
+        stamps[0] >= started && *stamps.last().unwrap() <= ended,
+        "{m}"
+    );
 }
 
 /// `tail -f run.log` follows the run: each recorded step with its number, the files' index

@@ -109,7 +109,15 @@ impl RunDir {
             );
             manifest.elapsed_s = last_step_end;
         }
-        let clock = ClockAnchor::now(manifest.elapsed_s);
+        // A virtual-time session's stamps ran ahead of the wall clock (`started_utc` plus the
+        // run clock): the clock goes on from there when that is later than now, so the stamps
+        // never run backwards from one session to the next. For a real-time run it is in the
+        // past and changes nothing.
+        let clock_floor = crate::parse_rfc3339_utc(&manifest.started_utc).map(|wall| ClockAnchor {
+            wall,
+            run_clock_s: 0.0,
+        });
+        let clock = ClockAnchor::now(manifest.elapsed_s).at_least(clock_floor);
         let Some(lock) = lock.take() else {
             return Err(RunError::Protocol {
                 path: path.join(LOCK_FILE),
@@ -127,6 +135,7 @@ impl RunDir {
             done,
             current: None,
             clock,
+            clock_floor,
         };
         rd.write_manifest()?;
         Ok(rd)

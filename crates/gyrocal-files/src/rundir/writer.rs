@@ -74,6 +74,11 @@ pub struct RunDir {
     pub(super) current: Option<Current>,
     /// Converts the run clock to UTC for the `t_utc` columns.
     pub(super) clock: ClockAnchor,
+    /// A resumed virtual-time run's earlier stamps: `started_utc` plus the run clock, ahead of
+    /// the wall clock. The clock is never anchored earlier than this, so the stamps of the
+    /// sessions after it go on from there instead of falling back to the wall clock (`None`
+    /// for a new run, and harmless for a real-time one, whose earlier stamps are all past).
+    pub(super) clock_floor: Option<ClockAnchor>,
 }
 
 /// A finished run (complete, failed or aborted) leaves no `.lock` behind: the file is removed
@@ -261,6 +266,7 @@ impl RunDir {
             done: BTreeSet::new(),
             current: None,
             clock: ClockAnchor::now(0.0),
+            clock_floor: None,
         };
         sync_dir(path)?;
         rd.write_manifest()?;
@@ -286,7 +292,7 @@ impl RunDir {
     /// negative value is ignored.
     pub fn anchor_clock(&mut self, run_clock_s: f64) {
         if run_clock_s.is_finite() && run_clock_s >= 0.0 {
-            self.clock = ClockAnchor::now(run_clock_s);
+            self.clock = ClockAnchor::now(run_clock_s).at_least(self.clock_floor);
         }
     }
 
