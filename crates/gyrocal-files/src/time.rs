@@ -97,20 +97,7 @@ impl ClockAnchor {
     /// This anchor, or `floor` when `floor` puts this anchor's run clock at a later wall time:
     /// of two mappings of the run clock to UTC, the later one.
     pub fn at_least(self, floor: Option<ClockAnchor>) -> ClockAnchor {
-        let Some(f) = floor else {
-            return self;
-        };
-        let d = self.run_clock_s - f.run_clock_s;
-        let floor_wall = if d >= 0.0 {
-            Duration::try_from_secs_f64(d)
-                .ok()
-                .and_then(|d| f.wall.checked_add(d))
-        } else {
-            Duration::try_from_secs_f64(-d)
-                .ok()
-                .and_then(|d| f.wall.checked_sub(d))
-        };
-        match floor_wall {
+        match floor.and_then(|f| f.wall_at(self.run_clock_s)) {
             Some(w) if w > self.wall => ClockAnchor {
                 wall: w,
                 run_clock_s: self.run_clock_s,
@@ -119,11 +106,11 @@ impl ClockAnchor {
         }
     }
 
-    /// `t_s` on the run clock as RFC 3339 UTC with milliseconds. A non-finite `t_s` (never
-    /// written: the writers refuse it) gives the anchor's own time.
-    pub fn utc(&self, t_s: f64) -> String {
+    /// The wall-clock time of `t_s` on the run clock (`None` when it does not fit a
+    /// `SystemTime`, or `t_s` is not finite).
+    fn wall_at(&self, t_s: f64) -> Option<SystemTime> {
         let d = t_s - self.run_clock_s;
-        let wall = if d >= 0.0 {
+        if d >= 0.0 {
             Duration::try_from_secs_f64(d)
                 .ok()
                 .and_then(|d| self.wall.checked_add(d))
@@ -131,8 +118,13 @@ impl ClockAnchor {
             Duration::try_from_secs_f64(-d)
                 .ok()
                 .and_then(|d| self.wall.checked_sub(d))
-        };
-        rfc3339_utc(wall.unwrap_or(self.wall))
+        }
+    }
+
+    /// `t_s` on the run clock as RFC 3339 UTC with milliseconds. A non-finite `t_s` (never
+    /// written: the writers refuse it) gives the anchor's own time.
+    pub fn utc(&self, t_s: f64) -> String {
+        rfc3339_utc(self.wall_at(t_s).unwrap_or(self.wall))
     }
 }
 

@@ -11,10 +11,11 @@ mod common;
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Output, Stdio};
+use std::process::{Output, Stdio};
 use std::sync::mpsc;
 use std::time::Duration;
 
+use common::sim::Sim;
 use serde_json::Value;
 
 /// A small plan (five steps, fast settings) for `dialect`; its ports are placeholders that the
@@ -62,69 +63,16 @@ rate_noise_dps = 0.0002
     path
 }
 
-/// A running `gyrocal sim` (killed on drop if still running).
-struct Sim {
-    child: Child,
-    lines: mpsc::Receiver<String>,
-    info: Value,
-}
-
-impl Sim {
-    /// `gyrocal sim --config CONFIG` (a plan, or a bench TOML), sped up 30 times.
-    fn start(config: &Path) -> Sim {
-        let mut child = common::gyrocal()
-            .arg("sim")
-            .arg("--config")
-            .arg(config)
-            .args(["--time-scale", "30", "--seed", "11"])
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .unwrap();
-        let stdout = child.stdout.take().unwrap();
-        let (tx, lines) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stdout).lines() {
-                let Ok(line) = line else { break };
-                if tx.send(line).is_err() {
-                    break;
-                }
-            }
-        });
-        let first = lines
-            .recv_timeout(Duration::from_secs(10))
-            .expect("the simulator's JSON line with the device paths");
-        let info: Value = serde_json::from_str(&first).unwrap();
-        Sim { child, lines, info }
-    }
-
-    fn dmm(&self) -> &str {
-        self.info["dmm"].as_str().unwrap()
-    }
-
-    fn table(&self) -> &str {
-        self.info["table"].as_str().unwrap()
-    }
-
-    /// SIGINT; the simulator's final-state line.
-    fn finish(mut self) -> Value {
-        let pid = nix::unistd::Pid::from_raw(i32::try_from(self.child.id()).unwrap());
-        nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGINT).unwrap();
-        let last = self
-            .lines
-            .recv_timeout(Duration::from_secs(5))
-            .expect("the simulator's final-state line");
-        let _ = self.child.wait();
-        serde_json::from_str(&last).unwrap()
-    }
-}
-
-impl Drop for Sim {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
+/// `gyrocal sim --config CONFIG` (a plan, or a bench TOML), sped up 30 times.
+fn start_sim(config: &Path) -> Sim {
+    Sim::start(&[
+        &"--config",
+        &config,
+        &"--time-scale",
+        &"30",
+        &"--seed",
+        &"11",
+    ])
 }
 
 /// `gyrocal check PLAN --probe --dmm-port DMM --table-port TABLE` plus `extra`.
@@ -172,7 +120,7 @@ fn assert_said_swapped(stderr: &str, sim: &Sim, table_identity: &str) {
 fn check_probe_says_swapped_ports_probes_both_and_fails() {
     let tmp = tempfile::tempdir().unwrap();
     let plan = write_plan(tmp.path(), "acl");
-    let sim = Sim::start(&plan);
+    let sim = start_sim(&plan);
 
     // the ports the right way round still pass
     let out = check_probe(&plan, sim.dmm(), sim.table(), &[]);
@@ -217,7 +165,7 @@ fn check_probe_says_swapped_ports_with_an_aerosmith_table() {
     // an Ideal Aerosmith controller has no *IDN?: its prompt identifies it
     let tmp = tempfile::tempdir().unwrap();
     let plan = write_plan(tmp.path(), "aerosmith");
-    let sim = Sim::start(&plan);
+    let sim = start_sim(&plan);
     let out = check_probe(&plan, sim.dmm(), sim.table(), &[]);
     assert!(out.status.success(), "{}", text(&out.stderr));
 
@@ -233,7 +181,7 @@ fn check_probe_says_swapped_ports_with_an_aerosmith_table() {
 fn a_table_on_the_meters_port_is_said_and_the_silent_table_port_gets_its_advice() {
     let tmp = tempfile::tempdir().unwrap();
     let plan = write_plan(tmp.path(), "acl");
-    let sim = Sim::start(&plan);
+    let sim = start_sim(&plan);
     // a table port where nothing answers (a pseudo-terminal nobody serves)
     let pty = nix::pty::openpty(None, None).unwrap();
     let silent = nix::unistd::ttyname(&pty.slave).unwrap();
@@ -261,7 +209,7 @@ fn a_table_on_the_meters_port_is_said_and_the_silent_table_port_gets_its_advice(
 fn run_with_swapped_ports_says_so_creates_nothing_and_moves_nothing() {
     let tmp = tempfile::tempdir().unwrap();
     let plan = write_plan(tmp.path(), "acl");
-    let sim = Sim::start(&plan);
+    let sim = start_sim(&plan);
     let dir = tmp.path().join("run");
     let out = common::gyrocal()
         .arg("run")
@@ -301,7 +249,7 @@ fn run_with_station(tmp: &Path, station: &str, sim: &Sim, plan: &Path) -> (Outpu
 fn a_station_with_another_meter_serial_warns_and_records_a_deviation_the_certificate_shows() {
     let tmp = tempfile::tempdir().unwrap();
     let plan = write_plan(tmp.path(), "acl");
-    let sim = Sim::start(&plan);
+    let sim = start_sim(&plan);
     // the station's meter is 3146A12345; the simulated meter reports SIM0001 (its table too)
     let station = common::stations::bench_2("").replace("AC-1120-77", "SIM0001");
     let (out, dir) = run_with_station(tmp.path(), &station, &sim, &plan);
@@ -348,7 +296,7 @@ fn a_station_with_another_meter_serial_warns_and_records_a_deviation_the_certifi
 fn a_station_matching_the_instruments_gives_no_warning_and_no_deviation() {
     let tmp = tempfile::tempdir().unwrap();
     let plan = write_plan(tmp.path(), "acl");
-    let sim = Sim::start(&plan);
+    let sim = start_sim(&plan);
     let station = common::stations::bench_2("")
         .replace("3146A12345", "SIM0001")
         .replace("AC-1120-77", "sim0001");
@@ -390,7 +338,7 @@ fn check_probe_compares_serials_and_a_meter_reporting_none_is_not_compared() {
         "[dmm]\nidentity = \"HEWLETT-PACKARD,34401A,0,11-5-2\"\n[table]\nidentity = \"ACUTRONIC,ACUTROL3000,AC-1120-99,1.0\"\n",
     )
     .unwrap();
-    let sim = Sim::start(&bench);
+    let sim = start_sim(&bench);
     let station = tmp.path().join("station.toml");
     std::fs::write(&station, common::stations::bench_2("")).unwrap();
     let out = check_probe(
@@ -431,7 +379,7 @@ fn check_probe_compares_serials_and_a_meter_reporting_none_is_not_compared() {
 fn a_resume_on_the_same_mismatching_bench_records_the_deviation_once() {
     let tmp = tempfile::tempdir().unwrap();
     let plan = write_plan(tmp.path(), "acl");
-    let sim = Sim::start(&plan);
+    let sim = start_sim(&plan);
     let station = tmp.path().join("station.toml");
     std::fs::write(&station, common::stations::bench_2("")).unwrap();
     let dir = tmp.path().join("run");

@@ -9,9 +9,10 @@
 mod common;
 
 use std::path::{Path, PathBuf};
-use std::process::{Child, Stdio};
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
+use common::sim::Sim;
 use common::{RunOutput, config, gyrocal, manifest, run_json, steps_done};
 
 /// `H:MM:SS` or `M:SS` to seconds.
@@ -301,33 +302,8 @@ fn run_log_records_each_step_and_segment() {
     }
 }
 
-/// A running `gyrocal sim` (killed when dropped).
-struct Sim(Child, serde_json::Value);
-
-impl Drop for Sim {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
 fn start_sim(plan: &Path, time_scale: &str) -> Sim {
-    use std::io::BufRead as _;
-    let mut child = gyrocal()
-        .args(["sim", "--config"])
-        .arg(plan)
-        .args(["--time-scale", time_scale])
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut first = String::new();
-    std::io::BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut first)
-        .unwrap();
-    let info = serde_json::from_str(&first).unwrap_or_else(|e| panic!("{e}: {first}"));
-    Sim(child, info)
+    Sim::start(&[&"--config", &plan, &"--time-scale", &time_scale])
 }
 
 /// Against `gyrocal sim --time-scale 20` the schedule beats the instruments' physical bound:
@@ -340,8 +316,8 @@ fn a_time_scaled_simulator_shows_no_ratio_below_one() {
     let o = gyrocal()
         .arg("run")
         .arg(config("quick.toml"))
-        .args(["--dmm-port", sim.1["dmm_port"].as_str().unwrap()])
-        .args(["--table-port", sim.1["table"].as_str().unwrap()])
+        .args(["--dmm-port", sim.info()["dmm_port"].as_str().unwrap()])
+        .args(["--table-port", sim.info()["table"].as_str().unwrap()])
         .args(["--no-report", "--json", "--out"])
         .arg(&out)
         .output()

@@ -16,6 +16,8 @@ pub mod plans;
 #[path = "../../../../tests/support/stations.rs"]
 pub mod stations;
 
+pub mod sim;
+
 /// True for the environment variables through which gyrocal finds a user's own files: its
 /// catalog and station file (`GYROCAL_*`) and the directories of their defaults (`HOME`,
 /// `XDG_*`), and the caller's log filter (`RUST_LOG`).

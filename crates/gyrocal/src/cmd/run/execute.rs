@@ -98,17 +98,14 @@ pub(super) async fn execute(
         if let Some(station) = &records.station {
             // the station's records must be these instruments': a mismatch is recorded
             for c in crate::cmd::probe::serial_checks(station, &found) {
+                let words = c.words(&station.id);
                 if c.is_mismatch() {
-                    say!(
-                        "gyrocal: warning: {} (recorded as a deviation)",
-                        c.words(&station.id)
-                    );
-                    records.deviations.push((
-                        gyrocal_files::station::SERIAL_MISMATCH.to_string(),
-                        c.words(&station.id),
-                    ));
+                    say!("gyrocal: warning: {words} (recorded as a deviation)");
+                    records
+                        .deviations
+                        .push((gyrocal_files::station::SERIAL_MISMATCH.to_string(), words));
                 } else {
-                    say!("station: {}", c.words(&station.id));
+                    say!("station: {words}");
                 }
             }
         }
