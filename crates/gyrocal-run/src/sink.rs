@@ -229,7 +229,8 @@ impl Sink for RunDir {
 }
 
 /// The log's line for a recorded step: the plan's numbering (`step 4/19`, `segment 12/167`),
-/// the files' 0-based `step`, and its key figures.
+/// which is steps.csv's `step_no` (both count from 1), the file it went to, and its key
+/// figures.
 pub fn recorded_line(r: &Recorded<'_>, of: usize) -> String {
     let what = match r.record {
         Record::Segment(_) => "segment",
@@ -245,9 +246,8 @@ pub fn recorded_line(r: &Recorded<'_>, of: usize) -> String {
         String::new()
     };
     format!(
-        "{what} {}/{of} recorded (steps.csv step {}): {:+} °/s, mean {:.6} V{spread}, n {}{overloads}, run clock {:.1} s",
+        "{what} {}/{of} recorded in steps.csv: {:+} °/s, mean {:.6} V{spread}, n {}{overloads}, run clock {:.1} s",
         row.step + 1,
-        row.step,
         row.rate_dps,
         row.volts,
         row.n,

@@ -272,8 +272,8 @@ fn a_resume_tells_this_session_from_the_whole_run() {
     );
 }
 
-/// `tail -f run.log` follows the run: each recorded step with its number, the files' index
-/// and its figures; a drift record's say "segment".
+/// `tail -f run.log` follows the run: each recorded step with its number (steps.csv's
+/// `step_no`, the same count) and its figures; a drift record's say "segment".
 #[test]
 fn run_log_records_each_step_and_segment() {
     let tmp = tempfile::tempdir().unwrap();
@@ -288,7 +288,7 @@ fn run_log_records_each_step_and_segment() {
             .find(|l| l.contains(&format!("step {n}/5 recorded")))
             .unwrap_or_else(|| panic!("step {n}/5 in:\n{log}"));
         assert!(
-            line.contains(&format!("(steps.csv step {})", n - 1)) && line.contains(" V"),
+            line.contains(&format!("step {n}/5 recorded in steps.csv:")) && line.contains(" V"),
             "{line}"
         );
     }
