@@ -68,6 +68,19 @@ fn decimals(token: &str) -> Option<usize> {
     (!int.is_empty() && digits(int) && digits(frac)).then_some(frac.len())
 }
 
+/// A whole token written in e-notation (`3.6e-1`, `-2E5`), not one that merely holds `…1e4`
+/// (a run id such as `3bbac4b781e4`).
+fn scientific(token: &str) -> bool {
+    let t = token.trim_start_matches(['+', '-']);
+    let Some((mantissa, exponent)) = t.split_once(['e', 'E']) else {
+        return false;
+    };
+    let exponent = exponent.trim_start_matches(['+', '-']);
+    decimals(mantissa).is_some()
+        && !exponent.is_empty()
+        && exponent.chars().all(|c| c.is_ascii_digit())
+}
+
 /// Every `A ± B` of `out` whose A is a number is in the one form: B a plain number of at
 /// most two significant digits, A to one decimal beyond B (or both whole), no exponent
 /// (`e-5`); a power of ten only as `(A ± B) × 10ⁿ`. Returns how many were checked.
@@ -76,9 +89,9 @@ fn assert_one_form(what: &str, out: &str) -> usize {
     for line in out.lines() {
         if line.contains('±') {
             assert!(
-                !line.as_bytes().windows(3).any(|w| w[0].is_ascii_digit()
-                    && (w[1] == b'e' || w[1] == b'E')
-                    && (w[2] == b'-' || w[2] == b'+' || w[2].is_ascii_digit())),
+                !line
+                    .split(|c: char| !(c.is_ascii_alphanumeric() || "._+-".contains(c)))
+                    .any(scientific),
                 "{what}: scientific notation in a value ± U line: {line:?}"
             );
         }
