@@ -158,15 +158,15 @@ pub trait Chamber: Send {
     /// F4's temperature unit and decimal places: a controller in °F is refused).
     fn connect(&mut self) -> impl Future<Output = Result<ChamberIdentity, ChamberError>> + Send;
 
-    /// Sets the setpoint, °C, and puts the controller in control (constant mode). `ramp`:
-    /// the ramp rate in °C/min when the plan asks for one and the dialect can set it (a
-    /// dialect that cannot says so in an error of kind [`ChamberErrorKind::Unsupported`]
-    /// before anything is sent). A setpoint outside the driver's limits is refused before
-    /// anything is sent ([`ChamberErrorKind::Limit`]).
+    /// Sets the setpoint, °C, and puts the controller in control (constant mode; a running
+    /// profile of the controller's own is terminated first). A setpoint outside the driver's
+    /// limits is refused before anything is sent ([`ChamberErrorKind::Limit`]). There is no
+    /// ramp here on purpose: a plan's ramp rate is the run's (the setpoint stepped towards the
+    /// target at each poll), written once for every dialect, since the controllers' own ramps
+    /// are profile features that differ from one to the next.
     fn set_setpoint(
         &mut self,
         setpoint_c: f64,
-        ramp_c_per_min: Option<f64>,
     ) -> impl Future<Output = Result<(), ChamberError>> + Send;
 
     /// Reads the temperatures, setpoint, mode and alarms. Idempotent queries: a garbled or

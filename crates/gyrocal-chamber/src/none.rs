@@ -35,7 +35,7 @@ impl Chamber for NoChamber {
         Err(absent("connect"))
     }
 
-    async fn set_setpoint(&mut self, _c: f64, _ramp: Option<f64>) -> Result<(), ChamberError> {
+    async fn set_setpoint(&mut self, _c: f64) -> Result<(), ChamberError> {
         Err(absent("set a setpoint"))
     }
 
