@@ -15,10 +15,15 @@
 //! controller set to °F rather than guess).
 
 mod error;
+pub mod espec;
+pub mod modbus;
 mod none;
+pub mod watlow;
 
 pub use error::{ChamberError, ChamberErrorKind};
+pub use espec::{Espec, EspecConfig};
 pub use none::{NO_CHAMBER, NoChamber};
+pub use watlow::{AlarmRegister, ProductInput, WatlowConfig, WatlowF4};
 
 use std::fmt;
 use std::future::Future;
