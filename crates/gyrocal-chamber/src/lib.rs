@@ -13,13 +13,30 @@
 //!
 //! Temperatures are °C everywhere in this crate: a dialect converts at the wire (and refuses a
 //! controller set to °F rather than guess).
+//!
+//! The dialects, and how a bench builds one from a plan's `[chamber]` section:
+//! - [`WatlowF4`] ([`watlow`]): Modbus RTU on a serial port ([`WatlowF4::open_rtu`]: path,
+//!   baud, 8N1), Modbus TCP ([`WatlowF4::connect_tcp`]: `host:port`), or RTU over any byte
+//!   stream ([`WatlowF4::over_stream`]: a simulator's in-memory pipe or pseudo-terminal), with a
+//!   [`WatlowConfig`] (slave, product input, limits, timeouts, the optional alarm registers and
+//!   "chamber on" output). The Modbus policy (deadlines, read retries, exception / garbled /
+//!   silent) is written once in [`modbus`].
+//! - [`Espec`] ([`espec`], experimental): text lines over a gyrocal-link [`gyrocal_link::Link`]
+//!   ([`Espec::open`]: a port string) or any [`gyrocal_link::Transport`]
+//!   ([`Espec::over_transport`]), with an [`EspecConfig`].
+//! - [`AnyChamber`]: the one a plan names, chosen at run time, so the engine is not
+//!   instantiated once per chamber dialect.
+//!
+//! What is confirmed and what is an option is in the crate's README and each dialect's docs.
 
+mod any;
 mod error;
 pub mod espec;
 pub mod modbus;
 mod none;
 pub mod watlow;
 
+pub use any::AnyChamber;
 pub use error::{ChamberError, ChamberErrorKind};
 pub use espec::{Espec, EspecConfig};
 pub use none::{NO_CHAMBER, NoChamber};

@@ -3,12 +3,12 @@
 //! written once here so the dialect stays about registers:
 //!
 //! - every transaction has a deadline (the reply timeout); a reply that never came is a
-//!   [`ChamberErrorKind::Timeout`], one that came but did not decode (a CRC error, a cut or
-//!   malformed frame, a reply to another request) is [`ChamberErrorKind::Garbled`];
+//!   [`crate::ChamberErrorKind::Timeout`], one that came but did not decode (a CRC error, a cut or
+//!   malformed frame, a reply to another request) is [`crate::ChamberErrorKind::Garbled`];
 //! - reads (idempotent) are asked again, `1 + retries` attempts in all, each noted for
 //!   [`crate::Chamber::take_retries`]; writes are never sent twice (a write whose reply was
 //!   lost may have been done: the caller reads back instead);
-//! - a Modbus exception reply is a definite answer ([`ChamberErrorKind::Instrument`], naming the
+//! - a Modbus exception reply is a definite answer ([`crate::ChamberErrorKind::Instrument`], naming the
 //!   exception and the register), never asked again;
 //! - stale input (a late reply to an attempt that timed out) is thrown away before each request,
 //!   and after any failure the `tokio-modbus` client is built afresh over the same stream, so
