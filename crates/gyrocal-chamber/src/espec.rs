@@ -25,8 +25,8 @@
 //! temperatures (the last two fields of `TEMP?`): a setpoint beyond them would raise its alarm.
 //!
 //! Queries (`TYPE?`, `TEMP?`, `MODE?`, `ALARM?`) are asked again after a lost or unparsable
-//! reply (`1 + retries` attempts, each within the reply timeout, stale input thrown away
-//! first); commands are sent once.
+//! reply (`1 + retries` attempts, each within the reply timeout); commands are sent once.
+//! Stale input (a late reply) is thrown away before every line sent.
 
 use std::time::Duration;
 
@@ -271,9 +271,10 @@ impl<T: Transport> Espec<T> {
                 );
                 tracing::warn!("{note}");
                 self.retry_notes.push(note);
-                if let Err(e) = self.link.discard_input().await {
-                    return Err(self.link_error(line, &e));
-                }
+            }
+            // A late reply to an earlier query is never read as this one's.
+            if let Err(e) = self.link.discard_input().await {
+                return Err(self.link_error(line, &e));
             }
             match self.exchange(line).await? {
                 Ok(reply) => match parse(&reply) {

@@ -69,12 +69,23 @@ fn exception_reply(function: u8, code: u8) -> Vec<u8> {
 struct Exchange {
     request: Vec<u8>,
     reply: Option<Vec<u8>>,
+    /// How long the slave takes before it replies.
+    delay: Duration,
 }
 
 fn ask(request: Vec<u8>, reply: Vec<u8>) -> Exchange {
     Exchange {
         request,
         reply: Some(reply),
+        delay: Duration::ZERO,
+    }
+}
+
+fn late(request: Vec<u8>, reply: Vec<u8>, delay: Duration) -> Exchange {
+    Exchange {
+        request,
+        reply: Some(reply),
+        delay,
     }
 }
 
@@ -82,6 +93,7 @@ fn silent(request: Vec<u8>) -> Exchange {
     Exchange {
         request,
         reply: None,
+        delay: Duration::ZERO,
     }
 }
 
@@ -100,6 +112,7 @@ fn peer(mut io: DuplexStream, script: Vec<Exchange>) -> JoinHandle<()> {
                 ex.request
             );
             if let Some(reply) = ex.reply {
+                tokio::time::sleep(ex.delay).await;
                 io.write_all(&reply).await.unwrap();
             }
         }
@@ -132,6 +145,7 @@ fn script(parts: &[Vec<Exchange>]) -> Vec<Exchange> {
         out.extend(p.iter().map(|e| Exchange {
             request: e.request.clone(),
             reply: e.reply.clone(),
+            delay: e.delay,
         }));
     }
     out
@@ -335,6 +349,38 @@ async fn a_silent_slave_times_out_exactly_after_its_retries() {
     assert_eq!(e.kind(), ChamberErrorKind::Timeout);
     assert!(e.to_string().contains("the chamber is silent"), "{e}");
     assert!(e.to_string().contains("within 1000 ms"), "{e}");
+    finish(f4, peer).await;
+}
+
+/// A slow reply (after the timeout) is not taken for a later request's: the late bytes are
+/// thrown away before the next request is sent.
+#[tokio::test(start_paused = true)]
+async fn a_late_reply_is_never_read_as_another_requests() {
+    let s = vec![
+        silent(read_request(901, 1)),
+        silent(read_request(901, 1)),
+        late(
+            read_request(901, 1),
+            read_reply(&[1]),
+            Duration::from_millis(1500),
+        ),
+        ask(read_request(901, 1), read_reply(&[1])),
+        ask(read_request(606, 1), read_reply(&[2])),
+        ask(read_request(602, 2), read_reply(&[-7000, 18000])),
+        ask(read_request(616, 1), read_reply(&[2])),
+    ];
+    let (mut f4, peer) = chamber(WatlowConfig::default(), s);
+    let e = f4.connect().await.unwrap_err();
+    assert_eq!(e.kind(), ChamberErrorKind::Timeout);
+    // The third attempt's reply arrives while the run does something else.
+    tokio::time::sleep(Duration::from_secs(1)).await;
+    let id = f4.connect().await.unwrap();
+    assert!(
+        id.detail.contains("input 1 (air) 2 decimals"),
+        "{}",
+        id.detail
+    );
+    assert!(id.detail.contains("range -70 .. 180 °C"), "{}", id.detail);
     finish(f4, peer).await;
 }
 
