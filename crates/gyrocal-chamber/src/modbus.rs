@@ -347,7 +347,10 @@ impl ModbusLink {
         let request = if count == 1 {
             format!("read register {addr}")
         } else {
-            format!("read registers {addr}..={}", addr.saturating_add(count - 1))
+            format!(
+                "read registers {addr}..={}",
+                addr.saturating_add(count.saturating_sub(1))
+            )
         };
         let attempts = self.retries.saturating_add(1);
         let mut last = String::new();

@@ -192,7 +192,8 @@ impl WatlowF4 {
                     return Err(ChamberError::Timeout {
                         device: description,
                         request: "connecting".into(),
-                        timeout_ms: 5000,
+                        timeout_ms: u64::try_from(TCP_CONNECT_TIMEOUT.as_millis())
+                            .unwrap_or(u64::MAX),
                     });
                 }
             };
