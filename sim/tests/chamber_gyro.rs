@@ -132,3 +132,42 @@ async fn without_a_chamber_the_gyro_is_at_room_temperature() {
     let ppm = (k / truth.k1_pos - 1.0) * 1e6;
     assert!((ppm + 5000.0).abs() < 25.0, "{ppm}");
 }
+
+/// The bias at rest, °/h (with the Earth rate, the same at every temperature), after soaking
+/// the chamber at `setpoint_c` for six hours.
+async fn soaked_bias_dph(bench: &mut Bench, setpoint_c: f64, k: f64) -> f64 {
+    let chamber = bench.handle.chamber.clone().unwrap();
+    chamber.set_setpoint(setpoint_c);
+    tokio::time::sleep(Duration::from_secs(6 * 3600)).await;
+    assert!((chamber.inside_c(Instant::now()) - setpoint_c).abs() < 1e-3);
+    mean_volts(&mut bench.dmm, 40).await / k * 3600.0
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_temperature_revisited_from_the_other_side_shows_the_hysteresis() {
+    let config = BenchConfig {
+        seed: 8,
+        gyro: GyroConfig {
+            noise_std: 0.0,
+            bias_random_walk: 0.0,
+            bias_tempco_dph_per_c: 1.0,
+            hysteresis_dph: 5.0,
+            ..GyroConfig::default()
+        },
+        chamber: Some(ChamberSimConfig::default()),
+        ..BenchConfig::default()
+    };
+    let mut bench = Bench::spawn(config);
+    let k = bench.handle.truth.k1_pos;
+    // the series 25 → 60 → 25 → −20 → 25: the middle 25 is reached from above, the last
+    // from below; the meter reads while the chamber holds each temperature
+    soaked_bias_dph(&mut bench, 25.0, k).await;
+    soaked_bias_dph(&mut bench, 60.0, k).await;
+    let from_above = soaked_bias_dph(&mut bench, 25.0, k).await;
+    soaked_bias_dph(&mut bench, -20.0, k).await;
+    let from_below = soaked_bias_dph(&mut bench, 25.0, k).await;
+    assert!(
+        (from_below - from_above - 5.0).abs() < 0.3,
+        "from below {from_below} °/h, from above {from_above} °/h"
+    );
+}

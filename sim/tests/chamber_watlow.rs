@@ -455,3 +455,61 @@ async fn a_profile_running_is_terminated_before_the_setpoint() {
         gyrocal_chamber::ChamberMode::Constant
     );
 }
+
+#[tokio::test(start_paused = true)]
+async fn the_driver_over_modbus_tcp_and_a_corrupted_adu() {
+    let (host, dev) = tokio::io::duplex(4096);
+    let h = ChamberHandle::new(ChamberSimConfig::default(), 1.0, 9);
+    h.serve_tcp(dev);
+    let mut f4 = WatlowF4::over_tcp_stream(host, "sim", with_alarms()).unwrap();
+    f4.connect().await.unwrap();
+    f4.set_setpoint(-30.0).await.unwrap();
+    wait_min(10.0).await;
+    let r = f4.read().await.unwrap();
+    assert!((r.air_c - 3.0).abs() < 0.4, "2 °C/min down from 23: {r:?}");
+    h.latch_alarm(ChamberAlarm::Door);
+    assert_eq!(f4.read().await.unwrap().alarms, ["door open"]);
+    // a corrupted ADU (protocol identifier 1) is garbled: asked again, noted
+    let n = h.requests_seen();
+    h.arm(ChamberFault {
+        kind: ChamberFaultKind::Corrupt,
+        trigger: ChamberTrigger::Request(n + 1),
+        count: 1,
+    });
+    f4.read().await.unwrap();
+    assert_eq!(f4.take_retries().len(), 1);
+}
+
+#[tokio::test(start_paused = true)]
+async fn slow_replies_are_late_then_too_late() {
+    let (mut f4, h) = f4(ChamberSimConfig::default(), WatlowConfig::default()).await;
+    // half a second late: within the driver's 1 s, each of the 3 transactions of a read
+    h.arm(ChamberFault {
+        kind: ChamberFaultKind::Slow(0.5),
+        trigger: ChamberTrigger::Request(h.requests_seen() + 1),
+        count: 3,
+    });
+    let t = Instant::now();
+    f4.read().await.unwrap();
+    let took = t.elapsed().as_secs_f64();
+    assert!((1.5..1.7).contains(&took), "{took}");
+    assert!(f4.take_retries().is_empty());
+    // two seconds late, every reply: the read fails. Late replies come while the driver
+    // waits for a later request's, so it sees a timeout or (RTU has no transaction id: the
+    // driver's README) a reply of the wrong length, garbled; never a reading
+    h.arm(ChamberFault {
+        kind: ChamberFaultKind::Slow(2.0),
+        trigger: ChamberTrigger::Request(h.requests_seen() + 1),
+        count: 0,
+    });
+    let err = f4.read().await.unwrap_err();
+    assert!(
+        matches!(
+            err.kind(),
+            ChamberErrorKind::Timeout | ChamberErrorKind::Garbled
+        ),
+        "{err}"
+    );
+    let report = f4.go_safe(SafeState::default()).await;
+    assert!(!report.confirmed, "{report:?}");
+}
