@@ -14,12 +14,17 @@
 //! latitude_deg = 34.3
 //! [dmm]
 //! line_hz = 50
+//! [chamber]            # optional: a thermal chamber around the gyro
+//! model = "watlow_f4"  # or "espec"
+//! [chamber.thermal]
+//! case_tau_s = 1200
 //! ```
 
 use gyrocal_link::{StreamTransport, memory_pair};
 use serde::{Deserialize, Serialize};
 use tokio::io::{AsyncRead, AsyncWrite, DuplexStream};
 
+use crate::chamber::{ChamberHandle, ChamberSimConfig};
 use crate::dmm::{DmmConfig, DmmHandle, SimDmm};
 use crate::gyro::{GyroConfig, GyroSignal, GyroTruth};
 use crate::table::{SimTable, TableConfig, TableHandle};
@@ -50,6 +55,9 @@ pub struct BenchConfig {
     pub dmm_model: DmmModel,
     /// The Truevolt's own settings (its model is `dmm_model`'s).
     pub truevolt: crate::truevolt::TruevoltConfig,
+    /// A thermal chamber around the gyro (its controller, physics and faults). Default none:
+    /// the gyro is at the room's temperature (`gyro.room_c`).
+    pub chamber: Option<ChamberSimConfig>,
 }
 
 /// Which simulated multimeter the bench has.
@@ -128,6 +136,7 @@ impl Default for BenchConfig {
                 serial: "SIM0001".into(),
                 ..crate::truevolt::TruevoltConfig::default()
             },
+            chamber: None,
         }
     }
 }
@@ -170,6 +179,9 @@ pub struct BenchHandle {
     pub truth: GyroTruth,
     /// A Truevolt's LAN port (more connections, reconnects); `None` for a 34401A.
     pub lan: Option<crate::truevolt::LanPort>,
+    /// The chamber (its truth, faults, and more links: [`ChamberHandle::serve`],
+    /// [`ChamberHandle::serve_tcp`]); `None` without one.
+    pub chamber: Option<ChamberHandle>,
 }
 
 /// A running bench: the drivers' transports and the simulators' handle.
@@ -178,6 +190,8 @@ pub struct Bench {
     pub dmm: StreamTransport<DuplexStream>,
     /// The table's link (give it to the table driver).
     pub table: StreamTransport<DuplexStream>,
+    /// The chamber's link, until [`Bench::chamber_link`] takes it.
+    chamber: Option<DuplexStream>,
     /// Truth and control of the simulators.
     pub handle: BenchHandle,
 }
@@ -201,17 +215,39 @@ impl Bench {
         };
         let (dmm_link, dmm_dev) = memory_pair(name);
         let handle = Bench::spawn_on(config, dmm_dev, table_dev);
+        let chamber = handle.chamber.as_ref().map(|c| {
+            let (host, device) = tokio::io::duplex(4096);
+            c.serve(device);
+            host
+        });
         Bench {
             dmm: dmm_link,
             table: table_link,
             handle,
+            chamber,
         }
+    }
+
+    /// The in-memory byte stream of the simulated chamber's controller (taken once; `None`
+    /// without a chamber or when taken already): Modbus RTU of a Watlow F4 for
+    /// `gyrocal_chamber::WatlowF4::over_stream`, or the Espec's text lines (wrap it in
+    /// [`Bench::chamber_transport`] for `gyrocal_chamber::Espec::over_transport`).
+    pub fn chamber_link(&mut self) -> Option<DuplexStream> {
+        self.chamber.take()
+    }
+
+    /// The chamber's link as a gyrocal-link line transport (for the Espec driver).
+    pub fn chamber_transport(&mut self) -> Option<StreamTransport<DuplexStream>> {
+        self.chamber_link()
+            .map(|s| StreamTransport::new(s, "sim-chamber"))
     }
 
     /// Spawns the bench serving the device sides of the links it is given: `dmm` for the
     /// multimeter, `table` for the table (for example the master sides of two
     /// pseudo-terminals). More table links can be served later with
-    /// [`TableHandle::serve_link`]. Must be called inside a tokio runtime.
+    /// [`TableHandle::serve_link`]. A chamber, when configured, is created (its clock starts
+    /// with the table's) but serves no link until given one ([`ChamberHandle::serve`]). Must
+    /// be called inside a tokio runtime.
     pub fn spawn_on<D, T>(config: BenchConfig, dmm: D, table: T) -> BenchHandle
     where
         D: AsyncRead + AsyncWrite + Send + Unpin + 'static,
@@ -227,6 +263,7 @@ impl Bench {
             dmm_link,
             dmm_model,
             truevolt,
+            chamber,
         } = config;
         let time_scale = if time_scale.is_finite() && time_scale > 0.0 {
             time_scale
@@ -241,7 +278,11 @@ impl Bench {
                 SimTable::spawn_aerosmith(table, table_config, w, derive_seed(seed, 1))
             }
         };
-        let signal = GyroSignal::new(gyro, table_handle.clone(), derive_seed(seed, 2));
+        let chamber = chamber.map(|c| ChamberHandle::new(c, time_scale, derive_seed(seed, 4)));
+        let mut signal = GyroSignal::new(gyro, table_handle.clone(), derive_seed(seed, 2));
+        if let Some(c) = &chamber {
+            signal = signal.in_chamber(c.clone());
+        }
         let truth = signal.truth();
         let mut lan = None;
         let dmm_handle = match (dmm_model, dmm_link) {
@@ -283,6 +324,7 @@ impl Bench {
             dmm: dmm_handle,
             truth,
             lan,
+            chamber,
         }
     }
 }

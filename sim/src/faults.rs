@@ -2,12 +2,14 @@
 //!
 //! ```text
 //! spec    = device ":" action "@" trigger [ "x" count ] [ "/" S ["s"] ]
-//! device  = "dmm" | "table"
+//! device  = "dmm" | "table" | "chamber"
 //! action  = dmm:   "timeout" | "garble" | "truncate" | "overload" | "disconnect" | "powercycle"
 //!                  | "slow"
 //!           table: "trip" | "fault" | "silent" | "interlock" | "drop" | "garble" | "noise"
 //!                  | "slow"
+//!           chamber: "door" | "overtemp" | "silent" | "exception" | "crc" | "slow"
 //! trigger = "reading" N        the N-th reading the meter takes (N >= 1)
+//!         | "request" N        the N-th request the chamber sees (N >= 1)
 //!         | "demand" N         the N-th `:Demand:Rate` the table sees (N >= 1)
 //!         | "stop" N           the N-th stop command the table sees (ACL `:Mode:Off` or
 //!                              `:Interlock:Open`, Aerosmith `STO`; N >= 1)
@@ -71,6 +73,14 @@
 //! replies. At `demandN` a table trip, fault or interlock opening latches halfway through that
 //! demand's ramp, and a link fault hits the replies that follow the demand (typically the
 //! driver's error-queue check).
+//!
+//! Chamber faults ([`crate::chamber::faults`]) are armed on the chamber itself and fire at
+//! the first request at or after their trigger (`requestN` or `t=Ss`): `door` and `overtemp`
+//! latch an alarm until reset, `silent` stops the controller for good, `exception` refuses
+//! COUNT requests (Modbus exception 4, Espec `NA:`), `crc` corrupts COUNT replies, `slow`
+//! holds replies back by `/Ss`. Examples: `chamber:door@t=3600s`, `chamber:silent@request40`,
+//! `chamber:crc@request10x2`, `chamber:slow@t=0s/0.5s`. A bench without a chamber ignores
+//! them.
 
 use std::fmt;
 use std::str::FromStr;
@@ -101,10 +111,14 @@ SPEC = DEVICE:ACTION@TRIGGER[xCOUNT][/Ss]
                  becomes #), noise (a 0xFF byte comes just before a reply),
                  slow (every reply held back by /Ss, which is required: the
                  table executes commands at once and answers late, in order)
+  chamber actions: door, overtemp (an alarm latched until reset), silent (the
+                 controller answers nothing more), exception (COUNT requests
+                 refused: Modbus exception 4 / Espec NA:), crc (COUNT replies
+                 corrupted), slow (replies held back by /Ss, required)
   triggers:      readingN (the N-th reading the meter takes), demandN (the N-th
                  :Demand:Rate the table sees), stopN (the N-th stop command the
-                 table sees: table:silent@stop1 ignores the first stop), t=Ss (S sim
-                 seconds after start)
+                 table sees: table:silent@stop1 ignores the first stop), requestN
+                 (the N-th request the chamber sees), t=Ss (S sim seconds after start)
   xCOUNT:        overload: that many readings; timeout/garble/truncate: that many
                  consecutive replies (readings); table drop/garble/noise: that many
                  consecutive query replies; slow: that many replies held back
@@ -150,6 +164,18 @@ pub enum FaultAction {
     TableNoise,
     /// The table's replies are held back (they come, late, in order).
     TableSlow,
+    /// The chamber latches a door-open alarm.
+    ChamberDoor,
+    /// The chamber latches an over-temperature alarm.
+    ChamberOvertemp,
+    /// The chamber's controller stops answering.
+    ChamberSilent,
+    /// Chamber requests are refused with an exception.
+    ChamberException,
+    /// Chamber replies are corrupted.
+    ChamberCrc,
+    /// Chamber replies are held back.
+    ChamberSlow,
 }
 
 impl FaultAction {
@@ -171,6 +197,12 @@ impl FaultAction {
             FaultAction::TableGarble => "table:garble",
             FaultAction::TableNoise => "table:noise",
             FaultAction::TableSlow => "table:slow",
+            FaultAction::ChamberDoor => "chamber:door",
+            FaultAction::ChamberOvertemp => "chamber:overtemp",
+            FaultAction::ChamberSilent => "chamber:silent",
+            FaultAction::ChamberException => "chamber:exception",
+            FaultAction::ChamberCrc => "chamber:crc",
+            FaultAction::ChamberSlow => "chamber:slow",
         }
     }
 
@@ -184,7 +216,9 @@ impl FaultAction {
     fn takes_seconds(self) -> (bool, bool) {
         match self {
             FaultAction::DmmPowerCycle => (true, false),
-            FaultAction::DmmSlow | FaultAction::TableSlow => (true, true),
+            FaultAction::DmmSlow | FaultAction::TableSlow | FaultAction::ChamberSlow => {
+                (true, true)
+            }
             _ => (false, false),
         }
     }
@@ -201,7 +235,28 @@ impl FaultAction {
                 | FaultAction::TableNoise
                 | FaultAction::DmmSlow
                 | FaultAction::TableSlow
+                | FaultAction::ChamberException
+                | FaultAction::ChamberCrc
+                | FaultAction::ChamberSlow
         )
+    }
+
+    fn is_chamber(self) -> bool {
+        self.as_str().starts_with("chamber:")
+    }
+
+    /// The chamber fault of a chamber action.
+    fn chamber_fault(self, delay_s: Option<f64>) -> Option<crate::chamber::ChamberFaultKind> {
+        use crate::chamber::{ChamberAlarm, ChamberFaultKind as K};
+        Some(match self {
+            FaultAction::ChamberDoor => K::Alarm(ChamberAlarm::Door),
+            FaultAction::ChamberOvertemp => K::Alarm(ChamberAlarm::OverTemperature),
+            FaultAction::ChamberSilent => K::Silent,
+            FaultAction::ChamberException => K::Exception,
+            FaultAction::ChamberCrc => K::Corrupt,
+            FaultAction::ChamberSlow => K::Slow(delay_s.unwrap_or(0.0)),
+            _ => return None,
+        })
     }
 
     fn is_dmm(self) -> bool {
@@ -259,6 +314,8 @@ pub enum Trigger {
     Demand(u64),
     /// At the N-th stop command the table sees (from 1).
     Stop(u64),
+    /// At the N-th request the chamber sees (from 1).
+    Request(u64),
     /// This many sim seconds after the bench started.
     Time(f64),
 }
@@ -269,6 +326,7 @@ impl fmt::Display for Trigger {
             Trigger::Reading(n) => write!(f, "reading{n}"),
             Trigger::Demand(n) => write!(f, "demand{n}"),
             Trigger::Stop(n) => write!(f, "stop{n}"),
+            Trigger::Request(n) => write!(f, "request{n}"),
             Trigger::Time(s) => write!(f, "t={s}s"),
         }
     }
@@ -294,7 +352,10 @@ pub struct FaultSpec {
 impl fmt::Display for FaultSpec {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}@{}", self.action.as_str(), self.trigger)?;
-        let slow = matches!(self.action, FaultAction::DmmSlow | FaultAction::TableSlow);
+        let slow = matches!(
+            self.action,
+            FaultAction::DmmSlow | FaultAction::TableSlow | FaultAction::ChamberSlow
+        );
         if (slow && self.count != 0) || (!slow && self.count != 1) {
             write!(f, "x{}", self.count)?;
         }
@@ -350,11 +411,18 @@ impl FromStr for FaultSpec {
             "table:garble" => FaultAction::TableGarble,
             "table:noise" => FaultAction::TableNoise,
             "table:slow" => FaultAction::TableSlow,
+            "chamber:door" => FaultAction::ChamberDoor,
+            "chamber:overtemp" => FaultAction::ChamberOvertemp,
+            "chamber:silent" => FaultAction::ChamberSilent,
+            "chamber:exception" => FaultAction::ChamberException,
+            "chamber:crc" => FaultAction::ChamberCrc,
+            "chamber:slow" => FaultAction::ChamberSlow,
             other => {
                 return Err(err(format!(
                     "unknown action `{other}` (dmm: timeout, garble, truncate, overload, \
                      disconnect, powercycle, slow; table: trip, fault, silent, interlock, \
-                     drop, garble, noise, slow)"
+                     drop, garble, noise, slow; chamber: door, overtemp, silent, exception, \
+                     crc, slow)"
                 )));
             }
         };
@@ -405,6 +473,8 @@ impl FromStr for FaultSpec {
             Trigger::Demand(positive(n, "the demand number").map_err(err)?)
         } else if let Some(n) = trigger_text.strip_prefix("stop") {
             Trigger::Stop(positive(n, "the stop number").map_err(err)?)
+        } else if let Some(n) = trigger_text.strip_prefix("request") {
+            Trigger::Request(positive(n, "the request number").map_err(err)?)
         } else if let Some(s) = trigger_text.strip_prefix("t=") {
             let s = s.strip_suffix('s').unwrap_or(s);
             match s.parse::<f64>() {
@@ -417,7 +487,7 @@ impl FromStr for FaultSpec {
             }
         } else {
             return Err(err(format!(
-                "unknown trigger `{trigger_text}` (readingN, demandN, stopN or t=Ss)"
+                "unknown trigger `{trigger_text}` (readingN, demandN, stopN, requestN or t=Ss)"
             )));
         };
         let count = match count {
@@ -432,6 +502,14 @@ impl FromStr for FaultSpec {
                 .ok_or_else(|| err(format!("count {c} is above 100000")))?,
         };
         action.implemented().map_err(|why| err(why.to_string()))?;
+        let chamber_trigger = matches!(trigger, Trigger::Request(_) | Trigger::Time(_));
+        if action.is_chamber() != chamber_trigger && !matches!(trigger, Trigger::Time(_)) {
+            return Err(err(if action.is_chamber() {
+                format!("{} fires at requestN or t=Ss", action.as_str())
+            } else {
+                "requestN is a chamber trigger".to_string()
+            }));
+        }
         Ok(FaultSpec {
             action,
             trigger,
@@ -466,6 +544,7 @@ impl FaultSchedule {
         let readings = bench.dmm.readings_taken();
         let demands = bench.table.demands_seen();
         let stops = bench.table.stops_seen();
+        let requests = bench.chamber.as_ref().map_or(0, |c| c.requests_seen());
         let sim_s = self.started.elapsed().as_secs_f64() * self.time_scale;
         let dmm_gone = bench.dmm.is_finished();
         let dmm_stats = bench.dmm.stats();
@@ -485,6 +564,7 @@ impl FaultSchedule {
                     }
                     Trigger::Demand(n) => demands >= n,
                     Trigger::Stop(n) => stops >= n,
+                    Trigger::Request(n) => requests >= n,
                     Trigger::Time(t) => sim_s >= t,
                 };
                 FaultStatus {
@@ -524,6 +604,22 @@ pub fn schedule(specs: &[FaultSpec], bench: &BenchHandle, time_scale: f64) -> Fa
     let started = Instant::now();
     let mut pending: Vec<FaultSpec> = Vec::new();
     for s in specs {
+        if let Some(kind) = s.action.chamber_fault(s.delay_s) {
+            // armed on the chamber itself, exact at its request or time
+            if let Some(c) = &bench.chamber {
+                let trigger = match s.trigger {
+                    Trigger::Request(n) => crate::chamber::ChamberTrigger::Request(n),
+                    Trigger::Time(t) => crate::chamber::ChamberTrigger::Time(t),
+                    _ => continue,
+                };
+                c.arm(crate::chamber::ChamberFault {
+                    kind,
+                    trigger,
+                    count: s.count,
+                });
+            }
+            continue;
+        }
         match (s.trigger, s.action.is_dmm()) {
             (Trigger::Reading(n), true) => {
                 for (i, f) in s
@@ -567,6 +663,8 @@ pub fn schedule(specs: &[FaultSpec], bench: &BenchHandle, time_scale: f64) -> Fa
                         Trigger::Reading(n) => readings >= n,
                         Trigger::Demand(n) => demands >= n,
                         Trigger::Stop(n) => stops >= n,
+                        // chamber specs never reach the supervisor
+                        Trigger::Request(_) => false,
                         Trigger::Time(t) => sim_s >= t,
                     };
                     if !due {
@@ -859,5 +957,75 @@ mod tests {
         link.send_line(":System:Error?").await.unwrap();
         assert_eq!(link.read_line(t).await.unwrap(), "201,\"Interlock open\"");
         schedule.stop();
+    }
+
+    #[test]
+    fn chamber_grammar() {
+        let s: FaultSpec = "chamber:door@t=3600s".parse().unwrap();
+        assert_eq!(
+            (s.action, s.trigger),
+            (FaultAction::ChamberDoor, Trigger::Time(3600.0))
+        );
+        let s: FaultSpec = "chamber:crc@request10x2".parse().unwrap();
+        assert_eq!(
+            (s.action, s.trigger, s.count),
+            (FaultAction::ChamberCrc, Trigger::Request(10), 2)
+        );
+        assert_eq!(s.to_string(), "chamber:crc@request10x2");
+        let s: FaultSpec = "chamber:slow@t=0s/0.5s".parse().unwrap();
+        assert_eq!((s.delay_s, s.count), (Some(0.5), 0));
+        assert_eq!(s.to_string(), "chamber:slow@t=0s/0.5s");
+        for bad in [
+            "chamber:door@reading3",
+            "chamber:silent@demand1",
+            "table:trip@request3",
+            "chamber:door@request3x2",
+            "chamber:slow@request3",
+            "chamber:melt@t=1s",
+        ] {
+            let e = bad.parse::<FaultSpec>().unwrap_err();
+            assert_eq!(e.spec, bad, "{e}");
+        }
+    }
+
+    /// Chamber specs are armed on the chamber: an alarm at its time, a silent controller at
+    /// its request, and the schedule's status says which fired.
+    #[tokio::test(start_paused = true)]
+    async fn chamber_faults_fire_on_the_chamber() {
+        let mut bench = crate::bench::Bench::spawn(crate::bench::BenchConfig {
+            chamber: Some(crate::chamber::ChamberSimConfig::default()),
+            ..crate::bench::BenchConfig::default()
+        });
+        let specs: Vec<FaultSpec> = ["chamber:overtemp@t=60s", "chamber:silent@request2"]
+            .iter()
+            .map(|s| s.parse().unwrap())
+            .collect();
+        let schedule = schedule(&specs, &bench.handle, 1.0);
+        let chamber = bench.handle.chamber.clone().unwrap();
+        let mut link = bench.chamber_link().unwrap();
+        assert!(chamber.alarms().is_empty());
+        tokio::time::sleep(Duration::from_secs(61)).await;
+        assert_eq!(
+            chamber.alarms(),
+            [crate::chamber::ChamberAlarm::OverTemperature]
+        );
+        use tokio::io::{AsyncReadExt, AsyncWriteExt};
+        let read_901 = [0x01, 0x03, 0x03, 0x85, 0x00, 0x01, 0x95, 0xA7];
+        let mut buf = [0u8; 64];
+        link.write_all(&read_901).await.unwrap();
+        let n = tokio::time::timeout(Duration::from_secs(1), link.read(&mut buf))
+            .await
+            .unwrap()
+            .unwrap();
+        assert_eq!(&buf[..n], [0x01, 0x03, 0x02, 0x00, 0x01, 0x79, 0x84]);
+        link.write_all(&read_901).await.unwrap();
+        assert!(
+            tokio::time::timeout(Duration::from_secs(1), link.read(&mut buf))
+                .await
+                .is_err(),
+            "silent from the second request"
+        );
+        let status = schedule.status(&bench.handle);
+        assert!(status.iter().all(|s| s.fired), "{status:?}");
     }
 }

@@ -46,6 +46,28 @@
 //!
 //! Each process draws from its own stream derived from the gyro's seed, and only when it is
 //! on: with every term at 0 the readings are bit for bit what they were without them.
+//!
+//! # Temperature (issue 26)
+//!
+//! The scale factor, the bias and K2 follow the gyro's **inside** temperature T (the
+//! chamber's [`crate::chamber::ChamberHandle::inside_c`] at the middle of each reading's
+//! window when the bench has a chamber, `room_c` otherwise), with ΔT = T − `t_ref_c`:
+//!
+//! ```text
+//! K1±(T)   = K1± · f,   f = 1 + 1e-6·(k_tempco_ppm_per_c·ΔT + k_tempco2_ppm_per_c2·ΔT² + h·hysteresis_k_ppm/2)
+//! bias(T)  = K0/K̄1·3600 + bias_tempco_dph_per_c·ΔT + bias_tempco2_dph_per_c2·ΔT² + h·hysteresis_dph/2   (°/h)
+//! K0(T)    = K̄1(T) · bias(T) / 3600        (so K0(T)/K̄1(T)·3600 is exactly bias(T); K̄1 the two directions' mean)
+//! K2(T)    = K2 · (1 + 1e-6·k2_tempco_ppm_per_c·ΔT)
+//! ```
+//!
+//! `h` is the hysteresis side: +1 when the inside temperature was last moving up (the
+//! temperature reached from below), −1 when moving down, 0 before it has moved: a play
+//! (backlash) operator of width [`HYSTERESIS_PLAY_C`] on the inside temperature, updated at
+//! each reading. So a temperature revisited from the other side shows K differing by
+//! `hysteresis_k_ppm` and the bias by `hysteresis_dph`. The bias tempcos are of the
+//! rate-referred bias (°/h), the quantity a series reports. Every coefficient is 0 by
+//! default, and then the temperature is not even looked at: readings are bit for bit what
+//! they were. [`GyroTruth::at_temperature`] gives the coefficients at a temperature.
 
 use std::time::Duration;
 
@@ -116,6 +138,25 @@ pub struct GyroConfig {
     pub noise_step_s: f64,
     /// Longest τ over which the bias-instability (flicker) model stays flat, s. Default 10⁴.
     pub flicker_max_tau_s: f64,
+    /// The gyro's temperature without a chamber, °C. Default 23.
+    pub room_c: f64,
+    /// The temperature the coefficients above are at, °C. Default 25.
+    pub t_ref_c: f64,
+    /// Scale factor's first-order tempco, ppm/°C. Default 0.
+    pub k_tempco_ppm_per_c: f64,
+    /// Scale factor's second-order tempco, ppm/°C². Default 0.
+    pub k_tempco2_ppm_per_c2: f64,
+    /// The bias's first-order tempco, (°/h)/°C. Default 0.
+    pub bias_tempco_dph_per_c: f64,
+    /// The bias's second-order tempco, (°/h)/°C². Default 0.
+    pub bias_tempco2_dph_per_c2: f64,
+    /// K2's tempco, ppm/°C (relative). Default 0.
+    pub k2_tempco_ppm_per_c: f64,
+    /// Scale-factor hysteresis: K reached from below minus K reached from above, ppm.
+    /// Default 0.
+    pub hysteresis_k_ppm: f64,
+    /// Bias hysteresis: the bias reached from below minus from above, °/h. Default 0.
+    pub hysteresis_dph: f64,
 }
 
 impl Default for GyroConfig {
@@ -141,6 +182,15 @@ impl Default for GyroConfig {
             warmup_tau_s: 600.0,
             noise_step_s: 0.01,
             flicker_max_tau_s: 1.0e4,
+            room_c: 23.0,
+            t_ref_c: 25.0,
+            k_tempco_ppm_per_c: 0.0,
+            k_tempco2_ppm_per_c2: 0.0,
+            bias_tempco_dph_per_c: 0.0,
+            bias_tempco2_dph_per_c2: 0.0,
+            k2_tempco_ppm_per_c: 0.0,
+            hysteresis_k_ppm: 0.0,
+            hysteresis_dph: 0.0,
         }
     }
 }
@@ -252,6 +302,96 @@ pub struct GyroTruth {
     /// The rate-noise terms and the warm-up as set.
     #[serde(default)]
     pub rate_noise: RateNoise,
+    /// How the coefficients above (at `t_ref_c`) follow the temperature.
+    #[serde(default)]
+    pub temperature: TempModel,
+}
+
+/// The width of the play operator deciding the hysteresis side, °C: the inside temperature
+/// must move this much against its last direction to turn it.
+pub const HYSTERESIS_PLAY_C: f64 = 1.0;
+
+/// How a gyro's coefficients follow its inside temperature (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct TempModel {
+    /// The reference temperature, °C.
+    pub t_ref_c: f64,
+    /// K's tempco, ppm/°C.
+    pub k_tempco_ppm_per_c: f64,
+    /// K's second-order tempco, ppm/°C².
+    pub k_tempco2_ppm_per_c2: f64,
+    /// The bias's tempco, (°/h)/°C.
+    pub bias_tempco_dph_per_c: f64,
+    /// The bias's second-order tempco, (°/h)/°C².
+    pub bias_tempco2_dph_per_c2: f64,
+    /// K2's tempco, ppm/°C.
+    pub k2_tempco_ppm_per_c: f64,
+    /// K hysteresis (from below − from above), ppm.
+    pub hysteresis_k_ppm: f64,
+    /// Bias hysteresis (from below − from above), °/h.
+    pub hysteresis_dph: f64,
+}
+
+fn finite_or_zero(x: f64) -> f64 {
+    if x.is_finite() { x } else { 0.0 }
+}
+
+impl TempModel {
+    /// From a configuration (a coefficient that is not finite is 0).
+    pub fn from_config(c: &GyroConfig) -> Self {
+        TempModel {
+            t_ref_c: if c.t_ref_c.is_finite() {
+                c.t_ref_c
+            } else {
+                25.0
+            },
+            k_tempco_ppm_per_c: finite_or_zero(c.k_tempco_ppm_per_c),
+            k_tempco2_ppm_per_c2: finite_or_zero(c.k_tempco2_ppm_per_c2),
+            bias_tempco_dph_per_c: finite_or_zero(c.bias_tempco_dph_per_c),
+            bias_tempco2_dph_per_c2: finite_or_zero(c.bias_tempco2_dph_per_c2),
+            k2_tempco_ppm_per_c: finite_or_zero(c.k2_tempco_ppm_per_c),
+            hysteresis_k_ppm: finite_or_zero(c.hysteresis_k_ppm),
+            hysteresis_dph: finite_or_zero(c.hysteresis_dph),
+        }
+    }
+
+    /// True when nothing depends on the temperature.
+    pub fn is_off(&self) -> bool {
+        self.k_tempco_ppm_per_c == 0.0
+            && self.k_tempco2_ppm_per_c2 == 0.0
+            && self.bias_tempco_dph_per_c == 0.0
+            && self.bias_tempco2_dph_per_c2 == 0.0
+            && self.k2_tempco_ppm_per_c == 0.0
+            && self.hysteresis_k_ppm == 0.0
+            && self.hysteresis_dph == 0.0
+    }
+}
+
+/// The hysteresis side of the inside temperature: a play operator of width
+/// [`HYSTERESIS_PLAY_C`].
+#[derive(Debug, Clone, Copy, Default)]
+struct Play {
+    side: f64,
+    /// The extreme reached in the current direction (the start before any move).
+    extreme: Option<f64>,
+}
+
+impl Play {
+    /// The side after the temperature `t_c`: +1 moving up, −1 moving down, 0 not yet moved.
+    fn update(&mut self, t_c: f64) -> f64 {
+        let Some(ext) = self.extreme else {
+            self.extreme = Some(t_c);
+            return self.side;
+        };
+        let moved = t_c - ext;
+        if (self.side > 0.0 && t_c > ext) || (self.side < 0.0 && t_c < ext) {
+            self.extreme = Some(t_c);
+        } else if moved.abs() > HYSTERESIS_PLAY_C {
+            self.side = moved.signum();
+            self.extreme = Some(t_c);
+        }
+        self.side
+    }
 }
 
 impl GyroTruth {
@@ -270,7 +410,48 @@ impl GyroTruth {
             k3: c.k3,
             earth_rate,
             rate_noise: RateNoise::from_config(c),
+            temperature: TempModel::from_config(c),
         }
+    }
+
+    /// The coefficients at the inside temperature `t_c`, °C, without hysteresis (midway
+    /// between the two sides): what an ideal calibration at that temperature finds.
+    pub fn at_temperature(&self, t_c: f64) -> GyroTruth {
+        self.at_temperature_side(t_c, 0.0)
+    }
+
+    /// The coefficients at `t_c` reached from below (`from_below`, heating) or from above.
+    pub fn at_temperature_reached(&self, t_c: f64, from_below: bool) -> GyroTruth {
+        self.at_temperature_side(t_c, if from_below { 1.0 } else { -1.0 })
+    }
+
+    fn at_temperature_side(&self, t_c: f64, side: f64) -> GyroTruth {
+        let m = &self.temperature;
+        if m.is_off() {
+            return *self;
+        }
+        let dt = t_c - m.t_ref_c;
+        let f = 1.0
+            + 1e-6
+                * (m.k_tempco_ppm_per_c * dt
+                    + m.k_tempco2_ppm_per_c2 * dt * dt
+                    + side * m.hysteresis_k_ppm / 2.0);
+        let k1_mean = (self.k1_pos + self.k1_neg) / 2.0;
+        let bias_shift_dph = m.bias_tempco_dph_per_c * dt
+            + m.bias_tempco2_dph_per_c2 * dt * dt
+            + side * m.hysteresis_dph / 2.0;
+        GyroTruth {
+            k0: f * (self.k0 + k1_mean * bias_shift_dph / 3600.0),
+            k1_pos: self.k1_pos * f,
+            k1_neg: self.k1_neg * f,
+            k2: self.k2 * (1.0 + 1e-6 * m.k2_tempco_ppm_per_c * dt),
+            ..*self
+        }
+    }
+
+    /// The rate-referred bias K0/K̄1·3600, °/h (K̄1 the two directions' mean; no Earth rate).
+    pub fn bias_dph(&self) -> f64 {
+        self.k0 / ((self.k1_pos + self.k1_neg) / 2.0) * 3600.0
     }
 
     /// Noise-free output (no walk, no drift) at input rate `input` (Earth rate included), V.
@@ -367,6 +548,8 @@ pub struct GyroSignal {
     last_t: Option<f64>,
     noise: Option<NoiseClock>,
     quantizer: Option<Quantizer>,
+    chamber: Option<crate::chamber::ChamberHandle>,
+    play: Play,
 }
 
 impl std::fmt::Debug for GyroSignal {
@@ -431,6 +614,22 @@ impl GyroSignal {
             last_t: None,
             noise: noise.and_then(Result::ok),
             quantizer,
+            chamber: None,
+            play: Play::default(),
+        }
+    }
+
+    /// The gyro sits in `chamber`: its coefficients follow the chamber's inside temperature.
+    pub fn in_chamber(mut self, chamber: crate::chamber::ChamberHandle) -> Self {
+        self.chamber = Some(chamber);
+        self
+    }
+
+    /// The gyro's inside temperature at `at`, °C.
+    pub fn inside_c(&self, at: Instant) -> f64 {
+        match &self.chamber {
+            Some(c) => c.inside_c(at),
+            None => self.config.room_c,
         }
     }
 
@@ -448,10 +647,17 @@ impl GyroSignal {
 impl SignalSource for GyroSignal {
     fn volts(&mut self, start: Instant, window: Duration) -> f64 {
         let n = self.config.subsamples.max(1);
+        let truth = if self.truth.temperature.is_off() {
+            self.truth
+        } else {
+            let t_c = self.inside_c(start + window / 2);
+            let side = self.play.update(t_c);
+            self.truth.at_temperature_side(t_c, side)
+        };
         let mut sum = 0.0;
         for i in 0..n {
             let at = start + window.mul_f64((f64::from(i) + 0.5) / f64::from(n));
-            sum += self.truth.output(self.table.actual_rate(at));
+            sum += truth.output(self.table.actual_rate(at));
         }
         let mean = sum / f64::from(n);
         let t_mid = self.table.sim_time(start + window / 2);
@@ -515,5 +721,54 @@ impl GyroSignal {
             }
         }
         v
+    }
+}
+
+#[cfg(test)]
+mod temperature_tests {
+    use super::*;
+
+    fn tempco_gyro() -> GyroTruth {
+        GyroTruth::from_config(&GyroConfig {
+            k_tempco_ppm_per_c: 40.0,
+            k_tempco2_ppm_per_c2: 0.5,
+            bias_tempco_dph_per_c: 2.0,
+            k2_tempco_ppm_per_c: 100.0,
+            k2: 1e-5,
+            hysteresis_k_ppm: 20.0,
+            hysteresis_dph: 0.8,
+            ..GyroConfig::default()
+        })
+    }
+
+    #[test]
+    fn coefficients_at_a_temperature() {
+        let g = tempco_gyro();
+        assert_eq!(g.at_temperature(25.0), g);
+        let hot = g.at_temperature(60.0);
+        let expect = 1.0 + 1e-6 * (40.0 * 35.0 + 0.5 * 35.0 * 35.0);
+        assert!((hot.k1_pos / g.k1_pos - expect).abs() < 1e-12);
+        assert!((hot.bias_dph() - g.bias_dph() - 70.0).abs() < 1e-9);
+        assert!((hot.k2 / g.k2 - (1.0 + 100e-6 * 35.0)).abs() < 1e-12);
+        // reached from below minus from above: the hysteresis, K in ppm and bias in °/h
+        let below = g.at_temperature_reached(25.0, true);
+        let above = g.at_temperature_reached(25.0, false);
+        assert!(((below.k1_pos - above.k1_pos) / g.k1_pos * 1e6 - 20.0).abs() < 1e-6);
+        assert!((below.bias_dph() - above.bias_dph() - 0.8).abs() < 1e-9);
+        // off: nothing changes, whatever the temperature
+        let plain = GyroTruth::from_config(&GyroConfig::default());
+        assert_eq!(plain.at_temperature(-40.0), plain);
+    }
+
+    #[test]
+    fn the_hysteresis_side_turns_after_the_play() {
+        let mut p = Play::default();
+        assert_eq!(p.update(25.0), 0.0);
+        assert_eq!(p.update(25.9), 0.0, "within the play");
+        assert_eq!(p.update(60.0), 1.0, "heating");
+        assert_eq!(p.update(59.5), 1.0, "a wobble is not a turn");
+        assert_eq!(p.update(25.0), -1.0, "cooling: 25 reached from above");
+        assert_eq!(p.update(-20.0), -1.0);
+        assert_eq!(p.update(25.0), 1.0, "25 reached from below");
     }
 }

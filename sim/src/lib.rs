@@ -14,8 +14,13 @@
 //! open is configurable, with the default documented on the configuration field. What the
 //! simulated SCPI meters share (the error queue, faults and their handle, reply formatting)
 //! is written once, in [`scpi`].
+//!
+//! A bench may also have a thermal chamber ([`chamber`]: a Watlow F4 on Modbus RTU or TCP, or
+//! an Espec on text lines) whose physics the gyro's scale factor and bias follow
+//! ([`gyro`]'s temperature model), for a temperature series.
 
 pub mod bench;
+pub mod chamber;
 pub mod dmm;
 pub mod faults;
 pub mod from_plan;

@@ -69,6 +69,7 @@ async fn bench_constant_rate_reads_the_true_model_voltage() {
         mut dmm,
         mut table,
         handle,
+        ..
     } = Bench::spawn(config.clone());
     let truth = handle.truth;
     // per reading: the gyro's 1 s noise over a 0.2 s window (10 PLC at 50 Hz) and the meter's

@@ -28,6 +28,20 @@ pub(super) const KEYS: &[KeySchema] = &[
     ("quantization_arcsec", Kind::Number, false),
     ("warmup_dph", Kind::Number, false),
     ("warmup_tau_s", Kind::Number, false),
+    ("room_c", Kind::Number, false),
+    ("t_ref_c", Kind::Number, false),
+    ("k_tempco_ppm_per_c", Kind::Number, false),
+    ("k_tempco2_ppm_per_c2", Kind::Number, false),
+    ("bias_tempco_dph_per_c", Kind::Number, false),
+    ("bias_tempco2_dph_per_c2", Kind::Number, false),
+    ("k2_tempco_ppm_per_c", Kind::Number, false),
+    ("hysteresis_k_ppm", Kind::Number, false),
+    ("hysteresis_dph", Kind::Number, false),
+    ("chamber_heat_c_per_min", Kind::Number, false),
+    ("chamber_cool_c_per_min", Kind::Number, false),
+    ("case_tau_s", Kind::Number, false),
+    ("inside_tau_s", Kind::Number, false),
+    ("chamber_noise_c", Kind::Number, false),
 ];
 
 #[derive(Deserialize)]
@@ -50,6 +64,20 @@ pub(super) struct RawSimulation {
     pub(super) quantization_arcsec: Option<S<f64>>,
     pub(super) warmup_dph: Option<S<f64>>,
     pub(super) warmup_tau_s: Option<S<f64>>,
+    pub(super) room_c: Option<S<f64>>,
+    pub(super) t_ref_c: Option<S<f64>>,
+    pub(super) k_tempco_ppm_per_c: Option<S<f64>>,
+    pub(super) k_tempco2_ppm_per_c2: Option<S<f64>>,
+    pub(super) bias_tempco_dph_per_c: Option<S<f64>>,
+    pub(super) bias_tempco2_dph_per_c2: Option<S<f64>>,
+    pub(super) k2_tempco_ppm_per_c: Option<S<f64>>,
+    pub(super) hysteresis_k_ppm: Option<S<f64>>,
+    pub(super) hysteresis_dph: Option<S<f64>>,
+    pub(super) chamber_heat_c_per_min: Option<S<f64>>,
+    pub(super) chamber_cool_c_per_min: Option<S<f64>>,
+    pub(super) case_tau_s: Option<S<f64>>,
+    pub(super) inside_tau_s: Option<S<f64>>,
+    pub(super) chamber_noise_c: Option<S<f64>>,
 }
 
 /// `[simulation]`: the truth of the in-process simulated bench used by `--simulate`.
@@ -110,6 +138,68 @@ pub struct Simulation {
         skip_serializing_if = "is_default_warmup_tau_s"
     )]
     pub warmup_tau_s: f64,
+    // The temperature keys (issue 26): like the rate-noise keys, left out of the serialised
+    // form (and so of the hash) at their defaults, so an older plan's hash is unchanged.
+    /// The room's temperature, °C: the gyro's without a chamber, and where a simulated chamber starts (default 23, within ±60).
+    #[serde(default = "default_room_c", skip_serializing_if = "is_default_room_c")]
+    pub room_c: f64,
+    /// The temperature `scale_factor`, `bias` and `k2` are at, °C (default 25, within ±100).
+    #[serde(
+        default = "default_t_ref_c",
+        skip_serializing_if = "is_default_t_ref_c"
+    )]
+    pub t_ref_c: f64,
+    /// The scale factor's tempco, ppm/°C of the gyro's inside temperature (default 0 = none, within ±10000).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub k_tempco_ppm_per_c: f64,
+    /// The scale factor's second-order tempco, ppm/°C² (default 0, within ±1000).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub k_tempco2_ppm_per_c2: f64,
+    /// The bias's tempco, (°/h)/°C, of the rate-referred bias K0/K·3600 (default 0, within ±1000).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub bias_tempco_dph_per_c: f64,
+    /// The bias's second-order tempco, (°/h)/°C² (default 0, within ±100).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub bias_tempco2_dph_per_c2: f64,
+    /// K2's relative tempco, ppm/°C (default 0, within ±100000).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub k2_tempco_ppm_per_c: f64,
+    /// Scale-factor hysteresis: K at a temperature reached from below minus from above, ppm (default 0, within ±10000).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub hysteresis_k_ppm: f64,
+    /// Bias hysteresis: the bias at a temperature reached from below minus from above, °/h (default 0, within ±1000).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub hysteresis_dph: f64,
+    /// A simulated chamber's fastest heating, °C/min (default 3, > 0 and at most 100).
+    #[serde(
+        default = "default_chamber_heat_c_per_min",
+        skip_serializing_if = "is_default_chamber_heat_c_per_min"
+    )]
+    pub chamber_heat_c_per_min: f64,
+    /// A simulated chamber's fastest cooling, °C/min (default 2, > 0 and at most 100).
+    #[serde(
+        default = "default_chamber_cool_c_per_min",
+        skip_serializing_if = "is_default_chamber_cool_c_per_min"
+    )]
+    pub chamber_cool_c_per_min: f64,
+    /// Time constant of the gyro's case following the chamber's air, s (default 1200, > 0 and at most 86400).
+    #[serde(
+        default = "default_case_tau_s",
+        skip_serializing_if = "is_default_case_tau_s"
+    )]
+    pub case_tau_s: f64,
+    /// Time constant of the gyro's inside following its case, s (default 600, > 0 and at most 86400).
+    #[serde(
+        default = "default_inside_tau_s",
+        skip_serializing_if = "is_default_inside_tau_s"
+    )]
+    pub inside_tau_s: f64,
+    /// Noise of the chamber's temperature sensors, °C standard deviation (default 0.05, 0 to 5).
+    #[serde(
+        default = "default_chamber_noise_c",
+        skip_serializing_if = "is_default_chamber_noise_c"
+    )]
+    pub chamber_noise_c: f64,
 }
 
 /// `[simulation] warmup_tau_s` when the plan does not say, s.
@@ -122,6 +212,84 @@ fn default_warmup_tau_s() -> f64 {
 #[allow(clippy::trivially_copy_pass_by_ref)] // serde's skip_serializing_if passes a &f64
 fn is_default_warmup_tau_s(v: &f64) -> bool {
     *v == DEFAULT_WARMUP_TAU_S
+}
+
+/// `[simulation] room_c` when the plan does not say, °C.
+const DEFAULT_ROOM_C: f64 = 23.0;
+/// `[simulation] t_ref_c` when the plan does not say, °C.
+const DEFAULT_T_REF_C: f64 = 25.0;
+/// `[simulation] chamber_heat_c_per_min` when the plan does not say.
+const DEFAULT_HEAT_C_PER_MIN: f64 = 3.0;
+/// `[simulation] chamber_cool_c_per_min` when the plan does not say.
+const DEFAULT_COOL_C_PER_MIN: f64 = 2.0;
+/// `[simulation] case_tau_s` when the plan does not say.
+const DEFAULT_CASE_TAU_S: f64 = 1200.0;
+/// `[simulation] inside_tau_s` when the plan does not say.
+const DEFAULT_INSIDE_TAU_S: f64 = 600.0;
+/// `[simulation] chamber_noise_c` when the plan does not say.
+const DEFAULT_CHAMBER_NOISE_C: f64 = 0.05;
+
+fn default_room_c() -> f64 {
+    DEFAULT_ROOM_C
+}
+
+#[allow(clippy::trivially_copy_pass_by_ref)] // serde's skip_serializing_if passes a &f64
+fn is_default_room_c(v: &f64) -> bool {
+    *v == DEFAULT_ROOM_C
+}
+
+fn default_t_ref_c() -> f64 {
+    DEFAULT_T_REF_C
+}
+
+#[allow(clippy::trivially_copy_pass_by_ref)] // serde's skip_serializing_if passes a &f64
+fn is_default_t_ref_c(v: &f64) -> bool {
+    *v == DEFAULT_T_REF_C
+}
+
+fn default_chamber_heat_c_per_min() -> f64 {
+    DEFAULT_HEAT_C_PER_MIN
+}
+
+#[allow(clippy::trivially_copy_pass_by_ref)] // serde's skip_serializing_if passes a &f64
+fn is_default_chamber_heat_c_per_min(v: &f64) -> bool {
+    *v == DEFAULT_HEAT_C_PER_MIN
+}
+
+fn default_chamber_cool_c_per_min() -> f64 {
+    DEFAULT_COOL_C_PER_MIN
+}
+
+#[allow(clippy::trivially_copy_pass_by_ref)] // serde's skip_serializing_if passes a &f64
+fn is_default_chamber_cool_c_per_min(v: &f64) -> bool {
+    *v == DEFAULT_COOL_C_PER_MIN
+}
+
+fn default_case_tau_s() -> f64 {
+    DEFAULT_CASE_TAU_S
+}
+
+#[allow(clippy::trivially_copy_pass_by_ref)] // serde's skip_serializing_if passes a &f64
+fn is_default_case_tau_s(v: &f64) -> bool {
+    *v == DEFAULT_CASE_TAU_S
+}
+
+fn default_inside_tau_s() -> f64 {
+    DEFAULT_INSIDE_TAU_S
+}
+
+#[allow(clippy::trivially_copy_pass_by_ref)] // serde's skip_serializing_if passes a &f64
+fn is_default_inside_tau_s(v: &f64) -> bool {
+    *v == DEFAULT_INSIDE_TAU_S
+}
+
+fn default_chamber_noise_c() -> f64 {
+    DEFAULT_CHAMBER_NOISE_C
+}
+
+#[allow(clippy::trivially_copy_pass_by_ref)] // serde's skip_serializing_if passes a &f64
+fn is_default_chamber_noise_c(v: &f64) -> bool {
+    *v == DEFAULT_CHAMBER_NOISE_C
 }
 
 #[allow(clippy::trivially_copy_pass_by_ref)] // serde's skip_serializing_if passes a &f64
@@ -149,6 +317,20 @@ impl Default for Simulation {
             quantization_arcsec: 0.0,
             warmup_dph: 0.0,
             warmup_tau_s: DEFAULT_WARMUP_TAU_S,
+            room_c: DEFAULT_ROOM_C,
+            t_ref_c: DEFAULT_T_REF_C,
+            k_tempco_ppm_per_c: 0.0,
+            k_tempco2_ppm_per_c2: 0.0,
+            bias_tempco_dph_per_c: 0.0,
+            bias_tempco2_dph_per_c2: 0.0,
+            k2_tempco_ppm_per_c: 0.0,
+            hysteresis_k_ppm: 0.0,
+            hysteresis_dph: 0.0,
+            chamber_heat_c_per_min: DEFAULT_HEAT_C_PER_MIN,
+            chamber_cool_c_per_min: DEFAULT_COOL_C_PER_MIN,
+            case_tau_s: DEFAULT_CASE_TAU_S,
+            inside_tau_s: DEFAULT_INSIDE_TAU_S,
+            chamber_noise_c: DEFAULT_CHAMBER_NOISE_C,
         }
     }
 }
@@ -198,6 +380,60 @@ impl Simulation {
             ),
             warmup_dph: sp.opt("simulation.warmup_dph", s.warmup_dph, d.warmup_dph),
             warmup_tau_s: sp.opt("simulation.warmup_tau_s", s.warmup_tau_s, d.warmup_tau_s),
+            room_c: sp.opt("simulation.room_c", s.room_c, d.room_c),
+            t_ref_c: sp.opt("simulation.t_ref_c", s.t_ref_c, d.t_ref_c),
+            k_tempco_ppm_per_c: sp.opt(
+                "simulation.k_tempco_ppm_per_c",
+                s.k_tempco_ppm_per_c,
+                d.k_tempco_ppm_per_c,
+            ),
+            k_tempco2_ppm_per_c2: sp.opt(
+                "simulation.k_tempco2_ppm_per_c2",
+                s.k_tempco2_ppm_per_c2,
+                d.k_tempco2_ppm_per_c2,
+            ),
+            bias_tempco_dph_per_c: sp.opt(
+                "simulation.bias_tempco_dph_per_c",
+                s.bias_tempco_dph_per_c,
+                d.bias_tempco_dph_per_c,
+            ),
+            bias_tempco2_dph_per_c2: sp.opt(
+                "simulation.bias_tempco2_dph_per_c2",
+                s.bias_tempco2_dph_per_c2,
+                d.bias_tempco2_dph_per_c2,
+            ),
+            k2_tempco_ppm_per_c: sp.opt(
+                "simulation.k2_tempco_ppm_per_c",
+                s.k2_tempco_ppm_per_c,
+                d.k2_tempco_ppm_per_c,
+            ),
+            hysteresis_k_ppm: sp.opt(
+                "simulation.hysteresis_k_ppm",
+                s.hysteresis_k_ppm,
+                d.hysteresis_k_ppm,
+            ),
+            hysteresis_dph: sp.opt(
+                "simulation.hysteresis_dph",
+                s.hysteresis_dph,
+                d.hysteresis_dph,
+            ),
+            chamber_heat_c_per_min: sp.opt(
+                "simulation.chamber_heat_c_per_min",
+                s.chamber_heat_c_per_min,
+                d.chamber_heat_c_per_min,
+            ),
+            chamber_cool_c_per_min: sp.opt(
+                "simulation.chamber_cool_c_per_min",
+                s.chamber_cool_c_per_min,
+                d.chamber_cool_c_per_min,
+            ),
+            case_tau_s: sp.opt("simulation.case_tau_s", s.case_tau_s, d.case_tau_s),
+            inside_tau_s: sp.opt("simulation.inside_tau_s", s.inside_tau_s, d.inside_tau_s),
+            chamber_noise_c: sp.opt(
+                "simulation.chamber_noise_c",
+                s.chamber_noise_c,
+                d.chamber_noise_c,
+            ),
         })
     }
 }
@@ -258,6 +494,74 @@ pub(super) fn validate(s: &Simulation, cx: &Ctx<'_>) -> Result<(), PlanError> {
         if !(0.0..=max).contains(&v) {
             return Err(cx.err(key, format!("must be from 0 to {max} {unit} (got {v})")));
         }
+    }
+    // the temperature keys: finite, within a bound no gyro or chamber comes near
+    for (key, v, bound) in [
+        ("simulation.room_c", s.room_c, 60.0),
+        ("simulation.t_ref_c", s.t_ref_c, 100.0),
+        (
+            "simulation.k_tempco_ppm_per_c",
+            s.k_tempco_ppm_per_c,
+            10000.0,
+        ),
+        (
+            "simulation.k_tempco2_ppm_per_c2",
+            s.k_tempco2_ppm_per_c2,
+            1000.0,
+        ),
+        (
+            "simulation.bias_tempco_dph_per_c",
+            s.bias_tempco_dph_per_c,
+            1000.0,
+        ),
+        (
+            "simulation.bias_tempco2_dph_per_c2",
+            s.bias_tempco2_dph_per_c2,
+            100.0,
+        ),
+        (
+            "simulation.k2_tempco_ppm_per_c",
+            s.k2_tempco_ppm_per_c,
+            100000.0,
+        ),
+        ("simulation.hysteresis_k_ppm", s.hysteresis_k_ppm, 10000.0),
+        ("simulation.hysteresis_dph", s.hysteresis_dph, 1000.0),
+    ] {
+        let v = cx.finite(key, v)?;
+        if v.abs() > bound {
+            return Err(cx.err(key, format!("must be within ±{bound} (got {v})")));
+        }
+    }
+    for (key, v, max, unit) in [
+        (
+            "simulation.chamber_heat_c_per_min",
+            s.chamber_heat_c_per_min,
+            100.0,
+            "°C/min",
+        ),
+        (
+            "simulation.chamber_cool_c_per_min",
+            s.chamber_cool_c_per_min,
+            100.0,
+            "°C/min",
+        ),
+        ("simulation.case_tau_s", s.case_tau_s, 86400.0, "s"),
+        ("simulation.inside_tau_s", s.inside_tau_s, 86400.0, "s"),
+    ] {
+        let v = cx.finite(key, v)?;
+        if !(v > 0.0 && v <= max) {
+            return Err(cx.err(
+                key,
+                format!("must be > 0 and at most {max} {unit} (got {v})"),
+            ));
+        }
+    }
+    let noise = cx.finite("simulation.chamber_noise_c", s.chamber_noise_c)?;
+    if !(0.0..=5.0).contains(&noise) {
+        return Err(cx.err(
+            "simulation.chamber_noise_c",
+            format!("must be from 0 to 5 °C (got {noise})"),
+        ));
     }
     let tau = cx.finite("simulation.warmup_tau_s", s.warmup_tau_s)?;
     if !(tau > 0.0 && tau <= 86400.0) {

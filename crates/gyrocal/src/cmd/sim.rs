@@ -1,15 +1,19 @@
 //! `gyrocal sim`: the simulated bench (HP 34401A, ACL rate table, HRG gyro) on two
-//! pseudo-terminals, and optionally the table on a TCP port, in real time.
+//! pseudo-terminals, and optionally the table on a TCP port, in real time; with `--chamber`
+//! a thermal chamber around the gyro too (a Watlow F4 on a pseudo-terminal, Modbus RTU, or on
+//! a Modbus TCP port with `--chamber-tcp`; an Espec on a pseudo-terminal).
 //!
 //! Output contract (stdout, one JSON object per line, nothing else):
 //!
 //! 1. once the bench serves: `{"dmm": "/dev/pts/N", "dmm_port": "<the plan's [dmm] port>",
 //!    "table": "/dev/pts/M",
-//!    ["table_tcp": "tcp://127.0.0.1:P",] "pid", "seed", "time_scale", "truth": {...},
+//!    ["table_tcp": "tcp://127.0.0.1:P",] ["chamber": "/dev/pts/K" or "tcp://127.0.0.1:P",
+//!    "chamber_model": "watlow_f4"|"espec",] "pid", "seed", "time_scale", "truth": {...},
 //!    "faults": ["dmm:garble@reading100", ...]}`;
 //! 2. on SIGINT or SIGTERM, before exiting with 0: `{"exit": "SIGINT"|"SIGTERM", "table":
 //!    {"mode", "demanded_rate", "actual_rate", "stopped", "interlock_closed", "fault",
-//!    "silent", "demands_seen"}, "dmm": {"readings_taken", ...}, "faults": [{"spec",
+//!    "silent", "demands_seen"}, "dmm": {"readings_taken", ...}, ["chamber": {"setpoint_c",
+//!    "air_c", "case_c", "inside_c", "alarms", "requests_seen"},] "faults": [{"spec",
 //!    "fired"}]}`.
 //!
 //! Logs go to stderr. The slave side of each pseudo-terminal stays open in this process for as
@@ -68,6 +72,16 @@ pub struct SimArgs {
     /// The table's dialect: acl or aerosmith. Default: the configuration's.
     #[arg(long, value_name = "DIALECT", value_parser = ["acl", "aerosmith"])]
     pub table: Option<String>,
+    /// A thermal chamber around the gyro: watlow_f4 (Modbus RTU on a pseudo-terminal) or
+    /// espec (text lines on a pseudo-terminal); the JSON line's "chamber" is its path. The
+    /// gyro's scale factor and bias follow its inside temperature (the configuration's
+    /// tempcos). Default: the configuration's chamber, if any.
+    #[arg(long, value_name = "MODEL", value_parser = ["watlow_f4", "espec"])]
+    pub chamber: Option<String>,
+    /// Serve the chamber (a Watlow F4) as Modbus TCP on tcp://127.0.0.1:PORT instead of a
+    /// pseudo-terminal (0 picks a free port; the JSON line's "chamber" says which).
+    #[arg(long, value_name = "PORT")]
+    pub chamber_tcp: Option<u16>,
 }
 
 const AFTER_HELP: &str = "\
@@ -140,6 +154,31 @@ pub fn run(args: &SimArgs) -> Result<()> {
         )
         .into());
     }
+    if let Some(model) = &args.chamber {
+        let model = model
+            .parse::<gyrocal_sim::chamber::ChamberModel>()
+            .map_err(|e| BadInput(format!("--chamber: {e}")))?;
+        let mut chamber = config.chamber.take().unwrap_or_default();
+        chamber.model = model;
+        config.chamber = Some(chamber);
+    }
+    if args.chamber_tcp.is_some() {
+        match &mut config.chamber {
+            None => config.chamber = Some(Default::default()),
+            Some(c) if c.model != gyrocal_sim::chamber::ChamberModel::WatlowF4 => {
+                return Err(BadInput(
+                    "--chamber-tcp serves Modbus TCP: a Watlow F4's (--chamber watlow_f4)".into(),
+                )
+                .into());
+            }
+            Some(_) => {}
+        }
+    }
+    if let Some(c) = &config.chamber {
+        c.thermal
+            .validate()
+            .map_err(|e| BadInput(format!("simulated chamber: {e}")))?;
+    }
     match args.table.as_deref() {
         Some("aerosmith") => {
             config.table_wire = gyrocal_sim::bench::TableWire::Aerosmith(Default::default());
@@ -168,7 +207,14 @@ pub fn run(args: &SimArgs) -> Result<()> {
         .config
         .as_ref()
         .map_or("PLAN".to_string(), |p| p.display().to_string());
-    runtime.block_on(serve(config, specs, args.table_tcp, prologix_tcp, plan))
+    runtime.block_on(serve(
+        config,
+        specs,
+        args.table_tcp,
+        args.chamber_tcp,
+        prologix_tcp,
+        plan,
+    ))
 }
 
 /// Reads a bench TOML or a plan TOML (see [`SimArgs::config`]).
@@ -212,11 +258,12 @@ async fn serve(
     config: BenchConfig,
     specs: Vec<FaultSpec>,
     table_tcp: Option<u16>,
+    chamber_tcp: Option<u16>,
     prologix_tcp: bool,
     plan: String,
 ) -> Result<()> {
     if config.dmm_model.truevolt().is_some() {
-        return serve_lan(config, specs, table_tcp, plan).await;
+        return serve_lan(config, specs, table_tcp, chamber_tcp, plan).await;
     }
     let (table_dev, table_slave, table_path) =
         gyrocal_link::pseudo_terminal().context("creating the table's pseudo-terminal")?;
@@ -279,6 +326,7 @@ async fn serve(
         &specs,
     );
     let acceptor = serve_table_tcp(listener, &bench, wire, &mut hello)?;
+    let chamber = serve_chamber(&bench, chamber_tcp, &mut hello).await?;
     emit(&hello)?;
     tell_operator(&hello, &plan);
     tracing::info!(dmm = %dmm_port, table = %table_path, "simulated bench serving");
@@ -297,6 +345,7 @@ async fn serve(
     if let Some(b) = bridge {
         b.abort();
     }
+    chamber.stop();
     let BenchHandle { table, dmm, .. } = bench;
     table.shutdown();
     let _ = tokio::time::timeout(Duration::from_secs(1), dmm.stop()).await;
@@ -360,6 +409,72 @@ fn serve_table_tcp(
     })))
 }
 
+/// What serves the chamber: a TCP acceptor, or a pseudo-terminal's slave side kept open.
+#[derive(Default)]
+struct ChamberServing {
+    acceptor: Option<tokio::task::JoinHandle<()>>,
+    // the slave side, kept open so a client may close the port and open it again
+    slave: Option<Box<dyn Send>>,
+}
+
+impl ChamberServing {
+    fn stop(self) {
+        if let Some(a) = self.acceptor {
+            a.abort();
+        }
+        drop(self.slave);
+    }
+}
+
+/// Serves the bench's chamber, if it has one: Modbus TCP on 127.0.0.1:`tcp` (every client
+/// the same controller), else its wire on a pseudo-terminal; says where in `hello`.
+async fn serve_chamber(
+    bench: &BenchHandle,
+    tcp: Option<u16>,
+    hello: &mut Value,
+) -> Result<ChamberServing> {
+    let Some(chamber) = bench.chamber.clone() else {
+        return Ok(ChamberServing::default());
+    };
+    hello["chamber_model"] = serde_json::to_value(chamber.config().model)?;
+    if let Some(port) = tcp {
+        let listener = tokio::net::TcpListener::bind(("127.0.0.1", port))
+            .await
+            .with_context(|| format!("listening for the chamber on 127.0.0.1:{port}"))?;
+        let addr = listener
+            .local_addr()
+            .context("reading the chamber's TCP address")?;
+        hello["chamber"] = json!(format!("tcp://{addr}"));
+        let acceptor = tokio::spawn(async move {
+            loop {
+                match listener.accept().await {
+                    Ok((sock, peer)) => {
+                        tracing::info!(%peer, "chamber client connected over Modbus TCP");
+                        let _ = sock.set_nodelay(true);
+                        chamber.serve_tcp(sock);
+                    }
+                    Err(e) => {
+                        tracing::warn!(error = %e, "accepting a chamber client failed");
+                        tokio::time::sleep(Duration::from_millis(50)).await;
+                    }
+                }
+            }
+        });
+        return Ok(ChamberServing {
+            acceptor: Some(acceptor),
+            slave: None,
+        });
+    }
+    let (dev, slave, path) =
+        gyrocal_link::pseudo_terminal().context("creating the chamber's pseudo-terminal")?;
+    chamber.serve(dev);
+    hello["chamber"] = json!(path);
+    Ok(ChamberServing {
+        acceptor: None,
+        slave: Some(Box::new(slave)),
+    })
+}
+
 /// The human line (on stderr; stdout stays one JSON document per line for scripts): the
 /// command that runs a plan against this bench.
 fn tell_operator(hello: &Value, plan: &str) {
@@ -409,7 +524,7 @@ fn final_state(signal: &str, bench: &BenchHandle, schedule: &FaultSchedule) -> V
     let t = &bench.table;
     let now = tokio::time::Instant::now();
     let d = bench.dmm.stats();
-    json!({
+    let mut out = json!({
         "exit": signal,
         "table": {
             "mode": format!("{:?}", t.mode()).to_ascii_uppercase(),
@@ -438,7 +553,19 @@ fn final_state(signal: &str, bench: &BenchHandle, schedule: &FaultSchedule) -> V
             "spec": s.spec,
             "fired": s.fired,
         })).collect::<Vec<_>>(),
-    })
+    });
+    if let Some(c) = &bench.chamber {
+        let temps = c.temperatures(now);
+        out["chamber"] = json!({
+            "setpoint_c": c.setpoint_c(),
+            "air_c": temps.air_c,
+            "case_c": temps.case_c,
+            "inside_c": temps.inside_c,
+            "alarms": c.alarms().iter().map(|a| a.name()).collect::<Vec<_>>(),
+            "requests_seen": c.requests_seen(),
+        });
+    }
+    out
 }
 
 /// `gyrocal sim` with a Truevolt: the meter on tcp://127.0.0.1:P (every accepted connection
@@ -448,6 +575,7 @@ async fn serve_lan(
     config: BenchConfig,
     specs: Vec<FaultSpec>,
     table_tcp: Option<u16>,
+    chamber_tcp: Option<u16>,
     plan: String,
 ) -> Result<()> {
     let (table_dev, table_slave, table_path) =
@@ -507,6 +635,7 @@ async fn serve_lan(
         &specs,
     );
     let table_acceptor = serve_table_tcp(table_listener, &bench, wire, &mut hello)?;
+    let chamber = serve_chamber(&bench, chamber_tcp, &mut hello).await?;
     emit(&hello)?;
     tell_operator(&hello, &plan);
     let signal = tokio::select! {
@@ -519,6 +648,7 @@ async fn serve_lan(
     if let Some(a) = table_acceptor {
         a.abort();
     }
+    chamber.stop();
     let BenchHandle { table, dmm, .. } = bench;
     table.shutdown();
     let _ = tokio::time::timeout(Duration::from_secs(1), dmm.stop()).await;

@@ -1,0 +1,132 @@
+//! `gyrocal sim --chamber`: the simulated chamber served beside the meter and the table, on a
+//! pseudo-terminal (Modbus RTU, the real Watlow F4 driver opening its path) and on Modbus TCP
+//! (`--chamber-tcp`, the real driver connecting), and its state in the final JSON line. Real
+//! time with a time scale (pseudo-terminals and virtual time do not mix).
+#![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Stdio};
+use std::sync::mpsc;
+use std::time::Duration;
+
+use gyrocal_chamber::{Chamber, SafeState, WatlowConfig, WatlowF4};
+use serde_json::Value;
+
+/// A running `gyrocal sim`; killed on drop if still running.
+struct Sim {
+    child: Child,
+    lines: mpsc::Receiver<String>,
+    info: Value,
+}
+
+impl Sim {
+    fn start(extra: &[&str]) -> Sim {
+        let mut child = common::gyrocal()
+            .args(["sim", "--time-scale", "60", "--seed", "7"])
+            .args(extra)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .unwrap();
+        let stdout = child.stdout.take().unwrap();
+        let (tx, lines) = mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines() {
+                let Ok(line) = line else { break };
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        let first = lines
+            .recv_timeout(Duration::from_secs(10))
+            .expect("the JSON line with the device paths");
+        let info: Value = serde_json::from_str(&first).unwrap();
+        Sim { child, lines, info }
+    }
+
+    /// SIGINT; the final-state line.
+    fn interrupt(mut self) -> Value {
+        let pid = nix::unistd::Pid::from_raw(i32::try_from(self.child.id()).unwrap());
+        nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGINT).unwrap();
+        let last = self
+            .lines
+            .recv_timeout(Duration::from_secs(5))
+            .expect("the final-state line");
+        let status = self.child.wait().unwrap();
+        assert!(status.success(), "{status:?}");
+        serde_json::from_str(&last).unwrap()
+    }
+}
+
+impl Drop for Sim {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Sets 40 °C, waits 2 real seconds (2 sim minutes at × 60), reads: the air has ramped at
+/// the chamber's 3 °C/min, not jumped; then the safe state.
+async fn drive(f4: &mut WatlowF4) {
+    let id = f4.connect().await.unwrap();
+    assert!(id.model.contains("F4"), "{id:?}");
+    f4.set_setpoint(40.0).await.unwrap();
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let r = f4.read().await.unwrap();
+    assert_eq!(r.setpoint_c, 40.0);
+    // 2 sim minutes (and the transactions' time) at 3 °C/min from 23: about 29 °C
+    assert!(r.air_c > 27.0 && r.air_c < 32.0, "{r:?}");
+    assert!(r.product_c.unwrap() < r.air_c, "the product lags: {r:?}");
+    let report = f4.go_safe(SafeState::default()).await;
+    assert!(report.confirmed, "{report:?}");
+}
+
+#[test]
+fn chamber_on_a_pseudo_terminal_answers_the_watlow_driver() {
+    let sim = Sim::start(&["--chamber", "watlow_f4"]);
+    assert_eq!(sim.info["chamber_model"], "watlow_f4");
+    let path = sim.info["chamber"].as_str().unwrap().to_string();
+    assert!(path.starts_with("/dev/"), "{path}");
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    rt.block_on(async {
+        let mut f4 = WatlowF4::open_rtu(&path, 9600, WatlowConfig::default()).unwrap();
+        drive(&mut f4).await;
+    });
+    let last = sim.interrupt();
+    assert_eq!(last["chamber"]["setpoint_c"], 23.0, "{last}");
+    assert!(
+        last["chamber"]["requests_seen"].as_u64().unwrap() >= 10,
+        "{last}"
+    );
+}
+
+#[test]
+fn chamber_on_modbus_tcp_answers_the_watlow_driver() {
+    let sim = Sim::start(&["--chamber-tcp", "0"]);
+    let addr = sim.info["chamber"].as_str().unwrap().to_string();
+    assert!(addr.starts_with("tcp://127.0.0.1:"), "{addr}");
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    rt.block_on(async {
+        let mut f4 = WatlowF4::connect_tcp(&addr, WatlowConfig::default())
+            .await
+            .unwrap();
+        drive(&mut f4).await;
+    });
+    let last = sim.interrupt();
+    assert_eq!(last["chamber"]["setpoint_c"], 23.0, "{last}");
+}
+
+#[test]
+fn an_espec_over_tcp_is_refused_plainly() {
+    let out = common::gyrocal()
+        .args(["sim", "--chamber", "espec", "--chamber-tcp", "0"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--chamber-tcp serves Modbus TCP"), "{err}");
+}

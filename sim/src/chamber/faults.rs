@@ -1,0 +1,151 @@
+//! The chamber's faults: what can go wrong, when it happens, and the state of those that
+//! have happened.
+//!
+//! | fault | effect | on the Watlow F4 | on the Espec |
+//! |---|---|---|---|
+//! | `door`, `overtemp` | an alarm latched until reset | register 1061 / 1063 reads 1 (0 when clear); a write of 0 resets it | `ALARM?` lists code 5 / 1 (sim's choice, unconfirmed) |
+//! | `silent` | the controller answers nothing and executes nothing from then on | no reply | no reply |
+//! | `exception` | the requests hit are refused | exception reply (code 4, server device failure; or the code given to [`super::ChamberHandle::exception_on_register`] for one register) | `NA:DEVICE FAULT` |
+//! | `crc` | the replies hit are corrupted on the wire | RTU: the last CRC byte inverted; TCP: the protocol identifier 0x0001 | a digit of the reply becomes `#` |
+//! | `slow` | replies leave late | held back `S` sim seconds | the same |
+//!
+//! A fault fires at its trigger: the N-th request the chamber sees (from 1, counting every
+//! request addressed to it, whatever the dialect) or a sim time; it is checked at each
+//! request, so a time trigger fires at the first request at or after its time (an alarm
+//! also fires at that time for a reader of the handle).
+
+/// An alarm the simulated chamber can latch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ChamberAlarm {
+    /// The door was opened (Watlow register 1061, Espec code 5).
+    Door,
+    /// The over-temperature limit tripped (Watlow register 1063, Espec code 1).
+    OverTemperature,
+}
+
+impl ChamberAlarm {
+    /// The alarm's Watlow F4 holding register (sim's choice; the driver's `alarm_registers`
+    /// must name it with `active = 1`).
+    pub fn register(self) -> u16 {
+        match self {
+            ChamberAlarm::Door => super::REG_ALARM_DOOR,
+            ChamberAlarm::OverTemperature => super::REG_ALARM_OVERTEMP,
+        }
+    }
+
+    /// The alarm's Espec `ALARM?` code (sim's choice).
+    pub fn espec_code(self) -> u16 {
+        match self {
+            ChamberAlarm::Door => 5,
+            ChamberAlarm::OverTemperature => 1,
+        }
+    }
+
+    /// Its name, for messages.
+    pub fn name(self) -> &'static str {
+        match self {
+            ChamberAlarm::Door => "door open",
+            ChamberAlarm::OverTemperature => "over-temperature",
+        }
+    }
+}
+
+/// What a chamber fault does.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ChamberFaultKind {
+    /// Latches an alarm.
+    Alarm(ChamberAlarm),
+    /// The controller stops answering (and executing) for good.
+    Silent,
+    /// `count` requests are refused with an exception (code 4) / `NA:`.
+    Exception,
+    /// `count` replies are corrupted on the wire.
+    Corrupt,
+    /// Replies are held back this many sim seconds (`count` of them; 0: every one).
+    Slow(f64),
+}
+
+/// When a chamber fault fires.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ChamberTrigger {
+    /// At the N-th request the chamber sees (from 1).
+    Request(u64),
+    /// At this sim time (s since the bench started).
+    Time(f64),
+}
+
+/// A fault armed on the chamber.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ChamberFault {
+    /// What happens.
+    pub kind: ChamberFaultKind,
+    /// When.
+    pub trigger: ChamberTrigger,
+    /// How many requests or replies it hits (exception, crc, slow; 0 for slow: every one).
+    pub count: u32,
+}
+
+/// The faults in force on the wire now.
+#[derive(Debug, Default)]
+pub(crate) struct WireFaults {
+    pub(crate) silent: bool,
+    /// Requests still to refuse with exception 4.
+    pub(crate) exceptions_left: u32,
+    /// A register refused with an exception code, every time.
+    pub(crate) register_exceptions: Vec<(u16, u8)>,
+    /// Replies still to corrupt.
+    pub(crate) corrupt_left: u32,
+    /// The delay of slow replies (sim s) and how many are left (`None`: every one).
+    pub(crate) slow: Option<(f64, Option<u32>)>,
+}
+
+/// What happens to one request's reply.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub(crate) struct Fate {
+    /// No reply at all, and nothing executed.
+    pub(crate) silent: bool,
+    /// Refused (exception 4, `NA:`).
+    pub(crate) refused: bool,
+    /// The reply corrupted.
+    pub(crate) corrupt: bool,
+    /// The reply held back, sim s.
+    pub(crate) delay_s: f64,
+}
+
+impl WireFaults {
+    /// The fate of the next request (using up the faults it takes).
+    pub(crate) fn next(&mut self) -> Fate {
+        if self.silent {
+            return Fate {
+                silent: true,
+                ..Fate::default()
+            };
+        }
+        let mut fate = Fate::default();
+        if self.exceptions_left > 0 {
+            self.exceptions_left -= 1;
+            fate.refused = true;
+        } else if self.corrupt_left > 0 {
+            self.corrupt_left -= 1;
+            fate.corrupt = true;
+        }
+        if let Some((delay, left)) = self.slow {
+            fate.delay_s = delay;
+            match left {
+                Some(n) if n <= 1 => self.slow = None,
+                Some(n) => self.slow = Some((delay, Some(n - 1))),
+                None => {}
+            }
+        }
+        fate
+    }
+
+    /// The exception code a register is refused with, if any.
+    pub(crate) fn register_exception(&self, first: u16, count: u16) -> Option<u8> {
+        let last = u32::from(first) + u32::from(count.max(1)) - 1;
+        self.register_exceptions
+            .iter()
+            .find(|(r, _)| (u32::from(first)..=last).contains(&u32::from(*r)))
+            .map(|&(_, c)| c)
+    }
+}
