@@ -146,3 +146,28 @@ fn an_espec_over_tcp_is_refused_plainly() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("--chamber-tcp serves Modbus TCP"), "{err}");
 }
+
+#[test]
+fn an_espec_on_a_pseudo_terminal_answers_the_espec_driver() {
+    let sim = Sim::start(&["--chamber", "espec"]);
+    assert_eq!(sim.info["chamber_model"], "espec");
+    let path = sim.info["chamber"].as_str().unwrap().to_string();
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    rt.block_on(async {
+        let config = gyrocal_chamber::EspecConfig {
+            mode_query: true,
+            ..gyrocal_chamber::EspecConfig::default()
+        };
+        let mut espec = gyrocal_chamber::Espec::open(&path, config).await.unwrap();
+        let id = espec.connect().await.unwrap();
+        assert!(id.detail.contains("T,T,S2,160.0"), "{id:?}");
+        espec.set_setpoint(10.0).await.unwrap();
+        let r = espec.read().await.unwrap();
+        assert_eq!(r.setpoint_c, 10.0);
+        assert_eq!(r.mode, gyrocal_chamber::ChamberMode::Constant);
+        let report = espec.go_safe(SafeState::Standby).await;
+        assert!(report.confirmed, "{report:?}");
+    });
+    let last = sim.interrupt();
+    assert_eq!(last["chamber"]["setpoint_c"], 10.0, "{last}");
+}
