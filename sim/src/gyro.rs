@@ -195,6 +195,22 @@ impl Default for GyroConfig {
     }
 }
 
+impl GyroConfig {
+    /// Takes the temperature keys of a plan's `[simulation]` section (`room_c`, `t_ref_c`,
+    /// the tempcos and the hysteresis), leaving every other field as it is.
+    pub fn set_temperature_keys(&mut self, s: &gyrocal_files::plan::Simulation) {
+        self.room_c = s.room_c;
+        self.t_ref_c = s.t_ref_c;
+        self.k_tempco_ppm_per_c = s.k_tempco_ppm_per_c;
+        self.k_tempco2_ppm_per_c2 = s.k_tempco2_ppm_per_c2;
+        self.bias_tempco_dph_per_c = s.bias_tempco_dph_per_c;
+        self.bias_tempco2_dph_per_c2 = s.bias_tempco2_dph_per_c2;
+        self.k2_tempco_ppm_per_c = s.k2_tempco_ppm_per_c;
+        self.hysteresis_k_ppm = s.hysteresis_k_ppm;
+        self.hysteresis_dph = s.hysteresis_dph;
+    }
+}
+
 /// The IEEE 952 rate-noise terms and the warm-up of a simulated gyro as set (a value that is
 /// not finite or is negative is 0, off; so is a warm-up with a time constant that is not > 0).
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]

@@ -11,7 +11,7 @@ use std::process::{Child, Stdio};
 use std::sync::mpsc;
 use std::time::Duration;
 
-use gyrocal_chamber::{Chamber, SafeState, WatlowConfig, WatlowF4};
+use gyrocal_chamber::{AlarmRegister, Chamber, SafeState, WatlowConfig, WatlowF4};
 use serde_json::Value;
 
 /// A running `gyrocal sim`; killed on drop if still running.
@@ -106,18 +106,34 @@ fn chamber_on_a_pseudo_terminal_answers_the_watlow_driver() {
 
 #[test]
 fn chamber_on_modbus_tcp_answers_the_watlow_driver() {
-    let sim = Sim::start(&["--chamber-tcp", "0"]);
+    // a door opened 5 sim minutes in (5 real seconds at × 60), read through the driver's
+    // alarm registers (the simulated F4's 1061, 1 when latched)
+    let sim = Sim::start(&["--chamber-tcp", "0", "--fault", "chamber:door@t=300s"]);
+    assert_eq!(sim.info["faults"][0], "chamber:door@t=300s");
     let addr = sim.info["chamber"].as_str().unwrap().to_string();
     assert!(addr.starts_with("tcp://127.0.0.1:"), "{addr}");
     let rt = tokio::runtime::Runtime::new().unwrap();
     rt.block_on(async {
-        let mut f4 = WatlowF4::connect_tcp(&addr, WatlowConfig::default())
-            .await
-            .unwrap();
+        let config = WatlowConfig {
+            alarms: vec![AlarmRegister {
+                register: 1061,
+                mask: 0xFFFF,
+                active: 1,
+                name: "door open".into(),
+            }],
+            ..WatlowConfig::default()
+        };
+        let mut f4 = WatlowF4::connect_tcp(&addr, config).await.unwrap();
         drive(&mut f4).await;
+        // (that no alarm is there before its time is asserted in virtual time, in the
+        // simulator's own tests; real time here only makes sure it has come)
+        tokio::time::sleep(Duration::from_secs(4)).await;
+        assert_eq!(f4.read().await.unwrap().alarms, ["door open"]);
     });
     let last = sim.interrupt();
     assert_eq!(last["chamber"]["setpoint_c"], 23.0, "{last}");
+    assert_eq!(last["chamber"]["alarms"][0], "door open", "{last}");
+    assert_eq!(last["faults"][0]["fired"], true, "{last}");
 }
 
 #[test]
@@ -129,4 +145,29 @@ fn an_espec_over_tcp_is_refused_plainly() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("--chamber-tcp serves Modbus TCP"), "{err}");
+}
+
+#[test]
+fn an_espec_on_a_pseudo_terminal_answers_the_espec_driver() {
+    let sim = Sim::start(&["--chamber", "espec"]);
+    assert_eq!(sim.info["chamber_model"], "espec");
+    let path = sim.info["chamber"].as_str().unwrap().to_string();
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    rt.block_on(async {
+        let config = gyrocal_chamber::EspecConfig {
+            mode_query: true,
+            ..gyrocal_chamber::EspecConfig::default()
+        };
+        let mut espec = gyrocal_chamber::Espec::open(&path, config).await.unwrap();
+        let id = espec.connect().await.unwrap();
+        assert!(id.detail.contains("T,T,S2,160.0"), "{id:?}");
+        espec.set_setpoint(10.0).await.unwrap();
+        let r = espec.read().await.unwrap();
+        assert_eq!(r.setpoint_c, 10.0);
+        assert_eq!(r.mode, gyrocal_chamber::ChamberMode::Constant);
+        let report = espec.go_safe(SafeState::Standby).await;
+        assert!(report.confirmed, "{report:?}");
+    });
+    let last = sim.interrupt();
+    assert_eq!(last["chamber"]["setpoint_c"], 10.0, "{last}");
 }

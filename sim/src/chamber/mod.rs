@@ -113,6 +113,34 @@ impl Default for ChamberSimConfig {
     }
 }
 
+impl ChamberSimConfig {
+    /// The chamber a plan's `[simulation]` section describes the physics of (`room_c`,
+    /// `chamber_heat_c_per_min`, `chamber_cool_c_per_min`, `case_tau_s`, `inside_tau_s`,
+    /// `chamber_noise_c`), with the controller `model` and Modbus `slave` of its `[chamber]`.
+    /// The rest stays at the defaults above (range −70 .. 180 °C, one decimal, alarms at 1061
+    /// and 1063): a plan's `alarm_registers` should name 1061 and 1063 with `active = 1`, and
+    /// its `chamber_on_output` goes to [`ChamberSimConfig::chamber_on_output`].
+    pub fn from_simulation(
+        model: ChamberModel,
+        slave: u8,
+        s: &gyrocal_files::plan::Simulation,
+    ) -> Self {
+        ChamberSimConfig {
+            model,
+            slave,
+            thermal: ThermalConfig {
+                room_c: s.room_c,
+                heat_c_per_min: s.chamber_heat_c_per_min,
+                cool_c_per_min: s.chamber_cool_c_per_min,
+                case_tau_s: s.case_tau_s,
+                inside_tau_s: s.inside_tau_s,
+                sensor_noise_c: s.chamber_noise_c,
+            },
+            ..ChamberSimConfig::default()
+        }
+    }
+}
+
 /// The controller's mode as the simulated chamber keeps it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]

@@ -158,6 +158,12 @@ fn write_register(s: &mut State, register: u16, value: u16) -> Result<(), u8> {
     Ok(())
 }
 
+/// The `n` registers from `first` (the caller has checked they end at or below 0xFFFF; any
+/// beyond are left out rather than wrapped).
+fn registers(first: u16, n: u16) -> impl Iterator<Item = u16> {
+    (u32::from(first)..u32::from(first) + u32::from(n)).filter_map(|r| u16::try_from(r).ok())
+}
+
 /// Executes one request PDU; the reply PDU (an exception's included).
 fn execute(s: &mut State, pdu: &[u8]) -> Vec<u8> {
     let Some(&function) = pdu.first() else {
@@ -182,7 +188,7 @@ fn execute(s: &mut State, pdu: &[u8]) -> Vec<u8> {
                 return exception(function, EX_ADDRESS);
             }
             let mut reply = vec![0x03, (n * 2) as u8];
-            for r in first..first + n {
+            for r in registers(first, n) {
                 match read_register(s, r) {
                     Ok(v) => reply.extend_from_slice(&v.to_be_bytes()),
                     Err(code) => return exception(function, code),
@@ -203,7 +209,7 @@ fn execute(s: &mut State, pdu: &[u8]) -> Vec<u8> {
             if u32::from(first) + u32::from(n) > 0x1_0000 {
                 return exception(function, EX_ADDRESS);
             }
-            for (i, r) in (first..first + n).enumerate() {
+            for (i, r) in registers(first, n).enumerate() {
                 let Some(v) = be16(pdu, 6 + 2 * i) else {
                     return exception(function, EX_VALUE);
                 };
@@ -355,6 +361,55 @@ where
         tokio::time::sleep(chamber.real(delay)).await;
         if stream.write_all(&reply).await.is_err() || stream.flush().await.is_err() {
             return;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::chamber::ChamberSimConfig;
+    use rand::rngs::StdRng;
+    use rand::{RngExt, SeedableRng};
+
+    /// Any PDU a master (or line noise with a valid CRC) may send gets a reply or an
+    /// exception, never a panic: the last register, counts at and past the limits, short
+    /// PDUs, random bytes.
+    #[tokio::test(start_paused = true)]
+    async fn hostile_pdus_never_panic() {
+        let h = ChamberHandle::new(ChamberSimConfig::default(), 1.0, 1);
+        let mut s = h.lock();
+        assert_eq!(
+            execute(&mut s, &[0x03, 0xFF, 0xFF, 0x00, 0x01]),
+            [0x83, 0x02]
+        );
+        assert_eq!(
+            execute(&mut s, &[0x03, 0xFF, 0xFF, 0x00, 0x02]),
+            [0x83, 0x02]
+        );
+        assert_eq!(
+            execute(&mut s, &[0x03, 0x00, 0x64, 0x00, 0x00]),
+            [0x83, 0x03]
+        );
+        assert_eq!(
+            execute(&mut s, &[0x03, 0x00, 0x64, 0x00, 0x7E]),
+            [0x83, 0x03]
+        );
+        assert_eq!(execute(&mut s, &[0x06, 0x01]), [0x86, 0x03]);
+        assert_eq!(execute(&mut s, &[]), [0x80, 0x01]);
+        assert_eq!(
+            execute(&mut s, &[0x10, 0xFF, 0xFF, 0x00, 0x01, 0x02, 0x00]),
+            [0x90, 0x03]
+        );
+        let mut rng = StdRng::seed_from_u64(5);
+        for _ in 0..20_000 {
+            let len = rng.random_range(0..12);
+            let mut pdu: Vec<u8> = (0..len).map(|_| rng.random()).collect();
+            if let Some(f) = pdu.first_mut() {
+                *f = [0x03, 0x06, 0x10, 0x04][usize::from(*f % 4)];
+            }
+            let reply = execute(&mut s, &pdu);
+            assert!(!reply.is_empty());
         }
     }
 }
