@@ -15,9 +15,16 @@
 //! | `rate_noise_dps`, `ripple_dps` | `table.rate_noise_std`, `table.ripple_amplitude` |
 //! | `arw_deg_rt_h`, `bias_instability_dph`, `rrw_dph_rt_h`, `quantization_arcsec`, `warmup_dph`, `warmup_tau_s` | the same `gyro` fields (rate noise in °/h through the scale factor; see [`crate::gyro`]) |
 //!
+//! | `room_c`, `t_ref_c`, `k_tempco_ppm_per_c`, `k_tempco2_ppm_per_c2`, `bias_tempco_dph_per_c`, `bias_tempco2_dph_per_c2`, `k2_tempco_ppm_per_c`, `hysteresis_k_ppm`, `hysteresis_dph` | the same `gyro` fields (its K, bias and K2 follow its inside temperature; see [`crate::gyro`]) |
+//! | `chamber_heat_c_per_min`, `chamber_cool_c_per_min`, `case_tau_s`, `inside_tau_s`, `chamber_noise_c`, `room_c` | the chamber's `thermal` physics (`heat_c_per_min`, `cool_c_per_min`, `case_tau_s`, `inside_tau_s`, `sensor_noise_c`, `room_c`) |
+//!
+//! A plan with a `[chamber]` gets a simulated controller of its `model`, with its `slave` and
+//! `chamber_on_output`, on the link the run's real driver is given.
+//!
 //! The gyro's own white noise is switched off, so `noise_v` alone sets the reading scatter
 //! and a plan reads as what it means.
 
+use gyrocal_files::plan::ChamberModel;
 use gyrocal_files::{DmmModel, Plan, TableDialect};
 
 use crate::bench::{BenchConfig, DmmLink, TableWire};
@@ -48,6 +55,8 @@ pub fn bench_config(plan: &Plan) -> BenchConfig {
     b.gyro.quantization_arcsec = s.quantization_arcsec;
     b.gyro.warmup_dph = s.warmup_dph;
     b.gyro.warmup_tau_s = s.warmup_tau_s;
+    b.gyro.set_temperature_keys(s);
+    b.chamber = plan_chamber(plan);
     // the plan's dialect is the wire the simulated table speaks (the Aerosmith wire with the
     // defaults the driver assumes)
     b.table_wire = match plan.table().dialect {
@@ -75,4 +84,18 @@ pub fn bench_config(plan: &Plan) -> BenchConfig {
     b.dmm.line_hz = plan.dmm().line_hz;
     b.dmm.framing = plan.dmm().framing;
     b
+}
+
+/// The simulated controller for the plan's `[chamber]` (none without one), with the
+/// `[simulation]` section's chamber physics.
+fn plan_chamber(plan: &Plan) -> Option<crate::chamber::ChamberSimConfig> {
+    let c = plan.chamber()?;
+    let model = match c.model {
+        ChamberModel::WatlowF4 => crate::chamber::ChamberModel::WatlowF4,
+        ChamberModel::Espec => crate::chamber::ChamberModel::Espec,
+    };
+    let mut sim =
+        crate::chamber::ChamberSimConfig::from_simulation(model, c.slave, plan.simulation());
+    sim.chamber_on_output = c.chamber_on_output;
+    Some(sim)
 }

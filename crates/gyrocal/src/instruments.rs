@@ -9,12 +9,13 @@
 //! [`with_table`] for a dialect. Each arm costs one monomorphised copy of the engine, so
 //! arms are per meter *or* per table, never per pair.
 
+use gyrocal_chamber::AnyChamber;
 use gyrocal_files::plan::DmmModel;
 use gyrocal_files::{Plan, TableDialect};
 use gyrocal_hp34401a::{AutoZero, DcvConfig, DriverOptions, MeterTiming, Strategy};
 use gyrocal_link::Transport;
 use gyrocal_meter::{Multimeter, TimingModel};
-use gyrocal_run::{Bench, MeterAndTable};
+use gyrocal_run::{Bench, MeterTableChamber};
 
 /// The 34401A configuration a plan asks for.
 pub fn hp34401a_config(plan: &Plan) -> DcvConfig {
@@ -116,13 +117,16 @@ pub trait WithInstruments {
 }
 
 /// Builds the plan's multimeter on `dmm_link` and its table on `table_link` into a bench
-/// ([`MeterAndTable`]), and hands it to `job`. A plan without a table (`[drift] table = "none"`) gets
+/// ([`MeterTableChamber`], with `chamber`: the plan's, built by [`crate::chamber`], or none),
+/// and hands it to `job`. The chamber is one run-time type ([`AnyChamber`]), so the engine is
+/// still one copy per meter and per table, not per chamber too. A plan without a table (`[drift] table = "none"`) gets
 /// [`gyrocal_table::NoTable`] whatever link is given (this is the one place that decides it);
 /// a caller on instruments passes `None` for it, so no table port is opened.
 pub async fn with_instruments<D, L, J>(
     plan: &Plan,
     dmm_link: D,
     table_link: Option<L>,
+    chamber: AnyChamber,
     job: J,
 ) -> J::Output
 where
@@ -130,11 +134,17 @@ where
     L: Transport + 'static,
     J: WithInstruments,
 {
-    with_meter(plan, dmm_link, table_link, job).await
+    with_meter(plan, dmm_link, table_link, chamber, job).await
 }
 
 /// The meter arm: one per multimeter model family.
-async fn with_meter<D, L, J>(plan: &Plan, dmm_link: D, table_link: Option<L>, job: J) -> J::Output
+async fn with_meter<D, L, J>(
+    plan: &Plan,
+    dmm_link: D,
+    table_link: Option<L>,
+    chamber: AnyChamber,
+    job: J,
+) -> J::Output
 where
     D: Transport + 'static,
     L: Transport + 'static,
@@ -149,17 +159,23 @@ where
                 plan.dmm().baud,
             )
             .over_gpib(plan.dmm().port.is_gpib());
-            with_table(plan, dmm, table_link, job).await
+            with_table(plan, dmm, table_link, chamber, job).await
         }
         Some(model) => {
             let dmm = gyrocal_truevolt::TruevoltMeter::new(dmm_link, truevolt_options(model, plan));
-            with_table(plan, dmm, table_link, job).await
+            with_table(plan, dmm, table_link, chamber, job).await
         }
     }
 }
 
 /// The table arm: one per dialect.
-async fn with_table<M, L, J>(plan: &Plan, dmm: M, table_link: Option<L>, job: J) -> J::Output
+async fn with_table<M, L, J>(
+    plan: &Plan,
+    dmm: M,
+    table_link: Option<L>,
+    chamber: AnyChamber,
+    job: J,
+) -> J::Output
 where
     M: Multimeter + 'static,
     L: Transport + 'static,
@@ -167,7 +183,11 @@ where
 {
     let Some(table_link) = table_link.filter(|_| plan.has_table()) else {
         return job
-            .call(MeterAndTable::new(dmm, gyrocal_table::NoTable::new()))
+            .call(MeterTableChamber::new(
+                dmm,
+                gyrocal_table::NoTable::new(),
+                chamber,
+            ))
             .await;
     };
     let policy = gyrocal_table::PolicyConfig {
@@ -181,7 +201,7 @@ where
                 ..gyrocal_acl::AclConfig::default()
             };
             let table = gyrocal_acl::AclTable::new(table_link, config);
-            job.call(MeterAndTable::new(dmm, table)).await
+            job.call(MeterTableChamber::new(dmm, table, chamber)).await
         }
         TableDialect::Aerosmith => {
             let config = gyrocal_aerosmith::AerosmithConfig {
@@ -189,7 +209,7 @@ where
                 ..gyrocal_aerosmith::AerosmithConfig::default()
             };
             let table = gyrocal_aerosmith::AerosmithTable::new(table_link, config);
-            job.call(MeterAndTable::new(dmm, table)).await
+            job.call(MeterTableChamber::new(dmm, table, chamber)).await
         }
     }
 }

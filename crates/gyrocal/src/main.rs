@@ -12,6 +12,7 @@
     rustdoc::bare_urls
 )]
 
+mod chamber;
 mod cmd;
 mod examples;
 mod instruments;

@@ -27,7 +27,9 @@ pub(super) async fn execute(
             tokio::spawn(pace(x));
         }
         let time_scale = cfg.time_scale;
-        let bench = gyrocal_sim::bench::Bench::spawn(cfg);
+        let mut bench = gyrocal_sim::bench::Bench::spawn(cfg);
+        // the real chamber driver over the simulated controller's link (none without [chamber])
+        let chamber = crate::chamber::simulated(&plan, bench.chamber_link())?;
         let mut schedule = gyrocal_sim::faults::schedule(faults, &bench.handle, time_scale);
         let (dir, run) = open_run_dir(args, &plan, records)?;
         let (summary, run, signal) = match &plan.dmm().port {
@@ -38,7 +40,7 @@ pub(super) async fn execute(
                 let dmm = gyrocal_link::PrologixTransport::open(bench.dmm, options)
                     .await
                     .context("opening the simulated Prologix controller")?;
-                sequence(plan, dmm, Some(bench.table), run).await?
+                sequence(plan, dmm, Some(bench.table), chamber, run).await?
             }
             // a Truevolt on its LAN socket: device clear reconnects to the simulated meter
             _ if plan.dmm().scpi_socket() => {
@@ -46,9 +48,9 @@ pub(super) async fn execute(
                     anyhow::bail!("the simulated bench has no LAN meter for a Truevolt plan");
                 };
                 let dmm = gyrocal_link::SocketTransport::new(bench.dmm.boxed(), lan.connector());
-                sequence(plan, dmm, Some(bench.table), run).await?
+                sequence(plan, dmm, Some(bench.table), chamber, run).await?
             }
-            _ => sequence(plan, bench.dmm, Some(bench.table), run).await?,
+            _ => sequence(plan, bench.dmm, Some(bench.table), chamber, run).await?,
         };
         // let the simulator take the last commands before it is dropped
         tokio::time::sleep(Duration::from_millis(50)).await;
@@ -123,8 +125,9 @@ pub(super) async fn execute(
         } else {
             None
         };
+        let chamber = crate::chamber::open(&plan, None).await?;
         let (dir, run) = open_run_dir(args, &plan, records)?;
-        let (summary, run, signal) = sequence(plan, dmm, table, run).await?;
+        let (summary, run, signal) = sequence(plan, dmm, table, chamber, run).await?;
         Ok((dir, summary, run, signal, None))
     }
 }
@@ -155,6 +158,7 @@ pub(super) async fn sequence<D, T>(
     plan: Plan,
     dmm_link: D,
     table_link: Option<T>,
+    chamber: gyrocal_chamber::AnyChamber,
     run: RunDir,
 ) -> anyhow::Result<(RunSummary, RunDir, Option<StopSignal>)>
 where
@@ -162,7 +166,8 @@ where
     T: Transport + 'static,
 {
     let p = plan.clone();
-    crate::instruments::with_instruments(&p, dmm_link, table_link, Sequence { plan, run }).await
+    let job = Sequence { plan, run };
+    crate::instruments::with_instruments(&p, dmm_link, table_link, chamber, job).await
 }
 
 /// The run's job once its instruments are built.
