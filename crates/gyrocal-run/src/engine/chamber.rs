@@ -332,6 +332,16 @@ impl<B: Bench> Engine<B> {
             } else {
                 None
             };
+            self.emit(super::Event::Soak {
+                point: soak.point,
+                target_c: soak.setpoint_c,
+                setpoint_c: r.setpoint_c,
+                air_c: r.air_c,
+                gyro_c: r.product_c,
+                held: held_since.map(|since| now - since),
+                soak: soak.soak,
+                waited: start.elapsed(),
+            })?;
             if let Some(since) = held_since
                 && now - since >= soak.soak
             {
