@@ -256,6 +256,30 @@ mod tests {
         assert!(e.total >= e.bound);
     }
 
+    /// A temperature series' estimate and bound count its soaks: the chamber's ramps at the
+    /// plan's rate (from ambient) and the soak time at each temperature, as `gyrocal check`
+    /// says them, on top of the steps.
+    #[test]
+    fn a_series_counts_its_soaks_in_the_estimate_and_the_bound() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/series.toml");
+        let plan = Plan::from_file(&path).unwrap();
+        let e = estimate(&plan, &plan.schedule(), 0.0, &timing(&plan));
+        let (ramps, soaks) =
+            gyrocal_files::plan::ramps_and_soaks(plan.series().unwrap(), plan.chamber().unwrap());
+        // 25 → -20 → 60 → 25 °C from 23 °C at 1 °C/min: 162 min; 4 soaks of 30 min
+        assert_eq!(ramps, Duration::from_secs(162 * 60));
+        assert_eq!(soaks, Duration::from_secs(120 * 60));
+        assert_eq!(e.soaks, ramps + soaks);
+        let steps: Duration = e.steps.iter().map(|s| s.bound).sum();
+        assert_eq!(e.bound, steps + e.soaks);
+        assert!(e.total >= e.bound);
+        // resumed at the third temperature: its soak from ambient, then the last one's
+        let rest = &plan.schedule()[10..];
+        let r = estimate(&plan, rest, 0.0, &timing(&plan));
+        let want = (60.0 - 23.0) + (60.0 - 25.0) + 2.0 * 30.0;
+        assert_eq!(r.soaks, Duration::from_secs_f64(want * 60.0));
+    }
+
     #[test]
     fn ramps_follow_the_schedule_order() {
         let plan = paper();

@@ -6,6 +6,9 @@
 //! - [`bench`](mod@bench): the instruments by role ([`Bench`]), so the engine is generic over one
 //!   parameter whatever the number of roles, and the same code drives real instruments and
 //!   the simulated bench, in real or virtual time.
+//!   A temperature series adds the thermal chamber ([`MeterTableChamber`]): the engine soaks
+//!   at each temperature, watches the chamber during each step, stops on its alarms and
+//!   leaves it in its safe state (after the table) on every way out ([`ChamberRest`]).
 //! - [`sink`]: where the results go ([`Sink`]): the run directory, the progress display, the
 //!   live monitors, and whatever is added next, through one trait.
 //! - [`estimate`]: the plan's duration from the instruments' timing models, and the physical

@@ -578,9 +578,82 @@ async fn a_series_on_a_bench_without_a_chamber_is_refused_before_anything_moves(
         summary.reason
     );
     assert_eq!(summary.steps_recorded, 0);
-    // NoChamber's safe state is trivially confirmed; the plan's chamber was never reached
-    assert!(matches!(
-        summary.chamber,
-        ChamberRest::Confirmed { .. } | ChamberRest::NoChamber
-    ));
+    // the plan's chamber was never reached: not "confirmed" by a bench that has none
+    assert!(
+        matches!(&summary.chamber, ChamberRest::NotConfirmed { reason, .. } if reason.contains("never reached")),
+        "{:?}",
+        summary.chamber
+    );
+}
+
+/// Like [`run_series`], with `on_event` called for every event (a stop during a soak).
+async fn run_series_events(
+    plan: &Plan,
+    run: RunDir,
+    chamber: FakeChamber,
+    on_event: impl Fn(&Event, &watch::Sender<StopRequest>) + Send + 'static,
+) -> RunSummary {
+    let bench = Bench::spawn(bench_config(plan));
+    let dmm = common::hp34401a(bench.dmm, plan);
+    let table = AclTable::new(bench.table, table_config(plan));
+    let (events_tx, mut events) = tokio::sync::mpsc::unbounded_channel();
+    let mut engine = Engine::on_bench(
+        plan.clone(),
+        MeterTableChamber::new(dmm, table, chamber),
+        run,
+        SequencerOptions::default(),
+    )
+    .with_events(events_tx);
+    let (stop_tx, stop_rx) = watch::channel(StopRequest::None);
+    tokio::spawn(async move {
+        while let Some(e) = events.recv().await {
+            on_event(&e, &stop_tx);
+        }
+    });
+    engine.run(stop_rx).await
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_series_stopped_mid_soak_soaks_again_when_resumed() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let plan = series("[25, -20]", 1.0, 60.0);
+    let (chamber, shared) = FakeChamber::new(23.0, no_lag());
+    // SIGINT two minutes into the soak at -20 °C (mid-ramp)
+    let summary = run_series_events(&plan, new_run(&plan, &dir), chamber, |e, stop| {
+        if let Event::Soak {
+            point: 1, waited, ..
+        } = e
+            && *waited >= Duration::from_secs(120)
+        {
+            let _ = stop.send(StopRequest::Controlled("SIGINT"));
+        }
+    })
+    .await;
+    assert_eq!(summary.status, Status::Aborted);
+    assert_chamber_safe(&summary, &shared);
+    assert_eq!(load(&dir).unwrap().steps.len(), 3);
+    let before = read_temps(&dir).unwrap().len();
+    let (chamber, shared) = FakeChamber::new(23.0, no_lag());
+    let run = RunDir::open_for_resume(&dir, &plan).unwrap();
+    let summary = run_series_events(&plan, run, chamber, |_, _| {}).await;
+    assert_eq!(summary.status, Status::Complete, "{:?}", summary.reason);
+    assert_chamber_safe(&summary, &shared);
+    let temps = read_temps(&dir).unwrap();
+    // the resumed session ramps from ambient to -20 °C again and soaks before measuring
+    let session2 = &temps[before..];
+    assert_eq!(
+        (session2[0].phase, session2[0].series_point),
+        (Phase::Ramp, Some(1))
+    );
+    let first_measure = session2
+        .iter()
+        .position(|r| r.phase == Phase::Measure)
+        .unwrap();
+    assert!(
+        session2[..first_measure]
+            .iter()
+            .any(|r| r.phase == Phase::Soak && r.setpoint_c == -20.0)
+    );
+    assert_eq!(load(&dir).unwrap().steps.len(), 6);
 }

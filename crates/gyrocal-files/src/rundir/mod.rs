@@ -15,6 +15,11 @@
 //! - `steps.csv`: one row per finished step, see [`StepRecord`] and [`STEPS_HEADER`]; its
 //!   `step_no` and `pass_no` count from 1 too. It is a valid input of `gyrocal fit`, which
 //!   reads `rate_dps`, `volts`, `volts_std` (optional, empty when `n = 1`) and `n` by name.
+//!   A temperature series fills its last six columns (`series_point`, `setpoint_c`, the gyro's
+//!   `temp_min_c`/`temp_mean_c`/`temp_max_c` during the acquisition, `bias_record`: 1 on the
+//!   bias record at a temperature), empty for every other kind ([`SeriesCells`]).
+//! - `temps.csv` (a run with a thermal chamber): every reading of the chamber,
+//!   `t_s,setpoint_c,air_c,product_c,series_point,phase` (see [`temps`]).
 //!
 //! In memory ([`StepRecord`], [`SampleRow`], the manifest's `steps_done` and `from_step`)
 //! steps, readings and passes are 0-based, the schedule's index; the conversion is made at the

@@ -336,6 +336,16 @@ impl<B: Bench> Engine<B> {
             } else {
                 None
             };
+            self.emit(super::Event::Soak {
+                point: soak.point,
+                target_c: soak.setpoint_c,
+                setpoint_c: r.setpoint_c,
+                air_c: r.air_c,
+                gyro_c: r.product_c,
+                held: held_since.map(|since| now - since),
+                soak: soak.soak,
+                waited: start.elapsed(),
+            })?;
             if let Some(since) = held_since
                 && now - since >= soak.soak
             {
@@ -384,6 +394,15 @@ impl<B: Bench> Engine<B> {
         };
         let state = safe_state(&settings);
         let words = settings.describe_safe_state();
+        if !self.bench.chamber().present() {
+            // the plan's chamber is not on this bench: nothing drove it, nothing can confirm it
+            return ChamberRest::NotConfirmed {
+                state: words,
+                reason: "this bench has no chamber: the plan's chamber was never reached in this \
+                         session"
+                    .into(),
+            };
+        }
         let limit = self.options.cleanup_timeout * 4;
         let report = match tokio::time::timeout(limit, self.bench.chamber().go_safe(state)).await {
             Ok(report) => report,

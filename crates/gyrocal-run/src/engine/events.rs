@@ -116,4 +116,23 @@ pub enum Event {
     },
     /// The end state of the table (the last event of a run).
     Rest(TableRest),
+    /// A reading of the chamber during a soak of a temperature series (every poll).
+    Soak {
+        /// 0-based index into `[series] temperatures_c`.
+        point: u32,
+        /// The target, °C.
+        target_c: f64,
+        /// The setpoint now (moving towards the target during the ramp), °C.
+        setpoint_c: f64,
+        /// The air, °C.
+        air_c: f64,
+        /// The gyro (product), °C, when the chamber reads one.
+        gyro_c: Option<f64>,
+        /// How long the soak criterion has held, when it holds.
+        held: Option<Duration>,
+        /// The soak time the criterion must hold.
+        soak: Duration,
+        /// Since the soak began.
+        waited: Duration,
+    },
 }

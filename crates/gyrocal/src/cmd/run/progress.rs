@@ -373,6 +373,36 @@ impl Progress {
                 self.line(text);
             }
             Event::Rest(rest) => self.line(rest_text(&rest)),
+            // a temperature series' soak: the phase says where the chamber and the gyro are
+            Event::Soak {
+                point,
+                target_c,
+                setpoint_c,
+                air_c,
+                gyro_c,
+                held,
+                soak,
+                waited,
+            } => {
+                let gyro = gyro_c.map_or("no gyro sensor".into(), |t| format!("gyro {t:.2} °C"));
+                let state = match held {
+                    Some(h) => format!(
+                        "soaked for {} of {}",
+                        hms(h.as_secs_f64()),
+                        hms(soak.as_secs_f64())
+                    ),
+                    None if setpoint_c != target_c => {
+                        format!("ramping, setpoint {setpoint_c:.2} °C")
+                    }
+                    None => "waiting for the gyro to settle".into(),
+                };
+                self.phase = format!(
+                    "temperature {} ({target_c} °C): {state}; air {air_c:.2} °C, {gyro}; {} so far",
+                    point + 1,
+                    hms(waited.as_secs_f64())
+                );
+                self.redraw();
+            }
         }
     }
 }
