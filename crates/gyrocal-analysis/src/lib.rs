@@ -32,6 +32,8 @@ use gyrocal_files::rundir::{Manifest, RunData, RunDir};
 
 mod error;
 mod figures;
+pub mod series;
+pub mod tempco;
 
 pub use error::{AnalysisError, DriftError, ErrorKind, FitRunError};
 pub use figures::Figures;
