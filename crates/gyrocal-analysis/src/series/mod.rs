@@ -97,10 +97,18 @@ pub enum SeriesError {
         /// What is wrong.
         message: String,
     },
+    /// `series.json` could not be read back.
+    #[error("{}: {message}", path.display())]
+    Document {
+        /// The file.
+        path: std::path::PathBuf,
+        /// What is wrong.
+        message: String,
+    },
 }
 
 impl SeriesError {
-    /// Whose fault it is: always the input's (the data cannot be analysed).
+    /// Whose fault it is: always the input's (the data or the file cannot be analysed).
     pub fn kind(&self) -> crate::ErrorKind {
         crate::ErrorKind::Input
     }
