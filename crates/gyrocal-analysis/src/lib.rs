@@ -32,7 +32,6 @@ use gyrocal_files::rundir::{Manifest, RunData, RunDir};
 
 mod error;
 mod figures;
-pub mod series;
 pub mod tempco;
 
 pub use error::{AnalysisError, DriftError, ErrorKind, FitRunError};

@@ -109,7 +109,7 @@ fn a_sweep_is_fitted_and_its_fit_json_recorded() {
 
     let stored = match analyse_run(&mut rd, &Options::default()).unwrap() {
         Analysis::Sweep(a) => a,
-        Analysis::Drift(_) => panic!("a sweep analysed as a drift record"),
+        other => panic!("a sweep analysed as {:?}", other.kind()),
     };
     assert!(
         (stored.metrics.scale_factor - K).abs() < 1e-4,
@@ -149,7 +149,7 @@ fn a_drift_record_gets_its_allan_analysis_recorded_and_verified() {
 
     let doc: AllanDocument = match analyse_run(&mut rd, &Options::default()).unwrap() {
         Analysis::Drift(d) => *d,
-        Analysis::Sweep(_) => panic!("a drift record fitted as a sweep"),
+        other => panic!("a drift record analysed as {:?}", other.kind()),
     };
     drop(rd);
     // the two segments (steps) are one record: 3000 readings 0.1 s apart, no gap

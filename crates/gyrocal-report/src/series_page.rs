@@ -27,7 +27,8 @@ pub struct ChamberLine {
     pub model: String,
     /// The port or address it was driven through.
     pub port: String,
-    /// The station file's record, when it has one: asset id, serial, calibration due.
+    /// What the run recorded of it (its identity, the safe state it was left in and whether
+    /// that was confirmed), when anything.
     pub record: Option<String>,
 }
 
@@ -354,7 +355,7 @@ pub fn render_series(
                 esc(&c.port),
                 c.record
                     .as_ref()
-                    .map_or_else(|| "; not in the station file: not identified".to_string(), |r| format!("; {}", esc(r)))
+                    .map_or_else(|| "; not identified (no identity recorded, not in the station file)".to_string(), |r| format!("; {}", esc(r)))
             );
         }
         None => html.push_str("<p class=\"note\" id=\"chamber-table\">No thermal chamber recorded for this run.</p>\n"),
@@ -364,3 +365,125 @@ pub fn render_series(
     Page::close(&mut html, Some("made by gyrocal"));
     Ok(html)
 }
+
+/// The run files the series page reads (checked against the run's record first).
+pub const SERIES_FILES_READ: [&str; 3] = ["manifest.json", "steps.csv", "temps.csv"];
+
+/// "result: K −60.3 ± 8.1 ppm/°C, bias 0.59 ± 0.29 °/h/°C (k = 4.30), verdict PASS": the
+/// sensitivities with U as the page prints them.
+pub fn result_line(doc: &SeriesDocument) -> String {
+    let s = |name: &str, s: Option<&Sensitivity>| {
+        s.map(|s| {
+            format!(
+                "{name} {} (k = {:.2})",
+                value_pm_u(s.value, Some(s.u), &s.unit),
+                s.coverage_factor
+            )
+        })
+    };
+    let parts: Vec<String> = [
+        s("K", doc.k_tempco_ppm_per_c.as_ref()),
+        s("bias", doc.bias_tempco_dph_per_c.as_ref()),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    let mut line = if parts.is_empty() {
+        "result: no sensitivity could be computed (see the notes)".to_string()
+    } else {
+        format!("result: sensitivities over the range: {}", parts.join(", "))
+    };
+    if let Some(v) = &doc.verdict {
+        let _ = write!(line, "; verdict {}", v.to_uppercase());
+    }
+    line
+}
+
+/// The temperature history of the run in `dir` for the page (temps.csv), or why there is
+/// none (a note for the page).
+fn history_of(dir: &Path) -> (Vec<HistoryRow>, Option<String>) {
+    match gyrocal_files::rundir::temps::read_temps(dir) {
+        Ok(rows) => (
+            rows.iter()
+                .map(|r| (r.t_s, Some(r.setpoint_c), Some(r.air_c), r.product_c))
+                .collect(),
+            None,
+        ),
+        Err(e) => (Vec::new(), Some(format!("no temperature history: {e}"))),
+    }
+}
+
+/// The chamber's line from the plan (and the station file's record, when it has one).
+fn chamber_of(m: &Manifest) -> Option<ChamberLine> {
+    let c = m.plan.chamber()?;
+    let rec = m.chamber.as_ref();
+    let mut said = Vec::new();
+    if let Some(id) = rec.and_then(|r| r.identity.as_deref()) {
+        said.push(format!("identified as {id}"));
+    }
+    if let Some(safe) = rec.and_then(|r| r.safe_state.as_deref()) {
+        let confirmed = match rec.and_then(|r| r.safe_confirmed) {
+            Some(true) => "confirmed",
+            _ => "could NOT be confirmed",
+        };
+        said.push(format!("left in its safe state: {safe} ({confirmed})"));
+    }
+    Some(ChamberLine {
+        model: c.model.as_str().to_string(),
+        port: c.port.to_string(),
+        record: (!said.is_empty()).then(|| said.join("; ")),
+    })
+}
+
+/// Analyses the series `run` holds and writes `series.json` through it (no page).
+pub fn write_analysis_into(
+    run: &mut dyn gyrocal_files::WriteResult,
+) -> Result<(SeriesDocument, Vec<std::path::PathBuf>), ReportError> {
+    let dir = run.dir().to_path_buf();
+    let data = gyrocal_files::load(&dir)?;
+    let doc = gyrocal_analysis::series::analyse_run_data(&dir, &data, &Default::default())
+        .map_err(gyrocal_analysis::AnalysisError::from)?;
+    let jp = gyrocal_analysis::series::write_document(run, &doc)?;
+    Ok((doc, vec![jp]))
+}
+
+/// Analyses the series `run` holds and writes `series.json` then `series.html` through it
+/// (atomically, under the run's lock, each recorded with its SHA-256), `notes` first among
+/// the analysis's notes. When the page fails after the analysis was written, the error is
+/// [`ReportError::PartlyWritten`].
+pub fn write_series_into(
+    run: &mut dyn gyrocal_files::WriteResult,
+    notes: &[String],
+) -> Result<(SeriesDocument, Vec<std::path::PathBuf>), ReportError> {
+    let dir = run.dir().to_path_buf();
+    let data = gyrocal_files::load(&dir)?;
+    let mut doc = gyrocal_analysis::series::analyse_run_data(&dir, &data, &Default::default())
+        .map_err(gyrocal_analysis::AnalysisError::from)?;
+    if !notes.is_empty() {
+        doc.notes.splice(0..0, notes.iter().cloned());
+    }
+    let (history, missing) = history_of(&dir);
+    if let Some(n) = missing {
+        doc.notes.push(n);
+    }
+    let jp = gyrocal_analysis::series::write_document(run, &doc)?;
+    render_series(
+        &doc,
+        &data.manifest,
+        &dir,
+        &history,
+        chamber_of(&data.manifest).as_ref(),
+    )
+    .and_then(|html| {
+        run.write_result(SERIES_HTML, html.as_bytes())
+            .map_err(ReportError::from)
+    })
+    .map_err(|e| ReportError::PartlyWritten {
+        written: vec![jp.clone()],
+        failed: Box::new(e),
+    })?;
+    Ok((doc, vec![jp, dir.join(SERIES_HTML)]))
+}
+
+/// The series page's file name in the run directory.
+pub const SERIES_HTML: &str = "series.html";

@@ -7,8 +7,11 @@
 //! `series.json` ([`SeriesDocument`]) is what it returns.
 
 mod document;
+mod run;
 #[cfg(test)]
 mod tests;
+
+pub use run::{Kind, analyse_run_data, input_from_run, load_document, write_document};
 
 pub use document::{
     CatalogPoint, CatalogSeries, SERIES_FORMAT, Sensitivity, SeriesDocument, SeriesPoint,
