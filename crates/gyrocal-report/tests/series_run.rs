@@ -235,3 +235,58 @@ fn the_one_dispatch_analyses_a_series_and_its_figures_are_the_first_temperature_
     assert!((k - K25).abs() / K25 < 1e-3, "{k}");
     assert!(f.u_scale_factor.unwrap() > 0.0);
 }
+
+#[test]
+fn a_series_whose_rows_lack_the_gyro_temperature_is_a_plain_error_naming_the_point() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    drop(write_run(&dir));
+    // blank the temperature cells of every row (a product sensor that never answered)
+    let path = dir.join(gyrocal_files::rundir::STEPS_CSV);
+    let text = std::fs::read_to_string(&path).unwrap();
+    let mut out = String::new();
+    for (i, line) in text.lines().enumerate() {
+        if i == 0 {
+            out.push_str(line);
+        } else {
+            let cells: Vec<&str> = line.split(',').collect();
+            let n = cells.len();
+            let mut cells: Vec<String> = cells.iter().map(|c| c.to_string()).collect();
+            for c in &mut cells[n - 4..n - 1] {
+                c.clear();
+            }
+            out.push_str(&cells.join(","));
+        }
+        out.push('\n');
+    }
+    std::fs::write(&path, out).unwrap();
+    let data = gyrocal_files::load(&dir).unwrap();
+    let e = gyrocal_analysis::series::analyse_run_data(&dir, &data, &Default::default())
+        .expect_err("no temperatures");
+    let msg = e.to_string();
+    assert!(
+        msg.contains("series point 0") && msg.contains("no gyro (product) temperature"),
+        "{msg}"
+    );
+    assert_eq!(e.kind(), gyrocal_analysis::ErrorKind::Input);
+}
+
+#[test]
+fn check_warns_of_a_series_with_one_temperature_or_without_a_sweep() {
+    use gyrocal_analysis::KindAnalysis;
+    let one = PLAN
+        .replace(
+            "temperatures_c = [25, -20, 60, 25]",
+            "temperatures_c = [25, 25]",
+        )
+        .replace("measure = \"both\"", "measure = \"bias\"");
+    let plan = Plan::from_toml_str(&one, Path::new("one.toml")).unwrap();
+    let w = gyrocal_analysis::series::Kind::plan_warnings(&plan, Path::new("one.toml"));
+    assert!(
+        w.iter().any(|l| l.contains("1 distinct temperature")),
+        "{w:?}"
+    );
+    assert!(w.iter().any(|l| l.contains("measure = \"bias\"")), "{w:?}");
+    let plan = Plan::from_toml_str(PLAN, Path::new("series.toml")).unwrap();
+    assert!(gyrocal_analysis::series::Kind::plan_warnings(&plan, Path::new("s")).is_empty());
+}

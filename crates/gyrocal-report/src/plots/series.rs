@@ -54,10 +54,7 @@ pub(crate) fn figure_plot(
         );
         let (xa, ya) = (LinearAxis::new(x0, x1, 8), LinearAxis::new(y0, y1, 6));
         let mut legend = Legend::new();
-        legend.add(
-            "measured (mean gyro temperature), U (k = 2)",
-            Swatch::Dot(POINT),
-        );
+        legend.add("measured, U (k = 2)", Swatch::Dot(POINT));
         if let Some((_, _, label)) = &curve {
             legend.add(
                 label.clone(),
