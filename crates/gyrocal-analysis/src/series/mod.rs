@@ -127,6 +127,7 @@ fn analyse_point(p: &PointInput, input: &SeriesInput, opts: &Options) -> SeriesP
         temp_max_c: p.temp_max_c,
         k: None,
         u_k: None,
+        u_k_weight: None,
         bias_dph: None,
         u_bias_dph: None,
         bias_from: None,
@@ -143,6 +144,10 @@ fn analyse_point(p: &PointInput, input: &SeriesInput, opts: &Options) -> SeriesP
                 let finite = |v: f64| v.is_finite().then_some(v);
                 out.k = finite(m.scale_factor);
                 out.u_k = a.expanded_uncertainty("scale_factor");
+                out.u_k_weight = a
+                    .fit(gyrocal_fit::Method::LeastSquares, gyrocal_fit::Model::Linear)
+                    .and_then(|f| prior_u_k(f, a.points))
+                    .or(out.u_k);
                 out.bias_dph = finite(m.bias_dph);
                 out.u_bias_dph = a.expanded_uncertainty("bias_dph");
                 out.bias_from = out.bias_dph.map(|_| "sweep".to_string());
@@ -168,6 +173,16 @@ fn analyse_point(p: &PointInput, input: &SeriesInput, opts: &Options) -> SeriesP
         }
     }
     out
+}
+
+/// K's U (k = 2) from a weighted line's covariance before its scaling by the residual
+/// scatter: `se(K)·√(ν/χ²)`; `None` for an unweighted fit or one without residual freedom.
+fn prior_u_k(f: &gyrocal_fit::Fit, points: usize) -> Option<f64> {
+    let se = f.std_errors.k1?;
+    let chi2 = f.chi_squared.filter(|c| f.weighted && c.is_finite() && *c > 0.0)?;
+    let dof = points.checked_sub(2).filter(|d| *d > 0)?;
+    let u = 2.0 * se * (dof as f64 / chi2).sqrt();
+    (u.is_finite() && u > 0.0).then_some(u)
 }
 
 /// The bias record's mean as a rate, `V̄/K·3600` °/h, with U from the mean's standard error
@@ -232,6 +247,13 @@ fn model(visits: &[(f64, TempPoint)], what: &str, notes: &mut Vec<String>) -> Op
     }
 }
 
+fn distinct(visits: &[(f64, TempPoint)]) -> usize {
+    let mut ts: Vec<f64> = visits.iter().map(|v| v.1.t_c).collect();
+    ts.sort_by(f64::total_cmp);
+    ts.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    ts.len()
+}
+
 fn judge(key: &str, max: f64, s: Option<&Sensitivity>) -> TempcoVerdict {
     let verdict = match s {
         Some(s) if s.value.abs() + s.u <= max => "pass",
@@ -282,9 +304,17 @@ pub fn analyse_input(
         .map(|p| analyse_point(p, input, opts))
         .collect();
     let mut notes = Vec::new();
+    // K weighted by its prior U (see `SeriesPoint::u_k_weight`); the hysteresis compares
+    // two visits with their stated U
+    let k_weighted = temp_points(&points, |p| Some((p.k?, p.u_k_weight.or(p.u_k)?)));
     let k_visits = temp_points(&points, |p| Some((p.k?, p.u_k?)));
     let b_visits = temp_points(&points, |p| Some((p.bias_dph?, p.u_bias_dph?)));
-    let k_model = model(&k_visits, "K", &mut notes);
+    // with two temperatures the model has no residual to scale by: the stated U then
+    let k_model = if k_weighted.len() == k_visits.len() && distinct(&k_visits) > 2 {
+        model(&k_weighted, "K", &mut notes)
+    } else {
+        model(&k_visits, "K", &mut notes)
+    };
     let bias_model = model(&b_visits, "the bias", &mut notes);
     let k_tempco = k_model.as_ref().and_then(|f| {
         let m = f.chosen();

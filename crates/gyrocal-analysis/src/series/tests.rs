@@ -279,3 +279,45 @@ fn a_bias_record_without_a_sweep_says_why_it_has_no_rate() {
     assert_eq!(doc.acceptance[0].verdict, "indeterminate");
     assert_eq!(doc.verdict.as_deref(), Some("indeterminate"));
 }
+
+/// The whole pipeline (each temperature's sweep fitted by gyrocal-fit, its U from the budget,
+/// the bias records turned into °/h, the models in temperature) over many seeds: the stated U
+/// of both sensitivities covers the simulated gyro's truth about 95 % of the time. (Before K
+/// was weighted by its prior U and the parabola needed four temperatures, this measured 91 %
+/// for K: see `SeriesPoint::u_k_weight` and `tempco::QUADRATIC_MIN_TEMPERATURES`.)
+#[test]
+fn monte_carlo_the_series_sensitivities_cover_the_truth_about_95_percent() {
+    let g = Gyro {
+        k25: 0.0125,
+        alpha_ppm: -60.0,
+        k0_25: 0.004,
+        beta_v_per_c: 2e-6,
+        hysteresis_ppm_after_cold: 0.0,
+    };
+    let rate = |t: f64| {
+        (g.k0_25 + g.beta_v_per_c * (t - 25.0)) / (g.k25 * (1.0 + g.alpha_ppm * 1e-6 * (t - 25.0)))
+            * 3600.0
+    };
+    let runs = 800;
+    let (mut k_in, mut b_in) = (0, 0);
+    for seed in 0..runs {
+        let input = series(&g, &[25.0, -20.0, 60.0, 25.0], 50_000 + seed, true);
+        let doc = analyse_input(&input, &ls_only(), "mc").expect("analysis");
+        // ppm/°C relative to K at 25 °C: exactly α for this gyro
+        let k = doc.k_tempco_ppm_per_c.as_ref().expect("K");
+        k_in += usize::from((k.value - g.alpha_ppm).abs() <= k.u);
+        let b = doc.bias_tempco_dph_per_c.as_ref().expect("bias");
+        let mid = doc.bias_model.as_ref().expect("model").chosen().t_mid_c;
+        let b_true = rate(mid + 0.5) - rate(mid - 0.5);
+        b_in += usize::from((b.value - b_true).abs() <= b.u);
+    }
+    let pct = |c: usize| 100.0 * c as f64 / runs as f64;
+    eprintln!(
+        "series pipeline coverage over {runs} seeds: K tempco {:.1} %, bias tempco {:.1} %",
+        pct(k_in),
+        pct(b_in)
+    );
+    // 800 runs: one standard error of a 95 % coverage is 0.8 %
+    assert!((92.5..=97.5).contains(&pct(k_in)), "K: {:.1} %", pct(k_in));
+    assert!((92.5..=97.5).contains(&pct(b_in)), "bias: {:.1} %", pct(b_in));
+}

@@ -17,7 +17,10 @@
 //!   gain, the table's rate) common to every temperature that do not scatter the points, so
 //!   taken alone they would misstate a slope. With no residual degree of freedom (two
 //!   temperatures and a line) the stated U alone is used, at `k = 2`, and said so.
-//! * **Chosen as the rate models are.** The quadratic is taken only when the nested F-test of
+//! * **Chosen as the rate models are.** The parabola is a candidate only with four distinct
+//!   temperatures and five points (two residual degrees of freedom: with one, the F-test
+//!   takes it exactly when its residual is small by chance and its U then undercovers). It
+//!   is taken only when the nested F-test of
 //!   linear → quadratic (weighted: `χ²` for the SSE) is significant at
 //!   [`gyrocal_fit::MODEL_SELECTION_LEVEL`] — the same rule as [`gyrocal_fit::selection`], the
 //!   same [`gyrocal_fit::NestedTest`] record.
@@ -38,6 +41,9 @@ use serde::{Deserialize, Serialize};
 use statrs::distribution::{ContinuousCDF, FisherSnedecor, StudentsT};
 
 use gyrocal_fit::{MODEL_SELECTION_LEVEL, Model, ModelSelection, NestedTest};
+
+/// The fewest distinct temperatures for which the parabola is a candidate.
+pub const QUADRATIC_MIN_TEMPERATURES: usize = 4;
 
 /// The coverage factor used when there is no residual degree of freedom (the stated U alone).
 pub const COVERAGE_FACTOR: f64 = 2.0;
@@ -182,7 +188,8 @@ impl TempModel {
 pub struct TempFit {
     /// The line.
     pub linear: TempModel,
-    /// The parabola (absent with fewer than three distinct temperatures).
+    /// The parabola (absent with fewer than [`QUADRATIC_MIN_TEMPERATURES`] distinct
+    /// temperatures or fewer than five points).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub quadratic: Option<TempModel>,
     /// How the model was chosen (the nested F-test).
@@ -294,12 +301,23 @@ pub fn fit_order(points: &[TempPoint], order: usize) -> Result<TempModel, Tempco
 /// between them by the nested F-test on `χ²` (see the module's notes).
 pub fn fit(points: &[TempPoint]) -> Result<TempFit, TempcoError> {
     let linear = fit_order(points, 1)?;
-    let quadratic = fit_order(points, 2).ok();
+    let distinct = check(points)?;
+    // A parabola is a candidate only with four distinct temperatures and two residual degrees
+    // of freedom: with one (four points), the F-test picks it exactly when its residual is
+    // small by chance, and its U (t with one degree of freedom over that small residual) then
+    // covers the truth far less than 95 % of the time (Monte Carlo in the series tests).
+    let quadratic = if distinct >= QUADRATIC_MIN_TEMPERATURES && points.len() >= 5 {
+        fit_order(points, 2).ok()
+    } else {
+        None
+    };
     let mut tests = Vec::new();
     let mut chosen = Model::Linear;
     let stopped = match &quadratic {
-        None => "linear is the only model the temperatures determine (a parabola needs three)"
-            .to_string(),
+        None => format!(
+            "linear: a parabola needs {QUADRATIC_MIN_TEMPERATURES} distinct temperatures and two residual degrees of freedom ({distinct} distinct, {} points)",
+            points.len()
+        ),
         Some(q) => {
             let t = nested_test(&linear, q, points.len());
             let why = match (t.p_value, &t.note) {

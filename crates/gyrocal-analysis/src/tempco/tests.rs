@@ -60,7 +60,7 @@ fn a_strong_curvature_is_chosen_as_a_parabola_and_a_line_stays_a_line() {
 }
 
 #[test]
-fn two_temperatures_give_a_line_from_the_stated_u_and_three_no_quadratic_test() {
+fn two_temperatures_give_a_line_from_the_stated_u_and_three_no_parabola() {
     let p = pts(&[-20.0, 60.0], |t| 1.0 + 0.1 * t, 0.2);
     let f = fit(&p).expect("fit");
     assert!(f.quadratic.is_none());
@@ -68,10 +68,17 @@ fn two_temperatures_give_a_line_from_the_stated_u_and_three_no_quadratic_test() 
     // slope U: two points 80 °C apart, each u_std 0.1: u(slope) = √2·0.1/80
     let (_, u) = f.linear.sensitivity();
     assert!((u - 2.0 * 2f64.sqrt() * 0.1 / 80.0).abs() < 1e-12, "{u}");
-    let p = pts(&[-20.0, 25.0, 60.0], |t| 1.0 + 0.1 * t, 0.2);
+    // three temperatures (one revisited): no parabola, said why
+    let p = pts(
+        &[-20.0, 25.0, 60.0, 25.0],
+        |t| 1.0 + 0.1 * t + 1e-3 * t * t,
+        0.2,
+    );
     let f = fit(&p).expect("fit");
     assert_eq!(f.selection.chosen, Model::Linear);
-    assert!(f.selection.tests[0].note.is_some());
+    assert!(f.quadratic.is_none() && f.selection.tests.is_empty());
+    let why = f.selection.stopped.unwrap_or_default();
+    assert!(why.contains("3 distinct"), "{why}");
 }
 
 #[test]
