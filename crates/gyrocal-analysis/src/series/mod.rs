@@ -248,10 +248,8 @@ fn model(visits: &[(f64, TempPoint)], what: &str, notes: &mut Vec<String>) -> Op
 }
 
 fn distinct(visits: &[(f64, TempPoint)]) -> usize {
-    let mut ts: Vec<f64> = visits.iter().map(|v| v.1.t_c).collect();
-    ts.sort_by(f64::total_cmp);
-    ts.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
-    ts.len()
+    let pts: Vec<TempPoint> = visits.iter().map(|v| v.1).collect();
+    tempco::temperatures_apart(&pts)
 }
 
 fn judge(key: &str, max: f64, s: Option<&Sensitivity>) -> TempcoVerdict {

@@ -229,6 +229,23 @@ fn check(points: &[TempPoint]) -> Result<usize, TempcoError> {
     Ok(ts.len())
 }
 
+/// Two measured temperatures closer than this count as one temperature for the model's
+/// choice (a revisit at 25.3 °C after 25.1 °C is the same temperature, not a third one).
+pub const SAME_TEMPERATURE_C: f64 = 1.0;
+
+/// How many temperatures the points hold, those within [`SAME_TEMPERATURE_C`] of the
+/// previous (in ascending order) counted once.
+pub fn temperatures_apart(points: &[TempPoint]) -> usize {
+    let mut ts: Vec<f64> = points
+        .iter()
+        .map(|p| p.t_c)
+        .filter(|t| t.is_finite())
+        .collect();
+    ts.sort_by(f64::total_cmp);
+    ts.dedup_by(|a, b| (*a - *b).abs() < SAME_TEMPERATURE_C);
+    ts.len()
+}
+
 /// Fits `points` as a polynomial of `order` (1 or 2) in temperature. See the module's notes.
 pub fn fit_order(points: &[TempPoint], order: usize) -> Result<TempModel, TempcoError> {
     let distinct = check(points)?;
@@ -297,11 +314,12 @@ pub fn fit_order(points: &[TempPoint], order: usize) -> Result<TempModel, Tempco
     Ok(model)
 }
 
-/// Fits the line and, with at least three distinct temperatures, the parabola, and chooses
+/// Fits the line and, with at least [`QUADRATIC_MIN_TEMPERATURES`] temperatures apart
+/// ([`temperatures_apart`]) and five points, the parabola, and chooses
 /// between them by the nested F-test on `χ²` (see the module's notes).
 pub fn fit(points: &[TempPoint]) -> Result<TempFit, TempcoError> {
     let linear = fit_order(points, 1)?;
-    let distinct = check(points)?;
+    let distinct = temperatures_apart(points);
     // A parabola is a candidate only with four distinct temperatures and two residual degrees
     // of freedom: with one (four points), the F-test picks it exactly when its residual is
     // small by chance, and its U (t with one degree of freedom over that small residual) then
