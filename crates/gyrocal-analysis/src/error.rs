@@ -119,6 +119,9 @@ pub enum AnalysisError {
     /// The Allan analysis of a drift record.
     #[error(transparent)]
     Drift(#[from] DriftError),
+    /// The analysis of a temperature series.
+    #[error(transparent)]
+    Series(#[from] crate::series::SeriesError),
 }
 
 impl AnalysisError {
@@ -128,6 +131,7 @@ impl AnalysisError {
             AnalysisError::Run(e) => run_kind(e),
             AnalysisError::Sweep(e) => e.kind(),
             AnalysisError::Drift(e) => e.kind(),
+            AnalysisError::Series(e) => e.kind(),
         }
     }
 }

@@ -1,7 +1,7 @@
 //! gyrocal-analysis: what a run's data say. Synchronous, no runtime, no I/O beyond the run
 //! directory (and the bounded-memory path's unnamed temporary files).
 //!
-//! - One module per kind of test ([`sweep`], [`drift`]), each with a `Kind` implementing
+//! - One module per kind of test ([`sweep`], [`drift`], [`series`]), each with a `Kind` implementing
 //!   [`KindAnalysis`]: its analysis, its result file written through the run directory, its
 //!   headline figures, its warnings about a plan. The modules, [`Options`], [`Analysis`] and
 //!   the one dispatch on the kind ([`analyse`], [`analyse_run`], [`figures`],
@@ -19,6 +19,10 @@
 //! - [`drift`]: the Allan analysis of a record (a run's `samples.csv` or any CSV):
 //!   [`drift::AllanDocument`], what `allan.json` holds; [`drift::DriftFigures`], its headline
 //!   figures read back typed (the catalog's).
+//! - [`series`]: a temperature series (`series.json`): each temperature's sweep and bias
+//!   record, K and the bias modelled in temperature ([`tempco`]: line or parabola chosen by
+//!   the nested F-test, the sensitivities with U, hysteresis), the verdict against the
+//!   limits on the sensitivities, and the `catalog` member the catalog reads.
 //!
 //! Rendering is not here: the report crate turns a [`gyrocal_fit::Analysis`] into
 //! `report.html` and an [`drift::AllanDocument`] into `allan.html`.
@@ -32,6 +36,7 @@ use gyrocal_files::rundir::{Manifest, RunData, RunDir};
 
 mod error;
 mod figures;
+pub mod tempco;
 
 pub use error::{AnalysisError, DriftError, ErrorKind, FitRunError};
 pub use figures::Figures;

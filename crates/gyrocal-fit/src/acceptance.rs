@@ -236,7 +236,17 @@ pub struct AcceptanceSpec {
     pub rule: Rule,
     /// The limits, by quantity.
     pub limits: BTreeMap<Quantity, Limits>,
+    /// A temperature series' limit on |K's sensitivity|, ppm/°C (`k_tempco_ppm_per_c_max`):
+    /// judged by the series analysis (its sensitivities are not figures of one sweep).
+    pub k_tempco_ppm_per_c_max: Option<f64>,
+    /// A temperature series' limit on |the bias's sensitivity|, °/h/°C
+    /// (`bias_tempco_dph_per_c_max`).
+    pub bias_tempco_dph_per_c_max: Option<f64>,
 }
+
+/// The keys of the temperature series' limits in `[acceptance]` (plain numbers, not tables of
+/// limits: a sensitivity is limited in magnitude).
+pub const TEMPCO_KEYS: [&str; 2] = ["k_tempco_ppm_per_c_max", "bias_tempco_dph_per_c_max"];
 
 impl AcceptanceSpec {
     /// Validates every quantity's limits; the error names the quantity.
@@ -250,12 +260,29 @@ impl AcceptanceSpec {
 
 impl Serialize for AcceptanceSpec {
     fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        let mut map = s.serialize_map(Some(self.limits.len() + 1))?;
+        let mut map = s.serialize_map(None)?;
         map.serialize_entry("decision_rule", &self.rule)?;
         for (q, l) in &self.limits {
             map.serialize_entry(q.name(), l)?;
         }
+        let tempco = [self.k_tempco_ppm_per_c_max, self.bias_tempco_dph_per_c_max];
+        for (key, v) in TEMPCO_KEYS.iter().zip(tempco) {
+            if let Some(v) = v {
+                map.serialize_entry(key, &v)?;
+            }
+        }
         map.end()
+    }
+}
+
+/// A series' limit as read: a positive number.
+fn tempco_limit<E: serde::de::Error>(key: &str, v: f64) -> Result<f64, E> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(E::custom(format!(
+            "[acceptance] {key} = {v} is not a positive number"
+        )))
     }
 }
 
@@ -278,6 +305,11 @@ impl<'de> Deserialize<'de> for AcceptanceSpec {
                         }
                         rule_seen = true;
                         spec.rule = map.next_value()?;
+                    } else if key == TEMPCO_KEYS[0] {
+                        spec.k_tempco_ppm_per_c_max = Some(tempco_limit(&key, map.next_value()?)?);
+                    } else if key == TEMPCO_KEYS[1] {
+                        spec.bias_tempco_dph_per_c_max =
+                            Some(tempco_limit(&key, map.next_value()?)?);
                     } else if let Some(q) = Quantity::from_name(&key) {
                         let limits: Limits = map.next_value()?;
                         limits
@@ -288,9 +320,10 @@ impl<'de> Deserialize<'de> for AcceptanceSpec {
                         }
                     } else {
                         return Err(A::Error::custom(format!(
-                            "unknown acceptance key `{key}`: the keys are decision_rule and the \
-                             quantities {}",
-                            Quantity::names()
+                            "unknown acceptance key `{key}`: the keys are decision_rule, the \
+                             quantities {} and the series' {}",
+                            Quantity::names(),
+                            TEMPCO_KEYS.join(", ")
                         )));
                     }
                 }
@@ -831,6 +864,8 @@ mod tests {
     fn the_run_gets_its_worst_check() {
         let mut spec = AcceptanceSpec {
             rule: Rule::Guarded,
+            k_tempco_ppm_per_c_max: None,
+            bias_tempco_dph_per_c_max: None,
             limits: BTreeMap::new(),
         };
         assert_eq!(evaluate(&spec, |_| Measured::NONE), None);
@@ -860,6 +895,8 @@ mod tests {
     fn acceptance_json_shape() {
         let spec = AcceptanceSpec {
             rule: Rule::Guarded,
+            k_tempco_ppm_per_c_max: None,
+            bias_tempco_dph_per_c_max: None,
             limits: [(Quantity::ScaleFactor, banded())].into_iter().collect(),
         };
         let a = evaluate(&spec, |_| Measured::new(0.06, 0.001)).unwrap();
@@ -892,6 +929,8 @@ mod tests {
     fn spec_serde_is_the_acceptance_table() {
         let spec = AcceptanceSpec {
             rule: Rule::Guarded,
+            k_tempco_ppm_per_c_max: None,
+            bias_tempco_dph_per_c_max: None,
             limits: [
                 (Quantity::ScaleFactor, banded()),
                 (

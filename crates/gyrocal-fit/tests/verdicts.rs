@@ -192,6 +192,8 @@ fn the_repeatability_interval_covers_the_true_spread_of_the_passes() {
 fn at_most(q: Quantity, max: f64) -> AcceptanceSpec {
     AcceptanceSpec {
         rule: Rule::Guarded,
+        k_tempco_ppm_per_c_max: None,
+        bias_tempco_dph_per_c_max: None,
         limits: [(
             q,
             Limits {
@@ -256,6 +258,8 @@ fn an_asymmetry_limit_judges_the_unbiased_figure_and_the_gjb_key_the_two_lines()
     let a = analysed(&paper_gyro(100.0).steps(Some(&mut StdRng::seed_from_u64(3))));
     let spec = |q: Quantity| AcceptanceSpec {
         rule: Rule::Guarded,
+        k_tempco_ppm_per_c_max: None,
+        bias_tempco_dph_per_c_max: None,
         limits: [(
             q,
             Limits {

@@ -43,6 +43,7 @@ mod input;
 mod kinds;
 pub mod page;
 mod plots;
+pub mod series_page;
 pub mod text;
 
 use std::fs;

@@ -31,6 +31,9 @@ pub(super) const KEYS: &[KeySchema] = &[
     ("asymmetry_gjb_ppm", Kind::Limits, false),
     ("repeatability_ppm", Kind::Limits, false),
     ("k2", Kind::Limits, false),
+    // a temperature series' limits on its sensitivities (magnitudes), judged by its analysis
+    ("k_tempco_ppm_per_c_max", Kind::Number, false),
+    ("bias_tempco_dph_per_c_max", Kind::Number, false),
 ];
 
 /// `[acceptance]` of a plan, or the whole of a standalone acceptance file. One field per
@@ -47,6 +50,8 @@ pub(super) struct RawAcceptance {
     pub(super) asymmetry_gjb_ppm: Option<S<RawLimits>>,
     pub(super) repeatability_ppm: Option<S<RawLimits>>,
     pub(super) k2: Option<S<RawLimits>>,
+    pub(super) k_tempco_ppm_per_c_max: Option<S<f64>>,
+    pub(super) bias_tempco_dph_per_c_max: Option<S<f64>>,
 }
 
 impl RawAcceptance {
@@ -143,6 +148,27 @@ pub(super) fn raw_acceptance(
             ))?
         }
     };
+    let mut tempco =
+        |key: &'static str, v: Option<S<f64>>| -> Result<Option<f64>, (&'static str, String)> {
+            let Some(v) = v else { return Ok(None) };
+            let v = sp.take(key, v);
+            if v.is_finite() && v > 0.0 {
+                Ok(Some(v))
+            } else {
+                Err((
+                    key,
+                    format!("= {v} is not a positive number (a limit on a magnitude)"),
+                ))
+            }
+        };
+    let k_tempco_ppm_per_c_max = tempco(
+        "acceptance.k_tempco_ppm_per_c_max",
+        a.k_tempco_ppm_per_c_max.take(),
+    )?;
+    let bias_tempco_dph_per_c_max = tempco(
+        "acceptance.bias_tempco_dph_per_c_max",
+        a.bias_tempco_dph_per_c_max.take(),
+    )?;
     let mut limits = BTreeMap::new();
     for (q, raw) in a.into_limits() {
         let Some(raw) = raw else { continue };
@@ -160,7 +186,12 @@ pub(super) fn raw_acceptance(
             },
         );
     }
-    Ok(AcceptanceSpec { rule, limits })
+    Ok(AcceptanceSpec {
+        rule,
+        limits,
+        k_tempco_ppm_per_c_max,
+        bias_tempco_dph_per_c_max,
+    })
 }
 
 /// Every quantity's limits; an error names `[acceptance.QUANTITY] KEY`, at the value.
@@ -177,6 +208,29 @@ pub(super) fn validate(a: &AcceptanceSpec, cx: &Ctx<'_>) -> Result<(), PlanError
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_series_limits_are_read_and_a_non_positive_one_is_refused_naming_its_key() {
+        let spec = acceptance_from_toml_str(
+            "decision_rule = \"guarded\"\nk_tempco_ppm_per_c_max = 50\nbias_tempco_dph_per_c_max = 0.2\n",
+            Path::new("acc.toml"),
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(spec.k_tempco_ppm_per_c_max, Some(50.0));
+        assert_eq!(spec.bias_tempco_dph_per_c_max, Some(0.2));
+        // the manifest keeps them: serde round trip
+        let json = serde_json::to_string(&spec).unwrap_or_default();
+        let back: AcceptanceSpec = serde_json::from_str(&json).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(back, spec);
+        let e = acceptance_from_toml_str("k_tempco_ppm_per_c_max = -1\n", Path::new("acc.toml"))
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            e.contains("k_tempco_ppm_per_c_max") && e.contains("positive"),
+            "{e}"
+        );
+    }
 
     #[test]
     fn acceptance_keys_are_the_quantities() {
