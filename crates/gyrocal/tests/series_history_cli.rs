@@ -92,10 +92,10 @@ fn history_shows_each_series_sensitivities_with_u_and_their_trend() {
         .filter(|l| l.contains(&*runs.to_string_lossy()))
         .collect();
     assert_eq!(rows.len(), 2, "one line per series, no sweep line:\n{text}");
-    assert!(rows[0].contains("30.0 ± 4.0"), "{}", rows[0]);
-    assert!(rows[0].contains("1.50 ± 0.30"), "{}", rows[0]);
+    assert!(rows[0].contains("30.00 ± 4.0"), "{}", rows[0]);
+    assert!(rows[0].contains("1.500 ± 0.30"), "{}", rows[0]);
     assert!(rows[0].contains("-20.3 .. 60.2"), "{}", rows[0]);
-    assert!(rows[1].contains("36.5 ± 4.0"), "{}", rows[1]);
+    assert!(rows[1].contains("36.50 ± 4.0"), "{}", rows[1]);
     let k_trend = text
         .lines()
         .find(|l| l.starts_with("trend of K's temperature sensitivity"))
@@ -164,7 +164,7 @@ fn history_shows_each_series_sensitivities_with_u_and_their_trend() {
     let html = std::fs::read_to_string(&page).unwrap();
     assert!(html.contains("<h2>Temperature series</h2>"), "series table");
     assert!(
-        html.contains("36.5 ± 4.0"),
+        html.contains("36.50 ± 4.0"),
         "K sensitivity with U on the page"
     );
     assert!(
