@@ -61,6 +61,7 @@ fn write_run(dir: &Path, toml: &str, volts: impl Fn(usize, f64, u64) -> f64) -> 
             retries: 0,
             t_start_s: t_start,
             t_end_s: t,
+            series: None,
         })
         .unwrap();
     }

@@ -637,7 +637,7 @@ fn a_misspelt_section_or_key_gets_a_suggestion() {
     assert!(!e.to_string().contains("[plan] unknown"), "{e}");
     assert!(
         e.to_string().ends_with(
-            "(the sections are [plan], [table], [dmm], [simulation], [dut], [acceptance], [drift] and [warmup])"
+            "(the sections are [plan], [table], [dmm], [simulation], [dut], [acceptance], [drift], [series], [chamber] and [warmup])"
         ),
         "{e}"
     );
@@ -651,7 +651,7 @@ fn a_misspelt_section_or_key_gets_a_suggestion() {
     assert_at(
         &e,
         2,
-        "[plan] unknown key `port`: it belongs in [table] or [dmm]",
+        "[plan] unknown key `port`: it belongs in [table], [dmm] or [chamber]",
     );
     let e = bad(
         "acceleration_dps2 = 10",

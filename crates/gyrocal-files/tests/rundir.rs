@@ -327,6 +327,7 @@ fn protocol_violations_are_refused() {
         retries: 0,
         t_start_s: 0.0,
         t_end_s: 1.0,
+        series: None,
     };
     assert!(rd.append_step(rec.clone()).is_err());
     // wrong rate for the step
@@ -558,7 +559,11 @@ fn rate_samples_round_trip_and_older_steps_csv_still_read_and_resume() {
     drop(rd);
     let text = fs::read_to_string(dir.join(STEPS_CSV)).unwrap();
     assert!(text.starts_with(&gyrocal_files::rundir::STEPS_HEADER.join(",")));
-    assert!(text.lines().all(|l| l.split(',').count() == 17), "{text}");
+    assert!(
+        text.lines()
+            .all(|l| l.split(',').count() == gyrocal_files::rundir::STEPS_HEADER.len()),
+        "{text}"
+    );
     // the old rows' step and pass re-based: step_no 1, 2, then the new row's 3
     let nos: Vec<&str> = text.lines().skip(1).map(|l| &l[..4]).collect();
     assert_eq!(nos, ["1,1,", "2,1,", "3,1,"], "{text}");

@@ -112,6 +112,7 @@ fn make_run(dir: &Path, spec: &RunSpec<'_>) {
             retries: 0,
             t_start_s: i as f64 * 40.0,
             t_end_s: i as f64 * 40.0 + 2.0,
+            series: None,
         })
         .unwrap();
     }

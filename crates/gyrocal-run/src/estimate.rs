@@ -19,6 +19,7 @@ use std::time::Duration;
 use gyrocal_meter::TimingModel;
 
 use gyrocal_files::plan::{Plan, Step};
+use gyrocal_files::steps::{Action, ChamberAction, Soak};
 
 /// The DC-volts settings a plan's `[dmm]` section asks any meter for.
 pub fn dc_volts(plan: &Plan) -> gyrocal_meter::DcVolts {
@@ -69,10 +70,35 @@ pub struct Estimate {
     pub reading_time: Duration,
     /// Per step.
     pub steps: Vec<StepEstimate>,
-    /// The expected duration of the steps (ramps, dwells, acquisitions and transfers).
+    /// The soaks of a temperature series among them: the chamber's ramps at the plan's ramp
+    /// rate and the soak time at each temperature, at least (a gyro lagging the air takes
+    /// longer; no run can take less). Included in `total` and `bound`.
+    pub soaks: Duration,
+    /// The expected duration of the steps (ramps, dwells, acquisitions and transfers, soaks).
     pub total: Duration,
     /// The physical bound (see the module docs).
     pub bound: Duration,
+}
+
+/// The least a soak takes when the chamber starts at `from_c`: the setpoint's ramp to the
+/// target at the plan's ramp rate, then the soak time.
+pub fn soak_time(from_c: f64, soak: &Soak) -> Duration {
+    let ramp_min = (soak.setpoint_c - from_c).abs() / soak.ramp_c_per_min;
+    let ramp = Duration::try_from_secs_f64(ramp_min * 60.0).unwrap_or(Duration::ZERO);
+    ramp + soak.soak
+}
+
+/// The least the soaks among `actions` take, the chamber starting at `from_c`.
+pub fn soaks_ahead<'a>(actions: impl IntoIterator<Item = &'a Action>, from_c: f64) -> Duration {
+    let mut at = from_c;
+    let mut total = Duration::ZERO;
+    for a in actions {
+        if let ChamberAction::Soak(s) = &a.chamber {
+            total += soak_time(at, s);
+            at = s.setpoint_c;
+        }
+    }
+    total
 }
 
 /// Estimates `steps` of `plan` on a meter with `timing`, starting from a table at
@@ -114,13 +140,47 @@ pub fn estimate(
         (pending, pending_bound) = (cost.deferred, cost.bound_deferred);
         prev = step.rate_dps;
     }
+    let soaks = series_soaks(plan, steps);
     Estimate {
         acquisition: timing.acquisition(),
         reading_time,
         steps: out,
-        total,
-        bound,
+        soaks,
+        total: total + soaks,
+        bound: bound + soaks,
     }
+}
+
+/// The soaks a temperature series' `steps` need (one before the first step at each
+/// temperature, as the plan compiles them), the chamber starting at its ambient setpoint.
+fn series_soaks(plan: &Plan, steps: &[Step]) -> Duration {
+    let (Some(series), Some(chamber)) = (plan.series(), plan.chamber()) else {
+        return Duration::ZERO;
+    };
+    let mut at = chamber.ambient_c;
+    let mut point = None;
+    let mut total = Duration::ZERO;
+    for s in steps {
+        let Some(p) = s.series else { continue };
+        if point != Some(p.point) {
+            point = Some(p.point);
+            total += soak_time(
+                at,
+                &Soak {
+                    point: p.point,
+                    setpoint_c: p.setpoint_c,
+                    ramp_c_per_min: chamber.ramp_c_per_min,
+                    band_c: series.band_c,
+                    stability_c_per_min: series.stability_c_per_min,
+                    soak: series.soak(),
+                    max_wait: series.max_wait(),
+                    poll: series.poll(),
+                },
+            );
+            at = p.setpoint_c;
+        }
+    }
+    total
 }
 
 #[cfg(test)]

@@ -26,9 +26,9 @@ pub mod monitor;
 pub mod sequencer;
 pub mod sink;
 
-pub use bench::{Bench, MeterAndTable};
+pub use bench::{Bench, MeterAndTable, MeterTableChamber};
 pub use engine::{
-    Engine, Event, Phase, Repeats, RunSummary, SequenceError, SequenceErrorKind, Sequencer,
-    SequencerOptions, StopRequest, TableRest,
+    ChamberRest, Engine, Event, Phase, Repeats, RunSummary, SequenceError, SequenceErrorKind,
+    Sequencer, SequencerOptions, StopRequest, TableRest,
 };
 pub use sink::{EventChannel, Sink, SinkError, SinkErrorKind};

@@ -234,7 +234,7 @@ impl Sink for RunDir {
 pub fn recorded_line(r: &Recorded<'_>, of: usize) -> String {
     let what = match r.record {
         Record::Segment(_) => "segment",
-        Record::Row(_) | Record::Warmup => "step",
+        Record::Row(_) | Record::Warmup | Record::Soak => "step",
     };
     let row = r.row;
     let spread = row.volts_std.map_or(String::new(), |s| {
@@ -420,6 +420,7 @@ mod tests {
             retries: 0,
             t_start_s: 0.0,
             t_end_s: 10.0,
+            series: None,
         }
     }
 
@@ -436,6 +437,7 @@ mod tests {
             pass: 0,
             rate_dps: 0.0,
             acquire: Acquire::Samples(100),
+            series: None,
         };
         let volts: Vec<f64> = (0..100).map(|i| f64::from(i % 7) * 1e-6).collect();
         let r = row(&step);

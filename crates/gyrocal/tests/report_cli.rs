@@ -80,6 +80,7 @@ fn small_run(dir: &Path) {
             retries: 0,
             t_start_s: i as f64,
             t_end_s: i as f64 + 0.3,
+            series: None,
         })
         .unwrap();
     }

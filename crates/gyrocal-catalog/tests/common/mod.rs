@@ -74,6 +74,7 @@ fn write_template(dir: &Path) {
             retries: 0,
             t_start_s: i as f64 * 10.0,
             t_end_s: i as f64 * 10.0 + 0.5,
+            series: None,
         })
         .unwrap();
     }

@@ -70,13 +70,16 @@ impl Plan {
     }
 
     /// SHA-256 (lower-case hex) of the canonical serialisation; see the module docs for what
-    /// it covers (everything but the two port fields, `[dut]` and `[acceptance]`).
+    /// it covers (everything but the port fields (the chamber's too), `[dut]` and `[acceptance]`).
     pub fn hash(&self) -> String {
         let mut doc = self.to_doc();
         if let Some(t) = doc.table.as_mut() {
             t.port.clear();
         }
         doc.dmm.port.clear();
+        if let Some(c) = doc.kinds.chamber.as_mut() {
+            c.port.clear();
+        }
         // one plan serves many gyros, and limits can be re-evaluated: neither is the method
         doc.dut = None;
         doc.acceptance = None;

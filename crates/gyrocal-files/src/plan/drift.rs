@@ -15,7 +15,7 @@ use super::schedule::Step;
 use super::schema::{KeySchema, Kind};
 use super::table::TableDialect;
 use super::validate::Ctx;
-use crate::steps::{Acquiring, Action, Compiled, HoldCheck, Record, Setup, TableAction};
+use crate::steps::{Acquiring, Action, ChamberAction, Compiled, HoldCheck, Record, Setup, TableAction};
 
 /// The keys of `[drift]`.
 pub(super) const KEYS: &[KeySchema] = &[
@@ -369,6 +369,7 @@ pub(crate) fn compile(plan: &Plan, remaining: &[Step], warmup_done: bool) -> Com
                 acquire: Acquiring::Readings(step.acquire),
                 hold,
                 record: Record::Segment(*step),
+                chamber: ChamberAction::None,
             }
         })
         .collect();
@@ -378,5 +379,6 @@ pub(crate) fn compile(plan: &Plan, remaining: &[Step], warmup_done: bool) -> Com
         warmup_in_record: plan.warmup().copied().filter(|_| !warmup_done),
         schedule_len: plan.step_count(),
         uses_table: role != TableRole::None,
+        uses_chamber: false,
     }
 }

@@ -19,21 +19,27 @@ use toml::de::DeTable;
 #[macro_export]
 macro_rules! for_each_test_kind {
     ($callback:ident) => {
-        $callback! { sweep => Sweep, drift => Drift }
+        $callback! { sweep => Sweep, drift => Drift, series => Series }
     };
 }
 
+use super::chamber::{ChamberDoc, ChamberSettings, RawChamber};
 use super::drift::{DriftDoc, DriftSettings, RawDrift};
 use super::error::PlanError;
 use super::raw::Spans;
 use super::schema::SectionSchema;
+use super::series::{RawSeries, SeriesDoc, SeriesSettings};
 use super::table::TableDialect;
 use super::validate::Ctx;
-use super::{drift, sweep};
+use super::{chamber, drift, series, sweep};
 
 /// The test kinds' own sections of the file (name, required, keys), in the order the file
 /// documents them: part of the schema the file's shape is checked against.
-pub(super) const SECTIONS: &[SectionSchema] = &[("drift", false, drift::KEYS)];
+pub(super) const SECTIONS: &[SectionSchema] = &[
+    ("drift", false, drift::KEYS),
+    ("series", false, series::KEYS),
+    ("chamber", false, chamber::KEYS),
+];
 
 /// The kinds' own sections as written in the file, read by their modules from the same text
 /// as the common sections (serde ignores the common sections here; their struct ignores
@@ -41,14 +47,31 @@ pub(super) const SECTIONS: &[SectionSchema] = &[("drift", false, drift::KEYS)];
 #[derive(Deserialize)]
 struct RawSections {
     drift: Option<RawDrift>,
+    series: Option<RawSeries>,
+    chamber: Option<RawChamber>,
 }
 
-/// Reads the kinds' own sections from the plan's text, their values' spans into `sp`.
-pub(super) fn raw_sections(src: &str, sp: &mut Spans) -> Result<KindSectionsDoc, toml::de::Error> {
+/// Reads the kinds' own sections from the plan's text, their values' spans into `sp`. The
+/// outer error is serde's; the inner one a whole-number key out of 64 bits, `(key, message)`.
+pub(super) fn raw_sections(
+    src: &str,
+    sp: &mut Spans,
+) -> Result<Result<KindSectionsDoc, (&'static str, String)>, toml::de::Error> {
     let raw: RawSections = toml::from_str(src)?;
-    Ok(KindSectionsDoc {
-        drift: raw.drift.map(|d| DriftDoc::from_raw(d, sp)),
-    })
+    let drift = raw.drift.map(|d| DriftDoc::from_raw(d, sp));
+    let series = match raw.series.map(|s| SeriesDoc::from_raw(s, sp)).transpose() {
+        Ok(s) => s,
+        Err(e) => return Ok(Err(e)),
+    };
+    let chamber = match raw.chamber.map(|c| ChamberDoc::from_raw(c, sp)).transpose() {
+        Ok(c) => c,
+        Err(e) => return Ok(Err(e)),
+    };
+    Ok(Ok(KindSectionsDoc {
+        drift,
+        series,
+        chamber,
+    }))
 }
 
 /// The test kinds' own sections in the document form (what the manifest stores and the hash
@@ -59,6 +82,12 @@ pub struct KindSectionsDoc {
     /// `[drift]` (a drift plan's table role and bench orientation; absent: the defaults).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub drift: Option<DriftDoc>,
+    /// `[series]` (a temperature series' temperatures, soak criterion and measurement).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub series: Option<SeriesDoc>,
+    /// `[chamber]` (the thermal chamber a temperature series drives).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub chamber: Option<ChamberDoc>,
 }
 
 impl KindSectionsDoc {
@@ -74,10 +103,15 @@ impl KindSectionsDoc {
         self,
         kind: PlanKind,
         dialect: TableDialect,
+        rates: &[f64],
         cx: &Ctx<'_>,
     ) -> Result<KindSections, PlanError> {
+        let drift = drift::validate(self.drift, kind, dialect, cx)?;
+        let (series, chamber) = series::validate(self.series, self.chamber, kind, rates, cx)?;
         Ok(KindSections {
-            drift: drift::validate(self.drift, kind, dialect, cx)?,
+            drift,
+            series,
+            chamber,
         })
     }
 }
@@ -86,6 +120,8 @@ impl KindSectionsDoc {
 #[derive(Debug, Clone, PartialEq, Default)]
 pub(super) struct KindSections {
     pub(super) drift: Option<DriftSettings>,
+    pub(super) series: Option<SeriesSettings>,
+    pub(super) chamber: Option<ChamberSettings>,
 }
 
 impl KindSections {
@@ -93,6 +129,8 @@ impl KindSections {
     pub(super) fn to_doc(&self) -> KindSectionsDoc {
         KindSectionsDoc {
             drift: self.drift.map(DriftSettings::to_doc),
+            series: self.series.as_ref().map(SeriesSettings::to_doc),
+            chamber: self.chamber.as_ref().map(ChamberSettings::to_doc),
         }
     }
 }
@@ -107,6 +145,7 @@ pub(super) fn uses_table(plan: &super::Plan) -> bool {
     match plan.kind() {
         PlanKind::Sweep => true,
         PlanKind::Drift => plan.drift().table != drift::TableRole::None,
+        PlanKind::Series => true,
     }
 }
 
@@ -129,11 +168,15 @@ pub enum PlanKind {
     /// rate is 0, `samples_per_rate` readings make one segment (one step) and `repeat`
     /// segments the record; analysed by Allan deviation instead of a line.
     Drift,
+    /// A temperature series (IEEE 1431 §12.8): a thermal chamber set to each temperature of
+    /// `[series] temperatures_c`, a soak until the gyro has settled, then the sweep, a bias
+    /// record at 0 °/s or both at each: `kind = "temperature_series"`.
+    Series,
 }
 
 impl PlanKind {
     /// All kinds.
-    pub const ALL: [PlanKind; 2] = [PlanKind::Sweep, PlanKind::Drift];
+    pub const ALL: [PlanKind; 3] = [PlanKind::Sweep, PlanKind::Drift, PlanKind::Series];
 
     /// The kind of the run whose manifest is `m` (its plan's).
     pub fn of(m: &crate::rundir::Manifest) -> PlanKind {
@@ -160,14 +203,16 @@ impl PlanKind {
         match self {
             PlanKind::Sweep => crate::rundir::FIT_JSON,
             PlanKind::Drift => crate::rundir::ALLAN_JSON,
+            PlanKind::Series => crate::rundir::SERIES_JSON,
         }
     }
 
-    /// `scale_factor` or `drift`, as written in a plan.
+    /// `scale_factor`, `drift` or `temperature_series`, as written in a plan.
     pub fn as_str(self) -> &'static str {
         match self {
             PlanKind::Sweep => "scale_factor",
             PlanKind::Drift => "drift",
+            PlanKind::Series => "temperature_series",
         }
     }
 }
@@ -182,6 +227,23 @@ pub(crate) fn compile(
     match plan.kind() {
         PlanKind::Sweep => sweep::compile(plan, remaining, warmup_done),
         PlanKind::Drift => drift::compile(plan, remaining, warmup_done),
+        PlanKind::Series => series::compile(plan, remaining, warmup_done),
+    }
+}
+
+/// The schedule of `plan` (see [`super::Plan::schedule`]).
+pub(super) fn schedule(plan: &super::Plan) -> Vec<super::Step> {
+    match plan.kind() {
+        PlanKind::Sweep | PlanKind::Drift => plan.passes_schedule(0, None),
+        PlanKind::Series => series::schedule(plan),
+    }
+}
+
+/// The number of steps of `plan`'s schedule.
+pub(super) fn step_count(plan: &super::Plan) -> usize {
+    match plan.kind() {
+        PlanKind::Sweep | PlanKind::Drift => plan.passes_count(),
+        PlanKind::Series => series::step_count(plan),
     }
 }
 
@@ -200,6 +262,7 @@ pub(super) fn summary(plan: &super::Plan) -> Option<KindSummary> {
     match plan.kind() {
         PlanKind::Sweep => None,
         PlanKind::Drift => Some(drift::summary(&plan.drift())),
+        PlanKind::Series => series::summary(plan),
     }
 }
 
@@ -212,7 +275,7 @@ pub(super) fn parse(kind: &str, cx: &Ctx<'_>) -> Result<PlanKind, PlanError> {
             cx.err(
                 "plan.kind",
                 format!(
-                    "unknown kind {kind:?}: write \"scale_factor\" (a sweep of rates) or \"drift\" (a static record at zero rate)"
+                    "unknown kind {kind:?}: write \"scale_factor\" (a sweep of rates), \"drift\" (a static record at zero rate) or \"temperature_series\" (a sweep or bias record at each temperature of a thermal chamber)"
                 ),
             )
         })
@@ -229,6 +292,8 @@ pub(super) fn check_rates(
     match kind {
         PlanKind::Sweep => sweep::check_rates(rates, cx),
         PlanKind::Drift => drift::check_rates(rates, written, cx),
+        // the series' rule depends on `[series] measure`: checked with its section
+        PlanKind::Series => Ok(()),
     }
 }
 

@@ -53,11 +53,13 @@
 //!   per section: `section` (`[plan]`), `table` and `dmm` (the bench's instruments; a port is the
 //!   link's own type, [`Port`]), `simulation` (the simulated truth), `dut`, `acceptance`;
 //! - one module per test kind, with `kind` the one dispatch on it: `sweep`
-//!   (`scale_factor`) and `drift` (with its `[drift]` section); `warmup` (`[warmup]`,
-//!   either kind);
+//!   (`scale_factor`), `drift` (with its `[drift]` section) and `series`
+//!   (`temperature_series`, with its `[series]` section and the chamber's `[chamber]`, module
+//!   `chamber`); `warmup` (`[warmup]`, any kind);
 //! - the schedule a plan expands into: `schedule`.
 
 mod acceptance;
+mod chamber;
 mod dmm;
 mod doc;
 mod dut;
@@ -90,6 +92,11 @@ use gyrocal_fit::acceptance::AcceptanceSpec;
 use toml::de::DeTable;
 
 pub use acceptance::{acceptance_from_toml_str, load_acceptance};
+pub use chamber::{
+    AlarmRegisterDoc, AlarmRegisterSetting, CHAMBER_BAUDS, ChamberDoc, ChamberModel,
+    ChamberSettings, DEFAULT_AMBIENT_C, DEFAULT_CHAMBER_BAUD, DEFAULT_MAX_C, DEFAULT_MIN_C,
+    DEFAULT_RAMP_C_PER_MIN, SafeStateChoice,
+};
 pub use dmm::{
     Acquisition, DmmDoc, DmmModel, DmmSettings, Framing, KNOWN_NPLC_VALUES, LINE_HZ, NPLC_VALUES,
     RANGES_V,
@@ -104,8 +111,13 @@ pub use error::{Location, PlanError, PlanErrorKind};
 pub use gyrocal_link::PortSpec as Port;
 pub(crate) use kind::compile;
 pub use kind::{KindSectionsDoc, KindSummary, PlanKind};
-pub use schedule::{Acquire, Step};
+pub use schedule::{Acquire, SeriesStep, Step};
 pub use section::{MAX_REPEAT, MAX_SAMPLES_PER_RATE, MAX_WHOLE_REVOLUTIONS, PlanSectionDoc};
+pub use series::{
+    DEFAULT_BAND_C, DEFAULT_BIAS_READINGS, DEFAULT_MAX_WAIT_MIN, DEFAULT_POLL_S, DEFAULT_SOAK_MIN,
+    DEFAULT_STABILITY_C_PER_MIN, MAX_SOAK_MIN, MAX_TEMPERATURES, Measure, SeriesDoc,
+    SeriesSettings, ramps_and_soaks,
+};
 pub use simulation::Simulation;
 pub use source::MAX_PLAN_BYTES;
 pub(crate) use source::{ReadFailure, read_capped_text};
@@ -192,7 +204,7 @@ impl Plan {
         let raw: RawFile = toml::from_str(src).map_err(syntax)?;
         let mut spans = Spans::default();
         let kinds = kind::raw_sections(src, &mut spans).map_err(syntax)?;
-        let doc = raw_to_doc(raw, kinds, &mut spans);
+        let doc = kinds.and_then(|kinds| raw_to_doc(raw, kinds, &mut spans));
         let cx = Ctx {
             origin,
             src: Some(src),

@@ -34,6 +34,22 @@ pub struct Step {
     pub rate_dps: f64,
     /// What to acquire.
     pub acquire: Acquire,
+    /// The temperature this step measures at, on a temperature series (`None` for every
+    /// other kind).
+    pub series: Option<SeriesStep>,
+}
+
+/// Where a step of a temperature series sits in the series: steps.csv's `series_point`,
+/// `setpoint_c` and `bias_record` columns.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SeriesStep {
+    /// 0-based index into `[series] temperatures_c`.
+    pub point: u32,
+    /// The chamber's setpoint, °C.
+    pub setpoint_c: f64,
+    /// The step is the bias record at this temperature (0 °/s, `bias_readings` readings),
+    /// not a step of its sweep.
+    pub bias_record: bool,
 }
 
 impl Step {
@@ -65,9 +81,21 @@ impl Step {
 }
 
 impl Plan {
-    /// The schedule: `repeat` passes over `rates_dps`, in order.
+    /// The schedule, by the plan's kind: `repeat` passes over `rates_dps`, in order (a
+    /// temperature series: those passes and its bias record at each temperature).
     pub fn schedule(&self) -> Vec<Step> {
-        let mut steps = Vec::with_capacity(self.step_count());
+        super::kind::schedule(self)
+    }
+
+    /// Number of steps of the schedule.
+    pub fn step_count(&self) -> usize {
+        super::kind::step_count(self)
+    }
+
+    /// `repeat` passes over `rates_dps`, the first step numbered `first`, each tagged with
+    /// `series`.
+    pub(super) fn passes_schedule(&self, first: usize, series: Option<SeriesStep>) -> Vec<Step> {
+        let mut steps = Vec::with_capacity(self.passes_count());
         for pass in 0..self.repeat {
             for &rate_dps in &self.rates_dps {
                 let acquire = if self.whole_revolutions > 0 && rate_dps != 0.0 {
@@ -83,18 +111,19 @@ impl Plan {
                     Acquire::Samples(self.samples_per_rate)
                 };
                 steps.push(Step {
-                    index: steps.len(),
+                    index: first + steps.len(),
                     pass,
                     rate_dps,
                     acquire,
+                    series,
                 });
             }
         }
         steps
     }
 
-    /// Number of steps (`repeat × rates`).
-    pub fn step_count(&self) -> usize {
+    /// Number of steps of `repeat` passes (`repeat × rates`).
+    pub(super) fn passes_count(&self) -> usize {
         self.rates_dps.len() * self.repeat as usize
     }
 }

@@ -55,6 +55,9 @@ pub(super) enum Kind {
     Numbers,
     /// A table of acceptance limits (`min`, `max`, `marginal_min`, `marginal_max`, numbers).
     Limits,
+    /// A list of inline tables (`[chamber] alarm_registers`); their keys are checked by
+    /// serde (unknown keys refused, with their place).
+    Tables,
 }
 
 /// An example line for a required key, for "add ..." hints.
@@ -66,6 +69,9 @@ fn example(section: &str, key: &str) -> &'static str {
         ("dmm", "port") => "port = \"/dev/ttyUSB0\"",
         ("table", "max_rate_dps") => "max_rate_dps = 20",
         ("table", "acceleration_dps2") => "acceleration_dps2 = 10",
+        ("series", "temperatures_c") => "temperatures_c = [25, -20, 60, 25]",
+        ("chamber", "model") => "model = \"watlow_f4\"",
+        ("chamber", "port") => "port = \"/dev/ttyUSB2\"",
         _ => "",
     }
 }
@@ -179,6 +185,15 @@ fn wrong_kind(section: &str, key: &str, kind: Kind, v: &DeValue<'_>) -> Option<S
         Kind::Numbers if v.is_array() => None,
         Kind::Numbers => Some(format!(
             "= {shown} is {what}: write a list of numbers in brackets, e.g. {key} = [0, 5, -5]"
+        )),
+        Kind::Tables
+            if v.as_array()
+                .is_some_and(|a| a.iter().all(|t| t.get_ref().is_table())) =>
+        {
+            None
+        }
+        Kind::Tables => Some(format!(
+            "= {shown} is not a list of tables: write e.g. {key} = [{{ register = 1061, name = \"door open\" }}]"
         )),
         Kind::Limits if v.is_table() => None,
         Kind::Limits => Some(format!(
@@ -425,6 +440,7 @@ mod tests {
             Kind::Bool => "true",
             Kind::Numbers => "[0, 1]",
             Kind::Limits => "{ min = 0, max = 1 }",
+            Kind::Tables => "[{ register = 1, name = \"x\" }]",
         }
     }
 

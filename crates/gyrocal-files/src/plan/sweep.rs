@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use super::Plan;
 use super::schedule::Step;
-use crate::steps::{Acquiring, Action, Compiled, HoldCheck, Record, Setup, TableAction};
+use crate::steps::{Acquiring, Action, ChamberAction, Compiled, HoldCheck, Record, Setup, TableAction};
 
 /// A sweep fits a line: it needs at least two distinct rates.
 pub(super) fn check_rates(rates: &[f64], cx: &Ctx<'_>) -> Result<(), PlanError> {
@@ -45,6 +45,7 @@ pub(crate) fn compile(plan: &Plan, remaining: &[Step], warmup_done: bool) -> Com
             acquire: Acquiring::UntilSettled(*settings),
             hold: HoldCheck::None,
             record: Record::Warmup,
+            chamber: ChamberAction::None,
         });
     let steps = warmup
         .into_iter()
@@ -57,6 +58,7 @@ pub(crate) fn compile(plan: &Plan, remaining: &[Step], warmup_done: bool) -> Com
                 tolerance_dps,
             },
             record: Record::Row(*step),
+            chamber: ChamberAction::None,
         }))
         .collect();
     Compiled {
@@ -65,5 +67,6 @@ pub(crate) fn compile(plan: &Plan, remaining: &[Step], warmup_done: bool) -> Com
         warmup_in_record: None,
         schedule_len: plan.step_count(),
         uses_table: true,
+        uses_chamber: false,
     }
 }

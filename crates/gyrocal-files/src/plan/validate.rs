@@ -149,7 +149,7 @@ pub(super) fn validate(doc: PlanDoc, cx: &Ctx<'_>) -> Result<Plan, PlanError> {
     if let Some(a) = &acceptance {
         acceptance::validate(a, cx)?;
     }
-    let kind_sections = kinds.validate(section.kind, table.dialect, cx)?;
+    let kind_sections = kinds.validate(section.kind, table.dialect, &section.rates_dps, cx)?;
     let warmup = warmup.map(|w| warmup::validate(&w, cx)).transpose()?;
     Ok(Plan {
         kind_sections,

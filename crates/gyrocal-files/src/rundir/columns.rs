@@ -131,6 +131,8 @@ pub(super) fn read_step(
     counting: Counting,
 ) -> Result<StepRecord, String> {
     let mut r: StepRecord = rec.deserialize(Some(fields)).map_err(|e| e.to_string())?;
+    let series: SeriesColumns = rec.deserialize(Some(fields)).map_err(|e| e.to_string())?;
+    r.series = series.cells()?;
     let step = counting.to_index("step", r.step as u64)?;
     let pass = counting.to_index("pass", u64::from(r.pass))?;
     r.step = usize::try_from(step).map_err(|e| e.to_string())?;
@@ -174,6 +176,12 @@ pub(super) fn step_row<'a>(r: &StepRecord, start_utc: &'a str, end_utc: &'a str)
         t_end_s: r.t_end_s,
         t_start_utc: start_utc,
         t_end_utc: end_utc,
+        series_point: r.series.map(|c| c.series_point),
+        setpoint_c: r.series.map(|c| c.setpoint_c),
+        temp_min_c: r.series.and_then(|c| c.temp_min_c),
+        temp_mean_c: r.series.and_then(|c| c.temp_mean_c),
+        temp_max_c: r.series.and_then(|c| c.temp_max_c),
+        bias_record: r.series.map(|c| u8::from(c.bias_record)),
     }
 }
 

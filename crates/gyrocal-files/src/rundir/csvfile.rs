@@ -103,6 +103,9 @@ pub(super) fn parse_steps(
                 s.rate_dps
             )));
         }
+        if let Some(m) = series_mismatch(&r, s) {
+            return Err(bad(format!("{} {m}", step_no(r.step))));
+        }
         if !seen.insert(r.step) {
             return Err(bad(format!("{} appears twice", step_no(r.step))));
         }

@@ -27,6 +27,25 @@ pub struct Instruments {
     pub table: Option<String>,
 }
 
+/// The chamber of a run with one (a temperature series), in the manifest.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct ChamberRecord {
+    /// Who the controller said it is, and where it is connected.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub identity: Option<String>,
+    /// The safe state the last session left it in, in words (`setpoint 23 °C (ambient), in
+    /// control`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub safe_state: Option<String>,
+    /// Whether that state was read back from the chamber; `false`: it could NOT be
+    /// confirmed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub safe_confirmed: Option<bool>,
+    /// What was read back, or why nothing could be.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub safe_detail: Option<String>,
+}
+
 /// A resume of the run.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Resume {
@@ -346,6 +365,10 @@ pub struct Manifest {
     /// The warm-up as the run found it while recording (plans with `[warmup]`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub warmup: Option<WarmupRecord>,
+    /// The thermal chamber of a temperature series: who it is and where the run left it
+    /// (absent: the run has no chamber).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub chamber: Option<ChamberRecord>,
     /// SHA-256 (lower-case hex) of the data files as they were when the run completed
     /// (`samples.csv`, `steps.csv`; `fit.json`'s is in `fit_summary`), so a file edited
     /// afterwards is found (`gyrocal verify`). Empty until the run completes, and in runs of

@@ -147,6 +147,7 @@ mod read;
 mod records;
 mod results;
 mod resume;
+pub mod temps;
 mod writer;
 
 // the modules' crate-private helpers, for one another (each `use super::*`)
@@ -163,11 +164,11 @@ pub use integrity::{
 };
 pub use lock::{HolderState, LOCK_FILE, LockHolder, host_name, lock_holder};
 pub use manifest::{
-    Deviation, Dut, FitSummary, Instruments, Manifest, Resume, Retry, RunContext, RunData, RunMeta,
-    Status, Timing, WarmupRecord,
+    ChamberRecord, Deviation, Dut, FitSummary, Instruments, Manifest, Resume, Retry, RunContext,
+    RunData, RunMeta, Status, Timing, WarmupRecord,
 };
 pub use read::{load, load_fit, load_samples, plan_changes, read_capped, run_plan};
-pub use records::{Sample, SampleRow, StepRecord};
+pub use records::{Sample, SampleRow, SeriesCells, StepRecord};
 pub use results::{RunResults, WriteResult};
 pub use writer::RunDir;
 
@@ -190,6 +191,10 @@ pub const REPORT_HTML: &str = "report.html";
 pub const ALLAN_JSON: &str = "allan.json";
 /// File name of a drift record's Allan page (written and recorded as [`ALLAN_JSON`]).
 pub const ALLAN_HTML: &str = "allan.html";
+/// A temperature series' analysis (written by `gyrocal-analysis`).
+pub const SERIES_JSON: &str = "series.json";
+/// The temperatures of a run with a chamber (see [`temps`]).
+pub const TEMPS_CSV: &str = "temps.csv";
 /// Version of the run-directory format written, recorded in the manifest. Version 3 counts
 /// steps, readings and passes from 1 in the CSV files (`step_no`, `sample_no`, `pass_no`);
 /// version 2 (`step`, `index`, `pass`, from 0) and version 1 (before the UTC columns and the
@@ -223,9 +228,41 @@ pub const SAMPLES_HEADER_V1: [&str; 6] = ["step", "index", "t_s", "rate_dps", "v
 /// Columns of `steps.csv`, in order: the [`StepRecord`]'s fields (`step_no` and `pass_no`
 /// counted from 1, the record's `step` and `pass` plus one), then `t_start_utc` and
 /// `t_end_utc`, which the run directory computes from `t_start_s` and `t_end_s` (see the
-/// module docs, *Times*). New columns go at the end, so a script that reads columns by
-/// position keeps working.
-pub const STEPS_HEADER: [&str; 17] = [
+/// module docs, *Times*), then a temperature series' columns (empty for every other kind):
+/// `series_point` (0-based index into `[series] temperatures_c`), `setpoint_c`, the gyro's
+/// temperature during the acquisition `temp_min_c`, `temp_mean_c`, `temp_max_c`, and
+/// `bias_record` (`1`: the bias record at that temperature, `0`: a step of its sweep). New
+/// columns go at the end, so a script that reads columns by position keeps working.
+pub const STEPS_HEADER: [&str; 23] = [
+    "step_no",
+    "pass_no",
+    "rate_dps",
+    "rate_meas_dps",
+    "rate_meas_std_dps",
+    "rate_meas_min_dps",
+    "rate_meas_max_dps",
+    "rate_samples",
+    "volts",
+    "volts_std",
+    "n",
+    "overloads",
+    "retries",
+    "t_start_s",
+    "t_end_s",
+    "t_start_utc",
+    "t_end_utc",
+    "series_point",
+    "setpoint_c",
+    "temp_min_c",
+    "temp_mean_c",
+    "temp_max_c",
+    "bias_record",
+];
+
+/// Columns of `steps.csv` before the temperature series' columns existed (`step_no` and
+/// `pass_no` counted from 1). Such a file still reads (its rows are no series steps); a
+/// resume rewrites it with [`STEPS_HEADER`] (empty series cells in the old rows).
+pub const STEPS_HEADER_V4: [&str; 17] = [
     "step_no",
     "pass_no",
     "rate_dps",
@@ -311,6 +348,7 @@ pub const STEPS_HEADER_V1: [&str; 14] = [
 /// Every `steps.csv` header read, current first.
 pub(super) const STEPS_HEADERS: &[&[&str]] = &[
     &STEPS_HEADER,
+    &STEPS_HEADER_V4,
     &STEPS_HEADER_V3,
     &STEPS_HEADER_V2,
     &STEPS_HEADER_V1,

@@ -60,6 +60,12 @@ pub(super) struct StepRow<'a> {
     pub(super) t_end_s: f64,
     pub(super) t_start_utc: &'a str,
     pub(super) t_end_utc: &'a str,
+    pub(super) series_point: Option<u32>,
+    pub(super) setpoint_c: Option<f64>,
+    pub(super) temp_min_c: Option<f64>,
+    pub(super) temp_mean_c: Option<f64>,
+    pub(super) temp_max_c: Option<f64>,
+    pub(super) bias_record: Option<u8>,
 }
 
 /// `rec` with its computed numbers rounded once (the demanded rate, the plan's own number,
@@ -74,7 +80,87 @@ pub(super) fn rounded(rec: &StepRecord) -> StepRecord {
         volts_std: round_opt(rec.volts_std),
         t_start_s: round_significant(rec.t_start_s),
         t_end_s: round_significant(rec.t_end_s),
+        series: rec.series.map(|c| SeriesCells {
+            temp_min_c: round_opt(c.temp_min_c),
+            temp_mean_c: round_opt(c.temp_mean_c),
+            temp_max_c: round_opt(c.temp_max_c),
+            ..c
+        }),
         ..rec.clone()
+    }
+}
+
+/// A step's place in a temperature series and the gyro's (product) temperature during its
+/// acquisition: steps.csv's columns `series_point`, `setpoint_c`, `temp_min_c`,
+/// `temp_mean_c`, `temp_max_c` and `bias_record`, empty on the rows of every other kind (and
+/// absent from files written before they existed).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SeriesCells {
+    /// 0-based index into the plan's `[series] temperatures_c`.
+    pub series_point: u32,
+    /// The chamber's setpoint, °C (the plan's number, kept bit for bit).
+    pub setpoint_c: f64,
+    /// The gyro's lowest temperature read during the acquisition, °C (`None`: no reading).
+    pub temp_min_c: Option<f64>,
+    /// Its mean, °C.
+    pub temp_mean_c: Option<f64>,
+    /// Its highest, °C.
+    pub temp_max_c: Option<f64>,
+    /// The row is the bias record at this temperature (0 °/s, `[series] bias_readings`
+    /// readings), written `1`; a step of the sweep is `0`.
+    pub bias_record: bool,
+}
+
+/// The series columns of a steps.csv row as read (every one optional).
+#[derive(Debug, Default, Deserialize)]
+pub(super) struct SeriesColumns {
+    #[serde(default)]
+    series_point: Option<u32>,
+    #[serde(default)]
+    setpoint_c: Option<f64>,
+    #[serde(default)]
+    temp_min_c: Option<f64>,
+    #[serde(default)]
+    temp_mean_c: Option<f64>,
+    #[serde(default)]
+    temp_max_c: Option<f64>,
+    #[serde(default)]
+    bias_record: Option<u8>,
+}
+
+impl SeriesColumns {
+    /// The cells, when the row is a series step (`series_point` given); a row with some
+    /// series cells but no `series_point` or `setpoint_c`, or a `bias_record` other than 0
+    /// or 1, is an error.
+    pub(super) fn cells(self) -> Result<Option<SeriesCells>, String> {
+        let any = self.setpoint_c.is_some()
+            || self.temp_min_c.is_some()
+            || self.temp_mean_c.is_some()
+            || self.temp_max_c.is_some()
+            || self.bias_record.is_some();
+        let Some(series_point) = self.series_point else {
+            return if any {
+                Err("has temperature cells but no series_point".into())
+            } else {
+                Ok(None)
+            };
+        };
+        let Some(setpoint_c) = self.setpoint_c else {
+            return Err("has a series_point but no setpoint_c".into());
+        };
+        let bias_record = match self.bias_record {
+            None | Some(0) => false,
+            Some(1) => true,
+            Some(other) => return Err(format!("bias_record must be 0 or 1 (got {other})")),
+        };
+        Ok(Some(SeriesCells {
+            series_point,
+            setpoint_c,
+            temp_min_c: self.temp_min_c,
+            temp_mean_c: self.temp_mean_c,
+            temp_max_c: self.temp_max_c,
+            bias_record,
+        }))
     }
 }
 
@@ -116,6 +202,11 @@ pub struct StepRecord {
     pub t_start_s: f64,
     /// Run clock at the end of the acquisition, s.
     pub t_end_s: f64,
+    /// On a temperature series: the step's temperature and the gyro's during it (the
+    /// columns `series_point` … `bias_record`, see [`SeriesCells`]); `None` for every other
+    /// kind.
+    #[serde(skip)]
+    pub series: Option<SeriesCells>,
 }
 
 /// Problems of a step record's numbers, if any.
@@ -135,6 +226,28 @@ pub(super) fn record_problem(r: &StepRecord) -> Option<String> {
             return Some(format!("{what} must be finite or empty (got {v:?})"));
         }
     }
+    if let Some(c) = &r.series {
+        if !c.setpoint_c.is_finite() {
+            return Some(format!("setpoint_c must be finite (got {})", c.setpoint_c));
+        }
+        let temps = [
+            ("temp_min_c", c.temp_min_c),
+            ("temp_mean_c", c.temp_mean_c),
+            ("temp_max_c", c.temp_max_c),
+        ];
+        for (what, v) in temps {
+            if v.is_some_and(|v| !v.is_finite()) {
+                return Some(format!("{what} must be finite or empty (got {v:?})"));
+            }
+        }
+        if let (Some(lo), Some(mean), Some(hi)) = (c.temp_min_c, c.temp_mean_c, c.temp_max_c)
+            && !(lo <= mean && mean <= hi)
+        {
+            return Some(format!(
+                "temp_min_c {lo}, temp_mean_c {mean} and temp_max_c {hi} must be ordered"
+            ));
+        }
+    }
     if !r.t_start_s.is_finite() || !r.t_end_s.is_finite() || r.t_end_s < r.t_start_s {
         return Some(format!(
             "t_start_s {} and t_end_s {} must be finite and ordered",
@@ -143,3 +256,40 @@ pub(super) fn record_problem(r: &StepRecord) -> Option<String> {
     }
     None
 }
+
+/// Whether a row's series cells fit its schedule step: both without, or the same point,
+/// setpoint (bit for bit: the plan's number) and kind of record. The message says what
+/// differs.
+pub(super) fn series_mismatch(r: &StepRecord, s: &Step) -> Option<String> {
+    match (r.series, s.series) {
+        (None, None) => None,
+        (Some(c), Some(t))
+            if c.series_point == t.point
+                && c.setpoint_c.to_bits() == t.setpoint_c.to_bits()
+                && c.bias_record == t.bias_record =>
+        {
+            None
+        }
+        (Some(c), Some(t)) => Some(format!(
+            "series_point {} setpoint_c {} bias_record {} where the schedule has series_point {} setpoint_c {} bias_record {}",
+            c.series_point,
+            c.setpoint_c,
+            u8::from(c.bias_record),
+            t.point,
+            t.setpoint_c,
+            u8::from(t.bias_record)
+        )),
+        (None, Some(t)) => Some(format!(
+            "has no series cells where the schedule measures at series_point {} ({} °C)",
+            t.point, t.setpoint_c
+        )),
+        (Some(c), None) => Some(format!(
+            "has series_point {} on a plan that is no temperature series",
+            c.series_point
+        )),
+    }
+}
+
+#[cfg(test)]
+#[path = "series_tests.rs"]
+mod series_tests;

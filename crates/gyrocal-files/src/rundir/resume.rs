@@ -136,6 +136,7 @@ impl RunDir {
             current: None,
             clock,
             clock_floor,
+            temps: temps::TempsWriter::default(),
         };
         rd.write_manifest()?;
         Ok(rd)

@@ -79,6 +79,8 @@ pub struct RunDir {
     /// sessions after it go on from there instead of falling back to the wall clock (`None`
     /// for a new run, and harmless for a real-time one, whose earlier stamps are all past).
     pub(super) clock_floor: Option<ClockAnchor>,
+    /// `temps.csv`, opened on its first row (a run with a chamber).
+    pub(super) temps: temps::TempsWriter,
 }
 
 /// A finished run (complete, failed or aborted) leaves no `.lock` behind: the file is removed
@@ -252,6 +254,7 @@ impl RunDir {
             timing: None,
             fit_summary: None,
             warmup: None,
+            chamber: None,
             acceptance: None,
             legacy_fit: None,
         };
@@ -267,6 +270,7 @@ impl RunDir {
             current: None,
             clock: ClockAnchor::now(0.0),
             clock_floor: None,
+            temps: temps::TempsWriter::default(),
         };
         sync_dir(path)?;
         rd.write_manifest()?;
@@ -442,6 +446,9 @@ impl RunDir {
                 rec.step, rec.pass, rec.rate_dps, s.pass, s.rate_dps
             )));
         }
+        if let Some(m) = series_mismatch(&rec, &s) {
+            return Err(proto(format!("step {}: {m}", rec.step)));
+        }
         let written = self
             .current
             .filter(|c| c.step == rec.step)
@@ -493,6 +500,34 @@ impl RunDir {
         }
         self.manifest.simulated = true;
         self.manifest.simulated_by = Some(by.to_string());
+        self.write_manifest()
+    }
+
+    /// Records the chamber's identity (a run with a chamber).
+    pub fn set_chamber_identity(&mut self, identity: &str) -> Result<(), RunError> {
+        let c = self
+            .manifest
+            .chamber
+            .get_or_insert_with(ChamberRecord::default);
+        c.identity = Some(identity.to_string());
+        self.write_manifest()
+    }
+
+    /// Records where the session left the chamber: its safe state in words, whether it was
+    /// confirmed, and what was read back (or why nothing could be).
+    pub fn set_chamber_safe(
+        &mut self,
+        state: &str,
+        confirmed: bool,
+        detail: &str,
+    ) -> Result<(), RunError> {
+        let c = self
+            .manifest
+            .chamber
+            .get_or_insert_with(ChamberRecord::default);
+        c.safe_state = Some(state.to_string());
+        c.safe_confirmed = Some(confirmed);
+        c.safe_detail = Some(detail.to_string());
         self.write_manifest()
     }
 
@@ -609,11 +644,19 @@ impl RunDir {
             .get_ref()
             .sync_data()
             .map_err(io(&sapath, "sync"))?;
+        let dir = self.dir.clone();
+        self.temps.sync(&dir)?;
         if status == Status::Complete {
             for name in [SAMPLES_CSV, STEPS_CSV] {
                 let path = self.dir.join(name);
                 let sum = sha256_file(&path).map_err(opened)?;
                 self.manifest.checksums.insert(name.to_string(), sum);
+            }
+            // the temperatures of a run with a chamber, checked by `verify` like the data
+            let tpath = self.dir.join(TEMPS_CSV);
+            if tpath.is_file() {
+                let sum = sha256_file(&tpath).map_err(opened)?;
+                self.manifest.checksums.insert(TEMPS_CSV.to_string(), sum);
             }
         }
         self.manifest.status = status;

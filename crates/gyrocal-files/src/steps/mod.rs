@@ -71,6 +71,8 @@ pub enum Acquiring {
     /// Chunks of one warm-up window each, until consecutive window means settle or the
     /// warm-up's longest time is reached (IEEE 1431 §12.6).
     UntilSettled(WarmupSettings),
+    /// No readings: the step is a chamber's soak ([`ChamberAction::Soak`]).
+    Nothing,
 }
 
 /// How the table's hold is checked after the acquisition (a step that fails it is not
@@ -104,6 +106,8 @@ pub enum Record {
     Segment(Step),
     /// The warm-up: its state goes to the manifest's `warmup`, no row.
     Warmup,
+    /// A soak: no row (the temperatures go to `temps.csv`, phases `ramp` and `soak`).
+    Soak,
 }
 
 impl Record {
@@ -111,7 +115,7 @@ impl Record {
     pub fn step(&self) -> Option<&Step> {
         match self {
             Record::Row(s) | Record::Segment(s) => Some(s),
-            Record::Warmup => None,
+            Record::Warmup | Record::Soak => None,
         }
     }
 }
@@ -130,6 +134,57 @@ pub struct Action {
     pub hold: HoldCheck,
     /// How the result is recorded.
     pub record: Record,
+    /// What the chamber does (nothing on a bench without one).
+    pub chamber: ChamberAction,
+}
+
+/// What the thermal chamber does during a step (a temperature series; see
+/// `plan/series.rs`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ChamberAction {
+    /// Nothing: no chamber, or one not watched during this step.
+    None,
+    /// The step is a soak: the setpoint stepped towards the target, then a wait until the
+    /// gyro's temperature meets the criterion; the chamber read every `poll`.
+    Soak(Soak),
+    /// The step measures at a temperature: the chamber is read every `poll` during the
+    /// acquisition (temps.csv phase `measure`), the gyro's temperature min/mean/max go into
+    /// the step's row, and a step during which it left the band is measured again.
+    Watch(Watch),
+}
+
+/// A soak at one temperature of a series.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Soak {
+    /// 0-based index into `[series] temperatures_c`.
+    pub point: u32,
+    /// The target setpoint, °C.
+    pub setpoint_c: f64,
+    /// The run's ramp: the setpoint is stepped towards the target at this rate, °C/min.
+    pub ramp_c_per_min: f64,
+    /// Soaked when the gyro's temperature is within ± this of the target, °C ...
+    pub band_c: f64,
+    /// ... changing slower than this, °C/min ...
+    pub stability_c_per_min: f64,
+    /// ... for this long.
+    pub soak: Duration,
+    /// The run fails if the criterion has not held `soak` long after this long.
+    pub max_wait: Duration,
+    /// The chamber is read (and temps.csv written) at this interval.
+    pub poll: Duration,
+}
+
+/// What a measuring step at a temperature of a series watches.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Watch {
+    /// 0-based index into `[series] temperatures_c`.
+    pub point: u32,
+    /// The setpoint, °C.
+    pub setpoint_c: f64,
+    /// The step is refused if the gyro's temperature leaves ± this of the setpoint, °C.
+    pub band_c: f64,
+    /// The chamber is read at this interval.
+    pub poll: Duration,
 }
 
 impl Action {
@@ -153,6 +208,8 @@ pub struct Compiled {
     pub schedule_len: usize,
     /// The run moves or samples a table: its teardown must bring it to rest.
     pub uses_table: bool,
+    /// The run drives a chamber: its teardown must put it in its safe state.
+    pub uses_chamber: bool,
 }
 
 impl Compiled {

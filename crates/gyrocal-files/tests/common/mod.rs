@@ -64,6 +64,7 @@ pub fn run_step(rd: &mut RunDir, step: usize, record: bool) {
             retries: 0,
             t_start_s: step as f64 * 10.0,
             t_end_s: step as f64 * 10.0 + 0.3,
+            series: None,
         })
         .unwrap();
     }

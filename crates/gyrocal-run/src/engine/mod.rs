@@ -25,6 +25,7 @@
 //! - **Time is the run's own clock** (tokio's `Instant`), so a simulated run in virtual time is
 //!   exact and reproducible, and the same code runs in real time on real instruments.
 
+mod chamber;
 mod events;
 mod outcome;
 mod repeat;
@@ -34,7 +35,8 @@ mod teardown;
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use gyrocal_files::steps::{self, Action, Compiled, Setup};
+use gyrocal_chamber::Chamber as _;
+use gyrocal_files::steps::{self, Action, ChamberAction, Compiled, Setup};
 use gyrocal_meter::{ErrorKind, MeterError, Multimeter};
 use gyrocal_table::{RateTable, SettleCriteria, SettleProgress, StopHandle};
 use tokio::sync::{mpsc, watch};
@@ -47,10 +49,14 @@ use crate::sink::{Begin, Connected, EventChannel, LiveFn, Monitors, Sink, Sinks}
 use gyrocal_files::plan::{Plan, Step};
 use gyrocal_files::rundir::{RunDir, Timing as RunTiming};
 
+pub use chamber::{
+    STABILITY_WINDOW_MAX, ramped_setpoint, safe_state, slope_per_min, stability_window,
+};
 pub use events::{Event, Phase};
 pub(crate) use outcome::dmm_error;
 pub use outcome::{
-    RunSummary, SequenceError, SequenceErrorKind, SequencerOptions, StopRequest, TableRest,
+    ChamberRest, RunSummary, SequenceError, SequenceErrorKind, SequencerOptions, StopRequest,
+    TableRest,
 };
 pub use repeat::Repeats;
 use step::{PendingFetch, StepOutcome};
@@ -298,6 +304,26 @@ impl<B: Bench> Engine<B> {
         let mut total = recording.len();
         let mut position = 0;
         while let Some(action) = queue.pop_front() {
+            if let ChamberAction::Soak(soak) = action.chamber {
+                // the table held at 0 °/s while the chamber moves (the previous step's
+                // readings fetched meanwhile); a step whose readings the meter lost is
+                // measured again before the chamber leaves its temperature
+                self.table_action(&action, None, pending.take(), &ctx)
+                    .await?;
+                let lost = self.repeats.take_lost();
+                if !lost.is_empty() {
+                    queue.push_front(action);
+                    for a in lost.into_iter().rev() {
+                        queue.push_front(a);
+                        total += 1;
+                    }
+                    continue;
+                }
+                let span =
+                    tracing::info_span!("soak", point = soak.point, target_c = soak.setpoint_c);
+                self.soak(&soak).instrument(span).await?;
+                continue;
+            }
             let Some(step) = action.step().copied() else {
                 // a step that fills no row of the schedule (the warm-up)
                 self.warm_up(&action, &ctx).await?;
@@ -311,11 +337,13 @@ impl<B: Bench> Engine<B> {
                     .find(|e| e.step.index == s.index)
                     .map_or(Duration::ZERO, |e| e.ramp + e.settle + e.acquire)
             };
+            // the soaks still queued count too: hours of a series are spent in them
             let after = queue
                 .iter()
                 .filter_map(Action::step)
                 .map(cost)
-                .sum::<Duration>();
+                .sum::<Duration>()
+                + estimate::soaks_ahead(&queue, step.series.map_or(f64::NAN, |at| at.setpoint_c));
             self.emit(Event::StepStarted {
                 step,
                 number: step.index + 1,
@@ -411,6 +439,24 @@ impl<B: Bench> Engine<B> {
             mark_simulated,
         };
         self.sinks.connected(&connected)?;
+        if self.program.uses_chamber {
+            // a series on a bench without a chamber is refused before anything moves
+            let chamber = self.bench.chamber();
+            if !chamber.present() {
+                return Err(SequenceError::Chamber(Box::new(
+                    gyrocal_chamber::ChamberError::State {
+                        device: chamber.describe().to_string(),
+                        what: "the plan is a temperature series and this bench has no chamber"
+                            .into(),
+                    },
+                )));
+            }
+            let id = chamber.connect().await?;
+            let text = format!("{} ({}) on {}", id.model, id.detail, chamber.describe());
+            tracing::info!(chamber = %text, "chamber connected");
+            self.sinks.run.set_chamber_identity(&text)?;
+            self.log_chamber_retries(None)?;
+        }
         self.emit(Event::Connected {
             dmm: dmm_id,
             table: table_id,

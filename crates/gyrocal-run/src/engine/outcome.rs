@@ -4,6 +4,7 @@
 
 use std::time::Duration;
 
+use gyrocal_chamber::ChamberError;
 use gyrocal_meter::MeterError;
 use gyrocal_table::TableError;
 
@@ -70,6 +71,48 @@ impl TableRest {
     /// (The operator's "stop it by hand" applies to neither.)
     pub fn nothing_turning(&self) -> bool {
         matches!(self, TableRest::AtRest { .. } | TableRest::NoTable)
+    }
+}
+
+/// Where the thermal chamber was left at the end of a run: its safe state read back, or
+/// plainly not confirmed (like the table's [`TableRest`]).
+#[derive(Debug, Clone, PartialEq)]
+pub enum ChamberRest {
+    /// The run has no chamber.
+    NoChamber,
+    /// The chamber was read back in its safe state.
+    Confirmed {
+        /// The state, in words (`setpoint 23 °C (ambient), in control`).
+        state: String,
+        /// What was read back.
+        detail: String,
+    },
+    /// The safe state was asked for but could NOT be confirmed (a silent controller, a
+    /// setpoint read back wrong, an option the chamber was not set up for).
+    NotConfirmed {
+        /// The state asked for, in words.
+        state: String,
+        /// Why it could not be confirmed.
+        reason: String,
+    },
+}
+
+impl ChamberRest {
+    /// True when no chamber can be left hot or cold: confirmed safe, or none in the run.
+    pub fn is_safe(&self) -> bool {
+        matches!(self, ChamberRest::NoChamber | ChamberRest::Confirmed { .. })
+    }
+
+    /// The ending's line: `chamber: setpoint 23 °C (ambient), in control: confirmed`, or
+    /// `chamber: standby could NOT be confirmed: <why>`; `None` without a chamber.
+    pub fn line(&self) -> Option<String> {
+        match self {
+            ChamberRest::NoChamber => None,
+            ChamberRest::Confirmed { state, .. } => Some(format!("chamber: {state}: confirmed")),
+            ChamberRest::NotConfirmed { state, reason } => Some(format!(
+                "chamber: {state} could NOT be confirmed: {reason}; check the chamber by hand"
+            )),
+        }
     }
 }
 
@@ -191,6 +234,46 @@ pub enum SequenceError {
     /// The sequencer panicked (a bug); the table was still brought to rest.
     #[error("internal error (panic) in the sequencer: {0}")]
     Panicked(String),
+    /// The thermal chamber failed (silent, refused a setpoint, a broken link) after its
+    /// driver's own retries.
+    #[error("chamber: {0}")]
+    Chamber(Box<ChamberError>),
+    /// The chamber raised an alarm: the run stops with the table at rest, the step in
+    /// progress not recorded; resumable once the alarm is dealt with.
+    #[error(
+        "chamber alarm: {}{}; the run is stopped (resume it once the alarm is cleared at the chamber)",
+        alarms.join(", "),
+        step.map(|s| format!(" during step {}, which is not recorded", s + 1)).unwrap_or_default()
+    )]
+    ChamberAlarm {
+        /// The alarms the chamber reported.
+        alarms: Vec<String>,
+        /// The step in progress (0-based), if any.
+        step: Option<usize>,
+    },
+    /// A temperature of the series did not soak within `[series] max_wait_min`.
+    #[error(
+        "temperature {} of the series ({setpoint_c} °C) not soaked after {waited_min:.1} min (max_wait_min): the gyro read {} (band ±{band_c} °C{}); check the chamber and the gyro's sensor, or widen the band or the wait",
+        .point + 1,
+        product_c.map_or("nothing".to_string(), |t| format!("{t} °C")),
+        rate_c_per_min.map_or(String::new(), |r| format!(", changing {r:.3} °C/min, limit {stability_c_per_min} °C/min"))
+    )]
+    NotSoaked {
+        /// 0-based index into `[series] temperatures_c`.
+        point: u32,
+        /// The target, °C.
+        setpoint_c: f64,
+        /// The gyro's last temperature, °C.
+        product_c: Option<f64>,
+        /// The band, ± °C.
+        band_c: f64,
+        /// Its last rate of change, °C/min.
+        rate_c_per_min: Option<f64>,
+        /// The stability limit, °C/min.
+        stability_c_per_min: f64,
+        /// How long the soak waited, min.
+        waited_min: f64,
+    },
 }
 
 /// What kind of ending a [`SequenceError`] is, for a caller that decides on it (an exit code,
@@ -215,6 +298,8 @@ pub enum SequenceErrorKind {
     Stopped,
     /// A bug (a panic).
     Internal,
+    /// The chamber failed, raised an alarm, or a temperature did not soak in time.
+    Chamber,
 }
 
 impl SequenceError {
@@ -233,6 +318,9 @@ impl SequenceError {
             }
             SequenceError::Stopped(_) => SequenceErrorKind::Stopped,
             SequenceError::Panicked(_) => SequenceErrorKind::Internal,
+            SequenceError::Chamber(_)
+            | SequenceError::ChamberAlarm { .. }
+            | SequenceError::NotSoaked { .. } => SequenceErrorKind::Chamber,
         }
     }
 }
@@ -257,6 +345,12 @@ impl From<TableError> for SequenceError {
     }
 }
 
+impl From<ChamberError> for SequenceError {
+    fn from(e: ChamberError) -> Self {
+        SequenceError::Chamber(Box::new(e))
+    }
+}
+
 impl From<RunError> for SequenceError {
     fn from(e: RunError) -> Self {
         SequenceError::RunDir(Box::new(e))
@@ -278,6 +372,8 @@ pub struct RunSummary {
     pub elapsed_s: f64,
     /// Where the table was left, as far as gyrocal could confirm.
     pub table: TableRest,
+    /// Where the chamber was left, as far as gyrocal could confirm (after the table).
+    pub chamber: ChamberRest,
     /// Whether resuming the same plan can complete the run. False when the plan itself must
     /// change (every reading of a step overloaded: the range is too small), which makes it
     /// another plan: a new run.

@@ -116,6 +116,7 @@ mod tests {
             pass: 0,
             rate_dps: 5.0,
             acquire: Acquire::Samples(10),
+            series: None,
         }
     }
 

@@ -2,11 +2,15 @@
 //! ([`Acquiring`]: n readings, or chunks until settled), the hold check ([`HoldCheck`]) and
 //! the record ([`Record`]), pushed to the sinks.
 
-use gyrocal_files::steps::{Acquiring, Action, HoldCheck, Record, TableAction};
+use gyrocal_files::rundir::temps::Phase as TempPhase;
+use gyrocal_files::steps::{
+    Acquiring, Action, ChamberAction, HoldCheck, Record, TableAction, Watch,
+};
 use gyrocal_meter::{Acquired, Measured, Multimeter, Reading};
 use gyrocal_table::{RateStats, RateTable, TableMode};
 use tokio::time::Instant;
 
+use super::chamber::{TempStats, watch_while};
 use super::{Engine, Event, Phase, SequenceError, StepContext, dmm_error};
 use crate::bench::Bench;
 use crate::monitor::{self, WarmupWatch};
@@ -38,6 +42,8 @@ pub(super) struct PendingFetch<P> {
     stats: RateStats,
     t_start: f64,
     t_end: f64,
+    /// The gyro's temperature during the acquisition (a step at a temperature).
+    temps: Option<TempStats>,
 }
 
 /// One acquisition: the readings (or the meter's pending burst) and the table's samples.
@@ -46,6 +52,8 @@ struct Acquisition<P> {
     stats: RateStats,
     t_start: f64,
     t_end: f64,
+    /// The gyro's temperature during it (a step at a temperature).
+    temps: Option<TempStats>,
 }
 
 impl<B: Bench> Engine<B> {
@@ -76,7 +84,13 @@ impl<B: Bench> Engine<B> {
         let n = Step { acquire, ..*step }.sample_count(ctx.reading_time);
         let n = usize::try_from(n).unwrap_or(usize::MAX);
         let may_defer = self.options.overlap_fetch && !last;
-        let acq = self.acquire(n, may_defer, true).await?;
+        let watch = match action.chamber {
+            ChamberAction::Watch(w) => Some(w),
+            ChamberAction::None | ChamberAction::Soak(_) => None,
+        };
+        let acq = self
+            .acquire(n, may_defer, true, watch.map(|w| (w, step)))
+            .await?;
         // the meter's recoveries are logged whatever the table did
         if let Measured::Complete(a) = &acq.measured {
             for note in &a.notes {
@@ -87,6 +101,15 @@ impl<B: Bench> Engine<B> {
         if let Some(why) = self.check_hold(action.hold, step, &mut stats).await? {
             return Ok(StepOutcome::Again {
                 instrument: "table",
+                detail: why,
+            });
+        }
+        // the gyro left the band: refused like a step the table did not hold
+        if let (Some(w), Some(t)) = (watch, acq.temps)
+            && let Some(why) = t.refusal(&w)
+        {
+            return Ok(StepOutcome::Again {
+                instrument: "chamber",
                 detail: why,
             });
         }
@@ -101,8 +124,8 @@ impl<B: Bench> Engine<B> {
                     &readings,
                     stats,
                     retries,
-                    acq.t_start,
-                    acq.t_end,
+                    (acq.t_start, acq.t_end),
+                    acq.temps,
                 )?;
                 Ok(StepOutcome::Recorded)
             }
@@ -113,6 +136,7 @@ impl<B: Bench> Engine<B> {
                 stats,
                 t_start: acq.t_start,
                 t_end: acq.t_end,
+                temps: acq.temps,
             })),
         }
     }
@@ -144,7 +168,7 @@ impl<B: Bench> Engine<B> {
         self.emit(Event::Warmup(watch.record().clone()))?;
         let n = usize::try_from(watch.window()).unwrap_or(usize::MAX);
         loop {
-            let acq = self.acquire(n, false, false).await?;
+            let acq = self.acquire(n, false, false, None).await?;
             let a = match acq.measured {
                 Measured::Complete(a) => a,
                 Measured::Pending(p) => self.dmm_mut()?.collect(p).await.map_err(dmm_error)?,
@@ -168,7 +192,7 @@ impl<B: Bench> Engine<B> {
     /// A rate is demanded and waited for, the previous step's pending readings fetched
     /// meanwhile (the table is on another port); otherwise nothing is demanded, the pending
     /// readings are fetched at once, and the hold starts now.
-    async fn table_action(
+    pub(super) async fn table_action(
         &mut self,
         action: &Action,
         index: Option<usize>,
@@ -185,7 +209,14 @@ impl<B: Bench> Engine<B> {
                     phase: Phase::Fetching,
                 })?;
                 let fetched = self.dmm_mut()?.collect(p.pending).await;
-                self.take_fetched(p.step, p.action, fetched, p.stats, p.t_start, p.t_end)?;
+                self.take_fetched(
+                    p.step,
+                    p.action,
+                    fetched,
+                    p.stats,
+                    (p.t_start, p.t_end),
+                    p.temps,
+                )?;
             }
             return Ok(at_rest);
         };
@@ -219,7 +250,14 @@ impl<B: Bench> Engine<B> {
         let wait = table.wait_at_rate_observed(&ctx.criteria, &mut observe);
         let (settled, fetched) = tokio::join!(wait, dmm.collect(p.pending));
         // record the previous step before anything else can fail
-        self.take_fetched(p.step, p.action, fetched, p.stats, p.t_start, p.t_end)?;
+        self.take_fetched(
+            p.step,
+            p.action,
+            fetched,
+            p.stats,
+            (p.t_start, p.t_end),
+            p.temps,
+        )?;
         Ok(settled?.at_rate_since)
     }
 
@@ -248,12 +286,15 @@ impl<B: Bench> Engine<B> {
 
     /// The one acquire path: `n` readings while the table is sampled every
     /// `sample_interval`; `may_defer`: the meter may leave its last burst pending; `live`:
-    /// each reading goes to the live feeds.
+    /// each reading goes to the live feeds; `watch`: a step at a temperature, during which the
+    /// chamber is read every poll (temps.csv phase `measure`) and the gyro's temperature kept
+    /// for the step's row (a chamber that fails or raises an alarm ends the step, unrecorded).
     async fn acquire(
         &mut self,
         n: usize,
         may_defer: bool,
         live: bool,
+        watch: Option<(Watch, &Step)>,
     ) -> Result<Acquisition<<B::Meter as Multimeter>::Pending>, SequenceError> {
         if live {
             self.progress_to_live()?;
@@ -263,16 +304,45 @@ impl<B: Bench> Engine<B> {
         if self.meter_released {
             return Err(super::released());
         }
-        let (dmm, table) = self.bench.meter_and_table();
-        let (measured, stats) = table
-            .record_while(interval, dmm.measure(n, may_defer))
-            .await?;
+        let Some((w, step)) = watch else {
+            let (dmm, table) = self.bench.meter_and_table();
+            let (measured, stats) = table
+                .record_while(interval, dmm.measure(n, may_defer))
+                .await?;
+            let measured = measured.map_err(dmm_error)?;
+            return Ok(Acquisition {
+                measured,
+                stats,
+                t_start,
+                t_end: self.now_s(),
+                temps: None,
+            });
+        };
+        let (origin, offset_s) = (self.origin, self.offset_s);
+        let clock = move || offset_s + origin.elapsed().as_secs_f64();
+        let (dmm, table, chamber) = self.bench.instruments();
+        let work = table.record_while(interval, dmm.measure(n, may_defer));
+        let (out, watched) = watch_while(chamber, w.poll, Some(step.index), clock, work).await;
+        for (t_s, r) in &watched.readings {
+            self.note_temp(*t_s, r, Some(w.point), TempPhase::Measure)?;
+        }
+        self.log_chamber_retries(Some(step.index))?;
+        if let Some(e) = watched.error {
+            return Err(e);
+        }
+        let Some(result) = out else {
+            return Err(SequenceError::Panicked(
+                "the chamber's watch ended without the acquisition or an error".into(),
+            ));
+        };
+        let (measured, stats) = result?;
         let measured = measured.map_err(dmm_error)?;
         Ok(Acquisition {
             measured,
             stats,
             t_start,
             t_end: self.now_s(),
+            temps: watched.stats(&w),
         })
     }
 
@@ -379,8 +449,8 @@ impl<B: Bench> Engine<B> {
         action: Action,
         fetched: Result<Acquired, <B::Meter as Multimeter>::Error>,
         stats: RateStats,
-        t_start: f64,
-        t_end: f64,
+        times: (f64, f64),
+        temps: Option<TempStats>,
     ) -> Result<(), SequenceError> {
         match fetched {
             Ok(acq) => {
@@ -393,8 +463,8 @@ impl<B: Bench> Engine<B> {
                     &acq.readings,
                     stats,
                     acq.retries,
-                    t_start,
-                    t_end,
+                    times,
+                    temps,
                 )
             }
             Err(e) => {
@@ -419,8 +489,8 @@ impl<B: Bench> Engine<B> {
         readings: &[Reading],
         stats: RateStats,
         retries: u32,
-        t_start: f64,
-        t_end: f64,
+        (t_start, t_end): (f64, f64),
+        temps: Option<TempStats>,
     ) -> Result<(), SequenceError> {
         let n = readings.len();
         // Reading times are spread evenly over the acquisition: the meter paces them itself.
@@ -461,6 +531,14 @@ impl<B: Bench> Engine<B> {
             retries,
             t_start_s: t_start,
             t_end_s: t_end,
+            series: step.series.map(|at| gyrocal_files::rundir::SeriesCells {
+                series_point: at.point,
+                setpoint_c: at.setpoint_c,
+                temp_min_c: temps.map(|t| t.min),
+                temp_mean_c: temps.map(|t| t.mean),
+                temp_max_c: temps.map(|t| t.max),
+                bias_record: at.bias_record,
+            }),
         };
         if overloads > 0 {
             tracing::warn!(

@@ -1,14 +1,19 @@
 //! The guaranteed teardown: whatever way a run ends (every step recorded, an error, a stop
 //! request, a failed consumer, a panic in the steps), the table is brought to rest and
-//! waited for until it says so, the multimeter is returned to its front panel, and the
-//! consumers (the run directory first) are told how the run ended (OpenHTF's teardown phase
-//! group, which always runs). The operator is never told "stopped" unless the table said so.
+//! waited for until it says so, the multimeter is returned to its front panel, the chamber
+//! of a temperature series goes to its safe state (after the table: the table is the
+//! dangerous one) and is read back, and the consumers (the run directory first) are told how
+//! the run ended (OpenHTF's teardown phase group, which always runs). The operator is never
+//! told "stopped" or "safe" unless the machine said so.
 
 use gyrocal_table::RateTable;
 use tokio::sync::watch;
 use tokio::time::Instant;
 
-use super::{Engine, Event, RunSummary, SequenceError, SequenceErrorKind, StopRequest, TableRest};
+use super::{
+    ChamberRest, Engine, Event, RunSummary, SequenceError, SequenceErrorKind, StopRequest,
+    TableRest,
+};
 use crate::bench::Bench;
 use crate::sink::Finish;
 use gyrocal_files::rundir::{Status, Timing as RunTiming};
@@ -24,17 +29,25 @@ impl<B: Bench> Engine<B> {
         // the steps sent the controlled stop; the run ends when the table says it is at rest
         let table = self.bring_to_rest(stop, false).await;
         self.release_meter(false).await;
+        let chamber = self.chamber_safe_and_recorded().await;
         let elapsed_s = self.now_s();
         // The data are complete whatever the table does now; a table that did not confirm
         // rest is said in the manifest and by the caller, but does not void the calibration.
-        let note = match &table {
-            TableRest::AtRest { .. } | TableRest::NoTable => None,
+        let mut notes: Vec<String> = Vec::new();
+        match &table {
+            TableRest::AtRest { .. } | TableRest::NoTable => {}
             TableRest::NotConfirmed { reason } | TableRest::NeverReached { reason } => {
-                Some(format!(
+                notes.push(format!(
                     "all steps recorded, but the table could NOT be confirmed at rest: {reason}"
                 ))
             }
-        };
+        }
+        if let ChamberRest::NotConfirmed { state, reason } = &chamber {
+            notes.push(format!(
+                "all steps recorded, but the chamber's safe state ({state}) could NOT be confirmed: {reason}"
+            ));
+        }
+        let note = (!notes.is_empty()).then(|| notes.join("; "));
         let mut summary = RunSummary {
             status: Status::Complete,
             reason: note.clone(),
@@ -42,6 +55,7 @@ impl<B: Bench> Engine<B> {
             timing: Some(timing.clone()),
             elapsed_s,
             table,
+            chamber,
             resumable: false,
             emergency_stop: self.emergency_sent,
         };
@@ -99,6 +113,7 @@ impl<B: Bench> Engine<B> {
         self.emergency_sent |= emergency_sent;
         let table = self.bring_to_rest(stop, emergency_sent).await;
         self.release_meter(true).await;
+        let chamber = self.chamber_safe_and_recorded().await;
         let elapsed_s = self.now_s();
         // the record says an emergency stop when one was sent, whatever the first request was
         let reason = if self.emergency_sent && !reason.contains("emergency stop") {
@@ -123,9 +138,29 @@ impl<B: Bench> Engine<B> {
             timing: None,
             elapsed_s,
             table,
+            chamber,
             resumable,
             emergency_stop: self.emergency_sent,
         }
+    }
+
+    /// The chamber to its safe state ([`Engine::chamber_to_safety`]), said in the manifest;
+    /// a manifest that cannot be written is logged (the ending says it anyway).
+    async fn chamber_safe_and_recorded(&mut self) -> ChamberRest {
+        let chamber = self.chamber_to_safety().await;
+        let record = match &chamber {
+            ChamberRest::NoChamber => None,
+            ChamberRest::Confirmed { state, detail } => Some((state.clone(), true, detail.clone())),
+            ChamberRest::NotConfirmed { state, reason } => {
+                Some((state.clone(), false, reason.clone()))
+            }
+        };
+        if let Some((state, confirmed, detail)) = record
+            && let Err(e) = self.sinks.run.set_chamber_safe(&state, confirmed, &detail)
+        {
+            tracing::error!(error = %e, "could not record the chamber's state in the manifest");
+        }
+        chamber
     }
 
     /// An event during the teardown: a consumer that fails now cannot change the ending, so

@@ -60,6 +60,7 @@ pub(super) fn finish(
     doc["reason"] = serde_json::json!(summary.reason);
     doc["emergency_stop"] = serde_json::json!(summary.emergency_stop);
     doc["table"] = table;
+    doc["chamber"] = serde_json::json!(summary.chamber.line());
     doc["steps_recorded_this_session"] = serde_json::json!(summary.steps_recorded);
     doc["steps_done"] = serde_json::json!(run.done_steps().len());
     doc["steps_total"] = serde_json::json!(run.schedule().len());
@@ -114,10 +115,14 @@ pub(super) fn finish_human(
     human: &dyn Fn(String),
     doc: &mut serde_json::Value,
 ) -> anyhow::Result<u8> {
-    let rest_line = match &summary.table {
+    let mut rest_line = match &summary.table {
         TableRest::AtRest { .. } => "the table is at rest".to_string(),
         other => rest_text(other),
     };
+    // a temperature series: where the chamber was left, confirmed or plainly not
+    if let Some(line) = summary.chamber.line() {
+        rest_line = format!("{rest_line}\n  {line}");
+    }
     // before a resume the operator re-arms what the emergency stop opened
     let rearm = if summary.emergency_stop {
         "\n  an EMERGENCY STOP was sent (it opens the table's interlock: servo off). Find out why \
@@ -169,6 +174,16 @@ pub(super) fn finish_human(
             rest_text(&summary.table)
         );
         return Ok(1);
+    }
+    if let Some(line) = summary.chamber.line() {
+        if !summary.chamber.is_safe() {
+            if let Err(e) = &ended {
+                say!("gyrocal: error: {e:#}");
+            }
+            say!("gyrocal: all steps recorded, but {line}");
+            return Ok(1);
+        }
+        human(line);
     }
     ended
 }
