@@ -222,3 +222,32 @@ fn the_simulated_bench_with_a_chamber_names_its_controller() {
     // the plain simulated bench has none (a sweep's certificate names no chamber)
     assert!(Station::simulated(3, today).chamber.is_none());
 }
+
+/// A plan of the repository's configs.
+fn config_plan(name: &str) -> gyrocal_files::Plan {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../configs")
+        .join(name);
+    let text = std::fs::read_to_string(&path).unwrap();
+    gyrocal_files::Plan::from_toml_str(&text, &path).unwrap_or_else(|e| panic!("{e}"))
+}
+
+#[test]
+fn the_series_plan_needs_a_chamber_and_the_sweep_plan_does_not() {
+    let series = config_plan("series.toml");
+    assert_eq!(Needs::of_plan(&series), SERIES);
+    let sweep = config_plan("quick.toml");
+    assert_eq!(Needs::of_plan(&sweep), SWEEP);
+    // so a station without [chamber] lacks it for the one and not the other
+    let plain = parse(&without_chamber());
+    assert_eq!(
+        plain.missing_sections(Needs::of_plan(&series)),
+        vec!["chamber"]
+    );
+    assert!(plain.missing_sections(Needs::of_plan(&sweep)).is_empty());
+    // the simulated bench of a series records its chamber, the sweep's none
+    let today = date(2026, 5, 1);
+    let sim = Station::simulated_for(5, today, &series);
+    assert!(sim.missing_sections(SERIES).is_empty());
+    assert!(Station::simulated_for(5, today, &sweep).chamber.is_none());
+}

@@ -204,3 +204,61 @@ fn a_series_json_of_another_shape_is_refused_naming_the_file() {
         "{stderr}"
     );
 }
+
+/// A station file with the meter and the table, `chamber` appended (a `[chamber]` or nothing).
+fn station_file(dir: &Path, chamber: &str) -> std::path::PathBuf {
+    let path = dir.join("station.toml");
+    let text = format!(
+        "id = \"bench-9\"\nlab = \"Lab\"\naddress = \"1 Road\"\n\n\
+         [multimeter]\nmodel = \"HP 34401A\"\nasset_id = \"DMM-07\"\nserial = \"3146A12345\"\n\
+         certificate = \"C-1\"\ncalibrated = 2025-04-12\ndue = 2099-04-12\n\n\
+         [table]\nmodel = \"ACL\"\nasset_id = \"RT-01\"\nserial = \"T-1\"\ncertificate = \"C-2\"\n\
+         calibrated = 2024-11-07\ndue = 2099-11-07\n\n{chamber}"
+    );
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn check_says_a_series_needs_the_chamber_s_record_and_its_calibration() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data_home = tmp.path().join("data");
+    let check = |station: &Path, plan: &str| {
+        let out = gyrocal(&data_home)
+            .args(["check", "--station"])
+            .arg(station)
+            .arg(config(plan))
+            .output()
+            .unwrap();
+        ok(&out);
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    // no [chamber]: the series is warned of, the sweep is not
+    let plain = station_file(tmp.path(), "");
+    let said = check(&plain, "series.toml");
+    assert!(
+        said.contains("station bench-9")
+            && said.contains("has no [chamber] section")
+            && said.contains("thermal chamber"),
+        "{said}"
+    );
+    assert!(!check(&plain, "quick.toml").contains("[chamber]"));
+    // an overdue chamber: `gyrocal run` would refuse the series; said at check
+    let overdue = station_file(
+        tmp.path(),
+        "[chamber]\nmodel = \"Espec SH-641\"\nasset_id = \"TC-03\"\nserial = \"S-1\"\n\
+         certificate = \"C-3\"\ncalibrated = 2020-01-01\ndue = 2021-01-01\n",
+    );
+    let said = check(&overdue, "series.toml");
+    assert!(
+        said.contains("the chamber TC-03 was due for calibration on 2021-01-01")
+            && said.contains("will refuse"),
+        "{said}"
+    );
+    assert!(
+        !said.contains("has no [chamber]"),
+        "the record is there: {said}"
+    );
+    // the sweep on the same bench does not use the chamber: no word of it
+    assert!(!check(&overdue, "quick.toml").contains("TC-03"));
+}

@@ -14,7 +14,7 @@
 
 use super::serials::{SerialCheck, reported_serial};
 use super::{Overdue, Station};
-use crate::plan::Plan;
+use crate::plan::{ChamberModel, Plan};
 
 /// The plan kind that drives a chamber (`kind = "temperature_series"`).
 pub const SERIES_KIND: &str = "temperature_series";
@@ -29,13 +29,12 @@ pub struct Needs {
 }
 
 impl Needs {
-    /// What a run of `plan` needs: the table when it drives one, the chamber when it is a
-    /// temperature series.
+    /// What a run of `plan` needs: the table when it drives one, the chamber when it has a
+    /// `[chamber]` (a temperature series).
     pub fn of_plan(plan: &Plan) -> Needs {
         Needs {
             table: plan.has_table(),
-            // by the kind's name, so the rule holds whichever way the kind is spelt in code
-            chamber: plan.kind().as_str() == SERIES_KIND,
+            chamber: plan.chamber().is_some(),
         }
     }
 
@@ -50,6 +49,16 @@ impl Needs {
 }
 
 impl Station {
+    /// The simulated bench's station for a run of `plan` (`gyrocal run --simulate`):
+    /// [`Station::simulated`], with a simulated chamber's record naming the plan's controller
+    /// when the plan has a `[chamber]` ([`Station::simulated_with_chamber`]).
+    pub fn simulated_for(seed: u64, today: jiff::civil::Date, plan: &Plan) -> Station {
+        match plan.chamber() {
+            Some(c) => Station::simulated_with_chamber(seed, today, controller_name(c.model)),
+            None => Station::simulated(seed, today),
+        }
+    }
+
     /// The instruments a run with `needs` uses whose calibration has expired on `today` (see
     /// [`Station::overdue`]): a drift record without a table is not refused for the table's
     /// calibration, nor a sweep for the chamber's.
@@ -112,6 +121,14 @@ impl Station {
     }
 }
 
+/// The controller of a plan's chamber model, as its identity names it (`Watlow F4`, `Espec`).
+fn controller_name(model: ChamberModel) -> &'static str {
+    match model {
+        ChamberModel::WatlowF4 => "Watlow F4",
+        ChamberModel::Espec => "Espec",
+    }
+}
+
 /// Letters and digits only, lower case: `SH-641` and `sh641` are one model number.
 fn squash(s: &str) -> String {
     s.chars()
@@ -147,6 +164,24 @@ mod tests {
         assert!(!names_controller("Espec SH-641", "Watlow F4"));
         assert!(!names_controller("Thermotron SE-600", "Watlow F4"));
         assert!(!names_controller("Watlow F4", ""));
+    }
+
+    #[test]
+    fn the_series_kind_is_the_plans() {
+        assert_eq!(SERIES_KIND, crate::plan::PlanKind::Series.as_str());
+    }
+
+    #[test]
+    fn the_identities_the_drivers_give_name_the_simulated_records_controller() {
+        // gyrocal-chamber's connect() identities (watlow/mod.rs, espec.rs)
+        assert!(names_controller(
+            &format!("{} (simulated)", controller_name(ChamberModel::WatlowF4)),
+            "Watlow F4"
+        ));
+        assert!(names_controller(
+            &format!("{} (simulated)", controller_name(ChamberModel::Espec)),
+            "Espec (SH-641/SU text protocol, experimental)"
+        ));
     }
 
     #[test]

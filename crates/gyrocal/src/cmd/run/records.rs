@@ -102,7 +102,7 @@ pub(super) fn station_for_run(
             }
             Some(s)
         }
-        None if args.simulate => Some(Station::simulated(sim_seed, today)),
+        None if args.simulate => Some(Station::simulated_for(sim_seed, today, plan)),
         None => None,
     };
     let mut deviations = Vec::new();
