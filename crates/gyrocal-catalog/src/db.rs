@@ -45,6 +45,8 @@ const POSTGRES_V1_HEADER: &str = "-- gyrocal catalog, schema version 1 (PostgreS
 const V1_CATALOG: &str = include_str!("../migrations/0001_catalog.sql");
 /// Version 2: a drift test's figures.
 const V2_DRIFT_RESULTS: &str = include_str!("../migrations/0002_drift_results.sql");
+/// Version 3: a temperature series' sensitivities and points.
+const V3_SERIES_RESULTS: &str = include_str!("../migrations/0003_series_results.sql");
 
 /// Which backend a set of migrations is for (only version 1's leading comment differs).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -62,6 +64,7 @@ fn migrations(backend: Backend) -> Vec<(i64, &'static str, Cow<'static, str>)> {
     vec![
         (1, "catalog", Cow::Owned(format!("{header}{V1_CATALOG}"))),
         (2, "drift results", Cow::Borrowed(V2_DRIFT_RESULTS)),
+        (3, "series results", Cow::Borrowed(V3_SERIES_RESULTS)),
     ]
 }
 
@@ -140,6 +143,9 @@ macro_rules! on_pool {
     };
 }
 
+// after `on_pool!`, which it uses
+mod series;
+
 /// An open catalog.
 #[derive(Debug, Clone)]
 pub struct Catalog {
@@ -206,7 +212,14 @@ const INSERT_CHECK: &str = "INSERT INTO checks (run_id, quantity, value, unit, \
      expanded_uncertainty, min, max, marginal_min, marginal_max, verdict) VALUES ($1, $2, $3, \
      $4, $5, $6, $7, $8, $9, $10)";
 /// The child tables, deleted before a run's rows are written again.
-const CHILD_TABLES: [&str; 4] = ["results", "steps", "instruments", "checks"];
+const CHILD_TABLES: [&str; 6] = [
+    "results",
+    "steps",
+    "instruments",
+    "checks",
+    "series_results",
+    "series_points",
+];
 
 /// Reads a `runs` row selected with [`RUN_COLUMNS`].
 macro_rules! run_row {
@@ -608,6 +621,9 @@ impl Catalog {
                         .execute(&mut *tx)
                         .await?;
                 }
+                if let Some(x) = &rec.series {
+                    series::insert_series!(tx, &r.id, x);
+                }
                 for c in &rec.checks {
                     sqlx::query(INSERT_CHECK)
                         .bind(&r.id)
@@ -741,6 +757,7 @@ impl Catalog {
                         results,
                         checks: Vec::new(),
                         rates_dps: Vec::new(),
+                        series: None,
                     });
                 }
                 let rows = sqlx::query(checks_sql).bind(serial).fetch_all(p).await?;
@@ -783,10 +800,16 @@ impl Catalog {
             }
             .await
         });
-        match result {
-            Ok(out) => Ok(out),
-            Err(e) => Err(self.read_error(&e).await),
+        let mut out = match result {
+            Ok(out) => out,
+            Err(e) => return Err(self.read_error(&e).await),
+        };
+        // a temperature series' sensitivities and points (schema version 3)
+        let mut series = self.series_of_serial(serial).await?;
+        for c in &mut out {
+            c.series = series.remove(&c.run.id);
         }
+        Ok(out)
     }
 
     /// The finished steps of a run, in order.
@@ -972,8 +995,9 @@ mod tests {
         };
         for backend in [Backend::Sqlite, Backend::Postgres] {
             let new = migrations(backend);
-            assert_eq!(new.len(), 2, "{backend:?}");
-            for (i, (version, _, sql)) in new.iter().enumerate() {
+            // the versions that release had; the later ones (3: the series tables) are new
+            assert_eq!(new.len(), 3, "{backend:?}");
+            for (i, (version, _, sql)) in new.iter().take(2).enumerate() {
                 assert_eq!(*version, i as i64 + 1);
                 assert_eq!(
                     sql.as_ref(),

@@ -29,7 +29,13 @@ use sqlx::{ConnectOptions as _, Connection as _};
 use crate::error::CatalogError;
 
 /// The tables a listing (`runs`, `history`) reads: checked before they are read.
-pub(crate) const LISTED_TABLES: [&str; 3] = ["runs", "results", "checks"];
+pub(crate) const LISTED_TABLES: [&str; 5] = [
+    "runs",
+    "results",
+    "checks",
+    "series_results",
+    "series_points",
+];
 
 /// At most this many of SQLite's findings are quoted in a message.
 const QUOTED: usize = 3;

@@ -27,80 +27,80 @@ pub struct Quantity {
     pub label: &'static str,
     /// Unit.
     pub unit: &'static str,
-    value: fn(&Results) -> Option<f64>,
-    uncertainty: fn(&Results) -> Option<f64>,
+    value: fn(&Calibration) -> Option<f64>,
+    uncertainty: fn(&Calibration) -> Option<f64>,
 }
 
 /// The quantities of a history, in the order shown.
-pub const QUANTITIES: [Quantity; 14] = [
+pub const QUANTITIES: [Quantity; 18] = [
     Quantity {
         name: "scale_factor",
         label: "Scale factor K",
         unit: "V/(°/s)",
-        value: |r| r.scale_factor,
-        uncertainty: |r| r.u_scale_factor,
+        value: |c| c.results.as_ref()?.scale_factor,
+        uncertainty: |c| c.results.as_ref()?.u_scale_factor,
     },
     Quantity {
         name: "bias_dph",
         label: "Bias",
         unit: "°/h",
-        value: |r| r.bias_dph,
-        uncertainty: |r| r.u_bias_dph,
+        value: |c| c.results.as_ref()?.bias_dph,
+        uncertainty: |c| c.results.as_ref()?.u_bias_dph,
     },
     Quantity {
         name: "bias_v",
         label: "Bias K0",
         unit: "V",
-        value: |r| r.bias_v,
-        uncertainty: |r| r.u_bias_v,
+        value: |c| c.results.as_ref()?.bias_v,
+        uncertainty: |c| c.results.as_ref()?.u_bias_v,
     },
     Quantity {
         name: "k_pos",
         label: "Scale factor K+",
         unit: "V/(°/s)",
-        value: |r| r.k_pos,
-        uncertainty: |r| r.u_k_pos,
+        value: |c| c.results.as_ref()?.k_pos,
+        uncertainty: |c| c.results.as_ref()?.u_k_pos,
     },
     Quantity {
         name: "k_neg",
         label: "Scale factor K−",
         unit: "V/(°/s)",
-        value: |r| r.k_neg,
-        uncertainty: |r| r.u_k_neg,
+        value: |c| c.results.as_ref()?.k_neg,
+        uncertainty: |c| c.results.as_ref()?.u_k_neg,
     },
     Quantity {
         name: "k2",
         label: "Second-order coefficient K2",
         unit: "V/(°/s)²",
-        value: |r| r.k2,
+        value: |c| c.results.as_ref()?.k2,
         uncertainty: |_| None,
     },
     Quantity {
         name: "nonlinearity_ppm",
         label: "Nonlinearity",
         unit: "ppm",
-        value: |r| r.nonlinearity_ppm,
+        value: |c| c.results.as_ref()?.nonlinearity_ppm,
         uncertainty: |_| None,
     },
     Quantity {
         name: "asymmetry_ppm",
         label: "Asymmetry (GJB)",
         unit: "ppm",
-        value: |r| r.asymmetry_ppm,
+        value: |c| c.results.as_ref()?.asymmetry_ppm,
         uncertainty: |_| None,
     },
     Quantity {
         name: "asymmetry_common_k2_ppm",
         label: "Asymmetry (common K2)",
         unit: "ppm",
-        value: |r| r.asymmetry_common_k2_ppm,
+        value: |c| c.results.as_ref()?.asymmetry_common_k2_ppm,
         uncertainty: |_| None,
     },
     Quantity {
         name: "repeatability_ppm",
         label: "Repeatability within a run",
         unit: "ppm",
-        value: |r| r.repeatability_ppm,
+        value: |c| c.results.as_ref()?.repeatability_ppm,
         uncertainty: |_| None,
     },
     // a drift test's (IEEE 952 terms from its Allan analysis)
@@ -108,29 +108,59 @@ pub const QUANTITIES: [Quantity; 14] = [
         name: "arw_deg_rt_h",
         label: "Angle random walk N (drift test)",
         unit: "°/√h",
-        value: |r| r.arw_deg_rt_h,
-        uncertainty: |r| r.u_arw_deg_rt_h,
+        value: |c| c.results.as_ref()?.arw_deg_rt_h,
+        uncertainty: |c| c.results.as_ref()?.u_arw_deg_rt_h,
     },
     Quantity {
         name: "bias_instability_dph",
         label: "Bias instability B (drift test)",
         unit: "°/h",
-        value: |r| r.bias_instability_dph,
-        uncertainty: |r| r.u_bias_instability_dph,
+        value: |c| c.results.as_ref()?.bias_instability_dph,
+        uncertainty: |c| c.results.as_ref()?.u_bias_instability_dph,
     },
     Quantity {
         name: "rrw_dph_rt_h",
         label: "Rate random walk K (drift test)",
         unit: "°/h/√h",
-        value: |r| r.rrw_dph_rt_h,
-        uncertainty: |r| r.u_rrw_dph_rt_h,
+        value: |c| c.results.as_ref()?.rrw_dph_rt_h,
+        uncertainty: |c| c.results.as_ref()?.u_rrw_dph_rt_h,
     },
     Quantity {
         name: "drift_bias_dph",
         label: "Bias (drift test)",
         unit: "°/h",
-        value: |r| r.drift_bias_dph,
-        uncertainty: |r| r.u_drift_bias_dph,
+        value: |c| c.results.as_ref()?.drift_bias_dph,
+        uncertainty: |c| c.results.as_ref()?.u_drift_bias_dph,
+    },
+    // a temperature series' (its series.json's `catalog` member): the sensitivities over the
+    // series' range with their U, and the hysteresis where a temperature was revisited
+    Quantity {
+        name: "k_tempco_ppm_per_c",
+        label: "Temperature sensitivity of K (series)",
+        unit: "ppm/°C",
+        value: |c| c.series.as_ref()?.k_tempco_ppm_per_c,
+        uncertainty: |c| c.series.as_ref()?.u_k_tempco_ppm_per_c,
+    },
+    Quantity {
+        name: "bias_tempco_dph_per_c",
+        label: "Temperature sensitivity of the bias (series)",
+        unit: "°/h/°C",
+        value: |c| c.series.as_ref()?.bias_tempco_dph_per_c,
+        uncertainty: |c| c.series.as_ref()?.u_bias_tempco_dph_per_c,
+    },
+    Quantity {
+        name: "hysteresis_k_ppm",
+        label: "Thermal hysteresis of K (series)",
+        unit: "ppm",
+        value: |c| c.series.as_ref()?.hysteresis_k_ppm,
+        uncertainty: |_| None,
+    },
+    Quantity {
+        name: "hysteresis_bias_dph",
+        label: "Thermal hysteresis of the bias (series)",
+        unit: "°/h",
+        value: |c| c.series.as_ref()?.hysteresis_bias_dph,
+        uncertainty: |_| None,
     },
 ];
 
@@ -414,13 +444,12 @@ impl History {
                 .iter()
                 .zip(&plan_of)
                 .filter_map(|(c, &plan)| {
-                    let r = c.results.as_ref()?;
-                    let value = (q.value)(r).filter(|x| x.is_finite())?;
+                    let value = (q.value)(c).filter(|x| x.is_finite())?;
                     Some(TrendPoint {
                         run_id: c.run.id.clone(),
                         started_utc: c.run.started_utc.clone(),
                         value,
-                        expanded_uncertainty: (q.uncertainty)(r),
+                        expanded_uncertainty: (q.uncertainty)(c).filter(|x| x.is_finite()),
                         plan,
                     })
                 })
@@ -554,6 +583,7 @@ mod tests {
             }),
             checks: Vec::new(),
             rates_dps,
+            series: None,
         }
     }
 
@@ -680,5 +710,50 @@ mod tests {
         );
         assert_eq!(h.plans.len(), 2);
         assert!(describe_plan(&h.plans[0]).contains("rates not in the catalog"));
+    }
+
+    #[test]
+    fn a_series_sensitivities_trend_with_their_u_and_a_sweep_has_none() {
+        let series = |day: u32, tc: f64| {
+            let mut c = cal(day, 0.361, "s", &FIVE);
+            c.run.kind = "temperature_series".into();
+            c.series = Some(crate::series::SeriesRecord {
+                points: Vec::new(),
+                k_tempco_ppm_per_c: Some(tc),
+                u_k_tempco_ppm_per_c: Some(4.0),
+                bias_tempco_dph_per_c: Some(1.5),
+                u_bias_tempco_dph_per_c: Some(0.3),
+                k_model_order: Some(1),
+                bias_model_order: Some(1),
+                hysteresis_k_ppm: None,
+                hysteresis_bias_dph: Some(0.1),
+                t_min_c: Some(-20.0),
+                t_max_c: Some(60.0),
+            });
+            c
+        };
+        let h = History::of(
+            "G-1",
+            true,
+            vec![series(1, 30.0), cal(2, 0.361, "a", &FIVE), series(3, 33.0)],
+        );
+        let t = h
+            .trends
+            .iter()
+            .find(|t| t.quantity == "k_tempco_ppm_per_c")
+            .expect("a K tempco trend");
+        let values: Vec<_> = t
+            .points
+            .iter()
+            .map(|p| (p.value, p.expanded_uncertainty))
+            .collect();
+        assert_eq!(values, vec![(30.0, Some(4.0)), (33.0, Some(4.0))]);
+        assert_eq!(t.unit, "ppm/°C");
+        // the series' own plan (another kind than the sweep), not the sweep's
+        assert_eq!(t.plan, h.plan_of[2]);
+        assert_ne!(h.plan_of[1], h.plan_of[2]);
+        assert!(h.trends.iter().any(|t| t.quantity == "hysteresis_bias_dph"));
+        // no revisited temperature: no hysteresis of K to follow
+        assert!(!h.trends.iter().any(|t| t.quantity == "hysteresis_k_ppm"));
     }
 }

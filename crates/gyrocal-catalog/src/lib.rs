@@ -45,6 +45,7 @@ mod history;
 mod pg_probe;
 mod record;
 mod rows;
+mod series;
 #[cfg(feature = "db")]
 mod url;
 #[cfg(feature = "db")]
@@ -64,6 +65,7 @@ pub use record::{
     host_name, is_run_dir, read_run,
 };
 pub use rows::{Calibration, RunSummary};
+pub use series::{CATALOG_MEMBER, SERIES_JSON, SeriesPointRecord, SeriesRecord, read_series};
 #[cfg(feature = "db")]
 pub use url::{CATALOG_ENV, CatalogUrl, redact, resolve};
 #[cfg(feature = "db")]

@@ -152,6 +152,10 @@ pub struct RunRecord {
     pub instruments: Vec<InstrumentRow>,
     /// The acceptance checks.
     pub checks: Vec<CheckRow>,
+    /// A temperature series' figures (the `catalog` member of its `series.json`); `None` for
+    /// every other run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub series: Option<crate::series::SeriesRecord>,
 }
 
 /// This machine's host name (`/proc/sys/kernel/hostname`, `/etc/hostname`, `$HOSTNAME`).
@@ -287,6 +291,8 @@ pub fn read_run(dir: &Path, host: Option<&str>) -> Result<RunRecord, CatalogErro
         })
         .collect();
     let instruments = instruments_of(&m.instruments, &station);
+    // a series.json is read whatever the kind: only a temperature series writes one
+    let series = crate::series::read_series(dir)?;
     let checks = acceptance
         .get("checks")
         .and_then(Value::as_array)
@@ -315,6 +321,7 @@ pub fn read_run(dir: &Path, host: Option<&str>) -> Result<RunRecord, CatalogErro
         steps,
         instruments,
         checks,
+        series,
     })
 }
 

@@ -27,4 +27,8 @@ pub struct Calibration {
     /// history compares to tell plans apart ([`crate::history::plan_key`]); empty when the
     /// catalog holds no step of the run.
     pub rates_dps: Vec<f64>,
+    /// A temperature series' sensitivities and points (its `series.json`), when the run is
+    /// one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub series: Option<crate::series::SeriesRecord>,
 }

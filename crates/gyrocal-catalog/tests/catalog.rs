@@ -369,13 +369,14 @@ async fn a_version_1_sqlite_catalog_is_migrated_and_keeps_its_calibrations() {
         pool.close().await;
         n
     };
-    assert_eq!(applied, 2, "migrated to version 2");
+    assert_eq!(applied, 3, "migrated to version 3 (the series tables)");
 }
 
 /// A catalog created by a release that kept one migrations folder per backend (up to 0.1: its
 /// files are kept in tests/fixtures/migrations-0.1) opens with the one shared folder: the
 /// checksums sqlx recorded then still match (no "migration was previously applied but has been
-/// modified"), nothing is re-applied, and its calibrations are listed.
+/// modified"), nothing is re-applied (the later versions are added), and its calibrations are
+/// listed.
 #[tokio::test]
 async fn a_catalog_made_with_the_per_backend_migrations_opens() {
     let tmp = tempfile::tempdir().unwrap();
@@ -425,9 +426,15 @@ async fn a_catalog_made_with_the_per_backend_migrations_opens() {
         sqlx::SqlitePool::connect_with(sqlx::sqlite::SqliteConnectOptions::new().filename(&file))
             .await
             .unwrap();
+    let after = recorded(pool).await;
     assert_eq!(
-        recorded(pool).await,
-        before,
-        "the record of migrations is untouched"
+        after[..before.len()],
+        before[..],
+        "the record of the earlier migrations is untouched"
+    );
+    assert_eq!(
+        after.iter().map(|(v, _)| *v).collect::<Vec<_>>(),
+        vec![1, 2, 3],
+        "only the later version (3, the series tables) is added"
     );
 }

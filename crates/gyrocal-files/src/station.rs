@@ -30,13 +30,23 @@
 //! calibrated = 2024-11-07
 //! due = 2026-11-07
 //! rate_accuracy_ppm = 10
+//!
+//! [chamber]                 # the thermal chamber of a temperature series
+//! model = "Thermotron SE-600 (Watlow F4)"
+//! asset_id = "TC-03"
+//! serial = "SE600-1187"
+//! certificate = "CAL-2025-0930"
+//! calibrated = 2025-09-30
+//! due = 2026-09-30
 //! ```
 //!
 //! Dates are TOML dates (`2026-04-12`) or the same as text (`"2026-04-12"`). Every key of an
 //! instrument is required except `accuracy`, `gain_pct`/`offset_pct` (multimeter only, given
 //! together: an explicit accuracy that overrides the period) and `rate_accuracy_ppm` (table
-//! only). `catalog` is reserved for the address of a lab's instrument catalog (a later version
-//! may read the records from it); it is kept and shown, never fetched. Unknown keys are
+//! only); a `[chamber]` has the six common keys only (the temperatures a series uses are the
+//! gyro's own sensor's, read through the controller: no accuracy is taken from the chamber's
+//! record). `catalog` is reserved for the address of a lab's instrument catalog (a later
+//! version may read the records from it); it is kept and shown, never fetched. Unknown keys are
 //! refused, naming the file, the line and the key.
 //!
 //! Where it is found ([`Station::resolve`]): the `--station` flag, else the
@@ -48,20 +58,25 @@
 //! it is a typing error (or a wrong clock), and a certificate would otherwise claim a
 //! calibration that had not happened yet. The file must be a regular file: a named pipe or a
 //! device is refused before it is opened (opening a pipe would wait for a writer forever).
-//! A station without a `[multimeter]` (or, for a plan with a table, a `[table]`) section is
-//! accepted, and `gyrocal run` and `gyrocal check` say at the terminal what is missing
-//! ([`Station::missing_sections`]).
+//! A station without a `[multimeter]` (or, for a plan with a table, a `[table]`; for a
+//! temperature series, a `[chamber]`) section is accepted, and `gyrocal run` and `gyrocal
+//! check` say at the terminal what is missing ([`Station::missing_sections`], with the plan's
+//! [`Needs`]); an overdue instrument the plan uses refuses the run ([`Station::overdue_for`]).
 //!
 //! The serials are checked against the instruments ([`Station::check_serials`], in
 //! `serials`): once the instruments have identified themselves, a serial that differs from
 //! the record is a warning and a recorded deviation, since the certificate would otherwise
-//! name another instrument's calibration.
+//! name another instrument's calibration. A chamber's controller identifies itself by model
+//! only: [`Station::check_chamber`] (in `chamber`) compares the record's model with it.
+//! Where the file is found and the simulated bench's station are in `resolve`.
 
+mod chamber;
+mod resolve;
 mod serials;
 
+pub use chamber::{Needs, SERIES_KIND};
 pub use serials::{SERIAL_MISMATCH, SerialCheck, reported_serial};
 
-use std::ffi::OsString;
 use std::fmt;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -195,12 +210,15 @@ pub struct Station {
     /// `[table]`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub table: Option<InstrumentRecord>,
+    /// `[chamber]`: the thermal chamber of a temperature series.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub chamber: Option<InstrumentRecord>,
 }
 
 /// An instrument whose calibration has expired.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
 pub struct Overdue {
-    /// `multimeter` or `table`.
+    /// `multimeter`, `table` or `chamber`.
     pub role: &'static str,
     /// Its asset number.
     pub asset_id: String,
@@ -320,7 +338,7 @@ pub enum StationError {
     Invalid {
         /// Where (the value, the key, or the section's header).
         location: Location,
-        /// `multimeter` or `table`; `None` for a top-level key.
+        /// `multimeter`, `table` or `chamber`; `None` for a top-level key.
         section: Option<String>,
         /// The key.
         key: String,
@@ -357,7 +375,7 @@ impl StationError {
 // ---------------------------------------------------------------------------------------------
 
 /// The top-level keys, in file order.
-const TOP_KEYS: [&str; 8] = [
+const TOP_KEYS: [&str; 9] = [
     "id",
     "lab",
     "address",
@@ -366,6 +384,7 @@ const TOP_KEYS: [&str; 8] = [
     "catalog",
     "multimeter",
     "table",
+    "chamber",
 ];
 /// The keys of an instrument table.
 const INSTRUMENT_KEYS: [&str; 10] = [
@@ -723,6 +742,26 @@ impl Walker {
                     "belongs to the table; the multimeter's accuracy is accuracy, or gain_pct and offset_pct".into(),
                 );
             }
+        } else if role == "chamber" {
+            // the chamber's record states no accuracy: name whose key it is
+            for (key, owner) in [
+                ("accuracy", "the multimeter"),
+                ("gain_pct", "the multimeter"),
+                ("offset_pct", "the multimeter"),
+                ("rate_accuracy_ppm", "the table"),
+            ] {
+                if let Some(v) = g(key) {
+                    self.problem(
+                        Some(v.span().start),
+                        s,
+                        key,
+                        format!(
+                            "belongs to {owner}; a [chamber] has model, asset_id, serial, \
+                             certificate, calibrated and due only"
+                        ),
+                    );
+                }
+            }
         } else {
             meter_only(self, "accuracy", "rate_accuracy_ppm");
             meter_only(self, "gain_pct", "rate_accuracy_ppm");
@@ -815,6 +854,7 @@ impl Station {
         let entry = |k: &str| root.iter().find(|(n, _)| n.get_ref().as_ref() == k);
         let multimeter = entry("multimeter").and_then(|e| w.instrument("multimeter", e));
         let table = entry("table").and_then(|e| w.instrument("table", e));
+        let chamber = entry("chamber").and_then(|e| w.instrument("chamber", e));
         // the first problem in the file (a missing top-level key, placed nowhere, last)
         if let Some(p) = w
             .problems
@@ -838,6 +878,7 @@ impl Station {
                 catalog,
                 multimeter,
                 table,
+                chamber,
             }),
             // every None above recorded a problem
             _ => Err(StationError::Syntax {
@@ -847,27 +888,33 @@ impl Station {
         }
     }
 
-    /// The instruments recorded, as `(role, record)`: `multimeter`, then `table`.
+    /// The instruments recorded, as `(role, record)`: `multimeter`, `table`, then `chamber`.
     pub fn instruments(&self) -> Vec<(&'static str, &InstrumentRecord)> {
-        [("multimeter", &self.multimeter), ("table", &self.table)]
+        self.instruments_slots()
             .into_iter()
-            .filter_map(|(role, r)| r.as_ref().map(|r| (role, r)))
+            .filter_map(|(role, r)| r.map(|r| (role, r)))
             .collect()
     }
 
-    /// The sections a run would need and the file lacks: `multimeter` always, `table` when
-    /// `needs_table` (a plan that drives a table). A station without them is accepted (a
-    /// bench may record only some instruments) but the certificate cannot name what is
-    /// missing, so the CLI says so at the terminal.
-    pub fn missing_sections(&self, needs_table: bool) -> Vec<&'static str> {
-        let mut missing = Vec::new();
-        if self.multimeter.is_none() {
-            missing.push("multimeter");
-        }
-        if needs_table && self.table.is_none() {
-            missing.push("table");
-        }
-        missing
+    /// The sections a run would need and the file lacks: `multimeter` always, `table` and
+    /// `chamber` when the plan `needs` them ([`Needs::of_plan`]). A station without them is
+    /// accepted (a bench may record only some instruments) but the certificate cannot name
+    /// what is missing, so the CLI says so at the terminal.
+    pub fn missing_sections(&self, needs: Needs) -> Vec<&'static str> {
+        self.instruments_slots()
+            .into_iter()
+            .filter(|(role, r)| needs.uses(role) && r.is_none())
+            .map(|(role, _)| role)
+            .collect()
+    }
+
+    /// Every role with its record or none, in the order of [`Station::instruments`].
+    fn instruments_slots(&self) -> [(&'static str, Option<&InstrumentRecord>); 3] {
+        [
+            ("multimeter", self.multimeter.as_ref()),
+            ("table", self.table.as_ref()),
+            ("chamber", self.chamber.as_ref()),
+        ]
     }
 
     /// The instruments whose calibration has expired on `today`: due before today. A
@@ -901,97 +948,6 @@ impl Station {
             }),
             (_, _, Some(p)) => Some(MeterAccuracySpec::Period(p)),
             _ => None,
-        }
-    }
-
-    /// The default station file: `$XDG_CONFIG_HOME/gyrocal/station.toml` (when the variable
-    /// is set to an absolute path), else `$HOME/.config/gyrocal/station.toml`; `None` without
-    /// either.
-    pub fn default_path() -> Option<PathBuf> {
-        Station::default_path_from(|k| std::env::var_os(k))
-    }
-
-    /// [`Station::default_path`] with the environment given by `env`.
-    pub fn default_path_from(env: impl Fn(&str) -> Option<OsString>) -> Option<PathBuf> {
-        let dir = |k: &str| env(k).map(PathBuf::from).filter(|p| p.is_absolute());
-        if let Some(config) = dir("XDG_CONFIG_HOME") {
-            return Some(config.join("gyrocal").join("station.toml"));
-        }
-        dir("HOME").map(|home| home.join(".config").join("gyrocal").join("station.toml"))
-    }
-
-    /// The station of this run: the `--station` path when given, else the [`STATION_ENV`]
-    /// variable's (when set and not empty), else the [`Station::default_path`] when that file
-    /// exists. A path from the flag or the variable that does not exist is an error; no
-    /// default file is `Ok(None)`.
-    pub fn resolve(flag: Option<&Path>) -> Result<Option<(PathBuf, Station)>, StationError> {
-        Station::resolve_with(flag, |k| std::env::var_os(k), Station::default_path())
-    }
-
-    /// [`Station::resolve`] with the environment given by `env` and the default path by
-    /// `default` (tests set neither in the process).
-    pub fn resolve_with(
-        flag: Option<&Path>,
-        env: impl Fn(&str) -> Option<OsString>,
-        default: Option<PathBuf>,
-    ) -> Result<Option<(PathBuf, Station)>, StationError> {
-        let given = flag.map(|p| (p.to_path_buf(), "--station")).or_else(|| {
-            env(STATION_ENV)
-                .filter(|v| !v.is_empty())
-                .map(|v| (PathBuf::from(v), STATION_ENV))
-        });
-        let path = match given {
-            Some((path, origin)) => {
-                if !path.exists() {
-                    return Err(StationError::NotFound { path, origin });
-                }
-                path
-            }
-            None => match default {
-                Some(path) if path.exists() => path,
-                _ => return Ok(None),
-            },
-        };
-        let station = Station::from_file(&path)?;
-        Ok(Some((path, station)))
-    }
-
-    /// The simulated bench's station (`gyrocal run --simulate`, `gyrocal sim`): complete and
-    /// plainly marked, serials `SIM-34401A-NNNN` and `SIM-ACL-NNNN` from `seed`, certificates
-    /// `SIMULATED`, calibrated `today` and due ten years later, the 1-year meter specification
-    /// and a 10 ppm table.
-    pub fn simulated(seed: u64, today: Date) -> Station {
-        let n = format!("{:04}", seed % 10_000);
-        let due = today
-            .checked_add(jiff::Span::new().years(10))
-            .unwrap_or(Date::MAX);
-        let record = |model: &str, tag: &str| InstrumentRecord {
-            model: model.to_string(),
-            asset_id: format!("SIM-{tag}-{n}"),
-            serial: format!("SIM-{tag}-{n}"),
-            certificate: "SIMULATED".into(),
-            calibrated: today,
-            due,
-            accuracy: None,
-            gain_pct: None,
-            offset_pct: None,
-            rate_accuracy_ppm: None,
-        };
-        Station {
-            id: format!("SIM-BENCH-{n}"),
-            lab: "gyrocal simulated bench".into(),
-            address: "in-process simulation (no laboratory)".into(),
-            ambient_c: None,
-            humidity_pct: None,
-            catalog: None,
-            multimeter: Some(InstrumentRecord {
-                accuracy: Some(SpecPeriod::Year1),
-                ..record("HP 34401A (simulated)", "34401A")
-            }),
-            table: Some(InstrumentRecord {
-                rate_accuracy_ppm: Some(10.0),
-                ..record("ACL rate table (simulated)", "ACL")
-            }),
         }
     }
 }

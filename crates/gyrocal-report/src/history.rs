@@ -1,6 +1,8 @@
 //! A gyro's history as one self-contained HTML page: the calibrations with their results and
 //! uncertainties, the day-to-day repeatability, and a trend plot (SVG, plotters) per quantity
-//! with its acceptance limits and control band.
+//! with its acceptance limits and control band. A temperature series has its own table (the
+//! sensitivities of K and of the bias with their U, the range, the hysteresis) and, per
+//! series, its temperatures; its sensitivities' trends are plotted with the others.
 //!
 //! The catalog stores and queries ([`gyrocal_catalog::Catalog::history`] computes the
 //! repeatability, trends and control bands into a typed [`History`]); this module only renders
@@ -75,7 +77,7 @@ pub fn render(h: &History) -> String {
         .calibrations
         .iter()
         .enumerate()
-        .filter(|(_, c)| c.run.kind != "drift")
+        .filter(|(_, c)| c.run.kind != "drift" && !is_series(c))
         .map(|(i, c)| (c, named(i, c)))
         .collect();
     let drifts: Vec<_> = h
@@ -174,6 +176,14 @@ pub fn render(h: &History) -> String {
         }
         out.push_str("</table>");
     }
+    let series: Vec<_> = h
+        .calibrations
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| is_series(c))
+        .map(|(i, c)| (c, named(i, c)))
+        .collect();
+    series_tables(&mut out, &series);
     out.push_str("<h2>Trends</h2>");
     for t in &h.trends {
         let _ = write!(out, "<h3>{} ({})</h3>", esc(&t.label), esc(&t.unit));
@@ -217,6 +227,86 @@ pub fn render(h: &History) -> String {
     }
     Page::close(&mut out, None);
     out
+}
+
+/// Whether `c` is a temperature series (its kind, or the series' figures the catalog holds).
+fn is_series(c: &gyrocal_catalog::Calibration) -> bool {
+    c.series.is_some() || c.run.kind == gyrocal_files::station::SERIES_KIND
+}
+
+/// The temperature series: one row each (sensitivities ± U, range, models, hysteresis), then
+/// each series' temperatures.
+fn series_tables(out: &mut String, series: &[(&gyrocal_catalog::Calibration, String)]) {
+    if series.is_empty() {
+        return;
+    }
+    out.push_str(
+        "<h2>Temperature series</h2><p class=\"note\">Sensitivities over each series' range \
+         (for a quadratic model, the slope at the range's mid-temperature), expanded \
+         uncertainties at k = 2; hysteresis where a temperature was revisited.</p>\
+         <table class=\"history\" id=\"series-table\"><tr><th>started (UTC)</th><th>run</th>\
+         <th>station</th><th>plan</th><th>K sensitivity ± U (ppm/°C)</th>\
+         <th>bias sensitivity ± U (°/h/°C)</th><th>range (°C)</th><th>model order K, bias</th>\
+         <th>hysteresis K (ppm)</th><th>hysteresis bias (°/h)</th><th>sim.</th></tr>",
+    );
+    for (c, plan) in series {
+        let s = c.series.as_ref();
+        let f = |g: fn(&gyrocal_catalog::SeriesRecord) -> Option<f64>| s.and_then(g);
+        let order = |o: Option<i64>| o.map_or("—".to_string(), |o| o.to_string());
+        let _ = write!(
+            out,
+            "<tr><td>{}</td><td title=\"{}\">{}</td><td>{}</td><td>{}</td>\
+             <td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td>\
+             <td>{}, {}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td>{}</td></tr>",
+            esc(&c.run.started_utc),
+            esc(&c.run.directory),
+            esc(&c.run.id.chars().take(12).collect::<String>()),
+            esc(c.run.station_id.as_deref().unwrap_or("")),
+            esc(plan),
+            with_u(f(|s| s.k_tempco_ppm_per_c), f(|s| s.u_k_tempco_ppm_per_c)),
+            with_u(
+                f(|s| s.bias_tempco_dph_per_c),
+                f(|s| s.u_bias_tempco_dph_per_c)
+            ),
+            match (f(|s| s.t_min_c), f(|s| s.t_max_c)) {
+                (Some(a), Some(b)) => format!("{a:.1} .. {b:.1}"),
+                _ => "—".to_string(),
+            },
+            order(s.and_then(|s| s.k_model_order)),
+            order(s.and_then(|s| s.bias_model_order)),
+            ppm(f(|s| s.hysteresis_k_ppm)),
+            num(f(|s| s.hysteresis_bias_dph)),
+            if c.run.simulated { "yes" } else { "" },
+        );
+    }
+    out.push_str("</table>");
+    for (c, _) in series {
+        let Some(s) = &c.series else { continue };
+        let _ = write!(
+            out,
+            "<h3>Series of {}: each temperature</h3><table class=\"history\">\
+             <tr><th>series_point</th><th>setpoint (°C)</th><th>gyro min / mean / max (°C)</th>\
+             <th>K ± U (V/(°/s))</th><th>bias ± U (°/h)</th><th>nonlinearity (ppm)</th></tr>",
+            esc(&c.run.started_utc)
+        );
+        for p in &s.points {
+            let t = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{v:.2}"));
+            let _ = write!(
+                out,
+                "<tr><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{} / {} / {}</td>\
+                 <td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td></tr>",
+                p.series_point,
+                short(p.setpoint_c),
+                t(p.temp_min_c),
+                t(p.temp_mean_c),
+                t(p.temp_max_c),
+                with_u(p.k, p.u_k),
+                with_u(p.bias_dph, p.u_bias_dph),
+                ppm(p.nonlinearity_ppm),
+            );
+        }
+        out.push_str("</table>");
+    }
 }
 
 /// A letter per plan (`A`, `B`, ...; `Z` and on past 26), as the page names them.

@@ -53,6 +53,7 @@ fn sweep(serial: &str, day: u32, k: f64, simulated: bool) -> Calibration {
             ..CheckRow::default()
         }],
         rates_dps: vec![-10.0, -1.0, 0.0, 1.0, 10.0],
+        series: None,
     }
 }
 

@@ -37,6 +37,25 @@ pub enum SerialCheck {
         /// What the instrument reported.
         reported: String,
     },
+    /// The chamber's controller is the one the station's record names (a chamber controller
+    /// identifies itself by model; see [`Station::check_chamber`]).
+    ModelMatch {
+        /// `chamber`.
+        role: &'static str,
+        /// The model the controller reported.
+        model: String,
+    },
+    /// The chamber's controller is another than the station's record names.
+    ModelMismatch {
+        /// `chamber`.
+        role: &'static str,
+        /// The station's asset id for it.
+        asset_id: String,
+        /// The station file's model.
+        expected: String,
+        /// The model the controller reported.
+        reported: String,
+    },
     /// Nothing to compare.
     NotCompared {
         /// `multimeter` or `table`.
@@ -59,33 +78,39 @@ impl SerialCheck {
         match self {
             SerialCheck::Match { role, .. }
             | SerialCheck::Mismatch { role, .. }
+            | SerialCheck::ModelMatch { role, .. }
+            | SerialCheck::ModelMismatch { role, .. }
             | SerialCheck::NotCompared { role, .. } => role,
         }
     }
 
-    /// The result's name in JSON documents: `match`, `mismatch`, `not-compared`.
+    /// The result's name in JSON documents: `match`, `mismatch`, `model-match`,
+    /// `model-mismatch`, `not-compared`.
     pub fn key(&self) -> &'static str {
         match self {
             SerialCheck::Match { .. } => "match",
             SerialCheck::Mismatch { .. } => "mismatch",
+            SerialCheck::ModelMatch { .. } => "model-match",
+            SerialCheck::ModelMismatch { .. } => "model-mismatch",
             SerialCheck::NotCompared { .. } => "not-compared",
         }
     }
 
-    /// True for a mismatch (a warning and a deviation).
+    /// True for a mismatch of serial or (a chamber's) model: a warning and a deviation.
     pub fn is_mismatch(&self) -> bool {
-        matches!(self, SerialCheck::Mismatch { .. })
+        matches!(
+            self,
+            SerialCheck::Mismatch { .. } | SerialCheck::ModelMismatch { .. }
+        )
     }
 
     /// The result in words, for the terminal: "the multimeter DMM-0042: the station file says
     /// serial 3146A12345 but the instrument reports SIM0001".
     pub fn words(&self, station_id: &str) -> String {
-        let role = |r: &str| {
-            if r == "table" {
-                "rate table"
-            } else {
-                "multimeter"
-            }
+        let role = |r: &str| match r {
+            "table" => "rate table",
+            "chamber" => "thermal chamber",
+            _ => "multimeter",
         };
         match self {
             SerialCheck::Match { role: r, serial } => format!(
@@ -101,6 +126,22 @@ impl SerialCheck {
                 "the {} {asset_id}: station {station_id} says serial {expected}, but the \
                  instrument that answered reports serial {reported}: the certificate would name \
                  another instrument's calibration",
+                role(r)
+            ),
+            SerialCheck::ModelMatch { role: r, model } => format!(
+                "the {}'s controller ({model}) is the one station {station_id} names",
+                role(r)
+            ),
+            SerialCheck::ModelMismatch {
+                role: r,
+                asset_id,
+                expected,
+                reported,
+            } => format!(
+                "the {} {asset_id}: station {station_id} names a {expected}, but the \
+                 controller that answered is a {reported}: the certificate would name another \
+                 chamber's calibration (if the chamber has that controller, name it in the \
+                 station's model, e.g. \"{expected} ({reported})\")",
                 role(r)
             ),
             SerialCheck::NotCompared { role: r, why } => {

@@ -92,8 +92,18 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
     // the station `gyrocal run` would use, read the same way (a bad one is bad input)
     let station = gyrocal_files::station::Station::resolve(args.station.as_deref())
         .map_err(|e| BadInput(format!("station: {e}")))?;
+    let needs = gyrocal_files::station::Needs::of_plan(&plan);
     if let Some((path, station)) = &station {
-        warnings.extend(station_warnings(station, path, plan.has_table()));
+        warnings.extend(station_warnings(station, path, needs));
+        // `gyrocal run` refuses these (unless --allow-expired): said here before the day
+        let today = jiff::Zoned::now().date();
+        for o in station.overdue_for(today, needs) {
+            warnings.push(format!(
+                "station {}: {o} (today is {today}): `gyrocal run` will refuse the plan unless \
+                 started with --allow-expired, which the report records as a deviation",
+                station.id
+            ));
+        }
     }
     let probe = if args.probe {
         use anyhow::Context as _;
@@ -181,22 +191,22 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
     }
 }
 
-/// One line per section a run on `plan` needs and the station file at `path` lacks: the
-/// certificate cannot name that instrument or its calibration. Said by `gyrocal check` and
-/// at the start of `gyrocal run`.
+/// One line per section a run with `needs` (its plan's) needs and the station file at `path`
+/// lacks: the certificate cannot name that instrument or its calibration. Said by `gyrocal
+/// check` and at the start of `gyrocal run`.
 pub fn station_warnings(
     station: &gyrocal_files::station::Station,
     path: &std::path::Path,
-    needs_table: bool,
+    needs: gyrocal_files::station::Needs,
 ) -> Vec<String> {
     station
-        .missing_sections(needs_table)
+        .missing_sections(needs)
         .into_iter()
         .map(|section| {
-            let what = if section == "multimeter" {
-                "multimeter"
-            } else {
-                "rate table"
+            let what = match section {
+                "multimeter" => "multimeter",
+                "chamber" => "thermal chamber",
+                _ => "rate table",
             };
             format!(
                 "station {} ({}) has no [{section}] section: the certificate will not name the \

@@ -1,6 +1,11 @@
 //! `gyrocal history SERIAL`: a gyro's complete calibrations over time, from the catalog: the
 //! results with their uncertainties, the repeatability from calibration to calibration, and
 //! (`-o FILE.html`) a trend plot per quantity with its limits and control band.
+//!
+//! A temperature series (issue 26) is a calibration of its own kind: its table gives the
+//! sensitivities of K and of the bias to temperature with their U (k = 2), the range measured
+//! and the hysteresis, and the lines under it how each sensitivity moved from the gyro's first
+//! series to its latest (the trends the catalog computes, as it does for K).
 
 use std::path::PathBuf;
 
@@ -71,7 +76,7 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<u8> {
     let sweeps: Vec<_> = h
         .calibrations
         .iter()
-        .filter(|c| c.run.kind != "drift")
+        .filter(|c| c.run.kind != "drift" && !is_series(c))
         .collect();
     if !sweeps.is_empty() {
         println!(
@@ -91,7 +96,7 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<u8> {
             c.run.directory
         );
     }
-    let drift: Vec<_> = h
+    let drift: Vec<&gyrocal_catalog::Calibration> = h
         .calibrations
         .iter()
         .filter(|c| c.results.as_ref().is_some_and(|r| r.arw_deg_rt_h.is_some()))
@@ -106,7 +111,7 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<u8> {
             "K ± U °/h/√h",
             "BIAS ± U °/h"
         );
-        for c in drift {
+        for c in &drift {
             let r = c.results.clone().unwrap_or_default();
             println!(
                 "{:<20} {:<22} {:<22} {:<22} {:<22} {}",
@@ -119,6 +124,7 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<u8> {
             );
         }
     }
+    print_series(&h, !sweeps.is_empty() || !drift.is_empty());
     if sweeps.is_empty() {
         return Ok(0);
     }
@@ -143,4 +149,131 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<u8> {
         _ => println!("repeatability: needs two calibrations or more"),
     }
     Ok(0)
+}
+
+/// Whether `c` is a temperature series (its kind, or the series' figures the catalog holds).
+fn is_series(c: &gyrocal_catalog::Calibration) -> bool {
+    c.series.is_some() || c.run.kind == gyrocal_files::station::SERIES_KIND
+}
+
+/// The series' quantities whose trends the terminal states (name, words).
+const SERIES_TRENDS: [(&str, &str); 4] = [
+    ("k_tempco_ppm_per_c", "K's temperature sensitivity"),
+    (
+        "bias_tempco_dph_per_c",
+        "the bias's temperature sensitivity",
+    ),
+    ("hysteresis_k_ppm", "K's thermal hysteresis"),
+    ("hysteresis_bias_dph", "the bias's thermal hysteresis"),
+];
+
+/// The temperature series of the history: one line each with the sensitivities ± U, the range
+/// and the hysteresis, then each sensitivity's trend from the first series to the latest.
+fn print_series(h: &gyrocal_catalog::History, after_other_tables: bool) {
+    let series: Vec<_> = h.calibrations.iter().filter(|c| is_series(c)).collect();
+    if series.is_empty() {
+        return;
+    }
+    println!(
+        "{}temperature series:\n{:<20} {:<24} {:<24} {:<17} {:<22} {:<3} DIRECTORY",
+        if after_other_tables { "\n" } else { "" },
+        "STARTED (UTC)",
+        "K SENS. ± U ppm/°C",
+        "BIAS SENS. ± U °/h/°C",
+        "RANGE °C",
+        "HYSTERESIS K, BIAS",
+        "SIM"
+    );
+    for c in &series {
+        let Some(s) = &c.series else {
+            println!(
+                "{:<20} (not analysed: no series.json in the catalog)   {}",
+                c.run.started_utc.chars().take(19).collect::<String>(),
+                c.run.directory
+            );
+            continue;
+        };
+        let range = match (s.t_min_c, s.t_max_c) {
+            (Some(a), Some(b)) => format!("{a:.1} .. {b:.1}"),
+            _ => "—".to_string(),
+        };
+        let hysteresis = match (s.hysteresis_k_ppm, s.hysteresis_bias_dph) {
+            (None, None) => "none revisited".to_string(),
+            (k, b) => format!(
+                "{} ppm, {} °/h",
+                k.map_or("—".to_string(), |v| format!("{v:.1}")),
+                b.map_or("—".to_string(), |v| gyrocal_fit::display::significant(
+                    v, 3
+                ))
+            ),
+        };
+        println!(
+            "{:<20} {:<24} {:<24} {:<17} {:<22} {:<3} {}",
+            c.run.started_utc.chars().take(19).collect::<String>(),
+            sci(s.k_tempco_ppm_per_c, s.u_k_tempco_ppm_per_c),
+            sci(s.bias_tempco_dph_per_c, s.u_bias_tempco_dph_per_c),
+            range,
+            hysteresis,
+            if c.run.simulated { "yes" } else { "" },
+            c.run.directory
+        );
+    }
+    for (name, words) in SERIES_TRENDS {
+        let Some(t) = h.trends.iter().find(|t| t.quantity == name) else {
+            continue;
+        };
+        let (Some(first), Some(latest)) = (t.points.first(), t.points.last()) else {
+            continue;
+        };
+        if t.points.len() < 2 {
+            println!(
+                "trend of {words}: one series so far ({} {})",
+                sci(Some(latest.value), latest.expanded_uncertainty),
+                t.unit
+            );
+            continue;
+        }
+        let change = latest.value - first.value;
+        // a change within the two values' U (k = 2, combined) is not a change one can tell
+        let u = match (first.expanded_uncertainty, latest.expanded_uncertainty) {
+            (Some(a), Some(b)) => Some(a.hypot(b)),
+            _ => None,
+        };
+        let verdict = match u {
+            Some(u) if change.abs() <= u => format!(
+                ", within the U of the two: {} {}",
+                gyrocal_fit::display::significant(u, 2),
+                t.unit
+            ),
+            Some(u) => format!(
+                ", MORE than the U of the two: {} {}",
+                gyrocal_fit::display::significant(u, 2),
+                t.unit
+            ),
+            None => String::new(),
+        };
+        println!(
+            "trend of {words} over {} series: {} → {} {} (change {}{verdict}){}",
+            t.points.len(),
+            gyrocal_fit::display::trimmed(first.value, 4),
+            gyrocal_fit::display::trimmed(latest.value, 4),
+            t.unit,
+            signed(change),
+            if t.latest_outside_band {
+                "; the latest is OUTSIDE its control band"
+            } else {
+                ""
+            }
+        );
+    }
+}
+
+/// A change with its sign (`+3.00`, `−0.300`), to 3 significant digits.
+fn signed(v: f64) -> String {
+    let text = gyrocal_fit::display::significant(v.abs(), 3);
+    if v < 0.0 {
+        format!("−{text}")
+    } else {
+        format!("+{text}")
+    }
 }

@@ -91,27 +91,25 @@ pub(super) fn station_for_run(
 ) -> anyhow::Result<(Option<gyrocal_files::station::Station>, PendingDeviations)> {
     use gyrocal_files::station::Station;
     let today = jiff::Zoned::now().date();
+    let needs = gyrocal_files::station::Needs::of_plan(plan);
     let station = match Station::resolve(args.station.as_deref())
         .map_err(|e| BadInput(format!("station: {e}")))?
     {
         Some((path, s)) => {
             say!("station: {} ({})", s.id, path.display());
-            for line in crate::cmd::check::station_warnings(&s, &path, plan.has_table()) {
+            for line in crate::cmd::check::station_warnings(&s, &path, needs) {
                 say!("gyrocal: warning: {line}");
             }
             Some(s)
         }
-        None if args.simulate => Some(Station::simulated(sim_seed, today)),
+        None if args.simulate => Some(Station::simulated_for(sim_seed, today, plan)),
         None => None,
     };
     let mut deviations = Vec::new();
     if let Some(s) = &station {
-        // a plan without a table does not use the station's table: its calibration is moot
-        let overdue: Vec<_> = s
-            .overdue(today)
-            .into_iter()
-            .filter(|o| plan.has_table() || o.role != "table")
-            .collect();
+        // an instrument the plan does not use (a drift record's absent table, a sweep's
+        // chamber): its calibration is moot
+        let overdue = s.overdue_for(today, needs);
         if !overdue.is_empty() {
             let list = overdue
                 .iter()
