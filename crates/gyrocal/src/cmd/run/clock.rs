@@ -107,6 +107,18 @@ impl Eta {
         Some(own.mul_f64(pace).saturating_sub(in_step) + after.mul_f64(pace))
     }
 
+    /// Something that is not a step runs (a temperature series' soak): the step before it
+    /// is finished, and the time until the next step starts is not counted in the pace. A
+    /// soak lasts as long as the gyro takes to reach its temperature, not as long as the
+    /// instruments' links take; counted, one soak of 2 h after a step estimated at 1 min set
+    /// the pace to the clamp and the time left to a thousand hours.
+    pub(super) fn interlude(&mut self) {
+        if let Some((started, own, _)) = self.current.take() {
+            self.estimated += own;
+            self.took += tokio::time::Instant::now().saturating_duration_since(started);
+        }
+    }
+
     /// No step is running (the run is stopping).
     pub(super) fn stop(&mut self) {
         self.current = None;

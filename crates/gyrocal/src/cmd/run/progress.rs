@@ -91,6 +91,8 @@ pub(super) struct Progress {
     warmup_reported: bool,
     /// A drift record's display: the bias so far, its last line.
     record: RecordView,
+    /// A soak's last line without a terminal: the temperature's index and the run clock, s.
+    soak_line: Option<(u32, f64)>,
 }
 
 /// What a drift record's display accumulates between its lines.
@@ -129,6 +131,7 @@ impl Progress {
             phase: String::new(),
             warmup_reported: false,
             record: RecordView::default(),
+            soak_line: None,
         }
     }
 
@@ -384,6 +387,7 @@ impl Progress {
                 soak,
                 waited,
             } => {
+                self.eta.interlude();
                 let gyro = gyro_c.map_or("no gyro sensor".into(), |t| format!("gyro {t:.2} °C"));
                 let state = match held {
                     Some(h) => format!(
@@ -401,11 +405,27 @@ impl Progress {
                     point + 1,
                     hms(waited.as_secs_f64())
                 );
+                // without a terminal to redraw, a line when a soak starts and every
+                // SOAK_LINE_EVERY of run clock: a log of a day-long series shows it alive
+                if !self.tty {
+                    let now = self.run_clock();
+                    let due = match self.soak_line {
+                        Some((p, at)) => p != point || now - at >= SOAK_LINE_EVERY.as_secs_f64(),
+                        None => true,
+                    };
+                    if due {
+                        self.soak_line = Some((point, now));
+                        say!("  soak: {}", self.phase);
+                    }
+                }
                 self.redraw();
             }
         }
     }
 }
+
+/// How often a soak prints its state without a terminal, on the run clock.
+const SOAK_LINE_EVERY: Duration = Duration::from_secs(600);
 
 impl Progress {
     /// The lines that open a drift record's display: how often it prints, what, in which
