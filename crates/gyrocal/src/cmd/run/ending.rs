@@ -21,6 +21,9 @@ pub(super) fn resume_command(args: &RunArgs, dir: &Path) -> String {
     if let Some(p) = &args.table_port {
         c.push_str(&format!(" --table-port {p}"));
     }
+    if let Some(p) = &args.chamber_port {
+        c.push_str(&format!(" --chamber-port {p}"));
+    }
     c.push_str(&format!(" --resume {}", dir.display()));
     c
 }

@@ -76,7 +76,7 @@ pub(super) async fn execute(
                 }
             );
         }
-        let state = serde_json::json!({
+        let mut state = serde_json::json!({
             "table": {
                 "mode": format!("{:?}", t.mode()),
                 "demanded_dps": t.demanded_rate(),
@@ -84,6 +84,24 @@ pub(super) async fn execute(
                 "interlock_closed": t.interlock_closed(),
             }
         });
+        // and what the simulated chamber itself holds (the run's account came from its driver)
+        if let Some(c) = &bench.handle.chamber {
+            let now = tokio::time::Instant::now();
+            let temps = c.temperatures(now);
+            say!(
+                "simulated chamber at the end: setpoint {:.1} °C, mode {:?}, air {:.1} °C, gyro inside {:.1} °C",
+                c.setpoint_c(),
+                c.mode(),
+                temps.air_c,
+                c.inside_c(now)
+            );
+            state["chamber"] = serde_json::json!({
+                "setpoint_c": c.setpoint_c(),
+                "mode": format!("{:?}", c.mode()),
+                "air_c": temps.air_c,
+                "alarms": c.alarms().iter().map(|a| format!("{a:?}")).collect::<Vec<_>>(),
+            });
+        }
         Ok((dir, summary, run, signal, Some(state)))
     } else {
         // Every instrument must answer before anything is created on disk.
@@ -125,7 +143,7 @@ pub(super) async fn execute(
         } else {
             None
         };
-        let chamber = crate::chamber::open(&plan, None).await?;
+        let chamber = crate::chamber::open(&plan, args.chamber_port.as_deref()).await?;
         let (dir, run) = open_run_dir(args, &plan, records)?;
         let (summary, run, signal) = sequence(plan, dmm, table, chamber, run).await?;
         Ok((dir, summary, run, signal, None))

@@ -107,6 +107,10 @@ pub struct RunArgs {
     /// The rate table's port, overriding the plan (a serial device or tcp://HOST:PORT).
     #[arg(long, value_name = "PORT")]
     pub table_port: Option<String>,
+    /// The thermal chamber's port, overriding the plan's `[chamber] port` (a serial device for
+    /// Modbus RTU or the Espec's text, tcp://HOST:PORT for Modbus TCP).
+    #[arg(long, value_name = "PORT")]
+    pub chamber_port: Option<String>,
     /// Do not write report.html at the end.
     #[arg(long)]
     pub no_report: bool,
