@@ -15,7 +15,7 @@
 //! ([`gyrocal_run::live`]) and never waits on a viewer; the server only reads. A stopped or
 //! slow server costs the run nothing.
 //!
-//! Security ([`check_bind`], [`router`]): loopback by default; another address only with a
+//! Security ([`check_bind`], [`App::router`]): loopback by default; another address only with a
 //! token, checked on every request as `Authorization: Bearer TOKEN` or the cookie that
 //! `/login?token=TOKEN` sets; GET only; no file outside the roots (a name is one path
 //! component, never hidden, never `..`, after percent-decoding; symlinks are never followed);
