@@ -11,6 +11,7 @@
 //!   leaves it in its safe state (after the table) on every way out ([`ChamberRest`]).
 //! - [`sink`]: where the results go ([`Sink`]): the run directory, the progress display, the
 //!   live monitors, and whatever is added next, through one trait.
+//! - [`live`]: the live state a run publishes for viewers (`live.json`, `gyrocal serve`).
 //! - [`estimate`]: the plan's duration from the instruments' timing models, and the physical
 //!   bound a run's elapsed time is judged against (`gyrocal check` prints it).
 //! - [`monitor`]: what the run watches in its readings: the warm-up, and a record's running
@@ -25,6 +26,7 @@
 pub mod bench;
 pub mod engine;
 pub mod estimate;
+pub mod live;
 pub mod monitor;
 pub mod sequencer;
 pub mod sink;

@@ -57,6 +57,8 @@ enum Command {
     History(cmd::history::HistoryArgs),
     /// Fill the calibration catalog from run directories (import, rebuild).
     Catalog(cmd::catalog::CatalogArgs),
+    /// Serve the runs' live view in a browser: dashboard, run pages, gyro history (read-only).
+    Serve(cmd::serve::ServeArgs),
     // the one-line summary here; `gyrocal allan --help` shows the arguments' own long text
     #[command(
         about = "Allan deviation, noise terms, bias stability and warm-up of a drift record (run directory or CSV)"
@@ -134,6 +136,7 @@ fn main() -> ExitCode {
         Command::Runs(args) => cmd::runs::run(&args),
         Command::History(args) => cmd::history::run(&args),
         Command::Catalog(args) => cmd::catalog::run(&args),
+        Command::Serve(args) => cmd::serve::run(&args),
         Command::Allan(args) => cmd::allan::run(&args),
         Command::Completions(args) => cmd::completions::completions(&args).map(|()| 0),
         Command::Man(args) => cmd::completions::man(&args).map(|()| 0),

@@ -10,6 +10,7 @@ pub mod probe;
 pub mod report;
 pub mod run;
 pub mod runs;
+pub mod serve;
 pub mod sim;
 pub mod verify;
 

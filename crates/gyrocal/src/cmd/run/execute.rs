@@ -216,7 +216,12 @@ where
 {
     let (tx, rx) = mpsc::unbounded_channel();
     let view = ViewContext::of(&plan, &run);
-    let mut seq = Engine::on_bench(plan, bench, run, SequencerOptions::default()).with_events(tx);
+    // live.json for viewers (gyrocal serve); never a reason for the run to wait or fail
+    let live =
+        gyrocal_run::live::LiveFile::new(run.path(), gyrocal_run::live::LiveHeader::of(&run));
+    let mut seq = Engine::on_bench(plan, bench, run, SequencerOptions::default())
+        .with_events(tx)
+        .with_sink(live);
     let (stop_tx, stop_rx) = watch::channel(StopRequest::None);
     let stop_handle = seq.stop_handle();
     let first_signal = Arc::new(OnceLock::new());

@@ -1,0 +1,559 @@
+//! The live state a run publishes for viewers (`gyrocal serve`): a small `live.json` in the
+//! run directory, replaced atomically (a temporary file renamed over it, so a reader sees the
+//! old state or the new, never half of one).
+//!
+//! Why a file and not a socket: the run directory stays the truth, and a web view that is
+//! slow, stopped or crashed must cost the run nothing. The sink only updates a state in memory
+//! (a mutex held for a few field writes) and, at most every [`MIN_INTERVAL`] of wall time and
+//! at each step's end, wakes a writer thread of its own without waiting for it (a full
+//! one-slot channel means a write is already due). No fsync: after a crash the file may be
+//! one update behind, which a viewer shows as stale anyway (`pid`, `hostname`,
+//! `updated_utc`).
+//!
+//! Bounded: the state holds one summary per recorded step (a run's step count), never its
+//! readings, so a 24-hour record's file stays small.
+//!
+//! A failure to write it is a note in the log (once), never a run failure: every [`Sink`]
+//! method returns `Ok`.
+
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::{self, SyncSender, TrySendError};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, Instant};
+
+use serde::{Deserialize, Serialize};
+
+use crate::engine::{Event, Phase, TableRest};
+use crate::sink::{Connected, Finish, LiveFn, Recorded, Sink, SinkError};
+use gyrocal_files::rundir::Status;
+
+/// The live state's file name in the run directory.
+pub const LIVE_JSON: &str = "live.json";
+
+/// The least wall time between two writes of `live.json` (a step's end and the run's end are
+/// written whenever they happen).
+pub const MIN_INTERVAL: Duration = Duration::from_millis(500);
+
+/// The format of `live.json` (bumped when a member changes meaning).
+pub const LIVE_FORMAT: u32 = 1;
+
+/// One recorded step, as a viewer's table and plot show it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StepSummary {
+    /// 1-based step number (steps.csv's `step_no`).
+    pub number: usize,
+    /// Commanded rate, °/s.
+    pub rate_dps: f64,
+    /// Mean output, V.
+    pub volts: f64,
+    /// Standard deviation of the readings, V.
+    pub volts_std: Option<f64>,
+    /// Valid readings.
+    pub n: u64,
+    /// Overloaded readings left out.
+    pub overloads: u64,
+    /// The run clock at the end of the acquisition, s.
+    pub t_end_s: f64,
+}
+
+/// What `live.json` holds (every member is what a viewer shows; see the module docs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LiveState {
+    /// [`LIVE_FORMAT`].
+    pub format: u32,
+    /// The run's id (the run directory's name).
+    pub run_id: String,
+    /// The station's id, when the run has a station file.
+    pub station: Option<String>,
+    /// The gyro's serial number.
+    pub gyro_serial: Option<String>,
+    /// The plan's name.
+    pub plan_name: String,
+    /// The plan's kind (`scale_factor`, `drift`, ...).
+    pub plan_kind: String,
+    /// `connecting`, `ramping`, `settling`, `acquiring`, `recording` (a drift record's
+    /// segment), `soaking`, `ending`, `done`, `aborted` or `failed`.
+    pub phase: String,
+    /// The step under way (1-based; the last recorded one between steps), 0 before the first.
+    pub step: usize,
+    /// Steps in the plan's schedule.
+    pub steps: usize,
+    /// Steps recorded so far (this session's and earlier sessions').
+    pub steps_done: usize,
+    /// Estimated time to the end, s (from the instruments' timing models).
+    pub eta_s: Option<f64>,
+    /// The last reading, V.
+    pub last_reading_v: Option<f64>,
+    /// The running mean of the current acquisition, V.
+    pub running_mean_v: Option<f64>,
+    /// The table: its demanded and measured rate while waiting for a rate, its end state.
+    pub table: Option<String>,
+    /// The steps recorded in this session, in order.
+    pub step_summaries: Vec<StepSummary>,
+    /// `running`, `complete`, `aborted` or `failed`.
+    pub status: String,
+    /// Why the run failed or was aborted.
+    pub reason: Option<String>,
+    /// The acceptance verdict when known (the analysis after the run sets it in the
+    /// manifest; a viewer reads it there once the run is done).
+    pub verdict: Option<String>,
+    /// The process writing this file.
+    pub pid: u32,
+    /// The host it runs on.
+    pub hostname: String,
+    /// When this state was written, RFC 3339 UTC.
+    pub updated_utc: String,
+}
+
+/// What the run's identity is, for the live state.
+#[derive(Debug, Clone, Default)]
+pub struct LiveHeader {
+    /// See [`LiveState::run_id`].
+    pub run_id: String,
+    /// See [`LiveState::station`].
+    pub station: Option<String>,
+    /// See [`LiveState::gyro_serial`].
+    pub gyro_serial: Option<String>,
+    /// See [`LiveState::plan_name`].
+    pub plan_name: String,
+    /// See [`LiveState::plan_kind`].
+    pub plan_kind: String,
+    /// See [`LiveState::steps`].
+    pub steps: usize,
+    /// Steps already recorded (a resumed run).
+    pub steps_done: usize,
+}
+
+impl LiveHeader {
+    /// The header of the run in `run` (its manifest's plan, gyro and station).
+    pub fn of(run: &gyrocal_files::rundir::RunDir) -> LiveHeader {
+        let m = run.manifest();
+        LiveHeader {
+            run_id: run
+                .path()
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            station: m.station.as_ref().map(|s| s.id.clone()),
+            gyro_serial: m.dut.as_ref().and_then(|d| d.serial.clone()),
+            plan_name: m.plan.name().to_string(),
+            plan_kind: m.plan.kind().as_str().to_string(),
+            steps: m.steps_total,
+            steps_done: m.steps_done.len(),
+        }
+    }
+}
+
+/// The state in memory and when it was last handed to the writer.
+struct Shared {
+    state: LiveState,
+    /// `remaining` and `after` of the last step start, and when it came (wall time): the ETA
+    /// counts down within the step.
+    eta: Option<(Duration, Duration, Instant)>,
+    last_sent: Option<Instant>,
+}
+
+impl Shared {
+    fn snapshot(&self) -> LiveState {
+        let mut s = self.state.clone();
+        if let Some((remaining, after, at)) = self.eta {
+            let left = remaining.saturating_sub(at.elapsed()).max(after);
+            s.eta_s = Some(left.as_secs_f64());
+        }
+        s.updated_utc = gyrocal_files::rfc3339_utc(std::time::SystemTime::now());
+        s
+    }
+}
+
+/// The sink that keeps `live.json` (see the module docs).
+pub struct LiveFile {
+    path: PathBuf,
+    shared: Arc<Mutex<Shared>>,
+    wake: Option<SyncSender<()>>,
+    writer: Option<std::thread::JoinHandle<()>>,
+}
+
+fn lock(m: &Mutex<Shared>) -> std::sync::MutexGuard<'_, Shared> {
+    // a panic while holding it leaves only a field half updated: keep publishing
+    m.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// Writes `state` to `path` through a temporary file beside it, renamed over it.
+pub fn write_live(path: &Path, state: &LiveState) -> std::io::Result<()> {
+    let bytes = serde_json::to_vec_pretty(state).map_err(std::io::Error::other)?;
+    let tmp = gyrocal_files::atomic::temp_path(path);
+    let r = std::fs::write(&tmp, &bytes).and_then(|()| std::fs::rename(&tmp, path));
+    if r.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    r
+}
+
+fn phase_name(phase: Phase, drift: bool) -> &'static str {
+    match phase {
+        Phase::Ramping => "ramping",
+        Phase::Settling => "settling",
+        Phase::Acquiring | Phase::Fetching if drift => "recording",
+        Phase::Acquiring | Phase::Fetching => "acquiring",
+    }
+}
+
+impl LiveFile {
+    /// The live state of a run in `dir` (written to `dir/live.json` from now on, by a
+    /// thread of its own).
+    pub fn new(dir: &Path, header: LiveHeader) -> LiveFile {
+        let path = dir.join(LIVE_JSON);
+        let state = LiveState {
+            format: LIVE_FORMAT,
+            run_id: header.run_id,
+            station: header.station,
+            gyro_serial: header.gyro_serial,
+            plan_name: header.plan_name,
+            plan_kind: header.plan_kind,
+            phase: "connecting".into(),
+            step: header.steps_done,
+            steps: header.steps,
+            steps_done: header.steps_done,
+            eta_s: None,
+            last_reading_v: None,
+            running_mean_v: None,
+            table: None,
+            step_summaries: Vec::new(),
+            status: "running".into(),
+            reason: None,
+            verdict: None,
+            pid: std::process::id(),
+            hostname: gyrocal_files::rundir::host_name(),
+            updated_utc: String::new(),
+        };
+        let shared = Arc::new(Mutex::new(Shared {
+            state,
+            eta: None,
+            last_sent: None,
+        }));
+        let (tx, rx) = mpsc::sync_channel::<()>(1);
+        let writer = {
+            let shared = shared.clone();
+            let path = path.clone();
+            std::thread::Builder::new()
+                .name("live.json".into())
+                .spawn(move || {
+                    let mut noted = false;
+                    while rx.recv().is_ok() {
+                        let snap = lock(&shared).snapshot();
+                        if let Err(e) = write_live(&path, &snap)
+                            && !std::mem::replace(&mut noted, true)
+                        {
+                            tracing::warn!(
+                                "{}: cannot write the live state ({e}); the run goes on \
+                                 without it",
+                                path.display()
+                            );
+                        }
+                    }
+                })
+                .ok()
+        };
+        let live = LiveFile {
+            path,
+            shared,
+            wake: writer.as_ref().map(|_| tx),
+            writer,
+        };
+        live.poke(true);
+        live
+    }
+
+    /// Asks the writer for a write when one is due (`force`: a step's end), never waiting.
+    fn poke(&self, force: bool) {
+        poke(&self.shared, self.wake.as_ref(), force);
+    }
+
+    fn update(&self, force: bool, f: impl FnOnce(&mut Shared)) {
+        f(&mut lock(&self.shared));
+        self.poke(force);
+    }
+}
+
+fn poke(shared: &Mutex<Shared>, wake: Option<&SyncSender<()>>, force: bool) {
+    let Some(wake) = wake else { return };
+    {
+        let mut s = lock(shared);
+        if !force && s.last_sent.is_some_and(|t| t.elapsed() < MIN_INTERVAL) {
+            return;
+        }
+        s.last_sent = Some(Instant::now());
+    }
+    match wake.try_send(()) {
+        Ok(()) | Err(TrySendError::Full(())) | Err(TrySendError::Disconnected(())) => {}
+    }
+}
+
+/// What an event changes in the state.
+fn apply(s: &mut Shared, event: &Event) {
+    let drift = s.state.plan_kind == "drift";
+    let st = &mut s.state;
+    match event {
+        Event::Connected { .. } => st.phase = "ramping".into(),
+        Event::StepStarted {
+            number,
+            of,
+            remaining,
+            after,
+            ..
+        } => {
+            st.step = *number;
+            st.steps = *of;
+            st.last_reading_v = None;
+            st.running_mean_v = None;
+            s.eta = Some((*remaining, *after, Instant::now()));
+        }
+        Event::Phase { phase, .. } => st.phase = phase_name(*phase, drift).into(),
+        Event::Settle(p) => {
+            st.table = Some(format!(
+                "{} at {:+.4} °/s (demand {:+.4} °/s)",
+                if p.ramping { "ramping" } else { "settling" },
+                p.rate,
+                p.demand
+            ));
+        }
+        Event::Acquiring { latest, mean, .. } => {
+            if latest.is_some() {
+                st.last_reading_v = *latest;
+            }
+            st.running_mean_v = mean.is_finite().then_some(*mean);
+        }
+        Event::Stopping { from_dps, .. } => {
+            st.phase = "ending".into();
+            st.table = Some(match from_dps {
+                Some(r) => format!("stopping from {r:+.4} °/s"),
+                None => "stopping".into(),
+            });
+        }
+        Event::Rest(rest) => {
+            st.table = Some(match rest {
+                TableRest::AtRest { rate_dps, .. } => format!("at rest ({rate_dps:+.4} °/s)"),
+                TableRest::NotConfirmed { reason } => {
+                    format!("rest could NOT be confirmed: {reason}")
+                }
+                TableRest::NeverReached { reason } => format!("never reached: {reason}"),
+                other => format!("{other:?}"),
+            });
+        }
+        _ => {}
+    }
+}
+
+impl Sink for LiveFile {
+    fn connected(&mut self, _c: &Connected) -> Result<(), SinkError> {
+        self.update(true, |s| s.state.phase = "ramping".into());
+        Ok(())
+    }
+
+    fn recorded(&mut self, r: &Recorded<'_>, _: &mut Vec<Event>) -> Result<(), SinkError> {
+        let row = r.row;
+        self.update(true, |s| {
+            s.state.steps_done += 1;
+            s.state.step = row.step + 1;
+            s.state.running_mean_v = Some(row.volts);
+            s.state.step_summaries.push(StepSummary {
+                number: row.step + 1,
+                rate_dps: row.rate_dps,
+                volts: row.volts,
+                volts_std: row.volts_std,
+                n: row.n,
+                overloads: row.overloads,
+                t_end_s: row.t_end_s,
+            });
+        });
+        Ok(())
+    }
+
+    fn event(&mut self, event: &Event) -> Result<(), SinkError> {
+        let force = matches!(event, Event::Stopping { .. } | Event::Rest(_));
+        self.update(force, |s| apply(s, event));
+        Ok(())
+    }
+
+    fn finish(&mut self, f: &Finish) -> Result<(), SinkError> {
+        // the writer thread ends; the last state is written here (the run is over, a write
+        // of a few kilobytes costs it nothing)
+        self.wake = None;
+        if let Some(w) = self.writer.take() {
+            let _ = w.join();
+        }
+        let snap = {
+            let mut s = lock(&self.shared);
+            let (status, phase) = match f.status {
+                Status::Complete => ("complete", "done"),
+                Status::Aborted => ("aborted", "aborted"),
+                Status::Running => ("running", "ending"),
+                Status::Failed => ("failed", "failed"),
+            };
+            s.state.status = status.into();
+            s.state.phase = phase.into();
+            s.state.reason = f.reason.clone();
+            s.eta = None;
+            s.state.eta_s = Some(0.0);
+            s.snapshot()
+        };
+        if let Err(e) = write_live(&self.path, &snap) {
+            tracing::warn!(
+                "{}: cannot write the live state ({e}); the run's own files are not affected",
+                self.path.display()
+            );
+        }
+        Ok(())
+    }
+
+    fn live(&mut self) -> Option<LiveFn> {
+        let shared = self.shared.clone();
+        let wake = self.wake.clone();
+        Some(Arc::new(move |e| {
+            apply(&mut lock(&shared), &e);
+            poke(&shared, wake.as_ref(), false);
+        }))
+    }
+}
+
+impl Drop for LiveFile {
+    fn drop(&mut self) {
+        self.wake = None;
+        if let Some(w) = self.writer.take() {
+            let _ = w.join();
+        }
+    }
+}
+
+/// Reads a `live.json` (a viewer's side): `None` when it is missing or not a live state.
+pub fn read_live(dir: &Path) -> Option<LiveState> {
+    let bytes = std::fs::read(dir.join(LIVE_JSON)).ok()?;
+    serde_json::from_slice(&bytes).ok()
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use gyrocal_files::plan::{Acquire, Step};
+    use gyrocal_files::rundir::StepRecord;
+    use gyrocal_files::steps::Record;
+
+    fn header() -> LiveHeader {
+        LiveHeader {
+            run_id: "r1".into(),
+            plan_name: "paper".into(),
+            plan_kind: "scale_factor".into(),
+            steps: 3,
+            ..LiveHeader::default()
+        }
+    }
+
+    fn wait_for(dir: &Path, f: impl Fn(&LiveState) -> bool) -> LiveState {
+        for _ in 0..200 {
+            if let Some(s) = read_live(dir)
+                && f(&s)
+            {
+                return s;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        panic!(
+            "live.json never reached the expected state: {:?}",
+            read_live(dir)
+        );
+    }
+
+    #[test]
+    fn live_json_follows_the_steps_and_says_how_the_run_ended() {
+        let tmp = tempfile::tempdir().unwrap();
+        let mut live = LiveFile::new(tmp.path(), header());
+        let s = wait_for(tmp.path(), |s| s.phase == "connecting");
+        assert_eq!(s.pid, std::process::id());
+        assert!(!s.updated_utc.is_empty());
+        for i in 0..2 {
+            let step = Step {
+                index: i,
+                pass: 0,
+                rate_dps: 10.0 * i as f64,
+                acquire: Acquire::Samples(10),
+            };
+            live.event(&Event::Phase {
+                step: i,
+                phase: Phase::Acquiring,
+            })
+            .unwrap();
+            let row = StepRecord {
+                step: i,
+                pass: 0,
+                rate_dps: step.rate_dps,
+                rate_meas_dps: None,
+                rate_meas_std_dps: None,
+                rate_meas_min_dps: None,
+                rate_meas_max_dps: None,
+                rate_samples: None,
+                volts: 0.5 * i as f64,
+                volts_std: Some(1e-4),
+                n: 10,
+                overloads: 0,
+                retries: 0,
+                t_start_s: 0.0,
+                t_end_s: 1.0,
+            };
+            let rec = Record::Row(step);
+            live.recorded(
+                &Recorded {
+                    step: &step,
+                    record: &rec,
+                    row: &row,
+                    volts: &[],
+                    t_start: 0.0,
+                    t_end: 1.0,
+                    elapsed_s: 1.0,
+                },
+                &mut Vec::new(),
+            )
+            .unwrap();
+        }
+        // a step's end is written at once, whatever the interval
+        let s = wait_for(tmp.path(), |s| s.steps_done == 2);
+        assert_eq!(s.step_summaries.len(), 2);
+        assert_eq!(s.step_summaries[1].rate_dps, 10.0);
+        live.finish(&Finish {
+            status: Status::Complete,
+            reason: None,
+            elapsed_s: 2.0,
+            timing: None,
+        })
+        .unwrap();
+        let s = read_live(tmp.path()).unwrap();
+        assert_eq!((s.phase.as_str(), s.status.as_str()), ("done", "complete"));
+        // no temporary file left behind
+        let names: Vec<_> = std::fs::read_dir(tmp.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names, vec![std::ffi::OsString::from(LIVE_JSON)]);
+    }
+
+    #[test]
+    fn a_directory_that_cannot_be_written_is_not_a_run_failure() {
+        let tmp = tempfile::tempdir().unwrap();
+        let gone = tmp.path().join("missing");
+        let mut live = LiveFile::new(&gone, header());
+        assert!(
+            live.event(&Event::Rest(TableRest::NotConfirmed { reason: "x".into() }))
+                .is_ok()
+        );
+        assert!(
+            live.finish(&Finish {
+                status: Status::Failed,
+                reason: Some("boom".into()),
+                elapsed_s: 0.0,
+                timing: None,
+            })
+            .is_ok()
+        );
+        assert!(!gone.exists());
+    }
+}
