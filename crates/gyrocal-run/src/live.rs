@@ -17,6 +17,7 @@
 //! method returns `Ok`.
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, SyncSender, TrySendError};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
@@ -170,6 +171,8 @@ pub struct LiveFile {
     path: PathBuf,
     shared: Arc<Mutex<Shared>>,
     wake: Option<SyncSender<()>>,
+    /// Tells the writer thread to end (with a wake, so it sees it).
+    stop: Arc<AtomicBool>,
     writer: Option<std::thread::JoinHandle<()>>,
 }
 
@@ -232,14 +235,19 @@ impl LiveFile {
             last_sent: None,
         }));
         let (tx, rx) = mpsc::sync_channel::<()>(1);
+        // the writer ends on this flag, not on the channel closing: the live closure handed
+        // to the engine's monitors holds a sender too, and while it lives the channel stays
+        // open (joining on the channel alone hung every run at its end)
+        let stop = Arc::new(AtomicBool::new(false));
         let writer = {
             let shared = shared.clone();
             let path = path.clone();
+            let stop = stop.clone();
             std::thread::Builder::new()
                 .name("live.json".into())
                 .spawn(move || {
                     let mut noted = false;
-                    while rx.recv().is_ok() {
+                    while rx.recv().is_ok() && !stop.load(Ordering::Acquire) {
                         let snap = lock(&shared).snapshot();
                         if let Err(e) = write_live(&path, &snap)
                             && !std::mem::replace(&mut noted, true)
@@ -255,6 +263,7 @@ impl LiveFile {
                 .ok()
         };
         let live = LiveFile {
+            stop,
             path,
             shared,
             wake: writer.as_ref().map(|_| tx),
@@ -378,10 +387,7 @@ impl Sink for LiveFile {
     fn finish(&mut self, f: &Finish) -> Result<(), SinkError> {
         // the writer thread ends; the last state is written here (the run is over, a write
         // of a few kilobytes costs it nothing)
-        self.wake = None;
-        if let Some(w) = self.writer.take() {
-            let _ = w.join();
-        }
+        self.end_writer();
         let snap = {
             let mut s = lock(&self.shared);
             let (status, phase) = match f.status {
@@ -416,12 +422,23 @@ impl Sink for LiveFile {
     }
 }
 
-impl Drop for LiveFile {
-    fn drop(&mut self) {
-        self.wake = None;
+impl LiveFile {
+    /// Ends the writer thread and waits for it (at most one write of a few kilobytes).
+    fn end_writer(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        if let Some(wake) = self.wake.take() {
+            // a full buffer already wakes it; a closed one means it has ended
+            let _ = wake.try_send(());
+        }
         if let Some(w) = self.writer.take() {
             let _ = w.join();
         }
+    }
+}
+
+impl Drop for LiveFile {
+    fn drop(&mut self) {
+        self.end_writer();
     }
 }
 
@@ -464,6 +481,34 @@ mod tests {
         );
     }
 
+    /// The engine's monitors keep the live closure (a sender of the writer's channel) until
+    /// after the sinks are told the run finished: `finish` must end the writer anyway. It
+    /// joined on the channel closing before, and every `gyrocal run` hung at its end.
+    #[test]
+    fn finish_returns_while_the_live_closure_is_still_held() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().to_path_buf();
+        let (done_tx, done_rx) = mpsc::channel();
+        std::thread::spawn(move || {
+            let mut live = LiveFile::new(&dir, header());
+            let held = live.live();
+            let _ = live.finish(&Finish {
+                status: Status::Complete,
+                reason: None,
+                elapsed_s: 1.0,
+                timing: None,
+            });
+            let _ = done_tx.send(());
+            drop(held);
+        });
+        assert!(
+            done_rx.recv_timeout(Duration::from_secs(10)).is_ok(),
+            "finish did not return while the live closure was held"
+        );
+        let s = wait_for(tmp.path(), |s| s.status == "complete");
+        assert_eq!(s.phase, "done");
+    }
+
     #[test]
     fn live_json_follows_the_steps_and_says_how_the_run_ended() {
         let tmp = tempfile::tempdir().unwrap();
@@ -477,6 +522,7 @@ mod tests {
                 pass: 0,
                 rate_dps: 10.0 * i as f64,
                 acquire: Acquire::Samples(10),
+                series: None,
             };
             live.event(&Event::Phase {
                 step: i,
@@ -498,6 +544,7 @@ mod tests {
                 overloads: 0,
                 retries: 0,
                 t_start_s: 0.0,
+                series: None,
                 t_end_s: 1.0,
             };
             let rec = Record::Row(step);

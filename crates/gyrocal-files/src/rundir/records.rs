@@ -68,6 +68,55 @@ pub(super) struct StepRow<'a> {
     pub(super) bias_record: Option<u8>,
 }
 
+/// [`StepRow`] without the temperature series' columns: the row of every run that is not a
+/// series, in [`super::STEPS_HEADER_V4`]'s columns (a sweep's or a drift record's steps.csv
+/// is as it was before series existed, so a script reading it sees no new empty columns).
+#[derive(Debug, Serialize)]
+pub(super) struct PlainStepRow<'a> {
+    step_no: u64,
+    pass_no: u64,
+    rate_dps: f64,
+    rate_meas_dps: Option<f64>,
+    rate_meas_std_dps: Option<f64>,
+    rate_meas_min_dps: Option<f64>,
+    rate_meas_max_dps: Option<f64>,
+    rate_samples: Option<u64>,
+    volts: f64,
+    volts_std: Option<f64>,
+    n: u64,
+    overloads: u64,
+    retries: u32,
+    t_start_s: f64,
+    t_end_s: f64,
+    t_start_utc: &'a str,
+    t_end_utc: &'a str,
+}
+
+impl<'a> StepRow<'a> {
+    /// The row without the series' columns.
+    pub(super) fn plain(&self) -> PlainStepRow<'a> {
+        PlainStepRow {
+            step_no: self.step_no,
+            pass_no: self.pass_no,
+            rate_dps: self.rate_dps,
+            rate_meas_dps: self.rate_meas_dps,
+            rate_meas_std_dps: self.rate_meas_std_dps,
+            rate_meas_min_dps: self.rate_meas_min_dps,
+            rate_meas_max_dps: self.rate_meas_max_dps,
+            rate_samples: self.rate_samples,
+            volts: self.volts,
+            volts_std: self.volts_std,
+            n: self.n,
+            overloads: self.overloads,
+            retries: self.retries,
+            t_start_s: self.t_start_s,
+            t_end_s: self.t_end_s,
+            t_start_utc: self.t_start_utc,
+            t_end_utc: self.t_end_utc,
+        }
+    }
+}
+
 /// `rec` with its computed numbers rounded once (the demanded rate, the plan's own number,
 /// is kept bit for bit: a resume compares it with the schedule).
 pub(super) fn rounded(rec: &StepRecord) -> StepRecord {

@@ -57,7 +57,12 @@ impl RunDir {
 
         // steps.csv: repair the tail, then every row must fit the schedule.
         let spath = path.join(STEPS_CSV);
-        let (steps_bytes, torn_steps) = read_repaired(&spath, STEPS_HEADERS, MAX_STEPS_BYTES)?;
+        let series_columns = super::writer::series_columns(plan);
+        let (steps_bytes, torn_steps) = read_repaired(
+            &spath,
+            &super::writer::steps_headers_for(series_columns),
+            MAX_STEPS_BYTES,
+        )?;
         let records = parse_steps(&spath, &steps_bytes, &schedule)?;
         let done: BTreeSet<usize> = records.iter().map(|r| r.step).collect();
         let expected: BTreeMap<usize, u64> = records
@@ -73,7 +78,7 @@ impl RunDir {
         truncate(&spath, steps_bytes.len() as u64)?;
 
         let samples = open_csv(&sapath, &SAMPLES_HEADER, false)?;
-        let steps = open_csv(&spath, &STEPS_HEADER, false)?;
+        let steps = open_csv(&spath, super::writer::steps_header(series_columns), false)?;
         let from_step = schedule.iter().map(|s| s.index).find(|i| !done.contains(i));
         manifest.resumes.push(Resume {
             at_utc: now_utc(),
@@ -137,6 +142,7 @@ impl RunDir {
             clock,
             clock_floor,
             temps: temps::TempsWriter::default(),
+            series_columns,
         };
         rd.write_manifest()?;
         Ok(rd)

@@ -166,10 +166,29 @@ fn a_steps_file_from_before_the_series_columns_still_reads() {
     let data = load(&run).unwrap();
     assert_eq!(data.steps.len(), 1);
     assert_eq!(data.steps[0].series, None);
-    // a resume rewrites it with the current header, the old row's series cells empty
+    // a sweep's resume keeps it as it is: only a series run has the series' columns
     let rd = RunDir::open_for_resume(&run, &plan).unwrap();
     drop(rd);
     let text = fs::read_to_string(run.join(STEPS_CSV)).unwrap();
-    assert!(text.starts_with(&STEPS_HEADER.join(",")), "{text}");
-    assert!(text.lines().nth(1).unwrap().ends_with(",,,,,,"), "{text}");
+    assert_eq!(text, format!("{header}\n1,1,0,,,,,,0.01,,1,0,0,0,0.04,,\n"));
+}
+
+#[test]
+fn only_a_series_run_writes_the_series_columns() {
+    let sweep = PLAN
+        .split("[series]")
+        .next()
+        .unwrap()
+        .replace("kind = \"temperature_series\"\n", "");
+    let dir = tempfile::tempdir().unwrap();
+    for (name, text, header) in [
+        ("sweep", sweep.as_str(), STEPS_HEADER_V4.join(",")),
+        ("series", PLAN, STEPS_HEADER.join(",")),
+    ] {
+        let plan = Plan::from_toml_str(text, Path::new("plan.toml")).unwrap();
+        let run = dir.path().join(name);
+        drop(RunDir::create(&run, &plan, RunMeta::default()).unwrap());
+        let written = fs::read_to_string(run.join(STEPS_CSV)).unwrap();
+        assert_eq!(written.lines().next(), Some(header.as_str()), "{name}");
+    }
 }

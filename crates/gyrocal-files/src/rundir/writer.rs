@@ -81,6 +81,9 @@ pub struct RunDir {
     pub(super) clock_floor: Option<ClockAnchor>,
     /// `temps.csv`, opened on its first row (a run with a chamber).
     pub(super) temps: temps::TempsWriter,
+    /// steps.csv has the temperature series' columns ([`STEPS_HEADER`]; a series run) or
+    /// not ([`STEPS_HEADER_V4`]; every other run).
+    pub(super) series_columns: bool,
 }
 
 /// A finished run (complete, failed or aborted) leaves no `.lock` behind: the file is removed
@@ -225,7 +228,8 @@ impl RunDir {
             }
         }
         let samples = open_csv(&path.join(SAMPLES_CSV), &SAMPLES_HEADER, true)?;
-        let steps = open_csv(&path.join(STEPS_CSV), &STEPS_HEADER, true)?;
+        let series_columns = series_columns(plan);
+        let steps = open_csv(&path.join(STEPS_CSV), steps_header(series_columns), true)?;
         let now = now_utc();
         let manifest = Manifest {
             format_version: FORMAT_VERSION,
@@ -271,6 +275,7 @@ impl RunDir {
             clock: ClockAnchor::now(0.0),
             clock_floor: None,
             temps: temps::TempsWriter::default(),
+            series_columns,
         };
         sync_dir(path)?;
         rd.write_manifest()?;
@@ -472,9 +477,12 @@ impl RunDir {
         let end_utc = self.clock.utc(rec.t_end_s);
         let r = rounded(&rec);
         let row = step_row(&r, &start_utc, &end_utc);
-        self.steps
-            .serialize(&row)
-            .map_err(|e| csv_write(&spath, e))?;
+        if self.series_columns {
+            self.steps.serialize(&row)
+        } else {
+            self.steps.serialize(row.plain())
+        }
+        .map_err(|e| csv_write(&spath, e))?;
         self.steps.flush().map_err(io(&spath, "write"))?;
         self.steps
             .get_ref()
@@ -706,4 +714,27 @@ impl RunDir {
     pub fn write_result(&mut self, name: &str, bytes: &[u8]) -> Result<(), RunError> {
         record_result(&self.dir, &mut self.manifest, name, bytes)
     }
+}
+
+/// Whether a run of `plan` writes the temperature series' columns in steps.csv.
+pub(super) fn series_columns(plan: &Plan) -> bool {
+    plan.kind() == crate::PlanKind::Series
+}
+
+/// The steps.csv columns a run writes ([`STEPS_HEADER`] with the series' columns).
+pub(super) fn steps_header(series_columns: bool) -> &'static [&'static str] {
+    if series_columns {
+        &STEPS_HEADER
+    } else {
+        &STEPS_HEADER_V4
+    }
+}
+
+/// The steps.csv headers a resume accepts, the one it writes first (an older one is
+/// rewritten to it).
+pub(super) fn steps_headers_for(series_columns: bool) -> Vec<&'static [&'static str]> {
+    let first = steps_header(series_columns);
+    std::iter::once(first)
+        .chain(STEPS_HEADERS.iter().copied().filter(|h| *h != first))
+        .collect()
 }
