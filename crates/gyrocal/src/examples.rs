@@ -214,6 +214,23 @@ pub const EXAMPLES: &[(&str, &[Example])] = &[
         ],
     ),
     (
+        "serve",
+        &[
+            ex(
+                "gyrocal serve",
+                "the runs under runs/ live at http://127.0.0.1:8737/ (this machine only)",
+            ),
+            ex(
+                "gyrocal serve --root /lab/runs --root /lab/old-runs --port 8080",
+                "two run-directory roots on another port",
+            ),
+            ex(
+                "gyrocal serve --bind 0.0.0.0 --token \"$GYROCAL_SERVE_TOKEN\"",
+                "for the lab's network: a token is required off this machine",
+            ),
+        ],
+    ),
+    (
         "allan",
         &[
             ex(

@@ -105,7 +105,14 @@ impl RunDir {
         // the end of the last finished step when the process died after fsyncing that step
         // but before rewriting the manifest (else the resumed readings' t_s would run back
         // into the kept ones, and a drift record would overlap itself).
-        let last_step_end = records.iter().map(|r| r.t_end_s).fold(0.0_f64, f64::max);
+        // A temperature series logs the chamber between the steps (temps.csv, flushed at each
+        // row, the manifest checkpointed only every few minutes of a soak): its last row
+        // counts too, or a series killed mid-soak would log its resumed soak back in time.
+        let last_temp = temps::read_temps(path)
+            .ok()
+            .and_then(|rows| rows.last().map(|r| r.t_s))
+            .unwrap_or(0.0);
+        let last_step_end = records.iter().map(|r| r.t_end_s).fold(last_temp, f64::max);
         if last_step_end > manifest.elapsed_s {
             tracing::info!(
                 manifest_elapsed_s = manifest.elapsed_s,

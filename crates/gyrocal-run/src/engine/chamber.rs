@@ -182,30 +182,50 @@ pub(super) async fn watch_while<C: Chamber, F: Future>(
 ) -> (Option<F::Output>, Watched) {
     let mut work = std::pin::pin!(work);
     let mut watched = Watched::default();
-    loop {
+    let out = loop {
         tokio::select! {
             biased;
-            out = &mut work => return (Some(out), watched),
-            r = chamber.read() => match r {
-                Ok(r) => {
-                    let alarm = alarms(&r, step).err();
-                    watched.readings.push((clock(), r));
-                    if let Some(e) = alarm {
-                        watched.error = Some(e);
-                        return (None, watched);
-                    }
-                }
-                Err(e) => {
-                    watched.error = Some(chamber_error(e, step));
+            out = &mut work => break out,
+            r = chamber.read() => {
+                if let Some(e) = take_reading(&mut watched, r, step, &clock) {
+                    watched.error = Some(e);
                     return (None, watched);
                 }
-            },
+            }
         }
         tokio::select! {
             biased;
-            out = &mut work => return (Some(out), watched),
+            out = &mut work => break out,
             () = tokio::time::sleep(poll) => {}
         }
+    };
+    // every step has the gyro's temperature of its own: a step that ended before its first
+    // reading of the chamber did (a short step; a paced virtual clock that moves both in one
+    // tick) is read at its end (without it a series' step had empty temperature cells and
+    // the whole series no analysis)
+    if watched.readings.is_empty()
+        && let Some(e) = take_reading(&mut watched, chamber.read().await, step, &clock)
+    {
+        watched.error = Some(e);
+        return (None, watched);
+    }
+    (Some(out), watched)
+}
+
+/// Keeps a reading of the watch; the run's error when the chamber failed or raised an alarm.
+fn take_reading(
+    watched: &mut Watched,
+    r: Result<ChamberReading, ChamberError>,
+    step: Option<usize>,
+    clock: &impl Fn() -> f64,
+) -> Option<SequenceError> {
+    match r {
+        Ok(r) => {
+            let alarm = alarms(&r, step).err();
+            watched.readings.push((clock(), r));
+            alarm
+        }
+        Err(e) => Some(chamber_error(e, step)),
     }
 }
 
