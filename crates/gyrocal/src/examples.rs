@@ -225,8 +225,8 @@ pub const EXAMPLES: &[(&str, &[Example])] = &[
                 "two run-directory roots on another port",
             ),
             ex(
-                "gyrocal serve --bind 0.0.0.0 --token \"$GYROCAL_SERVE_TOKEN\"",
-                "for the lab's network: a token is required off this machine",
+                "gyrocal serve --bind 0.0.0.0",
+                "for the lab's network, with the token from $GYROCAL_SERVE_TOKEN (required off this machine)",
             ),
         ],
     ),
