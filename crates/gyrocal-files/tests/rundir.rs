@@ -717,3 +717,50 @@ fn a_step_no_of_zero_is_refused_naming_the_column_and_line() {
         "{err}"
     );
 }
+
+/// The manifest's run clock as on disk.
+fn elapsed_on_disk(dir: &Path) -> f64 {
+    let text = fs::read_to_string(dir.join(MANIFEST_JSON)).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    v["elapsed_s"].as_f64().unwrap()
+}
+
+#[test]
+fn checkpoints_write_the_manifest_at_most_every_few_minutes_of_run_clock() {
+    use gyrocal_files::rundir::CHECKPOINT_INTERVAL_S;
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let mut rd = RunDir::create(&dir, &plan(), meta()).unwrap();
+    // an hour's soak polled every 10 s: 360 checkpoints, 12 manifest writes
+    let mut written = Vec::new();
+    for i in 1..=360 {
+        let t = f64::from(i) * 10.0;
+        if rd.checkpoint(t).unwrap() {
+            written.push(t);
+            assert_eq!(elapsed_on_disk(&dir), t);
+        }
+    }
+    assert_eq!(written.len(), 12, "{written:?}");
+    assert!(
+        written
+            .windows(2)
+            .all(|w| w[1] - w[0] >= CHECKPOINT_INTERVAL_S)
+    );
+    // the run clock is held at once, and any other write of the manifest writes it
+    assert_eq!(rd.manifest().elapsed_s, 3600.0);
+    rd.checkpoint(3610.0).unwrap();
+    assert_eq!(elapsed_on_disk(&dir), 3600.0);
+    rd.log_retry(Retry {
+        t_s: 3610.0,
+        step: None,
+        instrument: "chamber".into(),
+        message: "a garbled reply".into(),
+    })
+    .unwrap();
+    assert_eq!(elapsed_on_disk(&dir), 3610.0);
+    // killed now: a resume goes on from the durable clock (no step, no temps.csv later)
+    rd.checkpoint(3650.0).unwrap();
+    drop(rd);
+    let rd = RunDir::open_for_resume(&dir, &plan()).unwrap();
+    assert_eq!(rd.manifest().elapsed_s, 3610.0);
+}

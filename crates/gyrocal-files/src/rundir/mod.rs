@@ -173,7 +173,7 @@ pub use manifest::{
     RunData, RunMeta, Status, Timing, WarmupRecord,
 };
 pub use read::{load, load_fit, load_samples, plan_changes, read_capped, run_plan};
-pub use records::{Sample, SampleRow, SeriesCells, StepRecord};
+pub use records::{STEPS_HEADER, STEPS_HEADER_V4, Sample, SampleRow, SeriesCells, StepRecord};
 pub use results::{RunResults, WriteResult};
 pub use writer::RunDir;
 
@@ -230,63 +230,6 @@ pub const SAMPLES_HEADER_V2: [&str; 7] = [
 /// Columns of `samples.csv` before `t_utc` existed (counted from 0). Such a file still reads,
 /// and a resume keeps appending rows of these columns to it.
 pub const SAMPLES_HEADER_V1: [&str; 6] = ["step", "index", "t_s", "rate_dps", "volts", "overload"];
-/// Columns of `steps.csv`, in order: the [`StepRecord`]'s fields (`step_no` and `pass_no`
-/// counted from 1, the record's `step` and `pass` plus one), then `t_start_utc` and
-/// `t_end_utc`, which the run directory computes from `t_start_s` and `t_end_s` (see the
-/// module docs, *Times*), then a temperature series' columns (empty for every other kind):
-/// `series_point` (0-based index into `[series] temperatures_c`), `setpoint_c`, the gyro's
-/// temperature during the acquisition `temp_min_c`, `temp_mean_c`, `temp_max_c`, and
-/// `bias_record` (`1`: the bias record at that temperature, `0`: a step of its sweep). New
-/// columns go at the end, so a script that reads columns by position keeps working.
-pub const STEPS_HEADER: [&str; 23] = [
-    "step_no",
-    "pass_no",
-    "rate_dps",
-    "rate_meas_dps",
-    "rate_meas_std_dps",
-    "rate_meas_min_dps",
-    "rate_meas_max_dps",
-    "rate_samples",
-    "volts",
-    "volts_std",
-    "n",
-    "overloads",
-    "retries",
-    "t_start_s",
-    "t_end_s",
-    "t_start_utc",
-    "t_end_utc",
-    "series_point",
-    "setpoint_c",
-    "temp_min_c",
-    "temp_mean_c",
-    "temp_max_c",
-    "bias_record",
-];
-
-/// Columns of `steps.csv` before the temperature series' columns existed (`step_no` and
-/// `pass_no` counted from 1). Such a file still reads (its rows are no series steps); a
-/// resume rewrites it with [`STEPS_HEADER`] (empty series cells in the old rows).
-pub const STEPS_HEADER_V4: [&str; 17] = [
-    "step_no",
-    "pass_no",
-    "rate_dps",
-    "rate_meas_dps",
-    "rate_meas_std_dps",
-    "rate_meas_min_dps",
-    "rate_meas_max_dps",
-    "rate_samples",
-    "volts",
-    "volts_std",
-    "n",
-    "overloads",
-    "retries",
-    "t_start_s",
-    "t_end_s",
-    "t_start_utc",
-    "t_end_utc",
-];
-
 /// Columns of `steps.csv` of format 2: [`STEPS_HEADER`]'s with `step` and `pass` counted from
 /// 0. Such a file still reads; a resume rewrites it with [`STEPS_HEADER`] (the old rows' step
 /// and pass numbers plus one, every other cell as it was) before appending.
@@ -361,6 +304,10 @@ pub(super) const STEPS_HEADERS: &[&[&str]] = &[
 /// Every `samples.csv` header read, current first.
 pub(super) const SAMPLES_HEADERS: &[&[&str]] =
     &[&SAMPLES_HEADER, &SAMPLES_HEADER_V2, &SAMPLES_HEADER_V1];
+
+/// How far ahead of the manifest on disk the run clock of a [`RunDir::checkpoint`] may be
+/// before the manifest is written again, s of run clock (5 min).
+pub const CHECKPOINT_INTERVAL_S: f64 = 300.0;
 
 /// The most bytes read from `manifest.json` (64 MiB; a manifest is kilobytes, a megabyte or
 /// two with a large fit document).

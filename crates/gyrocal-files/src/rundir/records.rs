@@ -38,82 +38,91 @@ pub struct SampleRow {
     pub t_utc: Option<String>,
 }
 
-/// A row of `steps.csv` as written: the sequencer's [`StepRecord`] with its step and pass
-/// counted from 1 (see `columns`), its times converted to UTC by the run directory and its
-/// computed numbers rounded (see [`crate::num`]). Built by `step_row`.
-#[derive(Debug, Serialize)]
-pub(super) struct StepRow<'a> {
-    pub(super) step_no: u64,
-    pub(super) pass_no: u64,
-    pub(super) rate_dps: f64,
-    pub(super) rate_meas_dps: Option<f64>,
-    pub(super) rate_meas_std_dps: Option<f64>,
-    pub(super) rate_meas_min_dps: Option<f64>,
-    pub(super) rate_meas_max_dps: Option<f64>,
-    pub(super) rate_samples: Option<u64>,
-    pub(super) volts: f64,
-    pub(super) volts_std: Option<f64>,
-    pub(super) n: u64,
-    pub(super) overloads: u64,
-    pub(super) retries: u32,
-    pub(super) t_start_s: f64,
-    pub(super) t_end_s: f64,
-    pub(super) t_start_utc: &'a str,
-    pub(super) t_end_utc: &'a str,
-    pub(super) series_point: Option<u32>,
-    pub(super) setpoint_c: Option<f64>,
-    pub(super) temp_min_c: Option<f64>,
-    pub(super) temp_mean_c: Option<f64>,
-    pub(super) temp_max_c: Option<f64>,
-    pub(super) bias_record: Option<u8>,
-}
-
-/// [`StepRow`] without the temperature series' columns: the row of every run that is not a
-/// series, in [`super::STEPS_HEADER_V4`]'s columns (a sweep's or a drift record's steps.csv
-/// is as it was before series existed, so a script reading it sees no new empty columns).
-#[derive(Debug, Serialize)]
-pub(super) struct PlainStepRow<'a> {
-    step_no: u64,
-    pass_no: u64,
-    rate_dps: f64,
-    rate_meas_dps: Option<f64>,
-    rate_meas_std_dps: Option<f64>,
-    rate_meas_min_dps: Option<f64>,
-    rate_meas_max_dps: Option<f64>,
-    rate_samples: Option<u64>,
-    volts: f64,
-    volts_std: Option<f64>,
-    n: u64,
-    overloads: u64,
-    retries: u32,
-    t_start_s: f64,
-    t_end_s: f64,
-    t_start_utc: &'a str,
-    t_end_utc: &'a str,
-}
-
-impl<'a> StepRow<'a> {
-    /// The row without the series' columns.
-    pub(super) fn plain(&self) -> PlainStepRow<'a> {
-        PlainStepRow {
-            step_no: self.step_no,
-            pass_no: self.pass_no,
-            rate_dps: self.rate_dps,
-            rate_meas_dps: self.rate_meas_dps,
-            rate_meas_std_dps: self.rate_meas_std_dps,
-            rate_meas_min_dps: self.rate_meas_min_dps,
-            rate_meas_max_dps: self.rate_meas_max_dps,
-            rate_samples: self.rate_samples,
-            volts: self.volts,
-            volts_std: self.volts_std,
-            n: self.n,
-            overloads: self.overloads,
-            retries: self.retries,
-            t_start_s: self.t_start_s,
-            t_end_s: self.t_end_s,
-            t_start_utc: self.t_start_utc,
-            t_end_utc: self.t_end_utc,
+/// The columns of `steps.csv`, each named once: the row types written ([`StepRow`], and
+/// [`PlainStepRow`] of a run that is not a series) and the headers ([`STEPS_HEADER`],
+/// [`STEPS_HEADER_V4`]) are made from one list, the plain columns then the series' ones, so
+/// a column added to one cannot be forgotten in another.
+macro_rules! step_columns {
+    (
+        $(#[$plain_doc:meta])*
+        plain { $($p:ident: $pt:ty,)* }
+        $(#[$series_doc:meta])*
+        series { $($s:ident: $st:ty,)* }
+    ) => {
+        /// A row of `steps.csv` as written: the sequencer's [`StepRecord`] with its step and
+        /// pass counted from 1 (see `columns`), its times converted to UTC by the run
+        /// directory and its computed numbers rounded (see [`crate::num`]). Built by
+        /// `step_row`.
+        #[derive(Debug, Serialize)]
+        pub(super) struct StepRow<'a> {
+            $(pub(super) $p: $pt,)*
+            $(pub(super) $s: $st,)*
         }
+
+        /// [`StepRow`] without the temperature series' columns: the row of every run that is
+        /// not a series, in [`STEPS_HEADER_V4`]'s columns (a sweep's or a drift record's
+        /// steps.csv is as it was before series existed, so a script reading it sees no new
+        /// empty columns).
+        #[derive(Debug, Serialize)]
+        pub(super) struct PlainStepRow<'a> {
+            $($p: $pt,)*
+        }
+
+        impl<'a> StepRow<'a> {
+            /// The row without the series' columns.
+            pub(super) fn plain(&self) -> PlainStepRow<'a> {
+                PlainStepRow { $($p: self.$p,)* }
+            }
+        }
+
+        $(#[$plain_doc])*
+        pub const STEPS_HEADER_V4: [&str; [$(stringify!($p)),*].len()] = [$(stringify!($p)),*];
+
+        $(#[$series_doc])*
+        pub const STEPS_HEADER: [&str; [$(stringify!($p),)* $(stringify!($s)),*].len()] =
+            [$(stringify!($p),)* $(stringify!($s)),*];
+    };
+}
+
+step_columns! {
+    /// Columns of `steps.csv` of every run that is not a temperature series (the format-4
+    /// columns; `step_no` and `pass_no` counted from 1): the [`StepRecord`]'s fields
+    /// (`step_no` and `pass_no` the record's `step` and `pass` plus one), then `t_start_utc`
+    /// and `t_end_utc`, which the run directory computes from `t_start_s` and `t_end_s` (see
+    /// the module docs, *Times*). A series' file has [`STEPS_HEADER`]; a file of an earlier
+    /// release with these columns is a series-less run's, and a resume keeps them.
+    plain {
+        step_no: u64,
+        pass_no: u64,
+        rate_dps: f64,
+        rate_meas_dps: Option<f64>,
+        rate_meas_std_dps: Option<f64>,
+        rate_meas_min_dps: Option<f64>,
+        rate_meas_max_dps: Option<f64>,
+        rate_samples: Option<u64>,
+        volts: f64,
+        volts_std: Option<f64>,
+        n: u64,
+        overloads: u64,
+        retries: u32,
+        t_start_s: f64,
+        t_end_s: f64,
+        t_start_utc: &'a str,
+        t_end_utc: &'a str,
+    }
+    /// Columns of a temperature series' `steps.csv`, in order: [`STEPS_HEADER_V4`]'s, then
+    /// the series' own: `series_point` (0-based index into `[series] temperatures_c`),
+    /// `setpoint_c`, the gyro's temperature during the acquisition `temp_min_c`,
+    /// `temp_mean_c`, `temp_max_c`, and `bias_record` (`1`: the bias record at that
+    /// temperature, `0`: a step of its sweep). New columns go at the end, so a script that
+    /// reads columns by position keeps working.
+    series {
+        series_point: Option<u32>,
+        setpoint_c: Option<f64>,
+        temp_min_c: Option<f64>,
+        temp_mean_c: Option<f64>,
+        temp_max_c: Option<f64>,
+        bias_record: Option<u8>,
     }
 }
 

@@ -108,10 +108,8 @@ impl RunDir {
         // A temperature series logs the chamber between the steps (temps.csv, flushed at each
         // row, the manifest checkpointed only every few minutes of a soak): its last row
         // counts too, or a series killed mid-soak would log its resumed soak back in time.
-        let last_temp = temps::read_temps(path)
-            .ok()
-            .and_then(|rows| rows.last().map(|r| r.t_s))
-            .unwrap_or(0.0);
+        // (read from the file's end: only its last row's clock is wanted)
+        let last_temp = temps::last_t_s(path).ok().flatten().unwrap_or(0.0);
         let last_step_end = records.iter().map(|r| r.t_end_s).fold(last_temp, f64::max);
         if last_step_end > manifest.elapsed_s {
             tracing::info!(
@@ -150,6 +148,7 @@ impl RunDir {
             clock_floor,
             temps: temps::TempsWriter::default(),
             series_columns,
+            durable_elapsed_s: 0.0,
         };
         rd.write_manifest()?;
         Ok(rd)

@@ -134,6 +134,65 @@ pub fn read_temps(dir: &Path) -> Result<Vec<TempRow>, RunError> {
     Ok(out)
 }
 
+/// How much of `temps.csv`'s end [`last_t_s`] reads first (a row is some 50 bytes); it
+/// reads twice as much again while that holds no complete row.
+const TAIL_BYTES: u64 = 16 * 1024;
+
+/// The run clock (`t_s`) of the last complete row of `DIR/temps.csv`, read from the file's
+/// end (a block of it, not the file: a series logs the chamber every few seconds for days,
+/// and a resume wants only where its clock stopped). A torn last line (a crash mid-write) is
+/// not a row. `None`: no file (a run without a chamber) or no row yet. A last row whose
+/// `t_s` is not a number is an error naming the file.
+pub fn last_t_s(dir: &Path) -> Result<Option<f64>, RunError> {
+    use std::io::{Read as _, Seek as _, SeekFrom};
+    let path = dir.join(TEMPS_CSV);
+    let mut f = match open_regular(&path) {
+        Ok(f) => f,
+        Err(e) if e.kind() == crate::open::OpenErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(opened(e)),
+    };
+    let len = f.metadata().map_err(io(&path, "read"))?.len();
+    let mut block = TAIL_BYTES;
+    loop {
+        let start = len.saturating_sub(block);
+        f.seek(SeekFrom::Start(start)).map_err(io(&path, "read"))?;
+        let mut buf = Vec::new();
+        (&mut f)
+            .take(len - start)
+            .read_to_end(&mut buf)
+            .map_err(io(&path, "read"))?;
+        // the complete lines, without the newline that ends the last one
+        let (complete, _) = complete_lines(&buf);
+        let body = complete.strip_suffix(b"\n").unwrap_or(complete);
+        let line = match body.iter().rposition(|&b| b == b'\n') {
+            Some(i) => &body[i + 1..],
+            // the block begins mid-line: the last complete line may begin before it
+            None if start > 0 => {
+                block = block.saturating_mul(2);
+                continue;
+            }
+            // the file's only complete line: the header, no row yet
+            None => return Ok(None),
+        };
+        let line = line.strip_suffix(b"\r").unwrap_or(line);
+        let text = String::from_utf8_lossy(line);
+        if line.is_empty() {
+            return Ok(None);
+        }
+        let first = text.split(',').next().unwrap_or_default();
+        return match first.trim().parse::<f64>() {
+            Ok(t) if t.is_finite() && t >= 0.0 => Ok(Some(t)),
+            _ => Err(RunError::Inconsistent {
+                path,
+                message: format!(
+                    "its last row ({:?}) has no run clock (t_s) to resume from",
+                    text.chars().take(80).collect::<String>()
+                ),
+            }),
+        };
+    }
+}
+
 /// The writer of `temps.csv`, opened on the first row (a run without a chamber has no file).
 #[derive(Debug, Default)]
 pub(super) struct TempsWriter {
@@ -269,6 +328,49 @@ mod tests {
     fn a_run_without_a_chamber_has_no_temperatures() {
         let dir = tempfile::tempdir().unwrap();
         assert!(read_temps(dir.path()).unwrap().is_empty());
+        assert_eq!(last_t_s(dir.path()).unwrap(), None);
+        // the header alone, and the header with a torn first row: no row yet
+        let header = format!("{}\n", TEMPS_HEADER.join(","));
+        fs::write(dir.path().join(TEMPS_CSV), &header).unwrap();
+        assert_eq!(last_t_s(dir.path()).unwrap(), None);
+        fs::write(dir.path().join(TEMPS_CSV), format!("{header}12.5,2")).unwrap();
+        assert_eq!(last_t_s(dir.path()).unwrap(), None);
+    }
+
+    #[test]
+    fn the_last_row_s_clock_is_read_from_the_end_of_a_large_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut w = TempsWriter::default();
+        // some 2 MiB: a reading every 10 s for four days
+        let rows = 36_000;
+        for i in 0..rows {
+            w.append(dir.path(), &row(f64::from(i) * 10.0, Phase::Soak))
+                .unwrap();
+        }
+        w.sync(dir.path()).unwrap();
+        let path = dir.path().join(TEMPS_CSV);
+        assert!(fs::metadata(&path).unwrap().len() > 1024 * 1024);
+        let last = f64::from(rows - 1) * 10.0;
+        assert_eq!(last_t_s(dir.path()).unwrap(), Some(last));
+        assert_eq!(read_temps(dir.path()).unwrap().last().unwrap().t_s, last);
+        // a torn last line (a crash mid-write) is not a row: the one before it is the last
+        let mut f = OpenOptions::new().append(true).open(&path).unwrap();
+        std::io::Write::write_all(&mut f, b"999999.0,-20.0,-1").unwrap();
+        assert_eq!(last_t_s(dir.path()).unwrap(), Some(last));
+        // a last line longer than the first block read: read further back
+        let long = format!("{}\n", "1".repeat(3 * TAIL_BYTES as usize));
+        let mut f = OpenOptions::new().append(true).open(&path).unwrap();
+        std::io::Write::write_all(
+            &mut f,
+            format!("\n12345.5,-20,-19.5,,1,soak{long}").as_bytes(),
+        )
+        .unwrap();
+        assert_eq!(last_t_s(dir.path()).unwrap(), Some(12345.5));
+        // a last row without a clock is an error naming the file
+        let mut f = OpenOptions::new().append(true).open(&path).unwrap();
+        std::io::Write::write_all(&mut f, b"noon,-20,-19.5,,1,soak\n").unwrap();
+        let e = last_t_s(dir.path()).unwrap_err().to_string();
+        assert!(e.contains("temps.csv") && e.contains("noon"), "{e}");
     }
 
     #[test]
