@@ -245,20 +245,6 @@ impl FaultAction {
         self.as_str().starts_with("chamber:")
     }
 
-    /// The chamber fault of a chamber action.
-    fn chamber_fault(self, delay_s: Option<f64>) -> Option<crate::chamber::ChamberFaultKind> {
-        use crate::chamber::{ChamberAlarm, ChamberFaultKind as K};
-        Some(match self {
-            FaultAction::ChamberDoor => K::Alarm(ChamberAlarm::Door),
-            FaultAction::ChamberOvertemp => K::Alarm(ChamberAlarm::OverTemperature),
-            FaultAction::ChamberSilent => K::Silent,
-            FaultAction::ChamberException => K::Exception,
-            FaultAction::ChamberCrc => K::Corrupt,
-            FaultAction::ChamberSlow => K::Slow(delay_s.unwrap_or(0.0)),
-            _ => return None,
-        })
-    }
-
     fn is_dmm(self) -> bool {
         self.as_str().starts_with("dmm:")
     }
@@ -604,20 +590,8 @@ pub fn schedule(specs: &[FaultSpec], bench: &BenchHandle, time_scale: f64) -> Fa
     let started = Instant::now();
     let mut pending: Vec<FaultSpec> = Vec::new();
     for s in specs {
-        if let Some(kind) = s.action.chamber_fault(s.delay_s) {
-            // armed on the chamber itself, exact at its request or time
-            if let Some(c) = &bench.chamber {
-                let trigger = match s.trigger {
-                    Trigger::Request(n) => crate::chamber::ChamberTrigger::Request(n),
-                    Trigger::Time(t) => crate::chamber::ChamberTrigger::Time(t),
-                    _ => continue,
-                };
-                c.arm(crate::chamber::ChamberFault {
-                    kind,
-                    trigger,
-                    count: s.count,
-                });
-            }
+        // armed on the chamber itself, exact at its request or time
+        if crate::chamber::faults::arm(s, bench) {
             continue;
         }
         match (s.trigger, s.action.is_dmm()) {
@@ -957,75 +931,5 @@ mod tests {
         link.send_line(":System:Error?").await.unwrap();
         assert_eq!(link.read_line(t).await.unwrap(), "201,\"Interlock open\"");
         schedule.stop();
-    }
-
-    #[test]
-    fn chamber_grammar() {
-        let s: FaultSpec = "chamber:door@t=3600s".parse().unwrap();
-        assert_eq!(
-            (s.action, s.trigger),
-            (FaultAction::ChamberDoor, Trigger::Time(3600.0))
-        );
-        let s: FaultSpec = "chamber:crc@request10x2".parse().unwrap();
-        assert_eq!(
-            (s.action, s.trigger, s.count),
-            (FaultAction::ChamberCrc, Trigger::Request(10), 2)
-        );
-        assert_eq!(s.to_string(), "chamber:crc@request10x2");
-        let s: FaultSpec = "chamber:slow@t=0s/0.5s".parse().unwrap();
-        assert_eq!((s.delay_s, s.count), (Some(0.5), 0));
-        assert_eq!(s.to_string(), "chamber:slow@t=0s/0.5s");
-        for bad in [
-            "chamber:door@reading3",
-            "chamber:silent@demand1",
-            "table:trip@request3",
-            "chamber:door@request3x2",
-            "chamber:slow@request3",
-            "chamber:melt@t=1s",
-        ] {
-            let e = bad.parse::<FaultSpec>().unwrap_err();
-            assert_eq!(e.spec, bad, "{e}");
-        }
-    }
-
-    /// Chamber specs are armed on the chamber: an alarm at its time, a silent controller at
-    /// its request, and the schedule's status says which fired.
-    #[tokio::test(start_paused = true)]
-    async fn chamber_faults_fire_on_the_chamber() {
-        let mut bench = crate::bench::Bench::spawn(crate::bench::BenchConfig {
-            chamber: Some(crate::chamber::ChamberSimConfig::default()),
-            ..crate::bench::BenchConfig::default()
-        });
-        let specs: Vec<FaultSpec> = ["chamber:overtemp@t=60s", "chamber:silent@request2"]
-            .iter()
-            .map(|s| s.parse().unwrap())
-            .collect();
-        let schedule = schedule(&specs, &bench.handle, 1.0);
-        let chamber = bench.handle.chamber.clone().unwrap();
-        let mut link = bench.chamber_link().unwrap();
-        assert!(chamber.alarms().is_empty());
-        tokio::time::sleep(Duration::from_secs(61)).await;
-        assert_eq!(
-            chamber.alarms(),
-            [crate::chamber::ChamberAlarm::OverTemperature]
-        );
-        use tokio::io::{AsyncReadExt, AsyncWriteExt};
-        let read_901 = [0x01, 0x03, 0x03, 0x85, 0x00, 0x01, 0x95, 0xA7];
-        let mut buf = [0u8; 64];
-        link.write_all(&read_901).await.unwrap();
-        let n = tokio::time::timeout(Duration::from_secs(1), link.read(&mut buf))
-            .await
-            .unwrap()
-            .unwrap();
-        assert_eq!(&buf[..n], [0x01, 0x03, 0x02, 0x00, 0x01, 0x79, 0x84]);
-        link.write_all(&read_901).await.unwrap();
-        assert!(
-            tokio::time::timeout(Duration::from_secs(1), link.read(&mut buf))
-                .await
-                .is_err(),
-            "silent from the second request"
-        );
-        let status = schedule.status(&bench.handle);
-        assert!(status.iter().all(|s| s.fired), "{status:?}");
     }
 }

@@ -10,7 +10,7 @@
 
 mod common;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -201,13 +201,95 @@ fn series(temps: &str, soak_min: f64, max_wait_min: f64) -> Plan {
     Plan::from_toml_str(&text, Path::new("series.toml")).unwrap()
 }
 
+/// A test's series: its plan (see [`series`]) and the run directory it writes.
+struct Case {
+    _tmp: tempfile::TempDir,
+    dir: PathBuf,
+    plan: Plan,
+}
+
+impl Case {
+    fn new(temps: &str, soak_min: f64, max_wait_min: f64) -> Case {
+        let tmp = tempfile::tempdir().unwrap();
+        Case {
+            dir: tmp.path().join("run"),
+            _tmp: tmp,
+            plan: series(temps, soak_min, max_wait_min),
+        }
+    }
+
+    /// Runs the series on a new run directory with a fake chamber at `start_c` whose gyro
+    /// answers `response`; `on_step(done, shared, stop)` is called after each step recorded.
+    async fn run(
+        &self,
+        start_c: f64,
+        response: Response,
+        on_step: impl FnMut(usize, &Shared, &watch::Sender<StopRequest>) + Send + 'static,
+    ) -> (RunSummary, BenchHandle, Arc<Shared>) {
+        self.run_events(start_c, response, after_each_step(on_step))
+            .await
+    }
+
+    /// [`Case::run`] with `on_event(event, shared, stop)` called for every event.
+    async fn run_events(
+        &self,
+        start_c: f64,
+        response: Response,
+        on_event: impl FnMut(&Event, &Shared, &watch::Sender<StopRequest>) + Send + 'static,
+    ) -> (RunSummary, BenchHandle, Arc<Shared>) {
+        let (chamber, shared) = FakeChamber::new(start_c, response);
+        let run = new_run(&self.plan, &self.dir);
+        let (summary, handle) = run_series(&self.plan, run, chamber, on_event).await;
+        (summary, handle, shared)
+    }
+
+    /// Resumes the series in its run directory with a fake chamber back at ambient (23 °C)
+    /// whose gyro has no lag.
+    async fn resume(&self) -> (RunSummary, BenchHandle, Arc<Shared>) {
+        let (chamber, shared) = FakeChamber::new(23.0, no_lag());
+        let run = RunDir::open_for_resume(&self.dir, &self.plan).unwrap();
+        let (summary, handle) = run_series(&self.plan, run, chamber, |_, _, _| {}).await;
+        (summary, handle, shared)
+    }
+}
+
+/// `fault(shared, stop)` once the `n`th step is recorded.
+fn at_step(
+    n: usize,
+    fault: impl Fn(&Shared, &watch::Sender<StopRequest>) + Send + 'static,
+) -> impl FnMut(usize, &Shared, &watch::Sender<StopRequest>) + Send + 'static {
+    move |done, shared, stop| {
+        if done == n {
+            fault(shared, stop);
+        }
+    }
+}
+
+/// A controlled stop, as SIGINT asks.
+fn sigint(_: &Shared, stop: &watch::Sender<StopRequest>) {
+    let _ = stop.send(StopRequest::Controlled("SIGINT"));
+}
+
+/// `on_step(done, shared, stop)` called after each step recorded, as an event handler.
+fn after_each_step(
+    mut on_step: impl FnMut(usize, &Shared, &watch::Sender<StopRequest>) + Send + 'static,
+) -> impl FnMut(&Event, &Shared, &watch::Sender<StopRequest>) + Send + 'static {
+    let mut done = 0;
+    move |e, shared, stop| {
+        if matches!(e, Event::StepDone(_)) {
+            done += 1;
+            on_step(done, shared, stop);
+        }
+    }
+}
+
 /// Runs `plan` on a fresh simulated meter and table and `chamber`, writing to `run`;
-/// `on_step(done, shared, stop)` is called after each step recorded.
+/// `on_event(event, shared, stop)` is called for every event.
 async fn run_series(
     plan: &Plan,
     run: RunDir,
     chamber: FakeChamber,
-    on_step: impl Fn(usize, &Shared, &watch::Sender<StopRequest>) + Send + 'static,
+    mut on_event: impl FnMut(&Event, &Shared, &watch::Sender<StopRequest>) + Send + 'static,
 ) -> (RunSummary, BenchHandle) {
     let bench = Bench::spawn(bench_config(plan));
     let handle = bench.handle;
@@ -224,12 +306,8 @@ async fn run_series(
     .with_events(events_tx);
     let (stop_tx, stop_rx) = watch::channel(StopRequest::None);
     tokio::spawn(async move {
-        let mut done = 0;
         while let Some(e) = events.recv().await {
-            if matches!(e, Event::StepDone(_)) {
-                done += 1;
-                on_step(done, &shared, &stop_tx);
-            }
+            on_event(&e, &shared, &stop_tx);
         }
     });
     let summary = engine.run(stop_rx).await;
@@ -243,6 +321,12 @@ fn assert_table_at_rest(summary: &RunSummary, handle: &BenchHandle) {
         summary.table
     );
     assert!(handle.table.is_stopped(), "the simulated table still turns");
+}
+
+/// The table at rest and the chamber confirmed in its safe state.
+fn assert_both_safe(summary: &RunSummary, handle: &BenchHandle, shared: &Shared) {
+    assert_table_at_rest(summary, handle);
+    assert_chamber_safe(summary, shared);
 }
 
 fn assert_chamber_safe(summary: &RunSummary, shared: &Shared) {
@@ -260,16 +344,12 @@ fn assert_chamber_safe(summary: &RunSummary, shared: &Shared) {
 
 #[tokio::test(start_paused = true)]
 async fn a_series_runs_soaking_and_sweeping_at_each_temperature_and_ends_safe() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("run");
-    let plan = series("[25, -20, 25]", 2.0, 60.0);
-    let (chamber, shared) = FakeChamber::new(23.0, no_lag());
-    let (summary, handle) = run_series(&plan, new_run(&plan, &dir), chamber, |_, _, _| {}).await;
+    let c = Case::new("[25, -20, 25]", 2.0, 60.0);
+    let (summary, handle, shared) = c.run(23.0, no_lag(), |_, _, _| {}).await;
     assert_eq!(summary.status, Status::Complete, "{:?}", summary.reason);
     assert_eq!(summary.reason, None);
-    assert_table_at_rest(&summary, &handle);
-    assert_chamber_safe(&summary, &shared);
-    let data = load(&dir).unwrap();
+    assert_both_safe(&summary, &handle, &shared);
+    let data = load(&c.dir).unwrap();
     assert_eq!(data.steps.len(), 9);
     for (i, s) in data.steps.iter().enumerate() {
         let c = s.series.unwrap();
@@ -290,14 +370,14 @@ async fn a_series_runs_soaking_and_sweeping_at_each_temperature_and_ends_safe() 
     }
     assert!(setpoints.iter().any(|(_, s)| *s == -20.0));
     // temps.csv: every phase, each row at its point
-    let temps = read_temps(&dir).unwrap();
+    let temps = read_temps(&c.dir).unwrap();
     for phase in [Phase::Ramp, Phase::Soak, Phase::Measure, Phase::Safe] {
         assert!(temps.iter().any(|r| r.phase == phase), "{phase:?}");
     }
     assert!(temps.windows(2).all(|w| w[0].t_s <= w[1].t_s));
     assert_eq!(temps.last().unwrap().phase, Phase::Safe);
     assert_eq!(temps.last().unwrap().setpoint_c, 23.0);
-    let m = load(&dir).unwrap().manifest;
+    let m = load(&c.dir).unwrap().manifest;
     let c = m.chamber.unwrap();
     assert_eq!(c.safe_confirmed, Some(true));
     assert!(c.identity.unwrap().contains("Fake F4"));
@@ -309,18 +389,18 @@ async fn a_series_runs_soaking_and_sweeping_at_each_temperature_and_ends_safe() 
 /// and the soak of 5 minutes ends at the reading 300 s later, 1200 s after it began.
 #[tokio::test(start_paused = true)]
 async fn a_soak_ends_exactly_when_its_criterion_has_held_for_the_soak_time() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("run");
-    let plan = series("[25]", 5.0, 60.0);
+    let c = Case::new("[25]", 5.0, 60.0);
     // the chamber starts at the target: no ramp
-    let (chamber, shared) = FakeChamber::new(
-        25.0,
-        Box::new(|t, sp| if t < 600.0 { sp + 3.0 } else { sp }),
-    );
-    let (summary, _) = run_series(&plan, new_run(&plan, &dir), chamber, |_, _, _| {}).await;
+    let (summary, _, shared) = c
+        .run(
+            25.0,
+            Box::new(|t, sp| if t < 600.0 { sp + 3.0 } else { sp }),
+            |_, _, _| {},
+        )
+        .await;
     assert_eq!(summary.status, Status::Complete, "{:?}", summary.reason);
     assert_chamber_safe(&summary, &shared);
-    let temps = read_temps(&dir).unwrap();
+    let temps = read_temps(&c.dir).unwrap();
     let first = temps.first().unwrap();
     let soaking: Vec<_> = temps
         .iter()
@@ -337,11 +417,8 @@ async fn a_soak_ends_exactly_when_its_criterion_has_held_for_the_soak_time() {
 
 #[tokio::test(start_paused = true)]
 async fn a_soak_that_never_settles_fails_plainly_at_the_maximum_wait() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("run");
-    let plan = series("[25, -20]", 2.0, 20.0);
-    let (chamber, shared) = FakeChamber::new(25.0, Box::new(|_, sp| sp + 3.0));
-    let (summary, handle) = run_series(&plan, new_run(&plan, &dir), chamber, |_, _, _| {}).await;
+    let c = Case::new("[25, -20]", 2.0, 20.0);
+    let (summary, handle, shared) = c.run(25.0, Box::new(|_, sp| sp + 3.0), |_, _, _| {}).await;
     assert_eq!(summary.status, Status::Failed);
     let reason = summary.reason.clone().unwrap();
     assert_eq!(
@@ -352,27 +429,19 @@ async fn a_soak_that_never_settles_fails_plainly_at_the_maximum_wait() {
     );
     assert!(summary.resumable);
     assert_eq!(summary.steps_recorded, 0);
-    assert_table_at_rest(&summary, &handle);
-    assert_chamber_safe(&summary, &shared);
+    assert_both_safe(&summary, &handle, &shared);
     // 20 minutes of polls of 10 s
-    let temps = read_temps(&dir).unwrap();
+    let temps = read_temps(&c.dir).unwrap();
     let soak: Vec<_> = temps.iter().filter(|r| r.phase != Phase::Safe).collect();
     assert!((soak.last().unwrap().t_s - soak[0].t_s - 1200.0).abs() < 1e-6);
 }
 
 #[tokio::test(start_paused = true)]
 async fn a_chamber_alarm_mid_sweep_stops_with_the_table_at_rest_and_the_step_not_recorded() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("run");
-    let plan = series("[25, -20]", 1.0, 60.0);
-    let (chamber, shared) = FakeChamber::new(25.0, no_lag());
+    let c = Case::new("[25, -20]", 1.0, 60.0);
     // the door opens once the 4th step (the first at -20 °C) is recorded
-    let (summary, handle) = run_series(&plan, new_run(&plan, &dir), chamber, |done, s, _| {
-        if done == 4 {
-            s.alarm.store(true, Ordering::SeqCst);
-        }
-    })
-    .await;
+    let door = at_step(4, |s, _| s.alarm.store(true, Ordering::SeqCst));
+    let (summary, handle, shared) = c.run(25.0, no_lag(), door).await;
     assert_eq!(summary.status, Status::Failed);
     let reason = summary.reason.clone().unwrap();
     assert!(
@@ -383,62 +452,38 @@ async fn a_chamber_alarm_mid_sweep_stops_with_the_table_at_rest_and_the_step_not
     assert_table_at_rest(&summary, &handle);
     // the alarm does not keep the chamber from its safe state
     assert_eq!(shared.safe.lock().unwrap().len(), 1);
-    let data = load(&dir).unwrap();
+    let data = load(&c.dir).unwrap();
     assert_eq!(data.steps.len(), 4);
     assert_eq!(data.manifest.status, Status::Failed);
 }
 
 #[tokio::test(start_paused = true)]
 async fn a_stop_request_mid_sweep_leaves_the_chamber_safe() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("run");
-    let plan = series("[25, -20]", 1.0, 60.0);
-    let (chamber, shared) = FakeChamber::new(25.0, no_lag());
-    let (summary, handle) = run_series(&plan, new_run(&plan, &dir), chamber, |done, _, stop| {
-        if done == 2 {
-            let _ = stop.send(StopRequest::Controlled("SIGINT"));
-        }
-    })
-    .await;
+    let c = Case::new("[25, -20]", 1.0, 60.0);
+    let (summary, handle, shared) = c.run(25.0, no_lag(), at_step(2, sigint)).await;
     assert_eq!(summary.status, Status::Aborted);
-    assert_table_at_rest(&summary, &handle);
-    assert_chamber_safe(&summary, &shared);
+    assert_both_safe(&summary, &handle, &shared);
 }
 
 #[tokio::test(start_paused = true)]
 async fn a_panic_in_the_chambers_driver_still_leaves_both_machines_safe() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("run");
-    let plan = series("[25, -20]", 1.0, 60.0);
-    let (chamber, shared) = FakeChamber::new(25.0, no_lag());
-    let (summary, handle) = run_series(&plan, new_run(&plan, &dir), chamber, |done, s, _| {
-        if done == 1 {
-            s.panic.store(true, Ordering::SeqCst);
-        }
-    })
-    .await;
+    let c = Case::new("[25, -20]", 1.0, 60.0);
+    let bug = at_step(1, |s, _| s.panic.store(true, Ordering::SeqCst));
+    let (summary, handle, shared) = c.run(25.0, no_lag(), bug).await;
     assert_eq!(summary.status, Status::Failed);
     assert!(
         summary.reason.clone().unwrap().contains("panic"),
         "{:?}",
         summary.reason
     );
-    assert_table_at_rest(&summary, &handle);
-    assert_chamber_safe(&summary, &shared);
+    assert_both_safe(&summary, &handle, &shared);
 }
 
 #[tokio::test(start_paused = true)]
 async fn a_silent_chamber_at_the_end_is_said_could_not_be_confirmed() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("run");
-    let plan = series("[25]", 1.0, 60.0);
-    let (chamber, _shared) = FakeChamber::new(25.0, no_lag());
-    let (summary, handle) = run_series(&plan, new_run(&plan, &dir), chamber, |done, s, _| {
-        if done == 3 {
-            s.silent.store(true, Ordering::SeqCst);
-        }
-    })
-    .await;
+    let c = Case::new("[25]", 1.0, 60.0);
+    let silent = at_step(3, |s, _| s.silent.store(true, Ordering::SeqCst));
+    let (summary, handle, _) = c.run(25.0, no_lag(), silent).await;
     // the data are complete; the chamber's state is not
     assert_eq!(summary.status, Status::Complete, "{:?}", summary.reason);
     assert_table_at_rest(&summary, &handle);
@@ -458,26 +503,19 @@ async fn a_silent_chamber_at_the_end_is_said_could_not_be_confirmed() {
         "{:?}",
         summary.reason
     );
-    let m = load(&dir).unwrap().manifest;
+    let m = load(&c.dir).unwrap().manifest;
     assert_eq!(m.chamber.unwrap().safe_confirmed, Some(false));
 }
 
 #[tokio::test(start_paused = true)]
 async fn a_step_whose_gyro_left_the_band_is_measured_again() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("run");
-    let plan = series("[25]", 1.0, 60.0);
-    let (chamber, shared) = FakeChamber::new(25.0, no_lag());
-    let (summary, _) = run_series(&plan, new_run(&plan, &dir), chamber, |done, s, _| {
-        if done == 1 {
-            // the next reading (the 2nd step's) is 2 °C off
-            s.excursion.store(1, Ordering::SeqCst);
-        }
-    })
-    .await;
+    let c = Case::new("[25]", 1.0, 60.0);
+    // the next reading (the 2nd step's) is 2 °C off
+    let excursion = at_step(1, |s, _| s.excursion.store(1, Ordering::SeqCst));
+    let (summary, _, shared) = c.run(25.0, no_lag(), excursion).await;
     assert_eq!(summary.status, Status::Complete, "{:?}", summary.reason);
     assert_chamber_safe(&summary, &shared);
-    let data = load(&dir).unwrap();
+    let data = load(&c.dir).unwrap();
     assert_eq!(data.steps.len(), 3);
     // recorded in band; the refusal is in the manifest
     assert_eq!(data.steps[1].series.unwrap().temp_max_c, Some(25.0));
@@ -493,7 +531,7 @@ async fn a_step_whose_gyro_left_the_band_is_measured_again() {
         "{}",
         retry.message
     );
-    let temps = read_temps(&dir).unwrap();
+    let temps = read_temps(&c.dir).unwrap();
     assert!(
         temps
             .iter()
@@ -503,28 +541,17 @@ async fn a_step_whose_gyro_left_the_band_is_measured_again() {
 
 #[tokio::test(start_paused = true)]
 async fn a_resumed_series_soaks_again_at_the_temperature_where_it_stopped() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("run");
-    let plan = series("[25, -20, 25]", 1.0, 60.0);
-    let (chamber, _) = FakeChamber::new(23.0, no_lag());
+    let c = Case::new("[25, -20, 25]", 1.0, 60.0);
     // stopped after the first step at -20 °C
-    let (summary, _) = run_series(&plan, new_run(&plan, &dir), chamber, |done, _, stop| {
-        if done == 4 {
-            let _ = stop.send(StopRequest::Controlled("SIGINT"));
-        }
-    })
-    .await;
+    let (summary, _, _) = c.run(23.0, no_lag(), at_step(4, sigint)).await;
     assert_eq!(summary.status, Status::Aborted);
-    let before = read_temps(&dir).unwrap().len();
+    let before = read_temps(&c.dir).unwrap().len();
     // the chamber went back to ambient meanwhile
-    let (chamber, shared) = FakeChamber::new(23.0, no_lag());
-    let run = RunDir::open_for_resume(&dir, &plan).unwrap();
-    let (summary, handle) = run_series(&plan, run, chamber, |_, _, _| {}).await;
+    let (summary, handle, shared) = c.resume().await;
     assert_eq!(summary.status, Status::Complete, "{:?}", summary.reason);
-    assert_table_at_rest(&summary, &handle);
-    assert_chamber_safe(&summary, &shared);
+    assert_both_safe(&summary, &handle, &shared);
     // the second session's first readings ramp and soak at -20 °C (point 1) before measuring
-    let temps = read_temps(&dir).unwrap();
+    let temps = read_temps(&c.dir).unwrap();
     let session2 = &temps[before..];
     assert_eq!(session2[0].phase, Phase::Ramp);
     assert_eq!(session2[0].series_point, Some(1));
@@ -540,7 +567,7 @@ async fn a_resumed_series_soaks_again_at_the_temperature_where_it_stopped() {
     // the chamber was driven from ambient to -20 °C again
     let setpoints = shared.setpoints.lock().unwrap().clone();
     assert!(setpoints[0].1 > 20.0 && setpoints.iter().any(|s| s.1 == -20.0));
-    let data = load(&dir).unwrap();
+    let data = load(&c.dir).unwrap();
     assert_eq!(data.steps.len(), 9);
     let points: Vec<u32> = data
         .steps
@@ -552,17 +579,15 @@ async fn a_resumed_series_soaks_again_at_the_temperature_where_it_stopped() {
 
 #[tokio::test(start_paused = true)]
 async fn a_series_on_a_bench_without_a_chamber_is_refused_before_anything_moves() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("run");
-    let plan = series("[25]", 1.0, 60.0);
-    let bench = Bench::spawn(bench_config(&plan));
-    let dmm = common::hp34401a(bench.dmm, &plan);
-    let table = AclTable::new(bench.table, table_config(&plan));
+    let c = Case::new("[25]", 1.0, 60.0);
+    let bench = Bench::spawn(bench_config(&c.plan));
+    let dmm = common::hp34401a(bench.dmm, &c.plan);
+    let table = AclTable::new(bench.table, table_config(&c.plan));
     let mut seq = gyrocal_run::Sequencer::new(
-        plan.clone(),
+        c.plan.clone(),
         dmm,
         table,
-        new_run(&plan, &dir),
+        new_run(&c.plan, &c.dir),
         SequencerOptions::default(),
     );
     let (_stop_tx, stop_rx) = watch::channel(StopRequest::None);
@@ -586,60 +611,28 @@ async fn a_series_on_a_bench_without_a_chamber_is_refused_before_anything_moves(
     );
 }
 
-/// Like [`run_series`], with `on_event` called for every event (a stop during a soak).
-async fn run_series_events(
-    plan: &Plan,
-    run: RunDir,
-    chamber: FakeChamber,
-    on_event: impl Fn(&Event, &watch::Sender<StopRequest>) + Send + 'static,
-) -> RunSummary {
-    let bench = Bench::spawn(bench_config(plan));
-    let dmm = common::hp34401a(bench.dmm, plan);
-    let table = AclTable::new(bench.table, table_config(plan));
-    let (events_tx, mut events) = tokio::sync::mpsc::unbounded_channel();
-    let mut engine = Engine::on_bench(
-        plan.clone(),
-        MeterTableChamber::new(dmm, table, chamber),
-        run,
-        SequencerOptions::default(),
-    )
-    .with_events(events_tx);
-    let (stop_tx, stop_rx) = watch::channel(StopRequest::None);
-    tokio::spawn(async move {
-        while let Some(e) = events.recv().await {
-            on_event(&e, &stop_tx);
-        }
-    });
-    engine.run(stop_rx).await
-}
-
 #[tokio::test(start_paused = true)]
 async fn a_series_stopped_mid_soak_soaks_again_when_resumed() {
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("run");
-    let plan = series("[25, -20]", 1.0, 60.0);
-    let (chamber, shared) = FakeChamber::new(23.0, no_lag());
+    let c = Case::new("[25, -20]", 1.0, 60.0);
     // SIGINT two minutes into the soak at -20 °C (mid-ramp)
-    let summary = run_series_events(&plan, new_run(&plan, &dir), chamber, |e, stop| {
+    let two_minutes_in = |e: &Event, s: &Shared, stop: &watch::Sender<StopRequest>| {
         if let Event::Soak {
             point: 1, waited, ..
         } = e
             && *waited >= Duration::from_secs(120)
         {
-            let _ = stop.send(StopRequest::Controlled("SIGINT"));
+            sigint(s, stop);
         }
-    })
-    .await;
+    };
+    let (summary, _, shared) = c.run_events(23.0, no_lag(), two_minutes_in).await;
     assert_eq!(summary.status, Status::Aborted);
     assert_chamber_safe(&summary, &shared);
-    assert_eq!(load(&dir).unwrap().steps.len(), 3);
-    let before = read_temps(&dir).unwrap().len();
-    let (chamber, shared) = FakeChamber::new(23.0, no_lag());
-    let run = RunDir::open_for_resume(&dir, &plan).unwrap();
-    let summary = run_series_events(&plan, run, chamber, |_, _| {}).await;
+    assert_eq!(load(&c.dir).unwrap().steps.len(), 3);
+    let before = read_temps(&c.dir).unwrap().len();
+    let (summary, _, shared) = c.resume().await;
     assert_eq!(summary.status, Status::Complete, "{:?}", summary.reason);
     assert_chamber_safe(&summary, &shared);
-    let temps = read_temps(&dir).unwrap();
+    let temps = read_temps(&c.dir).unwrap();
     // the resumed session ramps from ambient to -20 °C again and soaks before measuring
     let session2 = &temps[before..];
     assert_eq!(
@@ -655,5 +648,5 @@ async fn a_series_stopped_mid_soak_soaks_again_when_resumed() {
             .iter()
             .any(|r| r.phase == Phase::Soak && r.setpoint_c == -20.0)
     );
-    assert_eq!(load(&dir).unwrap().steps.len(), 6);
+    assert_eq!(load(&c.dir).unwrap().steps.len(), 6);
 }

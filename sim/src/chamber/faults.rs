@@ -13,6 +13,11 @@
 //! request addressed to it, whatever the dialect) or a sim time; it is checked at each
 //! request, so a time trigger fires at the first request at or after its time (an alarm
 //! also fires at that time for a reader of the handle).
+//!
+//! `gyrocal sim --fault chamber:...` specs ([`crate::faults`]'s grammar) are armed here
+//! ([`arm`]), on the chamber itself.
+
+use crate::faults::{FaultAction, FaultSpec, Trigger};
 
 /// An alarm the simulated chamber can latch.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -147,5 +152,120 @@ impl WireFaults {
             .iter()
             .find(|(r, _)| (u32::from(first)..=last).contains(&u32::from(*r)))
             .map(|&(_, c)| c)
+    }
+}
+
+/// The chamber fault of a `chamber:` action of `gyrocal sim --fault` (`None` for the meter's
+/// and the table's actions).
+fn kind_of(action: FaultAction, delay_s: Option<f64>) -> Option<ChamberFaultKind> {
+    Some(match action {
+        FaultAction::ChamberDoor => ChamberFaultKind::Alarm(ChamberAlarm::Door),
+        FaultAction::ChamberOvertemp => ChamberFaultKind::Alarm(ChamberAlarm::OverTemperature),
+        FaultAction::ChamberSilent => ChamberFaultKind::Silent,
+        FaultAction::ChamberException => ChamberFaultKind::Exception,
+        FaultAction::ChamberCrc => ChamberFaultKind::Corrupt,
+        FaultAction::ChamberSlow => ChamberFaultKind::Slow(delay_s.unwrap_or(0.0)),
+        _ => return None,
+    })
+}
+
+/// Arms a `chamber:` fault spec on the bench's chamber, exact at its request or time (see
+/// [`crate::faults::schedule`]); a bench without a chamber ignores it. Returns whether `spec`
+/// was the chamber's (the schedule handles the others).
+pub(crate) fn arm(spec: &FaultSpec, bench: &crate::bench::BenchHandle) -> bool {
+    let Some(kind) = kind_of(spec.action, spec.delay_s) else {
+        return false;
+    };
+    let trigger = match spec.trigger {
+        Trigger::Request(n) => ChamberTrigger::Request(n),
+        Trigger::Time(t) => ChamberTrigger::Time(t),
+        // refused when the spec is parsed
+        _ => return true,
+    };
+    if let Some(c) = &bench.chamber {
+        c.arm(ChamberFault {
+            kind,
+            trigger,
+            count: spec.count,
+        });
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use crate::faults::schedule;
+    use std::time::Duration;
+
+    #[test]
+    fn chamber_grammar() {
+        let s: FaultSpec = "chamber:door@t=3600s".parse().unwrap();
+        assert_eq!(
+            (s.action, s.trigger),
+            (FaultAction::ChamberDoor, Trigger::Time(3600.0))
+        );
+        let s: FaultSpec = "chamber:crc@request10x2".parse().unwrap();
+        assert_eq!(
+            (s.action, s.trigger, s.count),
+            (FaultAction::ChamberCrc, Trigger::Request(10), 2)
+        );
+        assert_eq!(s.to_string(), "chamber:crc@request10x2");
+        let s: FaultSpec = "chamber:slow@t=0s/0.5s".parse().unwrap();
+        assert_eq!((s.delay_s, s.count), (Some(0.5), 0));
+        assert_eq!(s.to_string(), "chamber:slow@t=0s/0.5s");
+        for bad in [
+            "chamber:door@reading3",
+            "chamber:silent@demand1",
+            "table:trip@request3",
+            "chamber:door@request3x2",
+            "chamber:slow@request3",
+            "chamber:melt@t=1s",
+        ] {
+            let e = bad.parse::<FaultSpec>().unwrap_err();
+            assert_eq!(e.spec, bad, "{e}");
+        }
+    }
+
+    /// Chamber specs are armed on the chamber: an alarm at its time, a silent controller at
+    /// its request, and the schedule's status says which fired.
+    #[tokio::test(start_paused = true)]
+    async fn chamber_faults_fire_on_the_chamber() {
+        let mut bench = crate::bench::Bench::spawn(crate::bench::BenchConfig {
+            chamber: Some(crate::chamber::ChamberSimConfig::default()),
+            ..crate::bench::BenchConfig::default()
+        });
+        let specs: Vec<FaultSpec> = ["chamber:overtemp@t=60s", "chamber:silent@request2"]
+            .iter()
+            .map(|s| s.parse().unwrap())
+            .collect();
+        let schedule = schedule(&specs, &bench.handle, 1.0);
+        let chamber = bench.handle.chamber.clone().unwrap();
+        let mut link = bench.chamber_link().unwrap();
+        assert!(chamber.alarms().is_empty());
+        tokio::time::sleep(Duration::from_secs(61)).await;
+        assert_eq!(
+            chamber.alarms(),
+            [crate::chamber::ChamberAlarm::OverTemperature]
+        );
+        use tokio::io::{AsyncReadExt, AsyncWriteExt};
+        let read_901 = [0x01, 0x03, 0x03, 0x85, 0x00, 0x01, 0x95, 0xA7];
+        let mut buf = [0u8; 64];
+        link.write_all(&read_901).await.unwrap();
+        let n = tokio::time::timeout(Duration::from_secs(1), link.read(&mut buf))
+            .await
+            .unwrap()
+            .unwrap();
+        assert_eq!(&buf[..n], [0x01, 0x03, 0x02, 0x00, 0x01, 0x79, 0x84]);
+        link.write_all(&read_901).await.unwrap();
+        assert!(
+            tokio::time::timeout(Duration::from_secs(1), link.read(&mut buf))
+                .await
+                .is_err(),
+            "silent from the second request"
+        );
+        let status = schedule.status(&bench.handle);
+        assert!(status.iter().all(|s| s.fired), "{status:?}");
     }
 }

@@ -34,9 +34,6 @@ use gyrocal_files::rundir::temps::{Phase as TempPhase, TempRow};
 use gyrocal_files::steps::{Soak, Watch};
 use tokio::time::Instant;
 
-/// How often a soak makes the run clock durable (a manifest checkpoint), s of run clock.
-const SOAK_CHECKPOINT_S: f64 = 300.0;
-
 use super::{ChamberRest, Engine, SequenceError};
 use crate::bench::Bench;
 
@@ -305,7 +302,6 @@ impl<B: Bench> Engine<B> {
         let mut demanded: Option<f64> = None;
         let mut reading = Some(first);
         let mut warned_no_product = false;
-        let mut checkpointed_s = f64::NEG_INFINITY;
         loop {
             let elapsed = start.elapsed();
             let setpoint = ramped_setpoint(from, soak.setpoint_c, soak.ramp_c_per_min, elapsed);
@@ -389,14 +385,9 @@ impl<B: Bench> Engine<B> {
                     waited_min: start.elapsed().as_secs_f64() / 60.0,
                 });
             }
-            // the run clock made durable now and then, not at every poll: a checkpoint is an
-            // atomic rewrite of the manifest (two fsyncs), and a 10 s poll over a day-long
-            // series made thousands (55 s of wall time for an 8 h simulated series); what a
-            // crash can lose is at most this much of the run clock's account, never a reading
-            if now_s - checkpointed_s >= SOAK_CHECKPOINT_S {
-                self.sinks.checkpoint(now_s)?;
-                checkpointed_s = now_s;
-            }
+            // the run clock at every poll: the run directory writes it now and then
+            // (RunDir::checkpoint), not at every poll
+            self.sinks.checkpoint(now_s)?;
             tokio::time::sleep(soak.poll).await;
         }
     }
