@@ -255,15 +255,26 @@ pub(crate) fn conditions(html: &mut String, m: &Manifest) {
 
 /// The instruments used: as they identified themselves, and with the station file's
 /// records (asset id, serial, calibration certificate and dates, accuracy class), which make
-/// the result traceable. Without a station file the report says so.
+/// the result traceable. Without a station file the report says so. A run with a chamber (a
+/// temperature series) lists it too, from the station's
+/// `[chamber]`: the gyro's temperatures the results are stated at were read through its
+/// controller, so the certificate names it and its calibration.
 pub(crate) fn instruments(html: &mut String, m: &Manifest) {
     let _ = writeln!(html, "<h2 id=\"instruments\">Instruments</h2>");
+    // a series' chamber, as it identified itself (none yet: a series stopped before it)
+    let chamber_id = m.chamber.as_ref().and_then(|c| c.identity.clone());
+    let chamber_identity =
+        (m.chamber.is_some() || m.plan.chamber().is_some()).then_some(&chamber_id);
     let Some(st) = &m.station else {
         html.push_str("<table class=\"cert\" id=\"instruments-table\">\n<tr><th>Role</th><th>Identity (as reported)</th></tr>\n");
+        let chamber = chamber_identity.map(|id| ("Thermal chamber", id));
         for (role, id) in [
             ("Multimeter", &m.instruments.dmm),
             ("Rate table", &m.instruments.table),
-        ] {
+        ]
+        .into_iter()
+        .chain(chamber)
+        {
             let _ = writeln!(
                 html,
                 "<tr><td>{role}</td><td>{}</td></tr>",
@@ -274,10 +285,14 @@ pub(crate) fn instruments(html: &mut String, m: &Manifest) {
         return;
     };
     html.push_str("<table class=\"cert\" id=\"instruments-table\">\n<tr><th>Role</th><th>Model</th><th>Asset id</th><th>Serial</th><th>Calibration certificate</th><th>Calibrated</th><th>Due</th><th>Accuracy</th><th>Identity (as reported)</th></tr>\n");
+    let chamber = chamber_identity.map(|id| ("Thermal chamber", st.chamber.as_ref(), id));
     for (role, record, reported) in [
         ("Multimeter", st.multimeter.as_ref(), &m.instruments.dmm),
         ("Rate table", st.table.as_ref(), &m.instruments.table),
-    ] {
+    ]
+    .into_iter()
+    .chain(chamber)
+    {
         // an identity breaks after its commas, not inside a model name
         let reported = reported
             .as_deref()
@@ -823,6 +838,89 @@ mod tests {
         );
         assert!(
             html.contains("recorded when asymmetry_ppm limited that figure"),
+            "{html}"
+        );
+    }
+
+    /// The manifest of a new run of the plan `toml` on bench-5, whose station file has a
+    /// `[chamber]`.
+    fn manifest_on_bench_5(toml: &str) -> Manifest {
+        let station = gyrocal_files::station::Station::from_toml_str(
+            "id = \"bench-5\"\nlab = \"Lab\"\naddress = \"Road\"\n\
+             [multimeter]\nmodel = \"HP 34401A\"\nasset_id = \"DMM-1\"\nserial = \"S1\"\n\
+             certificate = \"C1\"\ncalibrated = 2026-01-01\ndue = 2099-01-01\n\
+             [chamber]\nmodel = \"Thermotron SE-600 (Watlow F4)\"\nasset_id = \"TC-07\"\n\
+             serial = \"SE600-1187\"\ncertificate = \"C-TC-7\"\ncalibrated = 2026-03-02\n\
+             due = 2099-03-02\n",
+            std::path::Path::new("station.toml"),
+        )
+        .unwrap();
+        let plan =
+            gyrocal_files::Plan::from_toml_str(toml, std::path::Path::new("p.toml")).unwrap();
+        let tmp = tempfile::tempdir().unwrap();
+        let meta = gyrocal_files::RunMeta {
+            station: Some(station),
+            ..gyrocal_files::RunMeta::default()
+        };
+        let run = gyrocal_files::RunDir::create(&tmp.path().join("run"), &plan, meta).unwrap();
+        run.manifest().clone()
+    }
+
+    const BASE: &str = "[plan]\nname = \"p\"\nrates_dps = [0, 10, -10]\nsamples_per_rate = 5\n\
+        settle_s = 0\n[table]\ndialect = \"acl\"\nport = \"/dev/ttyUSB1\"\nmax_rate_dps = 20\n\
+        acceleration_dps2 = 10\n[dmm]\nport = \"/dev/ttyUSB0\"\nrange_v = 10\nnplc = 1\n\
+        autozero = false\nline_hz = 50\n";
+
+    #[test]
+    fn a_series_certificate_lists_the_chamber_with_its_record_and_a_sweep_s_does_not() {
+        let series = format!(
+            "{}[series]\ntemperatures_c = [25, 60]\nmeasure = \"sweep\"\n[chamber]\nmodel = \"watlow_f4\"\n\
+             port = \"/dev/ttyUSB2\"\n",
+            BASE.replace(
+                "name = \"p\"",
+                "kind = \"temperature_series\"\nname = \"p\""
+            )
+        );
+        let mut m = manifest_on_bench_5(&series);
+        m.chamber = Some(gyrocal_files::rundir::ChamberRecord {
+            identity: Some("Watlow F4 (°C, 1 decimal) on /dev/ttyUSB2".into()),
+            ..Default::default()
+        });
+        let mut html = String::new();
+        instruments(&mut html, &m);
+        let row = html
+            .lines()
+            .find(|l| l.starts_with("<tr><td>Thermal chamber</td>"))
+            .unwrap_or_else(|| panic!("no chamber row: {html}"))
+            // an identity breaks after its commas
+            .replace(",<wbr>", ",");
+        for cell in [
+            "Thermotron SE-600 (Watlow F4)",
+            "TC-07",
+            "SE600-1187",
+            "C-TC-7",
+            "2099-03-02",
+            "Watlow F4 (°C, 1 decimal) on /dev/ttyUSB2",
+        ] {
+            assert!(row.contains(cell), "{cell} not in {row}");
+        }
+        // the station has no [table]: said as before, the chamber row after it
+        assert!(html.find("Rate table") < html.find("Thermal chamber"));
+
+        // a sweep on the same station: the chamber is not its instrument
+        let mut html = String::new();
+        instruments(&mut html, &manifest_on_bench_5(BASE));
+        assert!(
+            html.contains("Multimeter") && !html.contains("chamber"),
+            "{html}"
+        );
+
+        // a series without a station file: the chamber's identity as reported
+        m.station = None;
+        let mut html = String::new();
+        instruments(&mut html, &m);
+        assert!(
+            html.contains("<tr><td>Thermal chamber</td><td>Watlow F4 (°C, 1 decimal) on /dev/ttyUSB2</td></tr>"),
             "{html}"
         );
     }

@@ -142,21 +142,34 @@ fn analyse_point(p: &PointInput, input: &SeriesInput, opts: &Options) -> SeriesP
                 a.attach_uncertainty(&input.uncertainty);
                 let m = &a.metrics;
                 let finite = |v: f64| v.is_finite().then_some(v);
+                // a U of zero is no U (a line through two rates has no residual, and the
+                // budget then says 0): kept as none, so no model weighs the point as exact
+                let u = |key: &str| usable_u(a.expanded_uncertainty(key));
                 out.k = finite(m.scale_factor);
-                out.u_k = a.expanded_uncertainty("scale_factor");
+                out.u_k = u("scale_factor");
                 out.u_k_weight = a
                     .fit(gyrocal_fit::Method::LeastSquares, gyrocal_fit::Model::Linear)
                     .and_then(|f| prior_u_k(f, a.points))
                     .or(out.u_k);
                 out.bias_dph = finite(m.bias_dph);
-                out.u_bias_dph = a.expanded_uncertainty("bias_dph");
+                out.u_bias_dph = u("bias_dph");
                 out.bias_from = out.bias_dph.map(|_| "sweep".to_string());
                 out.nonlinearity_ppm = finite(m.nonlinearity_ppm);
-                out.u_nonlinearity_ppm = a.expanded_uncertainty("nonlinearity_ppm").or_else(|| {
-                    m.nonlinearity_uncertainty
-                        .as_ref()
-                        .map(|u| u.expanded_uncertainty_ppm)
+                out.u_nonlinearity_ppm = u("nonlinearity_ppm").or_else(|| {
+                    usable_u(
+                        m.nonlinearity_uncertainty
+                            .as_ref()
+                            .map(|u| u.expanded_uncertainty_ppm),
+                    )
                 });
+                if out.k.is_some() && out.u_k.is_none() {
+                    out.notes.push(format!(
+                        "K has no uncertainty: a sweep of {} distinct rate{} leaves the line no \
+                         residual (at least 3 rates are needed for a tempco with uncertainty)",
+                        distinct_rates(data),
+                        if distinct_rates(data) == 1 { "" } else { "s" }
+                    ));
+                }
                 out.best_model = a.best_model.map(|m| m.to_string());
             }
             Err(e) => out.notes.push(format!("sweep not fitted: {e}")),
@@ -173,6 +186,19 @@ fn analyse_point(p: &PointInput, input: &SeriesInput, opts: &Options) -> SeriesP
         }
     }
     out
+}
+
+/// An uncertainty that can weigh a point: finite and positive.
+fn usable_u(u: Option<f64>) -> Option<f64> {
+    u.filter(|u| u.is_finite() && *u > 0.0)
+}
+
+/// The distinct rates of a sweep.
+fn distinct_rates(data: &gyrocal_fit::Dataset) -> usize {
+    let mut rates: Vec<f64> = data.points.iter().map(|p| p.rate_dps).collect();
+    rates.sort_by(f64::total_cmp);
+    rates.dedup();
+    rates.len()
 }
 
 /// K's U (k = 2) from a weighted line's covariance before its scaling by the residual
@@ -236,15 +262,42 @@ fn temp_points(
         .collect()
 }
 
-fn model(visits: &[(f64, TempPoint)], what: &str, notes: &mut Vec<String>) -> Option<TempFit> {
+fn model(
+    visits: &[(f64, TempPoint)],
+    what: &str,
+    points: &[SeriesPoint],
+    notes: &mut Vec<String>,
+) -> Option<TempFit> {
     let pts: Vec<TempPoint> = visits.iter().map(|v| v.1).collect();
     match tempco::fit(&pts) {
         Ok(f) => Some(f),
         Err(e) => {
-            notes.push(format!("no model of {what} in temperature: {e}"));
+            let why = match (&e, without_u(points, what)) {
+                (tempco::TempcoError::TooFewTemperatures(_), n) if n > 0 => format!(
+                    "{n} of {} temperatures have {what} without an uncertainty, which a model \
+                     weighs by: a sweep needs at least 3 distinct rates for a tempco with \
+                     uncertainty (a line through 2 rates has no residual, so its K has no U)",
+                    points.len()
+                ),
+                _ => e.to_string(),
+            };
+            notes.push(format!("no model of {what} in temperature: {why}"));
             None
         }
     }
+}
+
+/// How many points have the figure `what` (`K`, `the bias`) but no U: a model in temperature
+/// leaves them out, and its own error ("at least two distinct temperatures, 0 given") would
+/// not say why (a series measured at four temperatures with sweeps of two rates).
+fn without_u(points: &[SeriesPoint], what: &str) -> usize {
+    points
+        .iter()
+        .filter(|p| match what {
+            "K" => p.k.is_some() && p.u_k.is_none(),
+            _ => p.bias_dph.is_some() && p.u_bias_dph.is_none(),
+        })
+        .count()
 }
 
 fn distinct(visits: &[(f64, TempPoint)]) -> usize {
@@ -309,11 +362,11 @@ pub fn analyse_input(
     let b_visits = temp_points(&points, |p| Some((p.bias_dph?, p.u_bias_dph?)));
     // with two temperatures the model has no residual to scale by: the stated U then
     let k_model = if k_weighted.len() == k_visits.len() && distinct(&k_visits) > 2 {
-        model(&k_weighted, "K", &mut notes)
+        model(&k_weighted, "K", &points, &mut notes)
     } else {
-        model(&k_visits, "K", &mut notes)
+        model(&k_visits, "K", &points, &mut notes)
     };
-    let bias_model = model(&b_visits, "the bias", &mut notes);
+    let bias_model = model(&b_visits, "the bias", &points, &mut notes);
     let k_tempco = k_model.as_ref().and_then(|f| {
         let m = f.chosen();
         let (v, u) = m.relative_sensitivity_ppm(reference_c)?;

@@ -206,6 +206,17 @@ impl KindAnalysis for Kind {
                 path.display()
             ));
         }
+        let mut rates = plan.rates_dps().to_vec();
+        rates.sort_by(f64::total_cmp);
+        rates.dedup();
+        if s.measure.sweep() && rates.len() < 3 {
+            out.push(format!(
+                "{}: [plan] rates_dps has {} distinct rate{}: a line through fewer than 3 rates has no residual, so the sweep's K has no uncertainty at any temperature and the series gives no tempco with uncertainty: at least 3 rates per sweep are needed",
+                path.display(),
+                rates.len(),
+                if rates.len() == 1 { "" } else { "s" }
+            ));
+        }
         if !s.measure.sweep() {
             out.push(format!(
                 "{}: [series] measure = \"bias\": no sweep, so no scale factor at any temperature: the bias records stay in volts (no °/h, no bias sensitivity); measure = \"both\" gives them",

@@ -321,3 +321,82 @@ fn monte_carlo_the_series_sensitivities_cover_the_truth_about_95_percent() {
     assert!((92.5..=97.5).contains(&pct(k_in)), "K: {:.1} %", pct(k_in));
     assert!((92.5..=97.5).contains(&pct(b_in)), "bias: {:.1} %", pct(b_in));
 }
+
+#[test]
+fn sweeps_of_two_rates_say_that_k_has_no_u_not_that_temperatures_are_missing() {
+    let g = Gyro {
+        k25: 0.0125,
+        alpha_ppm: -60.0,
+        k0_25: 0.004,
+        beta_v_per_c: 2e-6,
+        hysteresis_ppm_after_cold: 0.0,
+    };
+    let mut input = series(&g, &[25.0, -20.0, 60.0, 25.0], 5, false);
+    // each sweep at two rates only: the line through them has no residual
+    for p in &mut input.points {
+        if let Some(sweep) = &mut p.sweep {
+            sweep
+                .points
+                .retain(|pt| pt.rate_dps == 20.0 || pt.rate_dps == -20.0);
+        }
+    }
+    let doc = analyse_input(&input, &ls_only(), "two-rates").expect("analysis");
+    // K is there at every temperature, its U is not: no tempco
+    assert!(
+        doc.points.iter().all(|p| p.k.is_some() && p.u_k.is_none()),
+        "{:#?} {:?}",
+        doc.points,
+        doc.notes
+    );
+    assert!(doc.k_tempco_ppm_per_c.is_none());
+    let note = doc
+        .notes
+        .iter()
+        .find(|n| n.starts_with("no model of K"))
+        .expect("a note on K's model");
+    assert!(
+        note.contains("4 of 4 temperatures have K without an uncertainty")
+            && note.contains("at least 3 distinct rates"),
+        "{note}"
+    );
+    assert!(
+        !doc.notes.iter().any(|n| n.contains("(0 given)")),
+        "{:?}",
+        doc.notes
+    );
+    // each point says why its K has no U (never a U of zero)
+    assert!(
+        doc.points[0]
+            .notes
+            .iter()
+            .any(|n| n.contains("a sweep of 2 distinct rates")),
+        "{:?}",
+        doc.points[0].notes
+    );
+}
+
+#[test]
+fn check_warns_of_a_series_whose_sweeps_have_fewer_than_three_rates() {
+    use crate::KindAnalysis;
+    let plan_with = |rates: &str| {
+        let text = format!(
+            "[plan]\nkind = \"temperature_series\"\nname = \"s\"\nrates_dps = {rates}\n\
+             samples_per_rate = 20\nsettle_s = 0\n\
+             [table]\ndialect = \"acl\"\nport = \"/dev/ttyUSB1\"\nmax_rate_dps = 20\nacceleration_dps2 = 10\n\
+             [dmm]\nport = \"/dev/ttyUSB0\"\nrange_v = 10\nnplc = 1\nautozero = false\nline_hz = 50\n\
+             [series]\ntemperatures_c = [25, -20, 60, 25]\nmeasure = \"sweep\"\n\
+             [chamber]\nmodel = \"watlow_f4\"\nport = \"/dev/ttyUSB2\"\n"
+        );
+        gyrocal_files::Plan::from_toml_str(&text, std::path::Path::new("two.toml"))
+            .expect("plan")
+    };
+    let path = std::path::Path::new("two.toml");
+    let w = Kind::plan_warnings(&plan_with("[10, -10]"), path);
+    assert!(
+        w.iter().any(|l| l.starts_with("two.toml: [plan] rates_dps has 2 distinct rates")
+            && l.contains("at least 3 rates per sweep")),
+        "{w:?}"
+    );
+    let w = Kind::plan_warnings(&plan_with("[0, 10, -10]"), path);
+    assert!(!w.iter().any(|l| l.contains("rates_dps")), "{w:?}");
+}
