@@ -29,8 +29,9 @@ pub(super) async fn execute(
         let time_scale = cfg.time_scale;
         let mut bench = gyrocal_sim::bench::Bench::spawn(cfg);
         // the real chamber driver over the simulated controller's link (none without [chamber])
-        let chamber = crate::chamber::simulated(&plan, bench.chamber_link())?;
+        let mut chamber = crate::chamber::simulated(&plan, bench.chamber_link())?;
         let mut schedule = gyrocal_sim::faults::schedule(faults, &bench.handle, time_scale);
+        check_chamber(&mut chamber, &mut records).await?;
         let (dir, run) = open_run_dir(args, &plan, records)?;
         let (summary, run, signal) = match &plan.dmm().port {
             // the plan reaches the meter over GPIB: the bench put a simulated Prologix
@@ -143,11 +144,48 @@ pub(super) async fn execute(
         } else {
             None
         };
-        let chamber = crate::chamber::open(&plan, args.chamber_port.as_deref()).await?;
+        let mut chamber = crate::chamber::open(&plan, args.chamber_port.as_deref()).await?;
+        check_chamber(&mut chamber, &mut records).await?;
         let (dir, run) = open_run_dir(args, &plan, records)?;
         let (summary, run, signal) = sequence(plan, dmm, table, chamber, run).await?;
         Ok((dir, summary, run, signal, None))
     }
+}
+
+/// The chamber of a series identified before anything is created on disk (as the probe
+/// asks the meter and the table), and the station's `[chamber]` compared with the controller
+/// that answered ([`gyrocal_files::station::Station::check_chamber`]): another controller
+/// than the record names is a warning and a recorded deviation, since the certificate would
+/// name another chamber's calibration. Nothing for a run without a chamber. The engine
+/// connects again when the run starts (reads only: the identity and the units).
+async fn check_chamber(
+    chamber: &mut gyrocal_chamber::AnyChamber,
+    records: &mut Records,
+) -> anyhow::Result<()> {
+    use gyrocal_chamber::Chamber as _;
+    if !chamber.present() {
+        return Ok(());
+    }
+    let describe = chamber.describe().to_string();
+    let id = chamber
+        .connect()
+        .await
+        .with_context(|| format!("the chamber at {describe} did not identify itself"))?;
+    let Some(station) = &records.station else {
+        return Ok(());
+    };
+    for c in station.check_chamber(Some(id.model.as_str()), None) {
+        let words = c.words(&station.id);
+        if c.is_mismatch() {
+            say!("gyrocal: warning: {words} (recorded as a deviation)");
+            records
+                .deviations
+                .push((gyrocal_files::station::SERIAL_MISMATCH.to_string(), words));
+        } else if matches!(c, gyrocal_files::station::SerialCheck::ModelMatch { .. }) {
+            say!("station: {words}");
+        }
+    }
+    Ok(())
 }
 
 /// Paces the paused (virtual) clock at `x` simulated seconds per real second: a real sleep

@@ -92,7 +92,8 @@ pub(super) fn station_for_run(
     use gyrocal_files::station::Station;
     let today = jiff::Zoned::now().date();
     let needs = gyrocal_files::station::Needs::of_plan(plan);
-    let station = match Station::resolve(args.station.as_deref())
+    // where the records come from, for the refusal's message
+    let (station, source) = match Station::resolve(args.station.as_deref())
         .map_err(|e| BadInput(format!("station: {e}")))?
     {
         Some((path, s)) => {
@@ -100,15 +101,18 @@ pub(super) fn station_for_run(
             for line in crate::cmd::check::station_warnings(&s, &path, needs) {
                 say!("gyrocal: warning: {line}");
             }
-            Some(s)
+            (Some(s), path.display().to_string())
         }
-        None if args.simulate => Some(Station::simulated_for(sim_seed, today, plan)),
-        None => None,
+        None if args.simulate => (
+            Some(Station::simulated_for(sim_seed, today, plan)),
+            "the simulated bench's records".to_string(),
+        ),
+        None => (None, String::new()),
     };
     let mut deviations = Vec::new();
     if let Some(s) = &station {
         // an instrument the plan does not use (a drift record's absent table, a sweep's
-        // chamber): its calibration is moot
+        // chamber): its calibration is moot; a series' chamber is refused like the meter
         let overdue = s.overdue_for(today, needs);
         if !overdue.is_empty() {
             let list = overdue
@@ -122,9 +126,14 @@ pub(super) fn station_for_run(
                 .collect::<Vec<_>>()
                 .join("; ");
             if !args.allow_expired {
+                let keys = overdue
+                    .iter()
+                    .map(|o| format!("[{}] due = {}", o.role, o.due))
+                    .collect::<Vec<_>>()
+                    .join(", ");
                 return Err(BadInput(format!(
-                    "station {}: {list} (today is {today}): calibrate it, or start with \
-                     --allow-expired, which the report records as a deviation",
+                    "{source}: {keys}: station {}: {list} (today is {today}): calibrate it, or \
+                     start with --allow-expired, which the report records as a deviation",
                     s.id
                 ))
                 .into());
