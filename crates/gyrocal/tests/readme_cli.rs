@@ -150,6 +150,23 @@ const EXPECTED: &[(&str, Check)] = &[
         "gyrocal allan runs/drift --estimator mdev --taus decade -o mdev.html",
         ends(0, &[], &["mdev.html"]),
     ),
+    // README: temperature series
+    (
+        "gyrocal check configs/series.toml",
+        ends(0, &["temperature"], &[]),
+    ),
+    (
+        "gyrocal run configs/series.toml --simulate -o runs/series",
+        ends(
+            0,
+            &["in control: confirmed", "at rest"],
+            &[
+                "runs/series/series.json",
+                "runs/series/series.html",
+                "runs/series/temps.csv",
+            ],
+        ),
+    ),
     // README: records and catalog
     (
         "gyrocal verify runs/rehearsal runs/drift",
