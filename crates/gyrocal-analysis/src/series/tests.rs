@@ -19,6 +19,15 @@ struct Gyro {
     hysteresis_ppm_after_cold: f64,
 }
 
+/// The issue's gyro: K −60 ppm/°C, K0 +2 µV/°C.
+const ISSUE_GYRO: Gyro = Gyro {
+    k25: 0.0125,
+    alpha_ppm: -60.0,
+    k0_25: 0.004,
+    beta_v_per_c: 2e-6,
+    hysteresis_ppm_after_cold: 0.0,
+};
+
 const RATES: [f64; 9] = [-100.0, -50.0, -20.0, -5.0, 0.0, 5.0, 20.0, 50.0, 100.0];
 const NOISE_V: f64 = 2e-4;
 const READINGS: u64 = 100;
@@ -92,13 +101,7 @@ fn ls_only() -> Options {
 
 #[test]
 fn the_issue_s_series_recovers_the_gyro_s_coefficients_within_their_stated_u() {
-    let g = Gyro {
-        k25: 0.0125,
-        alpha_ppm: -60.0,
-        k0_25: 0.004,
-        beta_v_per_c: 2e-6,
-        hysteresis_ppm_after_cold: 0.0,
-    };
+    let g = ISSUE_GYRO;
     let input = series(&g, &[25.0, -20.0, 60.0, 25.0], 3, true);
     let doc = analyse_input(&input, &ls_only(), "synthetic").expect("analysis");
     assert_eq!(doc.points.len(), 4);
@@ -287,13 +290,7 @@ fn a_bias_record_without_a_sweep_says_why_it_has_no_rate() {
 /// for K: see `SeriesPoint::u_k_weight` and `tempco::QUADRATIC_MIN_TEMPERATURES`.)
 #[test]
 fn monte_carlo_the_series_sensitivities_cover_the_truth_about_95_percent() {
-    let g = Gyro {
-        k25: 0.0125,
-        alpha_ppm: -60.0,
-        k0_25: 0.004,
-        beta_v_per_c: 2e-6,
-        hysteresis_ppm_after_cold: 0.0,
-    };
+    let g = ISSUE_GYRO;
     let rate = |t: f64| {
         (g.k0_25 + g.beta_v_per_c * (t - 25.0)) / (g.k25 * (1.0 + g.alpha_ppm * 1e-6 * (t - 25.0)))
             * 3600.0
@@ -324,13 +321,7 @@ fn monte_carlo_the_series_sensitivities_cover_the_truth_about_95_percent() {
 
 #[test]
 fn sweeps_of_two_rates_say_that_k_has_no_u_not_that_temperatures_are_missing() {
-    let g = Gyro {
-        k25: 0.0125,
-        alpha_ppm: -60.0,
-        k0_25: 0.004,
-        beta_v_per_c: 2e-6,
-        hysteresis_ppm_after_cold: 0.0,
-    };
+    let g = ISSUE_GYRO;
     let mut input = series(&g, &[25.0, -20.0, 60.0, 25.0], 5, false);
     // each sweep at two rates only: the line through them has no residual
     for p in &mut input.points {

@@ -2,6 +2,7 @@
 //! bench spawned), the bench built by [`crate::instruments`], the engine run with the signals
 //! watched and the progress shown.
 
+use gyrocal_files::station::SerialCheck;
 use gyrocal_run::{Bench, Engine};
 
 use super::*;
@@ -118,17 +119,8 @@ pub(super) async fn execute(
         );
         if let Some(station) = &records.station {
             // the station's records must be these instruments': a mismatch is recorded
-            for c in crate::cmd::probe::serial_checks(station, &found) {
-                let words = c.words(&station.id);
-                if c.is_mismatch() {
-                    say!("gyrocal: warning: {words} (recorded as a deviation)");
-                    records
-                        .deviations
-                        .push((gyrocal_files::station::SERIAL_MISMATCH.to_string(), words));
-                } else {
-                    say!("station: {words}");
-                }
-            }
+            let checks = crate::cmd::probe::serial_checks(station, &found);
+            note_checks(checks, &station.id, &mut records.deviations, |_| true);
         }
         let d = plan.dmm();
         let dmm = gyrocal_link::open_port(&d.port, &crate::cmd::probe::dmm_link_options(&plan))
@@ -174,18 +166,32 @@ async fn check_chamber(
     let Some(station) = &records.station else {
         return Ok(());
     };
-    for c in station.check_chamber(Some(id.model.as_str()), None) {
-        let words = c.words(&station.id);
+    // the controller's model is what it tells; it reports no serial (not said at each run)
+    let checks = station.check_chamber(Some(id.model.as_str()), None);
+    note_checks(checks, &station.id, &mut records.deviations, |c| {
+        matches!(c, SerialCheck::ModelMatch { .. })
+    });
+    Ok(())
+}
+
+/// The station's checks of the instruments that answered: a mismatch is a warning and a
+/// recorded deviation (the certificate would name another instrument's calibration); the
+/// others are said when `said` says so.
+fn note_checks(
+    checks: Vec<SerialCheck>,
+    station_id: &str,
+    deviations: &mut PendingDeviations,
+    said: impl Fn(&SerialCheck) -> bool,
+) {
+    for c in checks {
+        let words = c.words(station_id);
         if c.is_mismatch() {
             say!("gyrocal: warning: {words} (recorded as a deviation)");
-            records
-                .deviations
-                .push((gyrocal_files::station::SERIAL_MISMATCH.to_string(), words));
-        } else if matches!(c, gyrocal_files::station::SerialCheck::ModelMatch { .. }) {
+            deviations.push((gyrocal_files::station::SERIAL_MISMATCH.to_string(), words));
+        } else if said(&c) {
             say!("station: {words}");
         }
     }
-    Ok(())
 }
 
 /// Paces the paused (virtual) clock at `x` simulated seconds per real second: a real sleep
