@@ -75,12 +75,16 @@
 //! driver's error-queue check).
 //!
 //! Chamber faults ([`crate::chamber::faults`]) are armed on the chamber itself and fire at
-//! the first request at or after their trigger (`requestN` or `t=Ss`): `door` and `overtemp`
+//! the first request at or after their trigger (`requestN` or `t=Ss`; at a crossed trigger,
+//! `readingN`, `demandN` or `stopN`, the supervisor arms them for the chamber's next request
+//! once the trigger is reached, so a test can place a chamber fault in a given step of a
+//! run whatever the wall time the run took to get there): `door` and `overtemp`
 //! latch an alarm until reset, `silent` stops the controller for good, `exception` refuses
 //! COUNT requests (Modbus exception 4, Espec `NA:`), `crc` corrupts COUNT replies, `slow`
 //! holds replies back by `/Ss`. Examples: `chamber:door@t=3600s`, `chamber:silent@request40`,
-//! `chamber:crc@request10x2`, `chamber:slow@t=0s/0.5s`. A bench without a chamber ignores
-//! them.
+//! `chamber:crc@request10x2`, `chamber:slow@t=0s/0.5s`, `chamber:door@reading50` (the door
+//! opens once the meter has taken its 50th reading), `chamber:silent@stop1`. A bench without
+//! a chamber ignores them.
 
 use std::fmt;
 use std::str::FromStr;
@@ -118,7 +122,9 @@ SPEC = DEVICE:ACTION@TRIGGER[xCOUNT][/Ss]
   triggers:      readingN (the N-th reading the meter takes), demandN (the N-th
                  :Demand:Rate the table sees), stopN (the N-th stop command the
                  table sees: table:silent@stop1 ignores the first stop), requestN
-                 (the N-th request the chamber sees), t=Ss (S sim seconds after start)
+                 (the N-th request the chamber sees), t=Ss (S sim seconds after start);
+                 a chamber action at readingN, demandN or stopN hits the chamber's
+                 next request after it (chamber:door@reading50)
   xCOUNT:        overload: that many readings; timeout/garble/truncate: that many
                  consecutive replies (readings); table drop/garble/noise: that many
                  consecutive query replies; slow: that many replies held back
@@ -502,13 +508,10 @@ impl FromStr for FaultSpec {
                 .ok_or_else(|| err(format!("count {c} is above 100000")))?,
         };
         action.implemented().map_err(|why| err(why.to_string()))?;
-        let chamber_trigger = matches!(trigger, Trigger::Request(_) | Trigger::Time(_));
-        if action.is_chamber() != chamber_trigger && !matches!(trigger, Trigger::Time(_)) {
-            return Err(err(if action.is_chamber() {
-                format!("{} fires at requestN or t=Ss", action.as_str())
-            } else {
-                "requestN is a chamber trigger".to_string()
-            }));
+        // a chamber action may fire at any trigger (the crossed ones through the supervisor);
+        // the chamber's request count is its own
+        if !action.is_chamber() && matches!(trigger, Trigger::Request(_)) {
+            return Err(err("requestN is a chamber trigger".to_string()));
         }
         Ok(FaultSpec {
             action,
@@ -605,12 +608,16 @@ pub fn schedule(specs: &[FaultSpec], bench: &BenchHandle, time_scale: f64) -> Fa
     let mut pending: Vec<FaultSpec> = Vec::new();
     for s in specs {
         if let Some(kind) = s.action.chamber_fault(s.delay_s) {
-            // armed on the chamber itself, exact at its request or time
+            // armed on the chamber itself, exact at its request or time; at a meter reading,
+            // a table demand or stop, by the supervisor
             if let Some(c) = &bench.chamber {
                 let trigger = match s.trigger {
                     Trigger::Request(n) => crate::chamber::ChamberTrigger::Request(n),
                     Trigger::Time(t) => crate::chamber::ChamberTrigger::Time(t),
-                    _ => continue,
+                    _ => {
+                        pending.push(s.clone());
+                        continue;
+                    }
                 };
                 c.arm(crate::chamber::ChamberFault {
                     kind,
@@ -650,6 +657,7 @@ pub fn schedule(specs: &[FaultSpec], bench: &BenchHandle, time_scale: f64) -> Fa
     let supervisor = (!pending.is_empty()).then(|| {
         let dmm_faults = bench.dmm.injector();
         let table = bench.table.clone();
+        let chamber = bench.chamber.clone();
         let message = table.config().faults.message;
         tokio::spawn(async move {
             let mut left = pending;
@@ -671,6 +679,15 @@ pub fn schedule(specs: &[FaultSpec], bench: &BenchHandle, time_scale: f64) -> Fa
                         return true;
                     }
                     tracing::info!(spec = %s, "fault fires");
+                    if let (Some(kind), Some(c)) = (s.action.chamber_fault(s.delay_s), &chamber) {
+                        // due now: the chamber's next request (or a read of its alarms)
+                        c.arm(crate::chamber::ChamberFault {
+                            kind,
+                            trigger: crate::chamber::ChamberTrigger::Time(0.0),
+                            count: s.count,
+                        });
+                        return false;
+                    }
                     match s.action {
                         FaultAction::TableTrip => table.trip(),
                         FaultAction::TableFault => table.inject_fault(&message),
@@ -975,9 +992,17 @@ mod tests {
         let s: FaultSpec = "chamber:slow@t=0s/0.5s".parse().unwrap();
         assert_eq!((s.delay_s, s.count), (Some(0.5), 0));
         assert_eq!(s.to_string(), "chamber:slow@t=0s/0.5s");
+        // the crossed triggers: the meter's readings, the table's demands and stops
+        for (text, trigger) in [
+            ("chamber:door@reading3", Trigger::Reading(3)),
+            ("chamber:silent@demand1", Trigger::Demand(1)),
+            ("chamber:silent@stop2", Trigger::Stop(2)),
+        ] {
+            let s: FaultSpec = text.parse().unwrap();
+            assert_eq!(s.trigger, trigger);
+            assert_eq!(s.to_string(), text);
+        }
         for bad in [
-            "chamber:door@reading3",
-            "chamber:silent@demand1",
             "table:trip@request3",
             "chamber:door@request3x2",
             "chamber:slow@request3",
@@ -1027,5 +1052,30 @@ mod tests {
         );
         let status = schedule.status(&bench.handle);
         assert!(status.iter().all(|s| s.fired), "{status:?}");
+    }
+
+    /// A chamber fault at a crossed trigger (here the table's second demand) is armed by the
+    /// supervisor once the trigger is reached: no alarm before it, the alarm latched after it.
+    #[tokio::test(start_paused = true)]
+    async fn a_chamber_fault_at_a_table_demand_fires_after_that_demand() {
+        use gyrocal_link::Transport;
+        let mut bench = crate::bench::Bench::spawn(crate::bench::BenchConfig {
+            chamber: Some(crate::chamber::ChamberSimConfig::default()),
+            ..crate::bench::BenchConfig::default()
+        });
+        let specs: Vec<FaultSpec> = vec!["chamber:door@demand2".parse().unwrap()];
+        let schedule = schedule(&specs, &bench.handle, 1.0);
+        let chamber = bench.handle.chamber.clone().unwrap();
+        let link = &mut bench.table;
+        for c in [":Interlock:Close 1", ":Mode:Rate 1", ":Demand:Rate 5"] {
+            link.send_line(c).await.unwrap();
+        }
+        tokio::time::sleep(Duration::from_secs(5)).await;
+        assert!(chamber.alarms().is_empty(), "fired before its demand");
+        assert!(!schedule.status(&bench.handle)[0].fired);
+        link.send_line(":Demand:Rate 0").await.unwrap();
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        assert_eq!(chamber.alarms(), [crate::chamber::ChamberAlarm::Door]);
+        assert!(schedule.status(&bench.handle)[0].fired);
     }
 }
