@@ -330,8 +330,9 @@ fn assert_completed(ended: &Ended, dir: &Path) {
 }
 
 /// The first "Done when", over pseudo-terminals: killed (SIGKILL: no ending, no safe
-/// state) while soaking at the second temperature, the run is resumed with the command its
-/// ending would have given; the resume soaks again at that temperature before it measures,
+/// state) while soaking at the second temperature, the run is resumed with `gyrocal run
+/// --resume DIR` alone (what `gyrocal runs` says of a killed run: the ports, the chamber's
+/// too, are in its manifest); the resume soaks again at that temperature before it measures,
 /// and completes with both machines safe.
 #[test]
 fn a_series_killed_mid_soak_soaks_again_on_resume_and_completes() {
@@ -356,9 +357,18 @@ fn a_series_killed_mid_soak_soaks_again_on_resume_and_completes() {
         [1, 2, 3],
         "the first temperature's sweep"
     );
-    assert_eq!(json(&dir, "manifest.json")["status"], "running");
-
-    let ended = run_printed(&resume_command(&sim, &dir));
+    // no ending, so no resume command printed: the run directory has what a resume needs,
+    // every port the run was given (the chamber's too) in the manifest's plan
+    let m = json(&dir, "manifest.json");
+    assert_eq!(m["status"], "running");
+    assert_eq!(
+        m["plan"]["chamber"]["port"],
+        sim.chamber(),
+        "{:#}",
+        m["plan"]
+    );
+    assert_eq!(m["plan"]["dmm"]["port"], sim.dmm(), "{:#}", m["plan"]);
+    let ended = run_printed(&format!("gyrocal run --resume {}", dir.display()));
     assert_completed(&ended, &dir);
     let after = temps(&dir);
     let resumed = &after[before.len()..];
