@@ -55,6 +55,19 @@ fn chamber_on_a_pseudo_terminal_answers_the_watlow_driver() {
     );
 }
 
+/// The driver reading the simulated F4's door alarm (register 1061, 1 when latched).
+fn door_alarm() -> WatlowConfig {
+    WatlowConfig {
+        alarms: vec![AlarmRegister {
+            register: 1061,
+            mask: 0xFFFF,
+            active: 1,
+            name: "door open".into(),
+        }],
+        ..WatlowConfig::default()
+    }
+}
+
 #[test]
 fn chamber_on_modbus_tcp_answers_the_watlow_driver() {
     // a door opened 5 sim minutes in (5 real seconds at × 60), read through the driver's
@@ -65,16 +78,7 @@ fn chamber_on_modbus_tcp_answers_the_watlow_driver() {
     assert!(addr.starts_with("tcp://127.0.0.1:"), "{addr}");
     let rt = tokio::runtime::Runtime::new().unwrap();
     rt.block_on(async {
-        let config = WatlowConfig {
-            alarms: vec![AlarmRegister {
-                register: 1061,
-                mask: 0xFFFF,
-                active: 1,
-                name: "door open".into(),
-            }],
-            ..WatlowConfig::default()
-        };
-        let mut f4 = WatlowF4::connect_tcp(&addr, config).await.unwrap();
+        let mut f4 = WatlowF4::connect_tcp(&addr, door_alarm()).await.unwrap();
         drive(&mut f4).await;
         // (that no alarm is there before its time is asserted in virtual time, in the
         // simulator's own tests; real time here only makes sure it has come)
@@ -94,16 +98,9 @@ fn the_panels_reset_clears_a_latched_alarm() {
     let sim = sim(&["--chamber-tcp", "0", "--fault", "chamber:door@request1"]);
     let rt = tokio::runtime::Runtime::new().unwrap();
     let mut f4 = rt.block_on(async {
-        let config = WatlowConfig {
-            alarms: vec![AlarmRegister {
-                register: 1061,
-                mask: 0xFFFF,
-                active: 1,
-                name: "door open".into(),
-            }],
-            ..WatlowConfig::default()
-        };
-        let mut f4 = WatlowF4::connect_tcp(sim.chamber(), config).await.unwrap();
+        let mut f4 = WatlowF4::connect_tcp(sim.chamber(), door_alarm())
+            .await
+            .unwrap();
         f4.connect().await.unwrap();
         for _ in 0..2 {
             assert_eq!(f4.read().await.unwrap().alarms, ["door open"]);
