@@ -75,12 +75,16 @@
 //! driver's error-queue check).
 //!
 //! Chamber faults ([`crate::chamber::faults`]) are armed on the chamber itself and fire at
-//! the first request at or after their trigger (`requestN` or `t=Ss`): `door` and `overtemp`
+//! the first request at or after their trigger (`requestN` or `t=Ss`; at a crossed trigger,
+//! `readingN`, `demandN` or `stopN`, the supervisor arms them for the chamber's next request
+//! once the trigger is reached, so a test can place a chamber fault in a given step of a
+//! run whatever the wall time the run took to get there): `door` and `overtemp`
 //! latch an alarm until reset, `silent` stops the controller for good, `exception` refuses
 //! COUNT requests (Modbus exception 4, Espec `NA:`), `crc` corrupts COUNT replies, `slow`
 //! holds replies back by `/Ss`. Examples: `chamber:door@t=3600s`, `chamber:silent@request40`,
-//! `chamber:crc@request10x2`, `chamber:slow@t=0s/0.5s`. A bench without a chamber ignores
-//! them.
+//! `chamber:crc@request10x2`, `chamber:slow@t=0s/0.5s`, `chamber:door@reading50` (the door
+//! opens once the meter has taken its 50th reading), `chamber:silent@stop1`. A bench without
+//! a chamber ignores them.
 
 use std::fmt;
 use std::str::FromStr;
@@ -118,7 +122,9 @@ SPEC = DEVICE:ACTION@TRIGGER[xCOUNT][/Ss]
   triggers:      readingN (the N-th reading the meter takes), demandN (the N-th
                  :Demand:Rate the table sees), stopN (the N-th stop command the
                  table sees: table:silent@stop1 ignores the first stop), requestN
-                 (the N-th request the chamber sees), t=Ss (S sim seconds after start)
+                 (the N-th request the chamber sees), t=Ss (S sim seconds after start);
+                 a chamber action at readingN, demandN or stopN hits the chamber's
+                 next request after it (chamber:door@reading50)
   xCOUNT:        overload: that many readings; timeout/garble/truncate: that many
                  consecutive replies (readings); table drop/garble/noise: that many
                  consecutive query replies; slow: that many replies held back
@@ -488,13 +494,10 @@ impl FromStr for FaultSpec {
                 .ok_or_else(|| err(format!("count {c} is above 100000")))?,
         };
         action.implemented().map_err(|why| err(why.to_string()))?;
-        let chamber_trigger = matches!(trigger, Trigger::Request(_) | Trigger::Time(_));
-        if action.is_chamber() != chamber_trigger && !matches!(trigger, Trigger::Time(_)) {
-            return Err(err(if action.is_chamber() {
-                format!("{} fires at requestN or t=Ss", action.as_str())
-            } else {
-                "requestN is a chamber trigger".to_string()
-            }));
+        // a chamber action may fire at any trigger (the crossed ones through the supervisor);
+        // the chamber's request count is its own
+        if !action.is_chamber() && matches!(trigger, Trigger::Request(_)) {
+            return Err(err("requestN is a chamber trigger".to_string()));
         }
         Ok(FaultSpec {
             action,
@@ -590,9 +593,15 @@ pub fn schedule(specs: &[FaultSpec], bench: &BenchHandle, time_scale: f64) -> Fa
     let started = Instant::now();
     let mut pending: Vec<FaultSpec> = Vec::new();
     for s in specs {
-        // armed on the chamber itself, exact at its request or time
-        if crate::chamber::faults::arm(s, bench) {
-            continue;
+        // armed on the chamber itself, exact at its request or time; at a meter reading, a
+        // table demand or stop, armed by the supervisor once that trigger is reached
+        match crate::chamber::faults::arm(s, bench) {
+            crate::chamber::faults::Arming::NotChamber => {}
+            crate::chamber::faults::Arming::Armed => continue,
+            crate::chamber::faults::Arming::Crossed => {
+                pending.push(s.clone());
+                continue;
+            }
         }
         match (s.trigger, s.action.is_dmm()) {
             (Trigger::Reading(n), true) => {
@@ -624,6 +633,7 @@ pub fn schedule(specs: &[FaultSpec], bench: &BenchHandle, time_scale: f64) -> Fa
     let supervisor = (!pending.is_empty()).then(|| {
         let dmm_faults = bench.dmm.injector();
         let table = bench.table.clone();
+        let chamber = bench.chamber.clone();
         let message = table.config().faults.message;
         tokio::spawn(async move {
             let mut left = pending;
@@ -645,6 +655,11 @@ pub fn schedule(specs: &[FaultSpec], bench: &BenchHandle, time_scale: f64) -> Fa
                         return true;
                     }
                     tracing::info!(spec = %s, "fault fires");
+                    if let Some(c) = &chamber
+                        && crate::chamber::faults::arm_now(s, c)
+                    {
+                        return false;
+                    }
                     match s.action {
                         FaultAction::TableTrip => table.trip(),
                         FaultAction::TableFault => table.inject_fault(&message),

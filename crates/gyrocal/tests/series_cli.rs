@@ -2,10 +2,13 @@
 //! series of `configs/series.toml` on the simulated bench (the real Watlow F4 driver over the
 //! simulated controller's Modbus RTU) in virtual time, the gyro's temperature coefficients
 //! recovered within their stated U, the chamber left in its safe state and the table at rest;
-//! and over pseudo-terminals against `gyrocal sim --chamber watlow_f4`: SIGINT during a soak.
-//! (A kill mid-soak with its resume, and a chamber alarm mid-sweep over pseudo-terminals, are
-//! tested in gyrocal-run's series_sim with a scripted chamber; their end-to-end forms here are
-//! not finished.)
+//! and over pseudo-terminals (and Modbus TCP) against `gyrocal sim --chamber watlow_f4`, the
+//! issue's "Done when" end to end: SIGINT during a soak; SIGKILL mid-soak and the resume that
+//! soaks again; a door alarm mid-sweep, the resume refused while it is latched and completing
+//! once it is reset at the chamber's panel; the chamber over Modbus TCP; a chamber silent at
+//! the end ("could NOT be confirmed", exit 1). Faults are placed by the meter's reading count
+//! or the table's stop count (`chamber:door@reading65`), never by wall time, and every wait
+//! on a run is bounded and says what the run printed.
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
 mod common;
@@ -14,7 +17,7 @@ use std::path::{Path, PathBuf};
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-use common::sim::Sim;
+use common::sim::{Ended, Sim, output_within};
 use common::{RunOutput, config, final_table_state, gyrocal, json, run_json, steps_done};
 
 /// The simulated gyro's coefficients in `configs/series.toml` (`[simulation]`).
@@ -102,27 +105,45 @@ fn a_simulated_series_recovers_the_gyros_tempcos_and_leaves_both_machines_safe()
     assert_eq!(m["chamber"]["safe_confirmed"], true, "{:#}", m["chamber"]);
 }
 
-/// A short series for real-time runs over pseudo-terminals: 25 → 35 °C, a soak of 3 s (a
-/// wide band: the run's criterion, not the physics, is under test here), two rates.
-fn short_series(dir: &Path) -> PathBuf {
+/// A short series for real-time runs over pseudo-terminals against a simulator at 600 sim
+/// seconds a second (the gyro's case, 20 min behind the air, settles in about 2 s): 23 → 26 °C,
+/// three rates of 20 readings at each (readings 1–60 at 23 °C, 61–120 at 26 °C: three rates
+/// so that each temperature's K has a U, and the series its tempcos), the soak's criterion
+/// (±1 °C, 60 °C/min, 1.2 s: on the run clock, which is the wall clock here) met in a few
+/// seconds, `overrides` (key or section.key, value) on top. About 10 s a run.
+fn short_series(dir: &Path, overrides: &[(&str, &str)]) -> PathBuf {
     let text = std::fs::read_to_string(config("series.toml")).unwrap();
+    let mut set: Vec<(&str, &str)> = vec![
+        ("rates_dps", "[0, 10, -10]"),
+        ("samples_per_rate", "20"),
+        ("settle_s", "0.1"),
+        ("stability_window_s", "0.3"),
+        ("acceleration_dps2", "100"),
+        ("temperatures_c", "[23, 26]"),
+        ("band_c", "1"),
+        ("stability_c_per_min", "60"),
+        ("soak_min", "0.02"),
+        ("max_wait_min", "5"),
+        ("poll_s", "0.2"),
+        ("ramp_c_per_min", "100"),
+    ];
+    set.extend_from_slice(overrides);
     let mut out = String::new();
+    let mut section = "";
     for line in text.lines() {
+        if let Some(name) = line
+            .trim()
+            .strip_prefix('[')
+            .and_then(|l| l.strip_suffix(']'))
+        {
+            section = name;
+        }
         let key = line.split('=').next().unwrap_or("").trim();
-        let replaced = match key {
-            "rates_dps" => "rates_dps = [0, 10]".to_string(),
-            "samples_per_rate" => "samples_per_rate = 20".to_string(),
-            "settle_s" => "settle_s = 0.5".to_string(),
-            "temperatures_c" => "temperatures_c = [25, 35]".to_string(),
-            "band_c" => "band_c = 30".to_string(),
-            "stability_c_per_min" => "stability_c_per_min = 1000".to_string(),
-            "soak_min" => "soak_min = 0.05".to_string(),
-            "max_wait_min" => "max_wait_min = 5".to_string(),
-            "poll_s" => "poll_s = 0.5".to_string(),
-            "ramp_c_per_min" => "ramp_c_per_min = 100".to_string(),
-            _ => line.to_string(),
-        };
-        out.push_str(&replaced);
+        let dotted = format!("{section}.{key}");
+        match set.iter().rev().find(|(k, _)| *k == key || *k == dotted) {
+            Some((_, v)) => out.push_str(&format!("{key} = {v}")),
+            None => out.push_str(line),
+        }
         out.push('\n');
     }
     let path = dir.join("short-series.toml");
@@ -130,6 +151,7 @@ fn short_series(dir: &Path) -> PathBuf {
     path
 }
 
+/// `gyrocal sim` with the plan's bench and a Watlow F4 chamber, at 600 sim seconds a second.
 fn sim_with_chamber(plan: &Path, extra: &[&str]) -> Sim {
     let mut args: Vec<&dyn AsRef<std::ffi::OsStr>> = vec![
         &"--config",
@@ -137,7 +159,7 @@ fn sim_with_chamber(plan: &Path, extra: &[&str]) -> Sim {
         &"--chamber",
         &"watlow_f4",
         &"--time-scale",
-        &"20",
+        &"600",
     ];
     for e in extra {
         args.push(e);
@@ -145,26 +167,89 @@ fn sim_with_chamber(plan: &Path, extra: &[&str]) -> Sim {
     Sim::start(&args)
 }
 
+/// `gyrocal run PLAN` against the simulator, every port given on the command line.
 fn run_on(sim: &Sim, plan: &Path, dir: &Path) -> std::process::Command {
     let mut c = gyrocal();
     c.arg("run")
         .arg(plan)
         .args(["--dmm-port", sim.dmm(), "--table-port", sim.table()])
-        .args(["--chamber-port", sim.info()["chamber"].as_str().unwrap()])
+        .args(["--chamber-port", sim.chamber()])
         .arg("--out")
         .arg(dir);
     c
 }
 
+/// The resume command a run against `sim` prints in its ending (the ports repeated, the
+/// chamber's too, so the resume reaches the same instruments).
+fn resume_command(sim: &Sim, dir: &Path) -> String {
+    format!(
+        "gyrocal run --dmm-port {} --table-port {} --chamber-port {} --resume {}",
+        sim.dmm(),
+        sim.table(),
+        sim.chamber(),
+        dir.display()
+    )
+}
+
+/// The resume command printed in `stderr` ("resume with: gyrocal run ...").
+fn printed_resume(stderr: &str) -> String {
+    let line = stderr
+        .lines()
+        .find_map(|l| l.split("resume with: ").nth(1))
+        .unwrap_or_else(|| panic!("no resume command in:\n{stderr}"));
+    line.trim().to_string()
+}
+
+/// Runs a printed `gyrocal run ...` command word for word (the binary for "gyrocal").
+fn run_printed(command: &str) -> Ended {
+    let words: Vec<&str> = command.split_whitespace().collect();
+    assert_eq!(words.first(), Some(&"gyrocal"), "{command}");
+    output_within(gyrocal().args(&words[1..]), RUN_LIMIT)
+}
+
+/// The bound on one session of a run here (a few seconds on a quiet machine).
+const RUN_LIMIT: Duration = Duration::from_secs(120);
+
+/// steps.csv's step numbers (`step_no`), in file order.
+fn step_numbers(dir: &Path) -> Vec<u32> {
+    let text = std::fs::read_to_string(dir.join("steps.csv")).unwrap_or_default();
+    text.lines()
+        .skip(1)
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| l.split(',').next().unwrap().parse().unwrap())
+        .collect()
+}
+
+/// Blocks until temps.csv has a row of `point` in `phase`, failing if the run ended first.
+fn wait_for_phase(child: &mut std::process::Child, dir: &Path, point: u32, phase: &str) {
+    let t0 = Instant::now();
+    while !temps(dir)
+        .iter()
+        .any(|(_, p, ph)| *p == point && ph == phase)
+    {
+        assert!(
+            t0.elapsed() < RUN_LIMIT,
+            "no {phase} at temperature {}",
+            point + 1
+        );
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!(
+                "the run ended ({status}) before temperature {}'s {phase}: {:?}",
+                point + 1,
+                temps(dir)
+            );
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+const SAFE_LINE: &str = "chamber: setpoint 23 °C (ambient), in control: confirmed";
+
 #[test]
 fn sigint_during_a_soak_leaves_the_table_at_rest_and_the_chamber_safe() {
     let tmp = tempfile::tempdir().unwrap();
-    let plan = short_series(tmp.path());
     // a soak long enough to be interrupted in
-    let text = std::fs::read_to_string(&plan)
-        .unwrap()
-        .replace("soak_min = 0.05", "soak_min = 2");
-    std::fs::write(&plan, text).unwrap();
+    let plan = short_series(tmp.path(), &[("soak_min", "2")]);
     let dir = tmp.path().join("run");
     let sim = sim_with_chamber(&plan, &[]);
     let mut child = run_on(&sim, &plan, &dir)
@@ -172,22 +257,17 @@ fn sigint_during_a_soak_leaves_the_table_at_rest_and_the_chamber_safe() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let t0 = Instant::now();
-    while !temps(&dir).iter().any(|(_, _, ph)| ph == "soak") {
-        assert!(t0.elapsed() < Duration::from_secs(60), "no soak");
-        assert!(
-            child.try_wait().unwrap().is_none(),
-            "ended before the signal"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    wait_for_phase(&mut child, &dir, 0, "soak");
     let pid = nix::unistd::Pid::from_raw(i32::try_from(child.id()).unwrap());
     nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGINT).unwrap();
     let out = child.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_ne!(out.status.code(), Some(0), "{stderr}");
-    assert!(
-        stderr.contains("chamber: setpoint 23 °C (ambient), in control: confirmed"),
+    assert_eq!(out.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains(SAFE_LINE), "{stderr}");
+    // the resume the ending gives reaches the same chamber: --chamber-port repeated
+    assert_eq!(
+        printed_resume(&stderr),
+        resume_command(&sim, &dir),
         "{stderr}"
     );
     let state = sim.finish();
@@ -195,4 +275,249 @@ fn sigint_during_a_soak_leaves_the_table_at_rest_and_the_chamber_safe() {
     assert_eq!(state["chamber"]["setpoint_c"], 23.0, "{state:#}");
     let m = json(&dir, "manifest.json");
     assert_eq!(m["status"], "aborted", "{:#}", m["status"]);
+}
+
+/// Everything a run printed: the human ending of a complete run is on stdout (stderr without
+/// `--json` has only warnings and the failures' words).
+fn said(e: &Ended) -> String {
+    format!("{}{}", e.stdout, e.stderr)
+}
+
+/// What every completed series here shows: exit 0, each of the 6 steps once in steps.csv,
+/// temps.csv's run clock never going back (across sessions too), the chamber confirmed in its
+/// safe state (said, and in the manifest), the series' analysis written with its tempcos and
+/// each temperature measured with the gyro within the band of its setpoint.
+fn assert_completed(ended: &Ended, dir: &Path) {
+    let text = said(ended);
+    assert_eq!(ended.code, Some(0), "{text}");
+    assert!(text.contains(SAFE_LINE), "{text}");
+    assert!(
+        text.contains("result: sensitivities over the range: K "),
+        "{text}"
+    );
+    assert_eq!(
+        step_numbers(dir),
+        [1, 2, 3, 4, 5, 6],
+        "no step lost or twice"
+    );
+    let t = temps(dir);
+    for w in t.windows(2) {
+        assert!(w[1].0 >= w[0].0, "temps.csv's run clock went back: {w:?}");
+    }
+    let m = json(dir, "manifest.json");
+    assert_eq!(m["status"], "complete", "{:#}", m["status"]);
+    assert_eq!(m["chamber"]["safe_confirmed"], true, "{:#}", m["chamber"]);
+    let c = json(dir, "series.json")["catalog"].clone();
+    let points = c["points"].as_array().unwrap();
+    assert_eq!(points.len(), 2, "{c:#}");
+    for p in points {
+        let (set, mean) = (
+            p["setpoint_c"].as_f64().unwrap(),
+            p["temp_mean_c"].as_f64().unwrap(),
+        );
+        assert!(
+            (mean - set).abs() <= 1.0,
+            "measured outside the band: {p:#}"
+        );
+    }
+    for key in [
+        "k_tempco_ppm_per_c",
+        "u_k_tempco_ppm_per_c",
+        "bias_tempco_dph_per_c",
+    ] {
+        assert!(c[key].as_f64().is_some_and(f64::is_finite), "{key}: {c:#}");
+    }
+}
+
+/// The first "Done when", over pseudo-terminals: killed (SIGKILL: no ending, no safe
+/// state) while soaking at the second temperature, the run is resumed with `gyrocal run
+/// --resume DIR` alone (what `gyrocal runs` says of a killed run: the ports, the chamber's
+/// too, are in its manifest); the resume soaks again at that temperature before it measures,
+/// and completes with both machines safe.
+#[test]
+fn a_series_killed_mid_soak_soaks_again_on_resume_and_completes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = short_series(tmp.path(), &[]);
+    let dir = tmp.path().join("run");
+    let sim = sim_with_chamber(&plan, &[]);
+    let mut child = run_on(&sim, &plan, &dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    // the kill waits on what the run directory shows, not on wall time
+    wait_for_phase(&mut child, &dir, 1, "soak");
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let before = temps(&dir);
+    let (t_kill, point, phase) = before.last().unwrap().clone();
+    assert_eq!((point, phase.as_str()), (1, "soak"), "{before:?}");
+    assert_eq!(
+        step_numbers(&dir),
+        [1, 2, 3],
+        "the first temperature's sweep"
+    );
+    // no ending, so no resume command printed: the run directory has what a resume needs,
+    // every port the run was given (the chamber's too) in the manifest's plan
+    let m = json(&dir, "manifest.json");
+    assert_eq!(m["status"], "running");
+    assert_eq!(
+        m["plan"]["chamber"]["port"],
+        sim.chamber(),
+        "{:#}",
+        m["plan"]
+    );
+    assert_eq!(m["plan"]["dmm"]["port"], sim.dmm(), "{:#}", m["plan"]);
+    let ended = run_printed(&format!("gyrocal run --resume {}", dir.display()));
+    assert_completed(&ended, &dir);
+    let after = temps(&dir);
+    let resumed = &after[before.len()..];
+    // the resumed session soaked at 26 °C again, after the kill, before measuring there
+    let soaked = resumed
+        .iter()
+        .position(|(t, p, ph)| *p == 1 && ph == "soak" && *t >= t_kill)
+        .unwrap_or_else(|| panic!("no soak at 26 °C on resume: {resumed:?}"));
+    let measured = resumed
+        .iter()
+        .position(|(_, p, ph)| *p == 1 && ph == "measure")
+        .unwrap_or_else(|| panic!("no measurement at 26 °C: {resumed:?}"));
+    assert!(soaked < measured, "{resumed:?}");
+    let m = json(&dir, "manifest.json");
+    assert_eq!(
+        m["resumes"].as_array().unwrap().len(),
+        1,
+        "{:#}",
+        m["resumes"]
+    );
+    let state = sim.finish();
+    assert_eq!(state["table"]["stopped"], true, "{state:#}");
+    assert_eq!(state["chamber"]["setpoint_c"], 23.0, "{state:#}");
+}
+
+/// A door opened during the sweep at the second temperature (once the meter has taken its
+/// 65th reading: the 5th of the first step at 26 °C), over pseudo-terminals: the run stops
+/// saying so, the table at rest, the step under way not recorded, the chamber confirmed
+/// safe. The resume it prints is refused while the alarm is latched (the same words); the
+/// operator resets it at the chamber's panel (SIGUSR1 to the simulator) and the same resume
+/// completes.
+#[test]
+fn a_door_alarm_mid_sweep_stops_the_run_and_the_resume_completes_once_reset() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = short_series(tmp.path(), &[]);
+    let dir = tmp.path().join("run");
+    let sim = sim_with_chamber(&plan, &["--fault", "chamber:door@reading65"]);
+    let first = output_within(&mut run_on(&sim, &plan, &dir), RUN_LIMIT);
+    assert_eq!(first.code, Some(1), "{}", said(&first));
+    let alarm_line = first
+        .stderr
+        .lines()
+        .find(|l| l.contains("chamber alarm: door open during step "))
+        .unwrap_or_else(|| panic!("the alarm not said:\n{}", said(&first)));
+    let step: u32 = alarm_line
+        .split("during step ")
+        .nth(1)
+        .and_then(|r| r.split(',').next())
+        .and_then(|n| n.trim().parse().ok())
+        .unwrap_or_else(|| panic!("{alarm_line}"));
+    assert!(alarm_line.contains("which is not recorded"), "{alarm_line}");
+    // a step at 26 °C, not recorded; the ones before it are
+    assert!(step >= 4, "{alarm_line}");
+    assert_eq!(step_numbers(&dir), (1..step).collect::<Vec<_>>());
+    assert!(
+        said(&first).contains("the table is at rest"),
+        "{}",
+        said(&first)
+    );
+    assert!(said(&first).contains(SAFE_LINE), "{}", said(&first));
+    let resume = printed_resume(&said(&first));
+    assert_eq!(resume, resume_command(&sim, &dir));
+
+    // the alarm is latched: the resume stops at once, saying so, the table still at rest
+    let refused = run_printed(&resume);
+    assert_eq!(refused.code, Some(1), "{}", said(&refused));
+    assert!(
+        said(&refused).contains("chamber alarm: door open")
+            && said(&refused).contains("cleared at the chamber"),
+        "{}",
+        said(&refused)
+    );
+    assert!(
+        said(&refused).contains("the table is at rest"),
+        "{}",
+        said(&refused)
+    );
+    assert_eq!(step_numbers(&dir), (1..step).collect::<Vec<_>>());
+
+    let reset = sim.reset_chamber_alarms();
+    assert_eq!(
+        reset["cleared"],
+        serde_json::json!(["door open"]),
+        "{reset}"
+    );
+    let ended = run_printed(&resume);
+    assert_completed(&ended, &dir);
+    let state = sim.finish();
+    assert_eq!(state["table"]["stopped"], true, "{state:#}");
+    assert_eq!(
+        state["chamber"]["alarms"],
+        serde_json::json!([]),
+        "{state:#}"
+    );
+    assert_eq!(state["faults"][0]["fired"], true, "{state:#}");
+}
+
+/// The chamber over Modbus TCP (`gyrocal sim --chamber-tcp`), named in the plan's
+/// `[chamber] port` (no --chamber-port): the series completes with the chamber confirmed.
+#[test]
+fn a_series_with_the_chamber_on_modbus_tcp_completes_with_it_confirmed() {
+    let tmp = tempfile::tempdir().unwrap();
+    let sim_plan = short_series(tmp.path(), &[]);
+    let sim = sim_with_chamber(&sim_plan, &["--chamber-tcp", "0"]);
+    let addr = sim.chamber().to_string();
+    assert!(addr.starts_with("tcp://127.0.0.1:"), "{addr}");
+    let port = format!("\"{addr}\"");
+    let plan = short_series(tmp.path(), &[("chamber.port", &port)]);
+    let dir = tmp.path().join("run");
+    let ended = output_within(
+        gyrocal()
+            .arg("run")
+            .arg(&plan)
+            .args(["--dmm-port", sim.dmm(), "--table-port", sim.table()])
+            .arg("--out")
+            .arg(&dir),
+        RUN_LIMIT,
+    );
+    assert_completed(&ended, &dir);
+    let state = sim.finish();
+    assert_eq!(state["chamber"]["setpoint_c"], 23.0, "{state:#}");
+    assert!(
+        state["chamber"]["requests_seen"].as_u64().unwrap() > 20,
+        "{state:#}"
+    );
+    assert_eq!(state["table"]["stopped"], true, "{state:#}");
+}
+
+/// The chamber falls silent at the end (at the table's first stop command: the schedule's
+/// last step done): every step is recorded, but the chamber's safe state could not be
+/// confirmed, which the ending says plainly, with exit 1 and the table at rest.
+#[test]
+fn a_chamber_silent_at_the_end_is_said_not_confirmed_with_exit_1() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = short_series(tmp.path(), &[]);
+    let dir = tmp.path().join("run");
+    let sim = sim_with_chamber(&plan, &["--fault", "chamber:silent@stop1"]);
+    let ended = output_within(&mut run_on(&sim, &plan, &dir), RUN_LIMIT);
+    assert_eq!(ended.code, Some(1), "{}", said(&ended));
+    assert!(
+        said(&ended).contains("all steps recorded, but chamber: setpoint 23 °C (ambient), in control could NOT be confirmed"),
+        "{}",
+        said(&ended)
+    );
+    assert!(!said(&ended).contains(SAFE_LINE), "{}", said(&ended));
+    assert_eq!(step_numbers(&dir), [1, 2, 3, 4, 5, 6]);
+    let m = json(&dir, "manifest.json");
+    assert_eq!(m["chamber"]["safe_confirmed"], false, "{:#}", m["chamber"]);
+    let state = sim.finish();
+    assert_eq!(state["table"]["stopped"], true, "{state:#}");
+    assert_eq!(state["faults"][0]["fired"], true, "{state:#}");
 }

@@ -6,67 +6,18 @@
 
 mod common;
 
-use std::io::{BufRead, BufReader};
-use std::process::{Child, Stdio};
-use std::sync::mpsc;
 use std::time::Duration;
 
+use common::sim::Sim;
 use gyrocal_chamber::{AlarmRegister, Chamber, SafeState, WatlowConfig, WatlowF4};
-use serde_json::Value;
 
-/// A running `gyrocal sim`; killed on drop if still running.
-struct Sim {
-    child: Child,
-    lines: mpsc::Receiver<String>,
-    info: Value,
-}
-
-impl Sim {
-    fn start(extra: &[&str]) -> Sim {
-        let mut child = common::gyrocal()
-            .args(["sim", "--time-scale", "60", "--seed", "7"])
-            .args(extra)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .unwrap();
-        let stdout = child.stdout.take().unwrap();
-        let (tx, lines) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stdout).lines() {
-                let Ok(line) = line else { break };
-                if tx.send(line).is_err() {
-                    break;
-                }
-            }
-        });
-        let first = lines
-            .recv_timeout(Duration::from_secs(10))
-            .expect("the JSON line with the device paths");
-        let info: Value = serde_json::from_str(&first).unwrap();
-        Sim { child, lines, info }
+/// `gyrocal sim --time-scale 60 --seed 7 EXTRA` (the shared helper of `tests/common/sim.rs`).
+fn sim(extra: &[&str]) -> Sim {
+    let mut args: Vec<&dyn AsRef<std::ffi::OsStr>> = vec![&"--time-scale", &"60", &"--seed", &"7"];
+    for e in extra {
+        args.push(e);
     }
-
-    /// SIGINT; the final-state line.
-    fn interrupt(mut self) -> Value {
-        let pid = nix::unistd::Pid::from_raw(i32::try_from(self.child.id()).unwrap());
-        nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGINT).unwrap();
-        let last = self
-            .lines
-            .recv_timeout(Duration::from_secs(5))
-            .expect("the final-state line");
-        let status = self.child.wait().unwrap();
-        assert!(status.success(), "{status:?}");
-        serde_json::from_str(&last).unwrap()
-    }
-}
-
-impl Drop for Sim {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
+    Sim::start(&args)
 }
 
 /// Sets 40 °C, waits 2 real seconds (2 sim minutes at × 60), reads: the air has ramped at
@@ -87,16 +38,16 @@ async fn drive(f4: &mut WatlowF4) {
 
 #[test]
 fn chamber_on_a_pseudo_terminal_answers_the_watlow_driver() {
-    let sim = Sim::start(&["--chamber", "watlow_f4"]);
-    assert_eq!(sim.info["chamber_model"], "watlow_f4");
-    let path = sim.info["chamber"].as_str().unwrap().to_string();
+    let sim = sim(&["--chamber", "watlow_f4"]);
+    assert_eq!(sim.info()["chamber_model"], "watlow_f4");
+    let path = sim.chamber().to_string();
     assert!(path.starts_with("/dev/"), "{path}");
     let rt = tokio::runtime::Runtime::new().unwrap();
     rt.block_on(async {
         let mut f4 = WatlowF4::open_rtu(&path, 9600, WatlowConfig::default()).unwrap();
         drive(&mut f4).await;
     });
-    let last = sim.interrupt();
+    let last = sim.finish();
     assert_eq!(last["chamber"]["setpoint_c"], 23.0, "{last}");
     assert!(
         last["chamber"]["requests_seen"].as_u64().unwrap() >= 10,
@@ -104,36 +55,67 @@ fn chamber_on_a_pseudo_terminal_answers_the_watlow_driver() {
     );
 }
 
+/// The driver reading the simulated F4's door alarm (register 1061, 1 when latched).
+fn door_alarm() -> WatlowConfig {
+    WatlowConfig {
+        alarms: vec![AlarmRegister {
+            register: 1061,
+            mask: 0xFFFF,
+            active: 1,
+            name: "door open".into(),
+        }],
+        ..WatlowConfig::default()
+    }
+}
+
 #[test]
 fn chamber_on_modbus_tcp_answers_the_watlow_driver() {
     // a door opened 5 sim minutes in (5 real seconds at × 60), read through the driver's
     // alarm registers (the simulated F4's 1061, 1 when latched)
-    let sim = Sim::start(&["--chamber-tcp", "0", "--fault", "chamber:door@t=300s"]);
-    assert_eq!(sim.info["faults"][0], "chamber:door@t=300s");
-    let addr = sim.info["chamber"].as_str().unwrap().to_string();
+    let sim = sim(&["--chamber-tcp", "0", "--fault", "chamber:door@t=300s"]);
+    assert_eq!(sim.info()["faults"][0], "chamber:door@t=300s");
+    let addr = sim.chamber().to_string();
     assert!(addr.starts_with("tcp://127.0.0.1:"), "{addr}");
     let rt = tokio::runtime::Runtime::new().unwrap();
     rt.block_on(async {
-        let config = WatlowConfig {
-            alarms: vec![AlarmRegister {
-                register: 1061,
-                mask: 0xFFFF,
-                active: 1,
-                name: "door open".into(),
-            }],
-            ..WatlowConfig::default()
-        };
-        let mut f4 = WatlowF4::connect_tcp(&addr, config).await.unwrap();
+        let mut f4 = WatlowF4::connect_tcp(&addr, door_alarm()).await.unwrap();
         drive(&mut f4).await;
         // (that no alarm is there before its time is asserted in virtual time, in the
         // simulator's own tests; real time here only makes sure it has come)
         tokio::time::sleep(Duration::from_secs(4)).await;
         assert_eq!(f4.read().await.unwrap().alarms, ["door open"]);
     });
-    let last = sim.interrupt();
+    let last = sim.finish();
     assert_eq!(last["chamber"]["setpoint_c"], 23.0, "{last}");
     assert_eq!(last["chamber"]["alarms"][0], "door open", "{last}");
     assert_eq!(last["faults"][0]["fired"], true, "{last}");
+}
+
+/// The simulated chamber's panel (SIGUSR1 to `gyrocal sim`): a latched alarm stays latched
+/// however often it is read, until the operator presses the reset; then the driver reads none.
+#[test]
+fn the_panels_reset_clears_a_latched_alarm() {
+    let sim = sim(&["--chamber-tcp", "0", "--fault", "chamber:door@request1"]);
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let mut f4 = rt.block_on(async {
+        let mut f4 = WatlowF4::connect_tcp(sim.chamber(), door_alarm())
+            .await
+            .unwrap();
+        f4.connect().await.unwrap();
+        for _ in 0..2 {
+            assert_eq!(f4.read().await.unwrap().alarms, ["door open"]);
+        }
+        f4
+    });
+    let said = sim.reset_chamber_alarms();
+    assert_eq!(said["cleared"], serde_json::json!(["door open"]), "{said}");
+    rt.block_on(async {
+        assert!(f4.read().await.unwrap().alarms.is_empty());
+    });
+    // a second press clears nothing more, and says so
+    assert_eq!(sim.reset_chamber_alarms()["cleared"], serde_json::json!([]));
+    let last = sim.finish();
+    assert_eq!(last["chamber"]["alarms"], serde_json::json!([]), "{last}");
 }
 
 #[test]
@@ -149,9 +131,9 @@ fn an_espec_over_tcp_is_refused_plainly() {
 
 #[test]
 fn an_espec_on_a_pseudo_terminal_answers_the_espec_driver() {
-    let sim = Sim::start(&["--chamber", "espec"]);
-    assert_eq!(sim.info["chamber_model"], "espec");
-    let path = sim.info["chamber"].as_str().unwrap().to_string();
+    let sim = sim(&["--chamber", "espec"]);
+    assert_eq!(sim.info()["chamber_model"], "espec");
+    let path = sim.chamber().to_string();
     let rt = tokio::runtime::Runtime::new().unwrap();
     rt.block_on(async {
         let config = gyrocal_chamber::EspecConfig {
@@ -168,6 +150,6 @@ fn an_espec_on_a_pseudo_terminal_answers_the_espec_driver() {
         let report = espec.go_safe(SafeState::Standby).await;
         assert!(report.confirmed, "{report:?}");
     });
-    let last = sim.interrupt();
+    let last = sim.finish();
     assert_eq!(last["chamber"]["setpoint_c"], 10.0, "{last}");
 }

@@ -172,15 +172,27 @@ fn kind_of(action: FaultAction, delay_s: Option<f64>) -> Option<ChamberFaultKind
 /// Arms a `chamber:` fault spec on the bench's chamber, exact at its request or time (see
 /// [`crate::faults::schedule`]); a bench without a chamber ignores it. Returns whether `spec`
 /// was the chamber's (the schedule handles the others).
-pub(crate) fn arm(spec: &FaultSpec, bench: &crate::bench::BenchHandle) -> bool {
+/// What [`arm`] did with a spec.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Arming {
+    /// Not a chamber fault: the caller schedules it.
+    NotChamber,
+    /// Armed on the chamber (at its request count or time), or ignored by a bench without one.
+    Armed,
+    /// A chamber fault at a crossed trigger (a meter reading, a table demand or stop): the
+    /// supervisor arms it with [`arm_now`] once that trigger is reached.
+    Crossed,
+}
+
+/// Arms a chamber spec on the bench's chamber.
+pub(crate) fn arm(spec: &FaultSpec, bench: &crate::bench::BenchHandle) -> Arming {
     let Some(kind) = kind_of(spec.action, spec.delay_s) else {
-        return false;
+        return Arming::NotChamber;
     };
     let trigger = match spec.trigger {
         Trigger::Request(n) => ChamberTrigger::Request(n),
         Trigger::Time(t) => ChamberTrigger::Time(t),
-        // refused when the spec is parsed
-        _ => return true,
+        _ => return Arming::Crossed,
     };
     if let Some(c) = &bench.chamber {
         c.arm(ChamberFault {
@@ -189,6 +201,20 @@ pub(crate) fn arm(spec: &FaultSpec, bench: &crate::bench::BenchHandle) -> bool {
             count: spec.count,
         });
     }
+    Arming::Armed
+}
+
+/// Arms a chamber spec whose crossed trigger was just reached, due at the chamber's next
+/// request (or a read of its alarms). False when the spec is not a chamber fault.
+pub(crate) fn arm_now(spec: &FaultSpec, chamber: &super::ChamberHandle) -> bool {
+    let Some(kind) = kind_of(spec.action, spec.delay_s) else {
+        return false;
+    };
+    chamber.arm(ChamberFault {
+        kind,
+        trigger: ChamberTrigger::Time(0.0),
+        count: spec.count,
+    });
     true
 }
 
@@ -215,9 +241,17 @@ mod tests {
         let s: FaultSpec = "chamber:slow@t=0s/0.5s".parse().unwrap();
         assert_eq!((s.delay_s, s.count), (Some(0.5), 0));
         assert_eq!(s.to_string(), "chamber:slow@t=0s/0.5s");
+        // the crossed triggers: the meter's readings, the table's demands and stops
+        for (text, trigger) in [
+            ("chamber:door@reading3", Trigger::Reading(3)),
+            ("chamber:silent@demand1", Trigger::Demand(1)),
+            ("chamber:silent@stop2", Trigger::Stop(2)),
+        ] {
+            let s: FaultSpec = text.parse().unwrap();
+            assert_eq!(s.trigger, trigger);
+            assert_eq!(s.to_string(), text);
+        }
         for bad in [
-            "chamber:door@reading3",
-            "chamber:silent@demand1",
             "table:trip@request3",
             "chamber:door@request3x2",
             "chamber:slow@request3",
@@ -267,5 +301,30 @@ mod tests {
         );
         let status = schedule.status(&bench.handle);
         assert!(status.iter().all(|s| s.fired), "{status:?}");
+    }
+
+    /// A chamber fault at a crossed trigger (here the table's second demand) is armed by the
+    /// supervisor once the trigger is reached: no alarm before it, the alarm latched after it.
+    #[tokio::test(start_paused = true)]
+    async fn a_chamber_fault_at_a_table_demand_fires_after_that_demand() {
+        use gyrocal_link::Transport;
+        let mut bench = crate::bench::Bench::spawn(crate::bench::BenchConfig {
+            chamber: Some(crate::chamber::ChamberSimConfig::default()),
+            ..crate::bench::BenchConfig::default()
+        });
+        let specs: Vec<FaultSpec> = vec!["chamber:door@demand2".parse().unwrap()];
+        let schedule = schedule(&specs, &bench.handle, 1.0);
+        let chamber = bench.handle.chamber.clone().unwrap();
+        let link = &mut bench.table;
+        for c in [":Interlock:Close 1", ":Mode:Rate 1", ":Demand:Rate 5"] {
+            link.send_line(c).await.unwrap();
+        }
+        tokio::time::sleep(Duration::from_secs(5)).await;
+        assert!(chamber.alarms().is_empty(), "fired before its demand");
+        assert!(!schedule.status(&bench.handle)[0].fired);
+        link.send_line(":Demand:Rate 0").await.unwrap();
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        assert_eq!(chamber.alarms(), [crate::chamber::ChamberAlarm::Door]);
+        assert!(schedule.status(&bench.handle)[0].fired);
     }
 }

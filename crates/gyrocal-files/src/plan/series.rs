@@ -246,6 +246,15 @@ impl Plan {
     pub fn chamber(&self) -> Option<&ChamberSettings> {
         self.kind_sections.chamber.as_ref()
     }
+
+    /// Overrides the chamber's port (`--chamber-port`), on a plan that has one; ports are not
+    /// part of the hash. Recorded in the run's manifest like the meter's and the table's, so a
+    /// bare `--resume DIR` reaches the same chamber.
+    pub fn set_chamber_port(&mut self, port: gyrocal_link::PortSpec) {
+        if let Some(c) = self.kind_sections.chamber.as_mut() {
+            c.port = port;
+        }
+    }
 }
 
 /// The rates of a series: its sweep's, so the sweep's rule (two distinct rates at least),

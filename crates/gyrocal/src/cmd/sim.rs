@@ -14,7 +14,10 @@
 //!    {"mode", "demanded_rate", "actual_rate", "stopped", "interlock_closed", "fault",
 //!    "silent", "demands_seen"}, "dmm": {"readings_taken", ...}, ["chamber": {"setpoint_c",
 //!    "air_c", "case_c", "inside_c", "alarms", "requests_seen"},] "faults": [{"spec",
-//!    "fired"}]}`.
+//!    "fired"}]}`;
+//! 3. meanwhile, on each SIGUSR1 (the operator pressing the alarm reset at the simulated
+//!    chamber's panel: its latched alarms cleared): `{"chamber_panel": "alarms reset",
+//!    "cleared": ["door open", ...]}`.
 //!
 //! Logs go to stderr. The slave side of each pseudo-terminal stays open in this process for as
 //! long as it runs, so a client may close its port and open the same path again (a resumed
@@ -96,6 +99,9 @@ then, on SIGINT or SIGTERM, one more line before exiting with 0:
    \"commands_seen\", \"lines_seen\", \"queries_answered\", \"device_clears\", \"errors_raised\",
    \"remote\", \"stopped\", \"power_cycles\", \"nplc\", \"late_replies\"}, \"faults\": [{\"spec\",
    \"fired\"}]}
+SIGUSR1 is the operator pressing the alarm reset at the simulated chamber's panel: its latched
+alarms are cleared (a run stopped by one can then be resumed), and a line says so:
+  {\"chamber_panel\": \"alarms reset\", \"cleared\": [\"door open\"]}
 Clients may close a port and open the same path again; the simulators keep their state.
 
 Fault specs (--fault, repeatable):
@@ -280,6 +286,8 @@ async fn serve(
         .context("installing the SIGINT handler")?;
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
         .context("installing the SIGTERM handler")?;
+    let mut sigusr1 = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::user_defined1())
+        .context("installing the SIGUSR1 handler")?;
 
     let (seed, time_scale, wire) = (config.seed, config.time_scale, config.table_wire);
     let prologix = matches!(config.dmm_link, gyrocal_sim::bench::DmmLink::Prologix(_));
@@ -331,10 +339,7 @@ async fn serve(
     tell_operator(&hello, &plan);
     tracing::info!(dmm = %dmm_port, table = %table_path, "simulated bench serving");
 
-    let signal = tokio::select! {
-        _ = sigint.recv() => "SIGINT",
-        _ = sigterm.recv() => "SIGTERM",
-    };
+    let signal = until_stopped(&bench, &mut sigint, &mut sigterm, &mut sigusr1).await?;
     tracing::info!("{signal}: stopping the simulated bench");
     schedule.stop();
     emit(&final_state(signal, &bench, &schedule))?;
@@ -568,6 +573,35 @@ fn final_state(signal: &str, bench: &BenchHandle, schedule: &FaultSchedule) -> V
     out
 }
 
+/// Serves until SIGINT or SIGTERM (which it returns); meanwhile each SIGUSR1 is the operator
+/// at the simulated chamber's panel pressing its alarm reset: the latched alarms are cleared
+/// and said in a JSON line `{"chamber_panel": "alarms reset", "cleared": [...]}` (a real
+/// chamber's alarm is cleared at its panel, which a run never does on its own: the Watlow
+/// driver has no confirmed reset register; without this, nothing could clear the simulator's
+/// latched alarm and a run stopped by one could never be resumed against it).
+async fn until_stopped(
+    bench: &BenchHandle,
+    sigint: &mut tokio::signal::unix::Signal,
+    sigterm: &mut tokio::signal::unix::Signal,
+    sigusr1: &mut tokio::signal::unix::Signal,
+) -> Result<&'static str> {
+    loop {
+        tokio::select! {
+            _ = sigint.recv() => return Ok("SIGINT"),
+            _ = sigterm.recv() => return Ok("SIGTERM"),
+            _ = sigusr1.recv() => {
+                let cleared: Vec<&str> = bench.chamber.as_ref().map_or_else(Vec::new, |c| {
+                    let latched = c.alarms();
+                    c.reset_alarms();
+                    latched.iter().map(|a| a.name()).collect()
+                });
+                tracing::info!(?cleared, "SIGUSR1: the chamber's alarms reset at its panel");
+                emit(&json!({ "chamber_panel": "alarms reset", "cleared": cleared }))?;
+            }
+        }
+    }
+}
+
 /// `gyrocal sim` with a Truevolt: the meter on tcp://127.0.0.1:P (every accepted connection
 /// handed to the instrument, the newest served), the table on a pseudo-terminal (and TCP when
 /// asked). Same JSON contract, with "dmm" the meter's tcp:// address.
@@ -598,6 +632,8 @@ async fn serve_lan(
         .context("installing the SIGINT handler")?;
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
         .context("installing the SIGTERM handler")?;
+    let mut sigusr1 = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::user_defined1())
+        .context("installing the SIGUSR1 handler")?;
     let (seed, time_scale, wire) = (config.seed, config.time_scale, config.table_wire);
     // the meter's first "connection" is a pipe nobody holds: clients come over TCP
     let (_unused, dmm_dev) = tokio::io::duplex(16);
@@ -638,10 +674,7 @@ async fn serve_lan(
     let chamber = serve_chamber(&bench, chamber_tcp, &mut hello).await?;
     emit(&hello)?;
     tell_operator(&hello, &plan);
-    let signal = tokio::select! {
-        _ = sigint.recv() => "SIGINT",
-        _ = sigterm.recv() => "SIGTERM",
-    };
+    let signal = until_stopped(&bench, &mut sigint, &mut sigterm, &mut sigusr1).await?;
     schedule.stop();
     emit(&final_state(signal, &bench, &schedule))?;
     dmm_acceptor.abort();

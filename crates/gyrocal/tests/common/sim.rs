@@ -1,12 +1,13 @@
 //! A running `gyrocal sim` for the tests that drive the binary against it over its
 //! pseudo-terminals: started with the caller's arguments, its first JSON line (the device
-//! paths) read, SIGINT for its final-state line, killed when dropped.
+//! paths) read, SIGUSR1 for its chamber's panel reset, SIGINT for its final-state line (and
+//! its exit status checked), killed when dropped.
 
 use std::ffi::OsStr;
 use std::io::{BufRead, BufReader};
-use std::process::{Child, Stdio};
+use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
@@ -60,16 +61,41 @@ impl Sim {
         self.info["table"].as_str().unwrap()
     }
 
-    /// SIGINT; the simulator's final-state line.
-    pub fn finish(mut self) -> Value {
+    /// The chamber's pseudo-terminal or `tcp://` address (`--chamber`, `--chamber-tcp`).
+    pub fn chamber(&self) -> &str {
+        self.info["chamber"]
+            .as_str()
+            .unwrap_or_else(|| panic!("no chamber in {}", self.info))
+    }
+
+    fn signal(&self, signal: nix::sys::signal::Signal) {
         let pid = nix::unistd::Pid::from_raw(i32::try_from(self.child.id()).unwrap());
-        nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGINT).unwrap();
+        nix::sys::signal::kill(pid, signal).unwrap();
+    }
+
+    /// SIGUSR1: the operator presses the alarm reset at the simulated chamber's panel; the
+    /// simulator's line that says so (`{"chamber_panel": "alarms reset", "cleared": [...]}`).
+    pub fn reset_chamber_alarms(&self) -> Value {
+        self.signal(nix::sys::signal::Signal::SIGUSR1);
+        let line = self
+            .lines
+            .recv_timeout(Duration::from_secs(10))
+            .expect("the simulator's line for the panel's alarm reset");
+        let v: Value = serde_json::from_str(&line).unwrap_or_else(|e| panic!("{e}: {line}"));
+        assert_eq!(v["chamber_panel"], "alarms reset", "{v}");
+        v
+    }
+
+    /// SIGINT; the simulator's final-state line, once it has exited with success.
+    pub fn finish(mut self) -> Value {
+        self.signal(nix::sys::signal::Signal::SIGINT);
         let last = self
             .lines
-            .recv_timeout(Duration::from_secs(5))
+            .recv_timeout(Duration::from_secs(10))
             .expect("the simulator's final-state line");
-        let _ = self.child.wait();
-        serde_json::from_str(&last).unwrap()
+        let status = self.child.wait().unwrap();
+        assert!(status.success(), "gyrocal sim exited with {status:?}");
+        serde_json::from_str(&last).unwrap_or_else(|e| panic!("{e}: {last}"))
     }
 }
 
@@ -77,5 +103,58 @@ impl Drop for Sim {
     fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
+    }
+}
+
+/// What a command run to its end with [`output_within`] gave.
+#[derive(Debug)]
+pub struct Ended {
+    /// Its exit code (`None`: killed by a signal).
+    pub code: Option<i32>,
+    /// Its standard output.
+    pub stdout: String,
+    /// Its standard error.
+    pub stderr: String,
+}
+
+/// Runs `cmd` to its end (stdin closed, both outputs captured), killing it and failing the
+/// test with what it printed if it has not ended within `limit` (a generous bound: a run
+/// against a paced simulator that hangs must fail the test with its own words, not hang it).
+pub fn output_within(cmd: &mut Command, limit: Duration) -> Ended {
+    use std::io::Read;
+    let mut child = cmd
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let drain = |mut r: Box<dyn Read + Send>| {
+        std::thread::spawn(move || {
+            let mut buf = Vec::new();
+            let _ = r.read_to_end(&mut buf);
+            String::from_utf8_lossy(&buf).into_owned()
+        })
+    };
+    let out = drain(Box::new(child.stdout.take().unwrap()));
+    let err = drain(Box::new(child.stderr.take().unwrap()));
+    let t0 = Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if t0.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!(
+                "{cmd:?} did not end within {limit:?}; it printed:\n{}",
+                err.join().unwrap_or_default()
+            );
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    Ended {
+        code: status.code(),
+        stdout: out.join().unwrap_or_default(),
+        stderr: err.join().unwrap_or_default(),
     }
 }

@@ -213,6 +213,36 @@ mod tests {
         assert_eq!(eta.remaining(), None);
     }
 
+    /// A soak between two steps lasts as long as the gyro takes, not as long as the schedule's
+    /// links: its run clock stays out of the pace, and the time left after it is the rest of
+    /// the schedule (the soak still ahead counted at its own estimate) at the pace the steps
+    /// kept. Counted in, the 2 h soak below after a step of 3 s would make the pace 120 and the
+    /// time left 120 times the schedule (the bug was "1074:41:16 left" at step 6 of 20).
+    #[tokio::test(start_paused = true)]
+    async fn a_soak_is_not_counted_in_the_pace_of_the_time_left() {
+        let mut eta = Eta::default();
+        let step = Duration::from_secs(60);
+        let soak = Duration::from_secs(3600);
+        // step 1, a soak, step 2, a soak, step 3: each step estimated at 60 s, each soak at 1 h
+        eta.start(step * 3 + soak * 2, step * 2 + soak * 2);
+        // a simulator 20 times faster than the schedule: step 1 takes 3 s
+        tokio::time::advance(Duration::from_secs(3)).await;
+        // the soak: its polls, 2 h of run clock in all
+        for _ in 0..12 {
+            eta.interlude();
+            tokio::time::advance(Duration::from_secs(600)).await;
+        }
+        eta.start(step * 2 + soak, step + soak);
+        assert!((eta.pace() - 0.05).abs() < 1e-12, "{}", eta.pace());
+        // (60 s of step 2 + 60 s of step 3 + 1 h of soak) × 0.05
+        let left = eta.remaining().unwrap().as_secs_f64();
+        assert!((left - 186.0).abs() < 1e-6, "{left}");
+        // step 2 takes its 3 s: the pace stays, the time left counts down to the rest
+        tokio::time::advance(Duration::from_secs(3)).await;
+        eta.interlude();
+        assert!((eta.pace() - 0.05).abs() < 1e-12, "{}", eta.pace());
+    }
+
     #[test]
     fn a_ratio_below_one_is_not_shown() {
         let t = Timing {

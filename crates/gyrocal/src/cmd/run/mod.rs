@@ -223,6 +223,14 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
         args.dmm_port.as_deref(),
         args.table_port.as_deref(),
     )?;
+    // the chamber's too, into the plan the manifest records: a run killed before its ending
+    // (which repeats --chamber-port) is resumed by `--resume DIR` at the same chamber
+    if let Some(p) = &args.chamber_port {
+        let spec = p
+            .parse::<gyrocal_link::PortSpec>()
+            .map_err(|e| BadInput(format!("--chamber-port {p}: {e}")))?;
+        plan.set_chamber_port(spec);
+    }
     if let Some(x) = args.sim_time_scale
         && !(x.is_finite() && x > 0.0)
     {
