@@ -157,13 +157,15 @@ def paper_run(gyrocal, out, extra, clients_on_serve=0):
                           "--json", "--out", out] + extra, env=env(),
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     stop = threading.Event()
-    if clients_on_serve:
+    if "--serve" in extra:
         # the in-process view's URL comes on stderr before the first step
         line = p.stderr.readline()
         while line and not line.startswith("live view: "):
             line = p.stderr.readline()
         port = int(re.search(r"http://[^:]+:(\d+)/", line).group(1))
-        threading.Thread(target=hold, args=(port, clients_on_serve, stop), daemon=True).start()
+        if clients_on_serve:
+            threading.Thread(target=hold, args=(port, clients_on_serve, stop),
+                             daemon=True).start()
     stdout, _ = p.communicate()
     wall = time.monotonic() - t0
     stop.set()
@@ -193,12 +195,14 @@ def cost(gyrocal, reps):
             results[label] = (walls, ratios)
         serve.kill()
         serve.wait()
-        walls, ratios = [], []
-        for i in range(reps):
-            w, r, _ = paper_run(gyrocal, os.path.join(root, f"inproc-{i}"), ["--serve"], 50)
-            walls.append(w)
-            ratios.append(r)
-        results["--serve in-process, 50 clients"] = (walls, ratios)
+        for clients in (0, 50):
+            walls, ratios = [], []
+            for i in range(reps):
+                w, r, _ = paper_run(gyrocal, os.path.join(root, f"inproc-{clients}-{i}"),
+                                    ["--serve"], clients)
+                walls.append(w)
+                ratios.append(r)
+            results[f"--serve in-process, {clients} clients"] = (walls, ratios)
         for label, (walls, ratios) in results.items():
             sd = statistics.stdev(walls) if len(walls) > 1 else 0.0
             print(f"{label}: wall {statistics.mean(walls):.3f} s ± {sd:.3f} (min "
