@@ -36,11 +36,14 @@
 #![doc = include_str!("../SCHEMA.md")]
 
 #[cfg(feature = "db")]
+mod bus;
+#[cfg(feature = "db")]
 mod db;
 mod error;
 #[cfg(feature = "db")]
 mod health;
 mod history;
+mod live;
 #[cfg(feature = "db")]
 mod pg_probe;
 mod record;
@@ -52,6 +55,10 @@ mod url;
 mod writer;
 
 #[cfg(feature = "db")]
+pub use bus::{LiveBus, LiveBusOptions, LiveBusStats};
+#[cfg(feature = "db")]
+pub use db::live::{LiveListener, LiveNews, MAX_LIVE_ROWS};
+#[cfg(feature = "db")]
 pub use db::{Catalog, OpenOptions, RunFilter};
 pub use error::{CatalogError, ErrorKind};
 #[cfg(feature = "db")]
@@ -60,6 +67,7 @@ pub use history::{
     Band, History, Limits, MIN_BAND_POINTS, PlanGroup, PlanKey, QUANTITIES, Quantity,
     Repeatability, Trend, TrendPoint, describe_plan, plan_key,
 };
+pub use live::{LIVE_CHANNEL, LiveRow, MAX_STATE_JSON};
 pub use record::{
     CheckRow, InstrumentRow, KIND_SCALE_FACTOR, Results, RunRecord, RunRow, StepRow, find_run_dirs,
     host_name, is_run_dir, read_run,

@@ -369,7 +369,10 @@ async fn a_version_1_sqlite_catalog_is_migrated_and_keeps_its_calibrations() {
         pool.close().await;
         n
     };
-    assert_eq!(applied, 3, "migrated to version 3 (the series tables)");
+    assert_eq!(
+        applied, 4,
+        "migrated to version 4 (the series tables, then the live runs)"
+    );
 }
 
 /// A catalog created by a release that kept one migrations folder per backend (up to 0.1: its
@@ -434,7 +437,7 @@ async fn a_catalog_made_with_the_per_backend_migrations_opens() {
     );
     assert_eq!(
         after.iter().map(|(v, _)| *v).collect::<Vec<_>>(),
-        vec![1, 2, 3],
-        "only the later version (3, the series tables) is added"
+        vec![1, 2, 3, 4],
+        "only the later versions (3, the series tables; 4, the live runs) are added"
     );
 }

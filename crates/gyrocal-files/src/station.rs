@@ -46,7 +46,9 @@
 //! only); a `[chamber]` has the six common keys only (the temperatures a series uses are the
 //! gyro's own sensor's, read through the controller: no accuracy is taken from the chamber's
 //! record). `catalog` is reserved for the address of a lab's instrument catalog (a later
-//! version may read the records from it); it is kept and shown, never fetched. Unknown keys are
+//! version may read the records from it); it is kept and shown, never fetched. `serve` is the
+//! address of the lab's live view (`serve = "http://lab-view:8737"`, a `gyrocal serve` on the
+//! shared catalog): `gyrocal run` prints the run's page there and starts nothing. Unknown keys are
 //! refused, naming the file, the line and the key.
 //!
 //! Where it is found ([`Station::resolve`]): the `--station` flag, else the
@@ -204,6 +206,10 @@ pub struct Station {
     /// Reserved: the address of the lab's instrument catalog (kept and shown, never fetched).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub catalog: Option<String>,
+    /// The lab's live view (`http://` or `https://`, a `gyrocal serve`): `gyrocal run` prints
+    /// the run's page on it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub serve: Option<String>,
     /// `[multimeter]`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub multimeter: Option<InstrumentRecord>,
@@ -375,13 +381,14 @@ impl StationError {
 // ---------------------------------------------------------------------------------------------
 
 /// The top-level keys, in file order.
-const TOP_KEYS: [&str; 9] = [
+const TOP_KEYS: [&str; 10] = [
     "id",
     "lab",
     "address",
     "ambient_c",
     "humidity_pct",
     "catalog",
+    "serve",
     "multimeter",
     "table",
     "chamber",
@@ -851,6 +858,27 @@ impl Station {
         let ambient_c = w.number(None, "ambient_c", g("ambient_c"), -50.0, 100.0);
         let humidity_pct = w.number(None, "humidity_pct", g("humidity_pct"), 0.0, 100.0);
         let catalog = g("catalog").and_then(|v| w.text(None, "catalog", Some(v), None));
+        let serve = g("serve").and_then(|v| {
+            let text = w.text(None, "serve", Some(v), None)?;
+            let t = text.trim().trim_end_matches('/');
+            let rest = t
+                .strip_prefix("http://")
+                .or_else(|| t.strip_prefix("https://"));
+            if rest.is_some_and(|r| !r.is_empty() && !r.contains(char::is_whitespace)) {
+                Some(t.to_string())
+            } else {
+                w.problem(
+                    Some(v.span().start),
+                    None,
+                    "serve",
+                    format!(
+                        "= {text:?} is not the address of a web view: write \"http://HOST:PORT\" \
+                         (a gyrocal serve)"
+                    ),
+                );
+                None
+            }
+        });
         let entry = |k: &str| root.iter().find(|(n, _)| n.get_ref().as_ref() == k);
         let multimeter = entry("multimeter").and_then(|e| w.instrument("multimeter", e));
         let table = entry("table").and_then(|e| w.instrument("table", e));
@@ -876,6 +904,7 @@ impl Station {
                 ambient_c,
                 humidity_pct,
                 catalog,
+                serve,
                 multimeter,
                 table,
                 chamber,

@@ -390,3 +390,17 @@ fn the_simulated_bench_is_complete_and_valid() {
     let late = Station::simulated(7, date(9999, 12, 31));
     assert!(late.overdue(date(9999, 12, 31)).is_empty());
 }
+
+/// `serve` names the lab's live view: kept (without a trailing slash) for `gyrocal run` to
+/// print the run's page on it; anything but an http(s) address is refused naming the line
+/// and the key.
+#[test]
+fn serve_is_the_address_of_the_live_view() {
+    let s = parse("id = \"b\"\nlab = \"L\"\naddress = \"A\"\nserve = \"http://lab-view:8737/\"\n");
+    assert_eq!(s.serve.as_deref(), Some("http://lab-view:8737"));
+    assert_eq!(parse(GOOD).serve, None);
+    let e = err("id = \"b\"\nlab = \"L\"\naddress = \"A\"\nserve = \"lab-view:8737\"\n");
+    assert!(e.contains("station.toml:4") && e.contains("serve"), "{e}");
+    let e = err("id = \"b\"\nlab = \"L\"\naddress = \"A\"\nserve = 8737\n");
+    assert!(e.contains("serve"), "{e}");
+}

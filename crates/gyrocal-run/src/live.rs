@@ -15,6 +15,13 @@
 //!
 //! A failure to write it is a note in the log (once), never a run failure: every [`Sink`]
 //! method returns `Ok`.
+//!
+//! Two more readers may follow the state: a [`Publisher`] ([`LiveFile::with_publisher`]) is
+//! handed each state written (the CLI's is the catalog's message bus, which must not block:
+//! it only swaps the state into a one-slot mailbox), and the [`LiveHandle`] lets the end of
+//! the run add what only the analysis after it knows (the verdict, [`LiveHandle::conclude`]).
+//! A temperature series' soak shows as phase `soaking` with the gyro's temperature and the
+//! chamber's setpoint (`chamber`, a member added in format 1: older readers ignore it).
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -57,6 +64,17 @@ pub struct StepSummary {
     pub t_end_s: f64,
 }
 
+/// A temperature series' chamber in the live state (the last reading of a soak).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LiveChamber {
+    /// The gyro's temperature (the chamber's product sensor, else its air), °C.
+    pub temperature_c: Option<f64>,
+    /// The chamber's setpoint now (moving towards the target during the soak's ramp), °C.
+    pub setpoint_c: Option<f64>,
+    /// The soak's target, °C.
+    pub target_c: Option<f64>,
+}
+
 /// What `live.json` holds (every member is what a viewer shows; see the module docs).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LiveState {
@@ -95,9 +113,12 @@ pub struct LiveState {
     pub status: String,
     /// Why the run failed or was aborted.
     pub reason: Option<String>,
-    /// The acceptance verdict when known (the analysis after the run sets it in the
-    /// manifest; a viewer reads it there once the run is done).
+    /// The acceptance verdict (`pass`, `marginal`, `indeterminate`, `fail`) once the analysis
+    /// after the run knows it: the last state written carries it ([`LiveHandle::conclude`]).
     pub verdict: Option<String>,
+    /// A temperature series' chamber: the last reading of its soak (absent otherwise).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub chamber: Option<LiveChamber>,
     /// The process writing this file.
     pub pid: u32,
     /// The host it runs on.
@@ -166,9 +187,13 @@ impl Shared {
     }
 }
 
+/// Who else is handed each live state written (see the module docs): it must return at once.
+pub type Publisher = Arc<dyn Fn(&LiveState) + Send + Sync>;
+
 /// The sink that keeps `live.json` (see the module docs).
 pub struct LiveFile {
     path: PathBuf,
+    publisher: Arc<Mutex<Option<Publisher>>>,
     shared: Arc<Mutex<Shared>>,
     wake: Option<SyncSender<()>>,
     /// Tells the writer thread to end (with a wake, so it sees it).
@@ -225,6 +250,7 @@ impl LiveFile {
             status: "running".into(),
             reason: None,
             verdict: None,
+            chamber: None,
             pid: std::process::id(),
             hostname: gyrocal_files::rundir::host_name(),
             updated_utc: String::new(),
@@ -234,6 +260,7 @@ impl LiveFile {
             eta: None,
             last_sent: None,
         }));
+        let publisher: Arc<Mutex<Option<Publisher>>> = Arc::new(Mutex::new(None));
         let (tx, rx) = mpsc::sync_channel::<()>(1);
         // the writer ends on this flag, not on the channel closing: the live closure handed
         // to the engine's monitors holds a sender too, and while it lives the channel stays
@@ -243,12 +270,14 @@ impl LiveFile {
             let shared = shared.clone();
             let path = path.clone();
             let stop = stop.clone();
+            let publisher = publisher.clone();
             std::thread::Builder::new()
                 .name("live.json".into())
                 .spawn(move || {
                     let mut noted = false;
                     while rx.recv().is_ok() && !stop.load(Ordering::Acquire) {
                         let snap = lock(&shared).snapshot();
+                        publish(&publisher, &snap);
                         if let Err(e) = write_live(&path, &snap)
                             && !std::mem::replace(&mut noted, true)
                         {
@@ -265,12 +294,33 @@ impl LiveFile {
         let live = LiveFile {
             stop,
             path,
+            publisher,
             shared,
             wake: writer.as_ref().map(|_| tx),
             writer,
         };
         live.poke(true);
         live
+    }
+
+    /// Hands every state written from now on to `publisher` too (it must return at once).
+    pub fn with_publisher(self, publisher: Publisher) -> LiveFile {
+        *self
+            .publisher
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner) = Some(publisher);
+        // the state so far, at once
+        self.poke(true);
+        self
+    }
+
+    /// A handle for the end of the run (see [`LiveHandle::conclude`]).
+    pub fn handle(&self) -> LiveHandle {
+        LiveHandle {
+            path: self.path.clone(),
+            shared: self.shared.clone(),
+            publisher: self.publisher.clone(),
+        }
     }
 
     /// Asks the writer for a write when one is due (`force`: a step's end), never waiting.
@@ -281,6 +331,51 @@ impl LiveFile {
     fn update(&self, force: bool, f: impl FnOnce(&mut Shared)) {
         f(&mut lock(&self.shared));
         self.poke(force);
+    }
+}
+
+fn publish(publisher: &Mutex<Option<Publisher>>, state: &LiveState) {
+    let p = publisher
+        .lock()
+        .unwrap_or_else(PoisonError::into_inner)
+        .clone();
+    if let Some(p) = p {
+        p(state);
+    }
+}
+
+/// What the end of a run adds to its live state after the sinks are done: the verdict the
+/// analysis found. Cheap to clone; each call writes the file at once (the run is over).
+#[derive(Clone)]
+pub struct LiveHandle {
+    path: PathBuf,
+    shared: Arc<Mutex<Shared>>,
+    publisher: Arc<Mutex<Option<Publisher>>>,
+}
+
+impl LiveHandle {
+    /// Sets the verdict (when known) and writes the state a last time, and publishes it. A
+    /// failure to write is a note in the log.
+    pub fn conclude(&self, verdict: Option<&str>) {
+        let snap = {
+            let mut s = lock(&self.shared);
+            if let Some(v) = verdict {
+                s.state.verdict = Some(v.to_string());
+            }
+            s.snapshot()
+        };
+        publish(&self.publisher, &snap);
+        if let Err(e) = write_live(&self.path, &snap) {
+            tracing::warn!(
+                "{}: cannot write the live state's verdict ({e}); the manifest has it",
+                self.path.display()
+            );
+        }
+    }
+
+    /// The state as it is now.
+    pub fn state(&self) -> LiveState {
+        lock(&self.shared).snapshot()
     }
 }
 
@@ -349,6 +444,20 @@ fn apply(s: &mut Shared, event: &Event) {
                 other => format!("{other:?}"),
             });
         }
+        Event::Soak {
+            target_c,
+            setpoint_c,
+            air_c,
+            gyro_c,
+            ..
+        } => {
+            st.phase = "soaking".into();
+            st.chamber = Some(LiveChamber {
+                temperature_c: Some(gyro_c.unwrap_or(*air_c)).filter(|t| t.is_finite()),
+                setpoint_c: setpoint_c.is_finite().then_some(*setpoint_c),
+                target_c: target_c.is_finite().then_some(*target_c),
+            });
+        }
         _ => {}
     }
 }
@@ -403,6 +512,7 @@ impl Sink for LiveFile {
             s.state.eta_s = Some(0.0);
             s.snapshot()
         };
+        publish(&self.publisher, &snap);
         if let Err(e) = write_live(&self.path, &snap) {
             tracing::warn!(
                 "{}: cannot write the live state ({e}); the run's own files are not affected",
@@ -602,5 +712,85 @@ mod tests {
             .is_ok()
         );
         assert!(!gone.exists());
+    }
+
+    /// A series' soak shows as `soaking` with the gyro's temperature and the setpoint; the
+    /// analysis's verdict reaches the last state written and the publisher (the catalog's
+    /// bus), after the sinks were told the run finished.
+    #[test]
+    fn a_soak_shows_its_temperatures_and_the_last_write_carries_the_verdict() {
+        let tmp = tempfile::tempdir().unwrap();
+        let seen: Arc<Mutex<Vec<LiveState>>> = Arc::new(Mutex::new(Vec::new()));
+        let publisher: Publisher = {
+            let seen = seen.clone();
+            Arc::new(move |s: &LiveState| seen.lock().unwrap().push(s.clone()))
+        };
+        let mut live = LiveFile::new(tmp.path(), header()).with_publisher(publisher);
+        let handle = live.handle();
+        live.event(&Event::Soak {
+            point: 1,
+            target_c: 60.0,
+            setpoint_c: 42.5,
+            air_c: 41.0,
+            gyro_c: Some(38.25),
+            held: None,
+            soak: Duration::from_secs(600),
+            waited: Duration::from_secs(30),
+        })
+        .unwrap();
+        let now = handle.state();
+        assert_eq!(now.phase, "soaking");
+        let c = now.chamber.unwrap();
+        assert_eq!(c.temperature_c, Some(38.25));
+        assert_eq!(c.setpoint_c, Some(42.5));
+        assert_eq!(c.target_c, Some(60.0));
+        // without a product sensor the air is what the gyro sees
+        live.event(&Event::Soak {
+            point: 1,
+            target_c: 60.0,
+            setpoint_c: 60.0,
+            air_c: 59.5,
+            gyro_c: None,
+            held: None,
+            soak: Duration::from_secs(600),
+            waited: Duration::from_secs(40),
+        })
+        .unwrap();
+        assert_eq!(handle.state().chamber.unwrap().temperature_c, Some(59.5));
+        live.finish(&Finish {
+            status: Status::Complete,
+            reason: None,
+            elapsed_s: 2.0,
+            timing: None,
+        })
+        .unwrap();
+        assert_eq!(read_live(tmp.path()).unwrap().verdict, None);
+        handle.conclude(Some("marginal"));
+        let last = read_live(tmp.path()).unwrap();
+        assert_eq!(
+            (last.status.as_str(), last.verdict.as_deref()),
+            ("complete", Some("marginal"))
+        );
+        assert_eq!(last.chamber.unwrap().setpoint_c, Some(60.0));
+        let published = seen.lock().unwrap();
+        assert_eq!(
+            published.last().and_then(|s| s.verdict.as_deref()),
+            Some("marginal"),
+            "the publisher was not handed the concluded state"
+        );
+        assert!(published.iter().any(|s| s.status == "complete"));
+    }
+
+    /// A live.json of the first format without the soak's members still reads.
+    #[test]
+    fn a_state_without_the_soak_members_reads() {
+        let tmp = tempfile::tempdir().unwrap();
+        let live = LiveFile::new(tmp.path(), header());
+        let mut v = serde_json::to_value(live.handle().state()).unwrap();
+        let o = v.as_object_mut().unwrap();
+        o.remove("chamber");
+        let back: LiveState = serde_json::from_value(v).unwrap();
+        assert_eq!(back.chamber, None);
+        assert_eq!(back.run_id, "r1");
     }
 }

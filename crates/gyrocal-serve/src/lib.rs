@@ -9,7 +9,15 @@
 //! - `/gyro/SERIAL`: a gyro's history (the catalog's history page);
 //! - `/api/runs`, `/api/run/ROOT/NAME`, `/api/gyro/SERIAL`: the same as JSON;
 //! - `/api/events`: server-sent events, one `run` event per run whose `live.json` or
-//!   `manifest.json` changed (the roots are polled: [`POLL_INTERVAL`], bounded work).
+//!   `manifest.json` changed (the roots are polled: [`POLL_INTERVAL`], bounded work), and one
+//!   per notification of the catalog;
+//! - `/live/HOST/RUN_ID` (and `/part/live/...`, `/api/live/...`): a run known through the
+//!   catalog's `live_runs` (another bench's), or the run directory of that name under a root.
+//!
+//! With a PostgreSQL catalog the server also `LISTEN`s on `gyrocal_live` ([`bus`]): the runs
+//! every bench publishes there (see `gyrocal_catalog::LiveBus`) are shown beside the roots'
+//! runs (a run in both once, from its directory), each notification re-reads that run's row
+//! and is pushed to the event streams, and after a lost connection every row is read again.
 //!
 //! Why polling and files: a run publishes its live state into its own directory
 //! ([`gyrocal_run::live`]) and never waits on a viewer; the server only reads. A stopped or
@@ -19,17 +27,25 @@
 //! token, checked on every request as `Authorization: Bearer TOKEN` or the cookie that
 //! `/login?token=TOKEN` sets; GET only; no file outside the roots (a name is one path
 //! component, never hidden, never `..`, after percent-decoding; symlinks are never followed);
-//! every text escaped ([`pages::esc`]); the catalog's URL shown only redacted; bounded
-//! connections, event streams, URI length and request bodies.
+//! every text escaped ([`pages::esc`]); the catalog's URL shown only redacted.
+//!
+//! Limits ([`limits`]): at most [`MAX_CONNECTIONS`] connections at once (more wait in the
+//! kernel's backlog, answered as slots free), at most [`MAX_EVENT_STREAMS`] event streams
+//! (more are answered 503, so streams can never take every connection), a request's head
+//! read within [`HEADER_TIMEOUT`] and a connection with no traffic either way for
+//! [`IDLE_TIMEOUT`] closed (a slow or silent client cannot hold a slot; an event stream's
+//! keep-alive is traffic), URI, headers and body bounded.
 
+pub mod bus;
+pub mod limits;
 pub mod pages;
 pub mod runs;
 
+pub use limits::{HEADER_TIMEOUT, IDLE_TIMEOUT, MAX_CONNECTIONS, MAX_HEADER_BYTES};
+
 use std::net::SocketAddr;
 use std::path::PathBuf;
-use std::pin::Pin;
 use std::sync::Arc;
-use std::task::{Context, Poll};
 use std::time::{Duration, SystemTime};
 
 use axum::Router;
@@ -39,18 +55,16 @@ use axum::middleware::{self, Next};
 use axum::response::sse::{Event as SseEvent, KeepAlive, Sse};
 use axum::response::{Html, IntoResponse, Redirect, Response};
 use axum::routing::get;
-use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
-use tokio::net::{TcpListener, TcpStream};
-use tokio::sync::{OwnedSemaphorePermit, Semaphore, broadcast};
+use tokio::net::TcpListener;
+use tokio::sync::{Semaphore, broadcast};
 
 use runs::{RunKey, run_dir};
 
 /// How often the roots' `live.json` and `manifest.json` are looked at for changes.
 pub const POLL_INTERVAL: Duration = Duration::from_millis(250);
-/// The most open connections; more wait in the kernel's backlog.
-pub const MAX_CONNECTIONS: usize = 512;
-/// The most event streams at once; more are answered 503.
-pub const MAX_EVENT_STREAMS: usize = 256;
+/// The most event streams at once; more are answered 503 (fewer than
+/// [`MAX_CONNECTIONS`]: pages and answers always find a connection).
+pub const MAX_EVENT_STREAMS: usize = 192;
 /// The longest request URI accepted.
 pub const MAX_URI: usize = 4096;
 /// The largest request body accepted (the server takes none: GET only).
@@ -132,6 +146,8 @@ pub struct ServeConfig {
 
 struct AppState {
     cfg: ServeConfig,
+    /// The runs known through the catalog's `live_runs` (kept by [`App::listen`]).
+    live: bus::LiveRuns,
     /// The catalog's URL as shown: redacted.
     catalog_shown: Option<String>,
     events: broadcast::Sender<String>,
@@ -153,6 +169,7 @@ impl App {
             state: Arc::new(AppState {
                 catalog_shown: cfg.catalog_url.as_ref().map(|u| u.redacted()),
                 cfg,
+                live: bus::LiveRuns::default(),
                 events,
                 streams: Arc::new(Semaphore::new(MAX_EVENT_STREAMS)),
             }),
@@ -197,16 +214,32 @@ impl App {
         }
     }
 
-    /// Serves on `listener` (and polls the roots) until the process ends.
-    pub async fn serve(self, listener: TcpListener) -> Result<(), ServeError> {
-        let app = self.router();
-        let limited = Limited {
-            inner: listener,
-            slots: Arc::new(Semaphore::new(MAX_CONNECTIONS)),
+    /// Listens to the catalog's notifications forever (a PostgreSQL catalog; returns at once
+    /// otherwise), keeping the runs known through it and sending one event per change (see
+    /// [`bus`]).
+    pub async fn listen(&self) {
+        let Some(catalog) = self.state.cfg.catalog.clone() else {
+            return;
         };
+        if !catalog.carries_live() {
+            return;
+        }
+        bus::listen(&catalog, &self.state.live, &self.state.events).await;
+    }
+
+    /// Serves on `listener` (and polls the roots, and listens to the catalog) until the
+    /// process ends.
+    pub async fn serve(self, listener: TcpListener) -> Result<(), ServeError> {
+        self.serve_limited(limits::Limited::new(listener)).await
+    }
+
+    /// [`App::serve`] on a listener with explicit limits.
+    pub async fn serve_limited(self, limited: limits::Limited) -> Result<(), ServeError> {
+        let app = self.router();
         tokio::select! {
             r = axum::serve(limited, app) => Ok(r?),
             () = self.poll() => Ok(()),
+            () = async { self.listen().await; std::future::pending::<()>().await } => Ok(()),
         }
     }
 }
@@ -222,74 +255,10 @@ fn stamps(roots: &[PathBuf]) -> Vec<(RunKey, (Option<SystemTime>, Option<SystemT
                 mtime(dir.join(gyrocal_run::live::LIVE_JSON)),
                 mtime(dir.join("manifest.json")),
             );
-            out.push((RunKey { root: i, name }, stamp));
+            out.push((RunKey::local(i, name), stamp));
         }
     }
     out
-}
-
-/// A listener that holds at most [`MAX_CONNECTIONS`] connections open.
-struct Limited {
-    inner: TcpListener,
-    slots: Arc<Semaphore>,
-}
-
-/// A connection holding its slot until it closes.
-struct LimitedIo {
-    io: TcpStream,
-    _slot: OwnedSemaphorePermit,
-}
-
-impl AsyncRead for LimitedIo {
-    fn poll_read(
-        mut self: Pin<&mut Self>,
-        cx: &mut Context<'_>,
-        buf: &mut ReadBuf<'_>,
-    ) -> Poll<std::io::Result<()>> {
-        Pin::new(&mut self.io).poll_read(cx, buf)
-    }
-}
-
-impl AsyncWrite for LimitedIo {
-    fn poll_write(
-        mut self: Pin<&mut Self>,
-        cx: &mut Context<'_>,
-        buf: &[u8],
-    ) -> Poll<std::io::Result<usize>> {
-        Pin::new(&mut self.io).poll_write(cx, buf)
-    }
-    fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
-        Pin::new(&mut self.io).poll_flush(cx)
-    }
-    fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<std::io::Result<()>> {
-        Pin::new(&mut self.io).poll_shutdown(cx)
-    }
-}
-
-impl axum::serve::Listener for Limited {
-    type Io = LimitedIo;
-    type Addr = SocketAddr;
-
-    async fn accept(&mut self) -> (LimitedIo, SocketAddr) {
-        loop {
-            let Ok(slot) = self.slots.clone().acquire_owned().await else {
-                // the semaphore is never closed; wait rather than spin
-                tokio::time::sleep(Duration::from_millis(100)).await;
-                continue;
-            };
-            match self.inner.accept().await {
-                Ok((io, addr)) => return (LimitedIo { io, _slot: slot }, addr),
-                Err(e) => {
-                    tracing::warn!("accept: {e}");
-                    tokio::time::sleep(Duration::from_millis(50)).await;
-                }
-            }
-        }
-    }
-
-    fn local_addr(&self) -> std::io::Result<SocketAddr> {
-        self.inner.local_addr()
-    }
 }
 
 fn router(state: Shared) -> Router {
@@ -302,6 +271,9 @@ fn router(state: Shared) -> Router {
         .route("/part/run/{root}/{name}", get(run_part))
         .route("/run/{root}/{name}/report.html", get(run_report))
         .route("/run/{root}/{name}/files/{file}", get(run_file))
+        .route("/live/{host}/{name}", get(live_page))
+        .route("/part/live/{host}/{name}", get(live_part))
+        .route("/api/live/{host}/{name}", get(api_live))
         .route("/gyro/{serial}", get(gyro_page))
         .route("/api/runs", get(api_runs))
         .route("/api/run/{root}/{name}", get(api_run))
@@ -345,6 +317,18 @@ fn token_of(headers: &HeaderMap) -> Option<String> {
 async fn guard(State(st): State<Shared>, req: Request, next: Next) -> Response {
     if req.uri().to_string().len() > MAX_URI {
         return (StatusCode::URI_TOO_LONG, "URI too long").into_response();
+    }
+    let header_bytes: usize = req
+        .headers()
+        .iter()
+        .map(|(k, v)| k.as_str().len() + v.len() + 4)
+        .sum();
+    if header_bytes > MAX_HEADER_BYTES {
+        return (
+            StatusCode::REQUEST_HEADER_FIELDS_TOO_LARGE,
+            "request headers too large",
+        )
+            .into_response();
     }
     if let Some(token) = &st.cfg.token
         && req.uri().path() != "/login"
@@ -412,12 +396,13 @@ async fn live_js() -> Response {
         .into_response()
 }
 
-/// Every run, read off the runtime's workers.
+/// Every run: the roots' (read off the runtime's workers), then the catalog's others.
 async fn all_runs(st: &Shared) -> Vec<runs::RunView> {
     let roots = st.cfg.roots.clone();
-    tokio::task::spawn_blocking(move || runs::all(&roots, SystemTime::now()))
+    let local = tokio::task::spawn_blocking(move || runs::all(&roots, SystemTime::now()))
         .await
-        .unwrap_or_default()
+        .unwrap_or_default();
+    runs::merge(local, &st.live.rows(), SystemTime::now())
 }
 
 fn today() -> String {
@@ -445,7 +430,7 @@ async fn detail(st: &Shared, root: usize, name: String) -> Option<(runs::RunDeta
     let root_dir = st.cfg.roots.get(root)?.clone();
     tokio::task::spawn_blocking(move || {
         let dir = run_dir(&root_dir, &name)?;
-        let d = runs::view(RunKey { root, name }, &dir, SystemTime::now())?;
+        let d = runs::view(RunKey::local(root, name), &dir, SystemTime::now())?;
         Some((d, dir))
     })
     .await
@@ -470,6 +455,65 @@ async fn run_part(
     match detail(&st, root, name).await {
         Some((d, _)) => Html(pages::run_part(&d)).into_response(),
         None => not_found("no such run"),
+    }
+}
+
+/// The run `name` of `host`: the run directory of that name under a root when there is one
+/// (the truth), else the catalog's row.
+async fn live_detail(st: &Shared, host: String, name: String) -> Option<runs::RunDetail> {
+    let roots = st.cfg.roots.clone();
+    let local_name = name.clone();
+    let local = tokio::task::spawn_blocking(move || {
+        roots.iter().enumerate().find_map(|(i, root)| {
+            let dir = run_dir(root, &local_name)?;
+            runs::view(
+                RunKey::local(i, local_name.clone()),
+                &dir,
+                SystemTime::now(),
+            )
+        })
+    })
+    .await
+    .ok()
+    .flatten();
+    if local.is_some() {
+        return local;
+    }
+    let row = st.live.get(&host, &name)?;
+    Some(runs::from_row(&row, SystemTime::now()))
+}
+
+async fn live_page(
+    State(st): State<Shared>,
+    UrlPath((host, name)): UrlPath<(String, String)>,
+) -> Response {
+    match live_detail(&st, host, name).await {
+        Some(d) => Html(pages::run_page(&d)).into_response(),
+        None => not_found("no such run"),
+    }
+}
+
+async fn live_part(
+    State(st): State<Shared>,
+    UrlPath((host, name)): UrlPath<(String, String)>,
+) -> Response {
+    match live_detail(&st, host, name).await {
+        Some(d) => Html(pages::run_part(&d)).into_response(),
+        None => not_found("no such run"),
+    }
+}
+
+async fn api_live(
+    State(st): State<Shared>,
+    UrlPath((host, name)): UrlPath<(String, String)>,
+) -> Response {
+    match live_detail(&st, host, name).await {
+        Some(d) => axum::Json(d).into_response(),
+        None => (
+            StatusCode::NOT_FOUND,
+            axum::Json(serde_json::json!({"error": "no such run"})),
+        )
+            .into_response(),
     }
 }
 

@@ -24,19 +24,36 @@ pub const MAX_RUNS_PER_ROOT: usize = 5000;
 /// least at every step's end and every half second while readings come).
 pub const STALE_AFTER: Duration = Duration::from_secs(120);
 
-/// A run directory's address: which root, and its name directly under it.
+/// A run's address: a run directory (which root, and its name directly under it), or a run
+/// known through the catalog's `live_runs` (its host and its run id, `root` unused).
 #[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize)]
 pub struct RunKey {
     /// Index of the root (in the order given).
     pub root: usize,
-    /// The directory's name.
+    /// The directory's name (the run id).
     pub name: String,
+    /// The host of a run known through the catalog (`None`: a run directory under a root).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub host: Option<String>,
 }
 
 impl RunKey {
-    /// The run page's path (`/run/0/NAME`), the name percent-encoded.
+    /// The run directory `name` under root `root`.
+    pub fn local(root: usize, name: String) -> RunKey {
+        RunKey {
+            root,
+            name,
+            host: None,
+        }
+    }
+
+    /// The run page's path (`/run/0/NAME`, or `/live/HOST/NAME` for a run known through the
+    /// catalog), the parts percent-encoded.
     pub fn href(&self) -> String {
-        format!("/run/{}/{}", self.root, encode(&self.name))
+        match &self.host {
+            Some(host) => format!("/live/{}/{}", encode(host), encode(&self.name)),
+            None => format!("/run/{}/{}", self.root, encode(&self.name)),
+        }
     }
 }
 
@@ -382,10 +399,79 @@ pub fn all(roots: &[PathBuf], now: SystemTime) -> Vec<RunView> {
     let mut out = Vec::new();
     for (i, root) in roots.iter().enumerate() {
         for (name, dir) in list_dirs(root) {
-            if let Some(d) = view(RunKey { root: i, name }, &dir, now) {
+            if let Some(d) = view(RunKey::local(i, name), &dir, now) {
                 out.push(d.view);
             }
         }
     }
     out
+}
+
+/// A run known through the catalog's `live_runs` (another bench's, see
+/// [`gyrocal_catalog::LiveRow`]): its state from the row's JSON (the columns when that does
+/// not read), marked stale as a local run is when it says `running` and its last update is
+/// older than [`STALE_AFTER`].
+pub fn from_row(row: &gyrocal_catalog::LiveRow, now: SystemTime) -> RunDetail {
+    let live: Option<LiveState> = serde_json::from_str(&row.state_json).ok();
+    let count = |n: i64| usize::try_from(n).unwrap_or(0);
+    let key = RunKey {
+        root: 0,
+        name: row.run_id.clone(),
+        host: Some(row.host.clone()),
+    };
+    let mut v = RunView {
+        href: key.href(),
+        key,
+        plan_name: row.plan_name.clone(),
+        plan_kind: row.kind.clone(),
+        station: row.station_id.clone(),
+        gyro_serial: row.dut_serial.clone(),
+        status: row.status.clone(),
+        stale: false,
+        stale_reason: None,
+        phase: row.phase.clone(),
+        step: count(row.step),
+        steps: count(row.steps),
+        steps_done: count(row.steps_done),
+        eta_s: row.eta_s,
+        last_reading_v: row.last_reading_v,
+        running_mean_v: row.running_mean_v,
+        table: row.table_state.clone(),
+        verdict: row.verdict.clone(),
+        reason: live.as_ref().and_then(|l| l.reason.clone()),
+        started_utc: None,
+        ended_utc: None,
+        updated_utc: Some(row.updated_utc.clone()),
+        has_report: false,
+    };
+    if v.status == "running" && age(&row.updated_utc, now).is_some_and(|a| a > STALE_AFTER) {
+        v.stale = true;
+        v.stale_reason = Some(format!(
+            "no update since {} (from {})",
+            row.updated_utc, row.host
+        ));
+        v.phase = "stale".into();
+    }
+    RunDetail {
+        view: v,
+        step_summaries: live.map(|l| l.step_summaries).unwrap_or_default(),
+        files: Vec::new(),
+    }
+}
+
+/// The runs under the roots and, after them, the runs known through the catalog that are not
+/// under a root (a run in both is shown once, from its directory: the truth).
+pub fn merge(
+    mut local: Vec<RunView>,
+    rows: &[gyrocal_catalog::LiveRow],
+    now: SystemTime,
+) -> Vec<RunView> {
+    let names: std::collections::HashSet<String> =
+        local.iter().map(|v| v.key.name.clone()).collect();
+    for row in rows {
+        if !names.contains(&row.run_id) {
+            local.push(from_row(row, now).view);
+        }
+    }
+    local
 }

@@ -52,6 +52,7 @@ fn live(run_id: &str, serial: &str, plan: &str, steps_done: usize) -> LiveState 
         status: "running".into(),
         reason: None,
         verdict: None,
+        chamber: None,
         pid: std::process::id(),
         hostname: gyrocal_files::rundir::host_name(),
         updated_utc: now_utc(),

@@ -37,6 +37,8 @@ pub struct Cli {
 }
 
 /// The subcommands.
+// parsed once per process: the size of `gyrocal run`'s many options costs nothing
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Fit scale factor and bias to measured (rate, volts) data and report the metrics.

@@ -88,6 +88,7 @@ impl Station {
             ambient_c: None,
             humidity_pct: None,
             catalog: None,
+            serve: None,
             multimeter: Some(InstrumentRecord {
                 accuracy: Some(SpecPeriod::Year1),
                 ..record("HP 34401A (simulated)", "34401A")

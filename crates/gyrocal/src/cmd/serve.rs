@@ -2,6 +2,10 @@
 //! under one or more roots as they proceed (each run's `live.json`), their pages and verdicts,
 //! and each gyro's history from the catalog. Read-only.
 //!
+//! With a PostgreSQL catalog (`--catalog postgres://...`), the lab's shared one, it also
+//! listens to the runs every bench publishes there (`LISTEN gyrocal_live`) and shows them
+//! beside its roots' runs: one view of every bench, roots or not.
+//!
 //! Loopback by default; `--bind` to another address needs `--token` (or
 //! `$GYROCAL_SERVE_TOKEN`): a browser then opens `/login?token=TOKEN` once (a cookie), a
 //! script sends `Authorization: Bearer TOKEN`.
@@ -21,7 +25,8 @@ pub const TOKEN_ENV: &str = "GYROCAL_SERVE_TOKEN";
 #[derive(Debug, Args)]
 pub struct ServeArgs {
     /// A directory of run directories (repeatable). Default: `runs`, where `gyrocal run` puts
-    /// a run without --out.
+    /// a run without --out (with a PostgreSQL catalog, only when it exists: the catalog's
+    /// live runs may be all there is to show).
     #[arg(long = "root", value_name = "DIR")]
     pub roots: Vec<PathBuf>,
     /// The address to listen on. Anything but loopback needs a token.
@@ -50,19 +55,6 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<u8> {
         .filter(|t| !t.is_empty());
     let addr = SocketAddr::new(args.bind, args.port);
     gyrocal_serve::check_bind(&addr, token.as_deref()).map_err(|e| BadInput(e.to_string()))?;
-    let roots = if args.roots.is_empty() {
-        vec![PathBuf::from("runs")]
-    } else {
-        args.roots.clone()
-    };
-    for r in &roots {
-        if !r.is_dir() {
-            eprintln!(
-                "gyrocal: warning: {}: not a directory (yet); its runs appear once it is",
-                r.display()
-            );
-        }
-    }
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -81,6 +73,28 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<u8> {
             }
         }
     };
+    let live = catalog.as_ref().is_some_and(|c| c.carries_live());
+    let roots = if !args.roots.is_empty() {
+        args.roots.clone()
+    } else if live && !std::path::Path::new("runs").is_dir() {
+        Vec::new()
+    } else {
+        vec![PathBuf::from("runs")]
+    };
+    if let Some(url) = catalog_url.as_ref().filter(|_| live) {
+        eprintln!(
+            "gyrocal serve: showing the live runs of every bench that publishes to {}",
+            url.redacted()
+        );
+    }
+    for r in &roots {
+        if !r.is_dir() {
+            eprintln!(
+                "gyrocal: warning: {}: not a directory (yet); its runs appear once it is",
+                r.display()
+            );
+        }
+    }
     let cfg = gyrocal_serve::ServeConfig {
         roots,
         token: token.clone(),

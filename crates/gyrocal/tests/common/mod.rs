@@ -16,6 +16,7 @@ pub mod plans;
 #[path = "../../../../tests/support/stations.rs"]
 pub mod stations;
 
+pub mod serve;
 pub mod sim;
 
 /// True for the environment variables through which gyrocal finds a user's own files: its

@@ -77,6 +77,13 @@ pub(super) fn finish(
         _ => resume,
     });
     let code = finish_human(args, dir, summary, &mut run, signal, &human, doc);
+    // the verdict the analysis found, into the live state's last write (and the bus)
+    let verdict = run
+        .manifest()
+        .acceptance
+        .as_ref()
+        .map(|a| a.verdict.as_str().to_string());
+    live::conclude(verdict.as_deref());
     catalog_close(dir, doc);
     let code = code?;
     if summary.status == Status::Complete && summary.table.nothing_turning() {

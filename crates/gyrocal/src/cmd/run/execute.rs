@@ -261,8 +261,8 @@ where
     let (tx, rx) = mpsc::unbounded_channel();
     let view = ViewContext::of(&plan, &run);
     // live.json for viewers (gyrocal serve); never a reason for the run to wait or fail
-    let live =
-        gyrocal_run::live::LiveFile::new(run.path(), gyrocal_run::live::LiveHeader::of(&run));
+    // (and to the catalog's bus when it is PostgreSQL)
+    let live = live::live_sink(&run);
     let mut seq = Engine::on_bench(plan, bench, run, SequencerOptions::default())
         .with_events(tx)
         .with_sink(live);

@@ -90,6 +90,12 @@ pub struct RunArgs {
     /// catches up).
     #[arg(long, value_name = "URL")]
     pub catalog: Option<String>,
+    /// Start a live view of the run in this process (read-only, over the run's own root,
+    /// as `gyrocal serve`): ADDR defaults to 127.0.0.1 on any free port; the run's page is
+    /// printed before the first step. Off loopback it needs $GYROCAL_SERVE_TOKEN. The view
+    /// only reads the run's files: it costs the run nothing.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = live::SERVE_DEFAULT)]
+    pub serve: Option<String>,
     /// Print exactly one JSON document on stdout at the end (status, exit code, where the
     /// table was left, steps, timing, the fit's headline, the run directory, the resume
     /// command); the human text goes to stderr.
@@ -165,6 +171,7 @@ macro_rules! out {
 mod clock;
 mod ending;
 mod execute;
+mod live;
 mod progress;
 mod records;
 
@@ -255,6 +262,10 @@ pub fn run(args: &RunArgs) -> anyhow::Result<u8> {
             ))
             .into());
         }
+    }
+    if let Some(text) = &args.serve {
+        // a bad address is bad input before anything is opened
+        live::serve_addr(text)?;
     }
     // the station before any instrument is touched: an overdue calibration refuses the run
     let (station, deviations) = station_for_run(args, &plan, plan.simulation().seed)?;

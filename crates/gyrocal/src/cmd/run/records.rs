@@ -155,6 +155,7 @@ pub(super) fn open_run_dir(
     plan: &Plan,
     records: Records,
 ) -> anyhow::Result<(PathBuf, RunDir)> {
+    let station_serve = records.station.as_ref().and_then(|s| s.serve.clone());
     let (dir, mut run) = open_run_dir_inner(args, plan, records.dut, records.station)?;
     SessionClock::note(&run, args);
     for (kind, text) in &records.deviations {
@@ -172,12 +173,14 @@ pub(super) fn open_run_dir(
     }
     if let Some(url) = records.catalog {
         tracing::info!(catalog = %url, "indexing the run");
+        live::start_bus(&url);
         let writer = gyrocal_catalog::CatalogWriter::spawn(url);
         writer.register(&dir);
         if let Ok(mut slot) = CATALOG.lock() {
             *slot = Some((writer, dir.clone()));
         }
     }
+    live::announce(args, station_serve.as_deref(), &dir);
     Ok((dir, run))
 }
 

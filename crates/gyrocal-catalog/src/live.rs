@@ -1,0 +1,59 @@
+//! The live state of a run going on, as the catalog holds it (`live_runs`, schema version 4):
+//! what `gyrocal run` publishes when its catalog is PostgreSQL, and what `gyrocal serve`
+//! shows beside the runs under its own roots. See [`crate::LiveBus`] for the publishing side
+//! and `Catalog::listen_live` for the listening one.
+//!
+//! Why the catalog: a lab's benches already share its PostgreSQL server, and `LISTEN`/`NOTIFY`
+//! tells every listener "run X changed" without a service of its own. The row is a copy of the
+//! run's `live.json` (the run directory stays the truth), its JSON capped at
+//! [`MAX_STATE_JSON`].
+
+use serde::{Deserialize, Serialize};
+
+/// The channel of the notifications (`NOTIFY gyrocal_live, 'RUN_ID'`).
+pub const LIVE_CHANNEL: &str = "gyrocal_live";
+
+/// The most bytes of a live state's JSON kept in a row (a state with more step summaries is
+/// trimmed by the publisher, oldest steps first).
+pub const MAX_STATE_JSON: usize = 64 * 1024;
+
+/// One row of `live_runs`: a run going on (or just ended) on a host.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LiveRow {
+    /// The run's id (its directory's name).
+    pub run_id: String,
+    /// The host the run runs on.
+    pub host: String,
+    /// The station's id.
+    pub station_id: Option<String>,
+    /// The gyro's serial.
+    pub dut_serial: Option<String>,
+    /// The plan's name.
+    pub plan_name: String,
+    /// The plan's kind.
+    pub kind: String,
+    /// The phase (`ramping`, `acquiring`, `soaking`, `done`, ...).
+    pub phase: String,
+    /// The step under way (1-based).
+    pub step: i64,
+    /// Steps in the plan.
+    pub steps: i64,
+    /// Steps recorded.
+    pub steps_done: i64,
+    /// Estimated time to the end, s.
+    pub eta_s: Option<f64>,
+    /// The last reading, V.
+    pub last_reading_v: Option<f64>,
+    /// The running mean, V.
+    pub running_mean_v: Option<f64>,
+    /// The table's state.
+    pub table_state: Option<String>,
+    /// `running`, `complete`, `aborted`, `failed`.
+    pub status: String,
+    /// The verdict, once the analysis knows it.
+    pub verdict: Option<String>,
+    /// When the run wrote this state, RFC 3339 UTC.
+    pub updated_utc: String,
+    /// The live state itself (`live.json`'s text), at most [`MAX_STATE_JSON`] bytes.
+    pub state_json: String,
+}

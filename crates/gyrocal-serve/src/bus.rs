@@ -1,0 +1,152 @@
+//! The listening side of the live view's message bus: with a PostgreSQL catalog the server
+//! `LISTEN`s on `gyrocal_live` and keeps the rows of `live_runs` (the runs of every bench that
+//! publishes there, see `gyrocal_catalog::LiveBus`) in memory, for the dashboard and the run
+//! pages to show beside the roots' runs.
+//!
+//! Each notification names a run: its rows are read again and one `run` event goes to the
+//! event streams. When the connection is lost, notifications sent meanwhile are gone: once it
+//! is made again every row is read again and an `{"all":true}` event tells the pages to
+//! reload. A catalog that cannot be reached is said once in the log and tried again every
+//! [`RELISTEN`]; the pages meanwhile show the last rows known (marked stale once old, as a
+//! local run whose writer stopped).
+
+use std::collections::HashMap;
+use std::sync::RwLock;
+use std::time::Duration;
+
+use gyrocal_catalog::{Catalog, LiveNews, LiveRow};
+use tokio::sync::broadcast;
+
+/// How long a `LISTEN` may take to be set up, and the wait before trying again after a
+/// failure.
+pub const RELISTEN: Duration = Duration::from_secs(2);
+
+/// The longest run id a notification may name (a directory's name).
+const MAX_ID: usize = 255;
+
+/// The runs known through the catalog, by host and run id.
+#[derive(Debug, Default)]
+pub struct LiveRuns {
+    rows: RwLock<HashMap<(String, String), LiveRow>>,
+}
+
+impl LiveRuns {
+    fn read(&self) -> std::sync::RwLockReadGuard<'_, HashMap<(String, String), LiveRow>> {
+        self.rows.read().unwrap_or_else(|e| e.into_inner())
+    }
+
+    fn write(&self) -> std::sync::RwLockWriteGuard<'_, HashMap<(String, String), LiveRow>> {
+        self.rows.write().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Every row, newest update first.
+    pub fn rows(&self) -> Vec<LiveRow> {
+        let mut out: Vec<LiveRow> = self.read().values().cloned().collect();
+        out.sort_by(|a, b| b.updated_utc.cmp(&a.updated_utc));
+        out
+    }
+
+    /// The row of run `run_id` on `host`.
+    pub fn get(&self, host: &str, run_id: &str) -> Option<LiveRow> {
+        self.read()
+            .get(&(host.to_string(), run_id.to_string()))
+            .cloned()
+    }
+
+    /// Every row, replaced by `rows`.
+    pub fn replace_all(&self, rows: Vec<LiveRow>) {
+        let mut map = self.write();
+        map.clear();
+        for r in rows {
+            map.insert((r.host.clone(), r.run_id.clone()), r);
+        }
+    }
+
+    /// The rows of run `run_id`, replaced by `rows`.
+    pub fn update(&self, run_id: &str, rows: Vec<LiveRow>) {
+        let mut map = self.write();
+        map.retain(|(_, id), _| id != run_id);
+        for r in rows {
+            map.insert((r.host.clone(), r.run_id.clone()), r);
+        }
+    }
+}
+
+fn event_of(row: &LiveRow) -> String {
+    let key = crate::runs::RunKey {
+        root: 0,
+        name: row.run_id.clone(),
+        host: Some(row.host.clone()),
+    };
+    serde_json::json!({ "name": row.run_id, "host": row.host, "href": key.href() }).to_string()
+}
+
+/// Reads every row again; false when the catalog could not be read.
+async fn reload(catalog: &Catalog, live: &LiveRuns, events: &broadcast::Sender<String>) -> bool {
+    match catalog.live_runs(None).await {
+        Ok(rows) => {
+            live.replace_all(rows);
+            let _ = events.send("{\"all\":true}".to_string());
+            true
+        }
+        Err(e) => {
+            tracing::warn!("the catalog's live runs cannot be read: {e}");
+            false
+        }
+    }
+}
+
+/// Listens forever (see the module docs).
+pub async fn listen(catalog: &Catalog, live: &LiveRuns, events: &broadcast::Sender<String>) {
+    let mut warned = false;
+    loop {
+        match catalog
+            .listen_live(RELISTEN.max(Duration::from_secs(5)))
+            .await
+        {
+            Ok(Some(mut listener)) => {
+                if warned {
+                    tracing::warn!("listening to the catalog's live runs again");
+                }
+                warned = false;
+                reload(catalog, live, events).await;
+                loop {
+                    match listener.recv().await {
+                        Ok(LiveNews::Changed(id)) if !id.is_empty() && id.len() <= MAX_ID => {
+                            match catalog.live_runs(Some(&id)).await {
+                                Ok(rows) => {
+                                    for r in &rows {
+                                        let _ = events.send(event_of(r));
+                                    }
+                                    live.update(&id, rows);
+                                }
+                                Err(e) => tracing::warn!("the live run {id} cannot be read: {e}"),
+                            }
+                        }
+                        Ok(LiveNews::Changed(_)) => {}
+                        Ok(LiveNews::Reconnected) => {
+                            reload(catalog, live, events).await;
+                        }
+                        Err(e) => {
+                            if !std::mem::replace(&mut warned, true) {
+                                tracing::warn!(
+                                    "lost the catalog's notifications ({e}); the live runs of other benches are not updated until it answers"
+                                );
+                            }
+                            break;
+                        }
+                    }
+                }
+            }
+            Ok(None) => return,
+            Err(e) => {
+                if !std::mem::replace(&mut warned, true) {
+                    tracing::warn!(
+                        "cannot listen to the catalog ({e}); the live runs of other benches are not shown until it answers"
+                    );
+                }
+            }
+        }
+        tokio::time::sleep(RELISTEN).await;
+    }
+}

@@ -1,0 +1,89 @@
+//! For the tests of `gyrocal serve` and `gyrocal run --serve`: a child process ended with the
+//! test, plain HTTP/1.1 requests, the port of a printed URL, and an event stream read in the
+//! background.
+
+use std::io::{Read as _, Write as _};
+use std::net::TcpStream;
+use std::process::Child;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+/// Ends a child process of this test when the test ends, however it ends.
+pub struct Reap(pub Child);
+
+impl Drop for Reap {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// `GET path` on `port` (HTTP/1.1, connection closed after): status line and body.
+pub fn get(port: u16, path: &str) -> (String, String) {
+    let mut s = TcpStream::connect(("127.0.0.1", port)).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
+    write!(
+        s,
+        "GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut text = String::new();
+    s.read_to_string(&mut text).unwrap();
+    let (head, body) = text.split_once("\r\n\r\n").unwrap_or((&text, ""));
+    (
+        head.lines().next().unwrap_or("").to_string(),
+        body.to_string(),
+    )
+}
+
+/// The port of the first `http://HOST:PORT` in `line`.
+pub fn port_in(line: &str) -> u16 {
+    let at = line.find("http://").expect("a URL in the line") + "http://".len();
+    let rest = &line[at..];
+    let host_port = rest.split('/').next().unwrap();
+    host_port
+        .rsplit(':')
+        .next()
+        .unwrap()
+        .trim()
+        .parse()
+        .unwrap()
+}
+
+/// The runs of `/api/runs`.
+pub fn api_runs(port: u16) -> Vec<serde_json::Value> {
+    let (status, body) = get(port, "/api/runs");
+    assert!(status.contains("200"), "{status}");
+    let doc: serde_json::Value = serde_json::from_str(&body).unwrap();
+    doc["runs"].as_array().cloned().unwrap_or_default()
+}
+
+/// An `/api/events` stream read by a thread of its own into a text that grows.
+pub struct Events(Arc<Mutex<String>>);
+
+impl Events {
+    /// Connects to `port`'s event stream (before the test makes anything change).
+    pub fn start(port: u16) -> Events {
+        let mut s = TcpStream::connect(("127.0.0.1", port)).unwrap();
+        write!(s, "GET /api/events HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n").unwrap();
+        let text = Arc::new(Mutex::new(String::new()));
+        let sink = text.clone();
+        std::thread::spawn(move || {
+            let mut buf = [0u8; 8192];
+            while let Ok(n) = s.read(&mut buf) {
+                if n == 0 {
+                    break;
+                }
+                sink.lock()
+                    .unwrap()
+                    .push_str(&String::from_utf8_lossy(&buf[..n]));
+            }
+        });
+        Events(text)
+    }
+
+    /// What came so far.
+    pub fn text(&self) -> String {
+        self.0.lock().unwrap().clone()
+    }
+}

@@ -1,0 +1,327 @@
+//! The live view across benches through the binary: runs publish their live state to the
+//! PostgreSQL catalog (`live_runs`, `NOTIFY gyrocal_live`) and a `gyrocal serve --catalog`
+//! with no roots shows them growing and ending with their verdicts (when
+//! GYROCAL_TEST_POSTGRES_URL is set); a run against a catalog that never answers finishes in
+//! the same virtual time with every step, the failure said once; `gyrocal run --serve` prints
+//! its page and the page answers during the run; the station's `serve` key prints the lab
+//! view's page of the run.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a panic is a failed test
+
+mod common;
+
+use std::collections::HashMap;
+use std::io::{BufRead as _, BufReader};
+use std::path::Path;
+use std::process::Stdio;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use common::serve::{Events, Reap, api_runs, get, port_in};
+use common::{config, gyrocal, plans, stations};
+
+/// A name no other test (or earlier run on the same database) uses.
+fn uniq(name: &str) -> String {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos();
+    format!("{name}-{}-{nanos}", std::process::id())
+}
+
+/// The quick plan with acceptance limits, so its end has a verdict.
+fn quick_with_acceptance(dir: &Path) -> std::path::PathBuf {
+    let text = std::fs::read_to_string(config("quick.toml")).unwrap()
+        + "\n[acceptance]\ndecision_rule = \"simple\"\n[acceptance.scale_factor]\nmin = -1000\nmax = 1000\n";
+    plans::write(dir, "quick-acceptance.toml", &text)
+}
+
+/// The lines a child writes on stderr, collected by a thread of their own.
+fn collect_stderr(child: &mut std::process::Child) -> Arc<Mutex<Vec<String>>> {
+    let lines = Arc::new(Mutex::new(Vec::new()));
+    let sink = lines.clone();
+    let err = child.stderr.take().unwrap();
+    std::thread::spawn(move || {
+        for line in BufReader::new(err).lines() {
+            let Ok(line) = line else { break };
+            sink.lock().unwrap().push(line);
+        }
+    });
+    lines
+}
+
+#[test]
+fn serve_on_the_catalog_shows_two_benches_runs_growing_and_ending_with_their_verdicts() {
+    let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
+        eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL test skipped");
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = quick_with_acceptance(tmp.path());
+    let (root_a, root_b, empty) = (
+        tmp.path().join("bench-a"),
+        tmp.path().join("bench-b"),
+        tmp.path().join("view"),
+    );
+    for d in [&root_a, &root_b, &empty] {
+        std::fs::create_dir(d).unwrap();
+    }
+    let names = [uniq("bench-a-run"), uniq("bench-b-run")];
+
+    // the view: the catalog only, no roots (its working directory has no `runs`)
+    let mut serve = Reap(
+        gyrocal()
+            .current_dir(&empty)
+            .args(["serve", "--catalog", &url, "--port", "0"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let mut line = String::new();
+    BufReader::new(serve.0.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let port = port_in(&line);
+    let events = Events::start(port);
+    // the listener is up once the view answers (it LISTENs before reading the rows)
+    std::thread::sleep(Duration::from_millis(500));
+
+    let runs: Vec<Reap> = [(&root_a, &names[0]), (&root_b, &names[1])]
+        .into_iter()
+        .map(|(root, name)| {
+            Reap(
+                gyrocal()
+                    .arg("run")
+                    .arg(&plan)
+                    .args(["--simulate", "--sim-time-scale", "4", "--catalog", &url])
+                    .arg("--out")
+                    .arg(root.join(name))
+                    .stdout(Stdio::null())
+                    .stderr(Stdio::null())
+                    .spawn()
+                    .unwrap(),
+            )
+        })
+        .collect();
+
+    let mut seen: HashMap<String, Vec<u64>> = HashMap::new();
+    let mut ended: HashMap<String, serde_json::Value> = HashMap::new();
+    let t0 = Instant::now();
+    while ended.len() < 2 {
+        assert!(
+            t0.elapsed() < Duration::from_secs(240),
+            "seen {seen:?}, ended {ended:?}"
+        );
+        for r in api_runs(port) {
+            let name = r["key"]["name"].as_str().unwrap_or("").to_string();
+            if !names.contains(&name) {
+                continue;
+            }
+            // a run known through the catalog: its host in the key, its page under /live
+            assert!(r["key"]["host"].is_string(), "{r}");
+            let n = r["steps_done"].as_u64().unwrap();
+            let counts = seen.entry(name.clone()).or_default();
+            if counts.last() != Some(&n) {
+                counts.push(n);
+            }
+            if r["status"] == "complete" && !r["verdict"].is_null() {
+                ended.insert(name, r);
+            }
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    for name in &names {
+        let counts = &seen[name];
+        assert!(counts.len() >= 3, "{name}: {counts:?}");
+        assert!(counts.windows(2).all(|w| w[0] < w[1]), "{name}: {counts:?}");
+        let r = &ended[name];
+        assert_eq!(
+            (r["steps"].as_u64(), r["steps_done"].as_u64()),
+            (Some(5), Some(5))
+        );
+        assert!(
+            ["pass", "marginal", "indeterminate", "fail"].contains(&r["verdict"].as_str().unwrap()),
+            "{r}"
+        );
+        // its page, from the catalog's row
+        let (status, html) = get(port, r["href"].as_str().unwrap());
+        assert!(status.contains("200"), "{status}");
+        assert!(html.contains(name.as_str()), "{html}");
+    }
+    // the event stream carried each run's updates (a notification per update)
+    let text = events.text();
+    for name in &names {
+        let n = text.matches(name.as_str()).count();
+        assert!(n >= 3, "{name} in {n} events: {text}");
+    }
+    for mut r in runs {
+        assert!(r.0.wait().unwrap().success());
+    }
+}
+
+/// A "PostgreSQL" that accepts connections and never says a word.
+fn silent_server() -> u16 {
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = l.local_addr().unwrap().port();
+    std::thread::spawn(move || {
+        let mut held = Vec::new();
+        for c in l.incoming() {
+            held.push(c);
+        }
+    });
+    port
+}
+
+#[test]
+fn a_run_against_a_catalog_that_never_answers_finishes_the_same_and_says_it_once() {
+    let tmp = tempfile::tempdir().unwrap();
+    let silent = format!("postgres://gyrocal@127.0.0.1:{}/lab", silent_server());
+    let mut docs = Vec::new();
+    for (name, catalog) in [("off", "off"), ("silent", silent.as_str())] {
+        let out = tmp.path().join(name);
+        let o = gyrocal()
+            .arg("run")
+            .arg(config("quick.toml"))
+            .args(["--simulate", "--json", "--catalog", catalog, "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let doc: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        docs.push((out, doc));
+    }
+    let (off, silent_doc) = (&docs[0].1, &docs[1].1);
+    for doc in [off, silent_doc] {
+        assert_eq!(doc["status"], "complete", "{doc}");
+        assert_eq!(doc["steps_done"], 5, "{doc}");
+    }
+    // the run clock (virtual) is the same to the microsecond: the catalog cost it nothing
+    let (a, b) = (
+        off["elapsed_s"].as_f64().unwrap(),
+        silent_doc["elapsed_s"].as_f64().unwrap(),
+    );
+    assert!(
+        (a - b).abs() < 1e-6,
+        "elapsed {a} s without a catalog, {b} s with a silent one"
+    );
+    // the live state's failure said once in the run's log, not at every step
+    let log = std::fs::read_to_string(docs[1].0.join("run.log")).unwrap();
+    let said = log
+        .matches("the live state cannot reach the catalog")
+        .count();
+    assert_eq!(said, 1, "{log}");
+}
+
+#[test]
+fn run_serve_prints_the_run_page_which_answers_during_the_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("runs").join("served-1");
+    let mut run = Reap(
+        gyrocal()
+            .arg("run")
+            .arg(config("quick.toml"))
+            .args(["--simulate", "--sim-time-scale", "2", "--serve", "--out"])
+            .arg(&out)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let lines = collect_stderr(&mut run.0);
+    let t0 = Instant::now();
+    let page_line = loop {
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "{:?}",
+            lines.lock().unwrap()
+        );
+        if let Some(l) = lines
+            .lock()
+            .unwrap()
+            .iter()
+            .find(|l| l.starts_with("live view: "))
+        {
+            break l.clone();
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert!(
+        page_line.starts_with("live view: http://127.0.0.1:")
+            && page_line.ends_with("/run/0/served-1"),
+        "{page_line}"
+    );
+    let port = port_in(&page_line);
+    let path = &page_line[page_line.find("/run/").unwrap()..];
+    // the page answers while the run goes on, and the run's state shows through it
+    let mut statuses = Vec::new();
+    loop {
+        assert!(t0.elapsed() < Duration::from_secs(120), "{statuses:?}");
+        let (status, html) = get(port, path);
+        assert!(status.contains("200"), "{status}");
+        assert!(html.contains("served-1"), "{html}");
+        let (_, api) = get(port, "/api/run/0/served-1");
+        let doc: serde_json::Value = serde_json::from_str(&api).unwrap();
+        let st = doc["status"].as_str().unwrap_or("").to_string();
+        if statuses.last() != Some(&st) {
+            statuses.push(st.clone());
+        }
+        if st == "complete" {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert_eq!(
+        statuses.first().map(String::as_str),
+        Some("running"),
+        "{statuses:?}"
+    );
+    assert!(run.0.wait().unwrap().success());
+}
+
+#[test]
+fn the_station_serve_key_prints_the_lab_views_page_of_the_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    let station = tmp.path().join("station.toml");
+    std::fs::write(
+        &station,
+        stations::bench_2("serve = \"http://lab-view:8737\"\n"),
+    )
+    .unwrap();
+    let out = tmp.path().join("station-run-1");
+    let o = gyrocal()
+        .arg("run")
+        .arg(config("quick.toml"))
+        .args(["--simulate", "--station"])
+        .arg(&station)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    let host = gyrocal_files::rundir::host_name();
+    let expected = format!("live view: http://lab-view:8737/live/{host}/station-run-1");
+    assert!(
+        err.lines().any(|l| l.starts_with(&expected)),
+        "{expected:?} not in:\n{err}"
+    );
+}
+
+#[test]
+fn run_serve_with_a_bad_address_is_refused_before_anything_starts() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("never");
+    let o = gyrocal()
+        .arg("run")
+        .arg(config("quick.toml"))
+        .args(["--simulate", "--serve", "0.0.0.0:0", "--out"])
+        .arg(&out)
+        .env_remove("GYROCAL_SERVE_TOKEN")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("--serve") && err.contains("token"), "{err}");
+    assert!(!out.exists());
+}
