@@ -23,6 +23,7 @@
 //! connections, event streams, URI length and request bodies.
 
 pub mod pages;
+pub mod plots;
 pub mod runs;
 
 use std::net::SocketAddr;
@@ -128,6 +129,8 @@ pub struct ServeConfig {
     pub catalog: Option<gyrocal_catalog::Catalog>,
     /// The catalog's URL: pages and answers show it redacted only (never its password).
     pub catalog_url: Option<gyrocal_catalog::CatalogUrl>,
+    /// A running run is stale once its live state is this old; `None`: [`runs::STALE_AFTER`].
+    pub stale_after: Option<Duration>,
 }
 
 struct AppState {
@@ -415,7 +418,8 @@ async fn live_js() -> Response {
 /// Every run, read off the runtime's workers.
 async fn all_runs(st: &Shared) -> Vec<runs::RunView> {
     let roots = st.cfg.roots.clone();
-    tokio::task::spawn_blocking(move || runs::all(&roots, SystemTime::now()))
+    let stale = st.cfg.stale_after.unwrap_or(runs::STALE_AFTER);
+    tokio::task::spawn_blocking(move || runs::all_with(&roots, SystemTime::now(), stale))
         .await
         .unwrap_or_default()
 }
@@ -443,9 +447,10 @@ async fn dashboard_part(State(st): State<Shared>) -> Html<String> {
 /// The run `name` under root `root`, when it is one (see [`runs::run_dir`]).
 async fn detail(st: &Shared, root: usize, name: String) -> Option<(runs::RunDetail, PathBuf)> {
     let root_dir = st.cfg.roots.get(root)?.clone();
+    let stale = st.cfg.stale_after.unwrap_or(runs::STALE_AFTER);
     tokio::task::spawn_blocking(move || {
         let dir = run_dir(&root_dir, &name)?;
-        let d = runs::view(RunKey { root, name }, &dir, SystemTime::now())?;
+        let d = runs::view_with(RunKey { root, name }, &dir, SystemTime::now(), stale)?;
         Some((d, dir))
     })
     .await
@@ -458,7 +463,7 @@ async fn run_page(
     UrlPath((root, name)): UrlPath<(usize, String)>,
 ) -> Response {
     match detail(&st, root, name).await {
-        Some((d, _)) => Html(pages::run_page(&d)).into_response(),
+        Some((d, dir)) => rendered(move || pages::run_page(&d, &dir)).await,
         None => not_found("no such run"),
     }
 }
@@ -468,8 +473,16 @@ async fn run_part(
     UrlPath((root, name)): UrlPath<(usize, String)>,
 ) -> Response {
     match detail(&st, root, name).await {
-        Some((d, _)) => Html(pages::run_part(&d)).into_response(),
+        Some((d, dir)) => rendered(move || pages::run_part(&d, &dir)).await,
         None => not_found("no such run"),
+    }
+}
+
+/// A page drawn off the runtime's workers (it reads `allan.json`, `temps.csv` and draws plots).
+async fn rendered(page: impl FnOnce() -> String + Send + 'static) -> Response {
+    match tokio::task::spawn_blocking(page).await {
+        Ok(html) => Html(html).into_response(),
+        Err(_) => (StatusCode::INTERNAL_SERVER_ERROR, "the page could not be drawn").into_response(),
     }
 }
 
