@@ -339,7 +339,7 @@ async fn at_a_phones_width_no_page_scrolls_sideways() {
         &root.join("sweep-with-a-rather-long-run-directory-name-2026-12-07T06-30-00Z"),
         &["--dut-serial", "SIM-42-LONG-SERIAL-NUMBER"],
     );
-    let mut running = start_run(&plan, &root.join("sweep-running"), Some(1.0), &[]);
+    let running = start_run(&plan, &root.join("sweep-running"), Some(1.0), &[]);
     wait_for_steps(&root.join("sweep-running"), 1).await;
     let serve = Serve::start(&[&root], &[]);
     let Some(b) = Browser::start(Window::Phone).await else {
