@@ -1,7 +1,7 @@
 //! The certificate's plots for `gyrocal serve`'s run page (the live view draws with the same
 //! code as the report, so a run looks the same in both): the measured output against rate
-//! with the least-squares line, its residuals, a drift record's σ(τ) curve and a series'
-//! temperatures. Each is bounded whatever the run's length: the fit plots take one point per
+//! with the least-squares line, its residuals, a drift record's segment means and σ(τ)
+//! curve, and a series' temperatures. Each is bounded whatever the run's length: the fit plots take one point per
 //! step, the curve one per τ, and the temperatures are thinned to at most
 //! [`TEMPERATURE_POINTS_MAX`] rows.
 
@@ -24,6 +24,12 @@ pub fn fit_svg(a: &Analysis) -> Result<String, ReportError> {
 /// The residuals of every fit against rate (the certificate's `residuals.svg`).
 pub fn residuals_svg(a: &Analysis) -> Result<String, ReportError> {
     crate::plots::residuals_plot(a)
+}
+
+/// A drift record's segment means `(run clock s, mean V)` against the run clock (the live
+/// view's plot while the record runs; the caller bounds the points).
+pub fn segments_svg(points: &[(f64, f64)]) -> Result<String, ReportError> {
+    crate::plots::live::segments_plot(points)
 }
 
 /// A drift record's σ(τ) with its confidence intervals (the Allan page's curve).

@@ -482,7 +482,11 @@ async fn run_part(
 async fn rendered(page: impl FnOnce() -> String + Send + 'static) -> Response {
     match tokio::task::spawn_blocking(page).await {
         Ok(html) => Html(html).into_response(),
-        Err(_) => (StatusCode::INTERNAL_SERVER_ERROR, "the page could not be drawn").into_response(),
+        Err(_) => (
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "the page could not be drawn",
+        )
+            .into_response(),
     }
 }
 

@@ -53,15 +53,19 @@ pub const LIVE_JS: &str = r#"(function () {
 })();
 "#;
 
-const STYLE: &str = "body{font-family:system-ui,sans-serif;margin:1em;max-width:70em}\
+const STYLE: &str = "body{font-family:system-ui,sans-serif;margin:1em;max-width:110em;\
+overflow-wrap:break-word}\
 table{border-collapse:collapse;width:100%}td,th{border-bottom:1px solid #ccc;padding:.3em .5em;\
 text-align:left;font-variant-numeric:tabular-nums}th{background:#eee}\
+#state{max-width:70em}#state tbody{display:grid;grid-template-columns:repeat(auto-fill,minmax(22em,1fr))}\
+#state tr{display:flex}#state th{flex:0 0 8.5em}#state td{flex:1}\
 .stale{color:#a00;font-weight:bold}.pass{color:#070}.fail{color:#a00}.marginal{color:#a60}\
 .wrap{overflow-x:auto}svg{max-width:100%;height:auto}\
-figure{margin:1em 0}figure svg{display:block;width:100%;max-width:50em;height:auto}\
-figcaption{color:#444;font-size:.9em}.note{color:#555;font-style:italic}\
-a,td,li{overflow-wrap:anywhere}\
-@media (max-width:40em){body{margin:.3em}td,th{padding:.2em}}";
+.plots{display:flex;flex-wrap:wrap;gap:0 1.5em}\
+figure{margin:1em 0;flex:1 1 30em;max-width:50em;min-width:0}\
+figure svg{display:block;width:100%;height:auto}\
+figcaption{color:#444;font-size:.9em}.note{color:#555;font-style:italic;flex:1 1 100%}\
+@media (max-width:40em){body{margin:.3em}td,th{padding:.2em}#state th{flex-basis:7em}}";
 
 /// The most step rows a run page lists (the newest; the rest are in `steps.csv`): the page
 /// stays the same size whatever the run's length.

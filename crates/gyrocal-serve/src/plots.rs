@@ -69,8 +69,9 @@ fn analysis(steps: &[StepSummary]) -> Option<gyrocal_fit::Analysis> {
     gyrocal_fit::analyze(&Dataset::from_pairs(pts), &opts).ok()
 }
 
-/// A sweep's plots: the output against rate with the fitted line, and the residuals.
-pub fn sweep(steps: &[StepSummary]) -> String {
+/// A sweep's plots: the output against rate with the fitted line, and (`residuals`) its
+/// residuals.
+pub fn sweep(steps: &[StepSummary], residuals: bool) -> String {
     let n = steps
         .iter()
         .filter(|s| s.rate_dps.is_finite() && s.volts.is_finite())
@@ -97,6 +98,9 @@ pub fn sweep(steps: &[StepSummary]) -> String {
              recorded so far.",
         )),
         Err(e) => h.push_str(&note("plot-volts", &e.to_string())),
+    }
+    if !residuals {
+        return h;
     }
     match gyrocal_report::live::residuals_svg(&a) {
         Ok(svg) => h.push_str(&figure(
@@ -137,19 +141,6 @@ pub fn drift(steps: &[StepSummary], dir: &Path) -> String {
         .filter(|(x, y)| x.is_finite() && y.is_finite())
         .collect();
     let shown = bucket_means(&pts, DRIFT_POINTS_MAX);
-    let thinned: Vec<StepSummary> = shown
-        .iter()
-        .enumerate()
-        .map(|(i, &(t, v))| StepSummary {
-            number: i + 1,
-            rate_dps: 0.0,
-            volts: v,
-            volts_std: None,
-            n: 0,
-            overloads: 0,
-            t_end_s: t,
-        })
-        .collect();
     let caption = if shown.len() < pts.len() {
         format!(
             "Mean output of the record's {} segments against the run clock (neighbouring \
@@ -160,12 +151,17 @@ pub fn drift(steps: &[StepSummary], dir: &Path) -> String {
     } else {
         "Mean output of each segment of the record against the run clock.".to_string()
     };
-    let mut h = figure(
-        "plot-volts",
-        shown.len(),
-        &crate::pages::plot(&thinned, true),
-        &caption,
-    );
+    let mut h = if shown.is_empty() {
+        note(
+            "plot-volts",
+            "The first segment's mean is drawn here once it is recorded.",
+        )
+    } else {
+        match gyrocal_report::live::segments_svg(&shown) {
+            Ok(svg) => figure("plot-volts", shown.len(), &svg, &caption),
+            Err(e) => note("plot-volts", &e.to_string()),
+        }
+    };
     h.push_str(&allan(dir));
     h
 }
@@ -211,9 +207,7 @@ pub fn temperatures(dir: &Path) -> String {
         .iter()
         .map(|r| (r.t_s, Some(r.setpoint_c), Some(r.air_c), r.product_c))
         .collect();
-    let shown = all
-        .len()
-        .min(gyrocal_report::live::TEMPERATURE_POINTS_MAX);
+    let shown = all.len().min(gyrocal_report::live::TEMPERATURE_POINTS_MAX);
     match gyrocal_report::live::temperatures_svg(&all) {
         Ok(svg) => figure(
             "plot-temps",
@@ -243,16 +237,17 @@ fn read_capped(path: &Path, max: u64) -> Option<Vec<u8>> {
     std::fs::read(path).ok()
 }
 
-/// The plots of a run of `kind` in `dir` with its recorded `steps`.
+/// The plots of a run of `kind` in `dir` with its recorded `steps`, side by side where the
+/// window is wide enough. A temperature series: its temperatures first, and the output
+/// against rate without residuals (one line through every temperature's steps says nothing
+/// of a step; the series' own page has the fits at each temperature).
 pub fn for_run(kind: &str, steps: &[StepSummary], dir: &Path) -> String {
-    let mut h = String::new();
-    if kind == "drift" {
-        h.push_str(&drift(steps, dir));
-    } else {
-        h.push_str(&sweep(steps));
-    }
-    h.push_str(&temperatures(dir));
-    h
+    let body = match kind {
+        "drift" => drift(steps, dir) + &temperatures(dir),
+        "temperature_series" => temperatures(dir) + &sweep(steps, false),
+        _ => sweep(steps, true) + &temperatures(dir),
+    };
+    format!("<div class=\"plots\">{body}</div>")
 }
 
 #[cfg(test)]
@@ -278,14 +273,13 @@ mod tests {
         let h = for_run("scale_factor", &two, tmp.path());
         assert!(h.contains("data-points=\"2\""), "{h}");
         assert!(!h.contains("plot-residuals"), "no residuals from two steps");
-        let three = [
-            step(1, 0.0, 0.01),
-            step(2, 1.0, 0.37),
-            step(3, -1.0, -0.35),
-        ];
+        let three = [step(1, 0.0, 0.01), step(2, 1.0, 0.37), step(3, -1.0, -0.35)];
         let h = for_run("scale_factor", &three, tmp.path());
         assert!(h.contains("id=\"plot-residuals\" data-points=\"3\""), "{h}");
-        assert!(h.contains("least squares: K = 0.36"), "the line's K in the legend");
+        assert!(
+            h.contains("least squares: K = 0.36"),
+            "the line's K in the legend"
+        );
     }
 
     #[test]
@@ -293,9 +287,15 @@ mod tests {
         let tmp = tempfile::tempdir().unwrap();
         let steps: Vec<StepSummary> = (1..=5000).map(|i| step(i, 0.0, 0.0088)).collect();
         let h = for_run("drift", &steps, tmp.path());
-        assert!(h.contains("data-points=\"385\""), "5000 segments in groups of 13");
+        assert!(
+            h.contains("data-points=\"385\""),
+            "5000 segments in groups of 13"
+        );
         assert!(h.matches("<circle").count() <= DRIFT_POINTS_MAX);
-        assert!(h.contains("once the record is complete"), "no allan.json yet");
+        assert!(
+            h.contains("once the record is complete"),
+            "no allan.json yet"
+        );
     }
 
     #[test]

@@ -16,9 +16,9 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a panic is a failed test
 
-mod common;
 #[path = "common/browser.rs"]
 mod browser;
+mod common;
 
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
@@ -30,9 +30,27 @@ use common::{config, gyrocal, plans};
 /// A sweep of seven rates with acceptance limits around the simulated K (0.3612 V/(°/s)):
 /// a verdict once analysed.
 fn sweep_plan(dir: &Path) -> PathBuf {
-    let mut text = plans::quick_with_rates("[0, 1, -1, 5, -5, 10, -10]");
+    sweep_plan_seeded(dir, 1)
+}
+
+/// [`sweep_plan`] with the simulated noise's `seed`.
+fn sweep_plan_seeded(dir: &Path, seed: u32) -> PathBuf {
+    let mut text = plans::config_with(
+        "quick.toml",
+        &[
+            (
+                "rates_dps = [0, 1, -1, 10, -10]",
+                "rates_dps = [0, 1, -1, 5, -5, 10, -10]",
+            ),
+            (
+                "name = \"Quick check (5 rates, 50 readings)\"",
+                "name = \"Sweep of 7 rates, 50 readings\"",
+            ),
+            ("seed = 1", &format!("seed = {seed}")),
+        ],
+    );
     text.push_str("\n[acceptance]\n[acceptance.scale_factor]\nmin = 0.355\nmax = 0.367\n");
-    let path = dir.join("sweep.toml");
+    let path = dir.join(format!("sweep-{seed}.toml"));
     std::fs::write(&path, text).unwrap();
     path
 }
@@ -41,7 +59,10 @@ fn sweep_plan(dir: &Path) -> PathBuf {
 /// as it goes), with `extra` arguments.
 fn start_run(plan: &Path, out: &Path, scale: Option<f64>, extra: &[&str]) -> Reap {
     let mut c = gyrocal();
-    c.arg("run").arg(plan).args(["--simulate", "--out"]).arg(out);
+    c.arg("run")
+        .arg(plan)
+        .args(["--simulate", "--out"])
+        .arg(out);
     if let Some(x) = scale {
         c.args(["--sim-time-scale", &x.to_string()]);
     }
@@ -64,11 +85,7 @@ fn run_to_end(plan: &Path, out: &Path, extra: &[&str]) {
         .args(extra)
         .output()
         .unwrap();
-    assert!(
-        o.status.success(),
-        "{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
 
 /// Waits for `live.json` in `dir` to record at least `steps` steps.
@@ -83,7 +100,11 @@ async fn wait_for_steps(dir: &Path, steps: u64) {
         if done >= steps {
             return;
         }
-        assert!(t0.elapsed() < PATIENCE * 2, "{}: {done} steps", dir.display());
+        assert!(
+            t0.elapsed() < PATIENCE * 2,
+            "{}: {done} steps",
+            dir.display()
+        );
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
 }
@@ -185,7 +206,10 @@ async fn the_dashboard_and_the_run_page_follow_a_paced_run_without_a_reload() {
         if points.len() >= 4 && shot_page.is_some() {
             b.screenshot(shot_page.take().as_deref()).await;
         }
-        if b.text("#status").await.is_some_and(|s| s.starts_with("complete")) {
+        if b.text("#status")
+            .await
+            .is_some_and(|s| s.starts_with("complete"))
+        {
             break;
         }
         tokio::time::sleep(Duration::from_millis(150)).await;
@@ -306,7 +330,12 @@ async fn a_run_whose_process_hangs_or_was_killed_is_marked_stale_without_a_reloa
     }
     b.client.switch_to_window(dashboard.clone()).await.unwrap();
     let t0 = Instant::now();
-    while !b.text("#stale").await.unwrap_or_default().contains("is gone") {
+    while !b
+        .text("#stale")
+        .await
+        .unwrap_or_default()
+        .contains("is gone")
+    {
         assert!(t0.elapsed() < PATIENCE, "{:?}", b.text("#live").await);
         tokio::time::sleep(Duration::from_millis(250)).await;
     }
@@ -383,10 +412,9 @@ async fn a_series_draws_its_temperatures_a_drift_record_its_allan_curve_and_a_gy
     let root = tmp.path().join("runs");
     std::fs::create_dir(&root).unwrap();
     let catalog = format!("sqlite:{}", tmp.path().join("catalog.sqlite").display());
-    let plan = sweep_plan(tmp.path());
     for i in 1..=2 {
         run_to_end(
-            &plan,
+            &sweep_plan_seeded(tmp.path(), i),
             &root.join(format!("sweep-{i}")),
             &["--dut-serial", "SIM-7", "--catalog", &catalog],
         );
@@ -422,7 +450,11 @@ async fn a_series_draws_its_temperatures_a_drift_record_its_allan_curve_and_a_gy
             vec![],
         )
         .await;
-    assert!(temps.is_array(), "no temperature plot: {:?}", b.text("#live").await);
+    assert!(
+        temps.is_array(),
+        "no temperature plot: {:?}",
+        b.text("#live").await
+    );
     assert!(temps[0].as_u64().unwrap() >= 10, "{temps}");
     assert!(temps[1].as_u64().unwrap() >= 3, "three lines: {temps}");
     assert!(temps[2].as_f64().unwrap() > 200.0, "drawn: {temps}");
@@ -445,7 +477,11 @@ async fn a_series_draws_its_temperatures_a_drift_record_its_allan_curve_and_a_gy
         .await
         .as_u64()
         .unwrap();
-    assert!(allan >= 3, "σ(τ) points: {allan}, {:?}", b.text("#live").await);
+    assert!(
+        allan >= 3,
+        "σ(τ) points: {allan}, {:?}",
+        b.text("#live").await
+    );
     b.screenshot(Browser::shot("drift-run-page").as_deref())
         .await;
 

@@ -149,7 +149,9 @@ impl Browser {
         let driver = cmd
             .spawn()
             .unwrap_or_else(|e| panic!("{}: {e}", driver_bin.display()));
-        let mut b = BrowserStart { driver: Some(driver) };
+        let mut b = BrowserStart {
+            driver: Some(driver),
+        };
         // chromedriver listens a moment after it starts
         let t0 = Instant::now();
         while TcpStream::connect(("127.0.0.1", port)).is_err() {
@@ -240,8 +242,11 @@ impl Browser {
     /// Sets a marker on the window: it survives the page's live updates and is gone after
     /// any navigation or reload ([`Browser::marker_kept`]).
     pub async fn set_marker(&self) {
-        self.js("window.__gyrocalMarker = 'not reloaded'; return true;", vec![])
-            .await;
+        self.js(
+            "window.__gyrocalMarker = 'not reloaded'; return true;",
+            vec![],
+        )
+        .await;
     }
 
     /// Whether the marker [`Browser::set_marker`] set is still there (no reload since).
