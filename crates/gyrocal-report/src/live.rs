@@ -51,7 +51,7 @@ pub fn thin<T: Copy>(rows: &[T], max: usize) -> Vec<T> {
     let every = rows.len().div_ceil(max - 1);
     let mut out: Vec<T> = rows.iter().step_by(every).copied().collect();
     if let Some(last) = rows.last()
-        && (rows.len() - 1) % every != 0
+        && !(rows.len() - 1).is_multiple_of(every)
     {
         out.push(*last);
     }
