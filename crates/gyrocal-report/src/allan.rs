@@ -127,7 +127,7 @@ const CURVE_SIZE: (u32, u32) = (800, 520);
 
 /// The σ(τ) plot: log axes labelled at every decade ([`LogAxis`]), the legend where it covers
 /// no point ([`Legend::place`]).
-fn curve_plot(doc: &AllanDocument) -> Result<String, ReportError> {
+pub(crate) fn curve_plot(doc: &AllanDocument) -> Result<String, ReportError> {
     draw("allan.svg", |s| {
         let root = SVGBackend::with_string(s, CURVE_SIZE).into_drawing_area();
         root.fill(&WHITE)?;

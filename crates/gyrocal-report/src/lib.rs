@@ -41,6 +41,7 @@ pub mod history;
 mod html;
 mod input;
 mod kinds;
+pub mod live;
 pub mod page;
 mod plots;
 pub mod series_page;

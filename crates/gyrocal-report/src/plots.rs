@@ -8,6 +8,7 @@ use std::error::Error;
 
 pub(crate) mod axis;
 pub(crate) mod legend;
+pub(crate) mod live;
 pub(crate) mod series;
 
 use gyrocal_fit::{Analysis, ErrorSurface, Fit, Method, Model};

@@ -39,6 +39,7 @@
 pub mod bus;
 pub mod limits;
 pub mod pages;
+pub mod plots;
 pub mod runs;
 
 pub use limits::{HEADER_TIMEOUT, IDLE_TIMEOUT, MAX_CONNECTIONS, MAX_HEADER_BYTES};
@@ -142,6 +143,8 @@ pub struct ServeConfig {
     pub catalog: Option<gyrocal_catalog::Catalog>,
     /// The catalog's URL: pages and answers show it redacted only (never its password).
     pub catalog_url: Option<gyrocal_catalog::CatalogUrl>,
+    /// A running run is stale once its live state is this old; `None`: [`runs::STALE_AFTER`].
+    pub stale_after: Option<Duration>,
 }
 
 struct AppState {
@@ -399,7 +402,9 @@ async fn live_js() -> Response {
 /// Every run: the roots' (read off the runtime's workers), then the catalog's others.
 async fn all_runs(st: &Shared) -> Vec<runs::RunView> {
     let roots = st.cfg.roots.clone();
-    let local = tokio::task::spawn_blocking(move || runs::all(&roots, SystemTime::now()))
+    let stale = st.cfg.stale_after.unwrap_or(runs::STALE_AFTER);
+    let local =
+        tokio::task::spawn_blocking(move || runs::all_with(&roots, SystemTime::now(), stale))
         .await
         .unwrap_or_default();
     runs::merge(local, &st.live.rows(), SystemTime::now())
@@ -428,9 +433,10 @@ async fn dashboard_part(State(st): State<Shared>) -> Html<String> {
 /// The run `name` under root `root`, when it is one (see [`runs::run_dir`]).
 async fn detail(st: &Shared, root: usize, name: String) -> Option<(runs::RunDetail, PathBuf)> {
     let root_dir = st.cfg.roots.get(root)?.clone();
+    let stale = st.cfg.stale_after.unwrap_or(runs::STALE_AFTER);
     tokio::task::spawn_blocking(move || {
         let dir = run_dir(&root_dir, &name)?;
-        let d = runs::view(RunKey::local(root, name), &dir, SystemTime::now())?;
+        let d = runs::view_with(RunKey::local(root, name), &dir, SystemTime::now(), stale)?;
         Some((d, dir))
     })
     .await
@@ -443,7 +449,7 @@ async fn run_page(
     UrlPath((root, name)): UrlPath<(usize, String)>,
 ) -> Response {
     match detail(&st, root, name).await {
-        Some((d, _)) => Html(pages::run_page(&d)).into_response(),
+        Some((d, dir)) => rendered(move || pages::run_page(&d, Some(&dir))).await,
         None => not_found("no such run"),
     }
 }
@@ -453,7 +459,7 @@ async fn run_part(
     UrlPath((root, name)): UrlPath<(usize, String)>,
 ) -> Response {
     match detail(&st, root, name).await {
-        Some((d, _)) => Html(pages::run_part(&d)).into_response(),
+        Some((d, dir)) => rendered(move || pages::run_part(&d, Some(&dir))).await,
         None => not_found("no such run"),
     }
 }
@@ -488,7 +494,7 @@ async fn live_page(
     UrlPath((host, name)): UrlPath<(String, String)>,
 ) -> Response {
     match live_detail(&st, host, name).await {
-        Some(d) => Html(pages::run_page(&d)).into_response(),
+        Some(d) => rendered(move || pages::run_page(&d, None)).await,
         None => not_found("no such run"),
     }
 }
@@ -498,7 +504,7 @@ async fn live_part(
     UrlPath((host, name)): UrlPath<(String, String)>,
 ) -> Response {
     match live_detail(&st, host, name).await {
-        Some(d) => Html(pages::run_part(&d)).into_response(),
+        Some(d) => rendered(move || pages::run_part(&d, None)).await,
         None => not_found("no such run"),
     }
 }
@@ -512,6 +518,18 @@ async fn api_live(
         None => (
             StatusCode::NOT_FOUND,
             axum::Json(serde_json::json!({"error": "no such run"})),
+        )
+            .into_response(),
+    }
+}
+
+/// A page drawn off the runtime's workers (it reads `allan.json`, `temps.csv` and draws plots).
+async fn rendered(page: impl FnOnce() -> String + Send + 'static) -> Response {
+    match tokio::task::spawn_blocking(page).await {
+        Ok(html) => Html(html).into_response(),
+        Err(_) => (
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "the page could not be drawn",
         )
             .into_response(),
     }

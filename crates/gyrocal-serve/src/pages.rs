@@ -5,6 +5,7 @@
 //! in on a server-sent event), so escaping happens in one place, never in JavaScript.
 
 use std::fmt::Write as _;
+use std::path::Path;
 
 use gyrocal_run::live::StepSummary;
 
@@ -28,7 +29,8 @@ pub fn esc(s: &str) -> String {
 
 /// The script every page loads (`/live.js`): on a server-sent event (any run changed),
 /// fetch the page's live fragment again and swap it in; at most one fetch at a time, and a
-/// refresh every 30 s without events (stale runs become stale without a file changing).
+/// refresh every 10 s without events (a run becomes stale without any file changing; the
+/// fragment is bounded whatever the run's length, see [`crate::plots`], so this costs little).
 pub const LIVE_JS: &str = r#"(function () {
   var box = document.getElementById('live');
   if (!box) return;
@@ -47,16 +49,27 @@ pub const LIVE_JS: &str = r#"(function () {
   }
   var es = new EventSource('/api/events');
   es.addEventListener('run', refresh);
-  setInterval(refresh, 30000);
+  setInterval(refresh, 10000);
 })();
 "#;
 
-const STYLE: &str = "body{font-family:system-ui,sans-serif;margin:1em;max-width:70em}\
+const STYLE: &str = "body{font-family:system-ui,sans-serif;margin:1em;max-width:110em;\
+overflow-wrap:break-word}\
 table{border-collapse:collapse;width:100%}td,th{border-bottom:1px solid #ccc;padding:.3em .5em;\
 text-align:left;font-variant-numeric:tabular-nums}th{background:#eee}\
+#state{max-width:70em}#state tbody{display:grid;grid-template-columns:repeat(auto-fill,minmax(22em,1fr))}\
+#state tr{display:flex}#state th{flex:0 0 8.5em}#state td{flex:1}\
 .stale{color:#a00;font-weight:bold}.pass{color:#070}.fail{color:#a00}.marginal{color:#a60}\
 .wrap{overflow-x:auto}svg{max-width:100%;height:auto}\
-@media (max-width:40em){body{margin:.3em}td,th{padding:.2em}}";
+.plots{display:flex;flex-wrap:wrap;gap:0 1.5em}\
+figure{margin:1em 0;flex:1 1 30em;max-width:50em;min-width:0}\
+figure svg{display:block;width:100%;height:auto}\
+figcaption{color:#444;font-size:.9em}.note{color:#555;font-style:italic;flex:1 1 100%}\
+@media (max-width:40em){body{margin:.3em}td,th{padding:.2em}#state th{flex-basis:7em}}";
+
+/// The most step rows a run page lists (the newest; the rest are in `steps.csv`): the page
+/// stays the same size whatever the run's length.
+pub const STEP_ROWS_MAX: usize = 30;
 
 /// A whole page around `body`.
 pub fn page(title: &str, body: &str) -> String {
@@ -323,8 +336,9 @@ pub fn plot(steps: &[StepSummary], drift: bool) -> String {
     svg
 }
 
-/// A run page's live part: its state, the plot, the step table, its files.
-pub fn run_part(d: &RunDetail) -> String {
+/// A run page's live part: its state, the plots ([`crate::plots`], reading `dir`'s
+/// `allan.json` and `temps.csv`), the last steps, its files.
+pub fn run_part(d: &RunDetail, dir: Option<&Path>) -> String {
     let v = &d.view;
     let mut h = String::new();
     let _ = write!(
@@ -365,14 +379,24 @@ pub fn run_part(d: &RunDetail) -> String {
     if let Some(r) = &v.reason {
         let _ = write!(h, "<p>Reason: {}</p>", esc(r));
     }
-    h.push_str("<div class=\"wrap\">");
-    h.push_str(&plot(&d.step_summaries, v.plan_kind == "drift"));
-    h.push_str("</div>");
+    h.push_str(&crate::plots::for_run(&v.plan_kind, &d.step_summaries, dir));
+    let total = d.step_summaries.len();
+    let shown = &d.step_summaries[total.saturating_sub(STEP_ROWS_MAX)..];
+    h.push_str("<h2>Steps</h2>");
+    if shown.len() < total {
+        let _ = write!(
+            h,
+            "<p id=\"steps-note\">The last {} of {total} steps; every step is in \
+             <a href=\"{}/files/steps.csv\">steps.csv</a>.</p>",
+            shown.len(),
+            esc(&v.href)
+        );
+    }
     h.push_str(
-        "<h2>Steps</h2><div class=\"wrap\"><table id=\"steps\"><tr><th>Step</th><th>Rate °/s</th>\
+        "<div class=\"wrap\"><table id=\"steps\"><tr><th>Step</th><th>Rate °/s</th>\
          <th>Mean V</th><th>σ V</th><th>n</th><th>Overloads</th><th>Run clock s</th></tr>",
     );
-    for s in &d.step_summaries {
+    for s in shown {
         let _ = write!(
             h,
             "<tr class=\"steprow\"><td>{}</td><td>{:+}</td><td>{:.7}</td><td>{}</td><td>{}</td>\
@@ -411,8 +435,8 @@ pub fn run_part(d: &RunDetail) -> String {
     h
 }
 
-/// A run's page.
-pub fn run_page(d: &RunDetail) -> String {
+/// A run's page (`dir`: its run directory, for the plots).
+pub fn run_page(d: &RunDetail, dir: Option<&Path>) -> String {
     let v = &d.view;
     page(
         &format!("{} · {}", v.plan_name, v.key.name),
@@ -421,7 +445,7 @@ pub fn run_page(d: &RunDetail) -> String {
             esc(&v.plan_name),
             esc(&v.key.name),
             esc(&v.href),
-            run_part(d)
+            run_part(d, dir)
         ),
     )
 }

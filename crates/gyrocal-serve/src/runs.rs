@@ -226,8 +226,19 @@ fn age(utc: &str, now: SystemTime) -> Option<Duration> {
     now.duration_since(t).ok()
 }
 
-/// The run in `dir` (`key`), or `None` when it is not a readable run.
+/// The run in `dir` (`key`), or `None` when it is not a readable run (stale after
+/// [`STALE_AFTER`]).
 pub fn view(key: RunKey, dir: &Path, now: SystemTime) -> Option<RunDetail> {
+    view_with(key, dir, now, STALE_AFTER)
+}
+
+/// [`view`], a running run stale once its live state is older than `stale_after`.
+pub fn view_with(
+    key: RunKey,
+    dir: &Path,
+    now: SystemTime,
+    stale_after: Duration,
+) -> Option<RunDetail> {
     let live: Option<LiveState> =
         read_capped(&dir.join(LIVE_JSON)).and_then(|b| serde_json::from_slice(&b).ok());
     let manifest = read_json(&dir.join("manifest.json"));
@@ -299,7 +310,7 @@ pub fn view(key: RunKey, dir: &Path, now: SystemTime) -> Option<RunDetail> {
             if writer_gone(l.pid, &l.hostname) {
                 v.stale = true;
                 v.stale_reason = Some(format!("its process ({} on {}) is gone", l.pid, l.hostname));
-            } else if age(&l.updated_utc, now).is_some_and(|a| a > STALE_AFTER) {
+            } else if age(&l.updated_utc, now).is_some_and(|a| a > stale_after) {
                 v.stale = true;
                 v.stale_reason = Some(format!("no update since {}", l.updated_utc));
             }
@@ -394,12 +405,17 @@ pub fn list_files(dir: &Path) -> Vec<String> {
     out
 }
 
-/// Every run under every root.
+/// Every run under every root (stale after [`STALE_AFTER`]).
 pub fn all(roots: &[PathBuf], now: SystemTime) -> Vec<RunView> {
+    all_with(roots, now, STALE_AFTER)
+}
+
+/// [`all`], a running run stale once its live state is older than `stale_after`.
+pub fn all_with(roots: &[PathBuf], now: SystemTime, stale_after: Duration) -> Vec<RunView> {
     let mut out = Vec::new();
     for (i, root) in roots.iter().enumerate() {
         for (name, dir) in list_dirs(root) {
-            if let Some(d) = view(RunKey::local(i, name), &dir, now) {
+            if let Some(d) = view_with(RunKey::local(i, name), &dir, now, stale_after) {
                 out.push(d.view);
             }
         }

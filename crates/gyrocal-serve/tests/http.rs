@@ -237,11 +237,15 @@ async fn a_run_page_has_its_steps_its_plot_with_the_fit_line_and_its_report() {
     let (code, html) = get(&app, "/run/0/paper-running").await;
     assert_eq!(code, StatusCode::OK);
     assert_eq!(html.matches("class=\"steprow\"").count(), 7);
-    assert_eq!(html.matches("class=\"pt\"").count(), 7);
     assert!(
-        html.contains("class=\"fit\""),
+        html.contains("id=\"plot-volts\" data-points=\"7\""),
+        "{html}"
+    );
+    assert!(
+        html.contains("least squares: K = "),
         "a fit line through 7 points"
     );
+    assert!(html.contains("id=\"plot-residuals\" data-points=\"7\""));
     // a finished run without live.json: steps.csv's rows, and its own report
     let (_, html) = get(&app, "/run/0/paper-done").await;
     assert_eq!(html.matches("class=\"steprow\"").count(), 2, "{html}");

@@ -39,11 +39,24 @@ pub struct ServeArgs {
     /// loopback.
     #[arg(long, value_name = "TOKEN")]
     pub token: Option<String>,
+    /// A running run whose live state has not changed for this long is shown stale (its
+    /// process hung, or its host is gone: a run on this host whose process ended is stale at
+    /// once).
+    #[arg(long, value_name = "SECS", default_value_t = gyrocal_serve::runs::STALE_AFTER.as_secs_f64(), value_parser = positive_secs)]
+    pub stale_after: f64,
     /// Serve without the catalog (no gyro history pages).
     #[arg(long)]
     pub no_catalog: bool,
     #[command(flatten)]
     catalog: CatalogOpt,
+}
+
+/// `--stale-after`: a finite number of seconds > 0.
+fn positive_secs(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 && v < 1e9 => Ok(v),
+        _ => Err(format!("{s:?}: a number of seconds > 0 (for example 120)")),
+    }
 }
 
 /// Runs `gyrocal serve` until interrupted.
@@ -100,6 +113,7 @@ pub fn run(args: &ServeArgs) -> anyhow::Result<u8> {
         token: token.clone(),
         catalog,
         catalog_url,
+        stale_after: Some(std::time::Duration::from_secs_f64(args.stale_after)),
     };
     rt.block_on(async move {
         let listener = gyrocal_serve::bind(addr, token.as_deref()).await?;
