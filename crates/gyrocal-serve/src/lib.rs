@@ -405,8 +405,8 @@ async fn all_runs(st: &Shared) -> Vec<runs::RunView> {
     let stale = st.cfg.stale_after.unwrap_or(runs::STALE_AFTER);
     let local =
         tokio::task::spawn_blocking(move || runs::all_with(&roots, SystemTime::now(), stale))
-        .await
-        .unwrap_or_default();
+            .await
+            .unwrap_or_default();
     runs::merge(local, &st.live.rows(), SystemTime::now())
 }
 

@@ -134,6 +134,7 @@ fn start_server(
         token,
         catalog: None,
         catalog_url: None,
+        stale_after: None,
     };
     std::thread::Builder::new()
         .name("gyrocal-serve".into())
