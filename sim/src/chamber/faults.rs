@@ -15,7 +15,7 @@
 //! also fires at that time for a reader of the handle).
 //!
 //! `gyrocal sim --fault chamber:...` specs ([`crate::faults`]'s grammar) are armed here
-//! ([`arm`]), on the chamber itself.
+//! (`arm`), on the chamber itself.
 
 use crate::faults::{FaultAction, FaultSpec, Trigger};
 
