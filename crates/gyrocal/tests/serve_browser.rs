@@ -395,6 +395,13 @@ async fn at_a_phones_width_no_page_scrolls_sideways() {
         .as_f64()
         .unwrap();
     assert!(plot_w > 200.0 && plot_w <= 360.0, "{plot_w}");
+    b.js(
+        "document.getElementById('plot-volts').scrollIntoView(); return true;",
+        vec![],
+    )
+    .await;
+    b.screenshot(Browser::shot("phone-run-plots").as_deref())
+        .await;
     b.close().await;
     drop(running);
 }
