@@ -55,6 +55,14 @@ fn sweep_plan_seeded(dir: &Path, seed: u32) -> PathBuf {
     path
 }
 
+/// A temporary directory with an empty root of run directories in it (`runs`).
+fn lab() -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::tempdir().unwrap();
+    let root = tmp.path().join("runs");
+    std::fs::create_dir(&root).unwrap();
+    (tmp, root)
+}
+
 /// `gyrocal run PLAN --simulate` into `out`, paced at `scale` × real time (`None`: as fast
 /// as it goes), with `extra` arguments.
 fn start_run(plan: &Path, out: &Path, scale: Option<f64>, extra: &[&str]) -> Reap {
@@ -133,9 +141,7 @@ fn assert_grew(what: &str, seen: &[u64]) {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_dashboard_and_the_run_page_follow_a_paced_run_without_a_reload() {
-    let tmp = tempfile::tempdir().unwrap();
-    let root = tmp.path().join("runs");
-    std::fs::create_dir(&root).unwrap();
+    let (tmp, root) = lab();
     let plan = sweep_plan(tmp.path());
     let serve = Serve::start(&[&root], &[]);
     let Some(b) = Browser::start(Window::Desktop).await else {
@@ -192,16 +198,7 @@ async fn the_dashboard_and_the_run_page_follow_a_paced_run_without_a_reload() {
         if let Some(step) = b.text("#step").await {
             note(&mut page_steps, done_of(&step));
         }
-        let n = b
-            .js(
-                "var f = document.getElementById('plot-volts'); \
-                 return f ? Number(f.getAttribute('data-points')) : 0;",
-                vec![],
-            )
-            .await
-            .as_u64()
-            .unwrap_or(0);
-        note(&mut points, n);
+        note(&mut points, b.data_points("plot-volts").await.unwrap_or(0));
         note(&mut circles, b.count("#plot-volts svg circle").await);
         if points.len() >= 4 && shot_page.is_some() {
             b.screenshot(shot_page.take().as_deref()).await;
@@ -269,9 +266,7 @@ async fn a_run_whose_process_hangs_or_was_killed_is_marked_stale_without_a_reloa
     use nix::sys::signal::{Signal, kill};
     use nix::unistd::Pid;
 
-    let tmp = tempfile::tempdir().unwrap();
-    let root = tmp.path().join("runs");
-    std::fs::create_dir(&root).unwrap();
+    let (tmp, root) = lab();
     let plan = sweep_plan(tmp.path());
     let serve = Serve::start(&[&root], &["--stale-after", "3"]);
     let Some(b) = Browser::start(Window::Desktop).await else {
@@ -358,9 +353,10 @@ async fn widths(b: &Browser) -> (u64, u64) {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn at_a_phones_width_no_page_scrolls_sideways() {
-    let tmp = tempfile::tempdir().unwrap();
-    let root = tmp.path().join("runs");
-    std::fs::create_dir(&root).unwrap();
+    let Some(b) = Browser::start(Window::Phone).await else {
+        return;
+    };
+    let (tmp, root) = lab();
     let plan = sweep_plan(tmp.path());
     // a finished run with a long name and a serial, and one running (paced)
     run_to_end(
@@ -371,9 +367,6 @@ async fn at_a_phones_width_no_page_scrolls_sideways() {
     let running = start_run(&plan, &root.join("sweep-running"), Some(1.0), &[]);
     wait_for_steps(&root.join("sweep-running"), 1).await;
     let serve = Serve::start(&[&root], &[]);
-    let Some(b) = Browser::start(Window::Phone).await else {
-        return;
-    };
     for (path, shot) in [
         ("/", "phone-dashboard"),
         ("/run/0/sweep-running", "phone-run-page"),
@@ -402,15 +395,23 @@ async fn at_a_phones_width_no_page_scrolls_sideways() {
         .as_f64()
         .unwrap();
     assert!(plot_w > 200.0 && plot_w <= 360.0, "{plot_w}");
+    b.js(
+        "document.getElementById('plot-volts').scrollIntoView(); return true;",
+        vec![],
+    )
+    .await;
+    b.screenshot(Browser::shot("phone-run-plots").as_deref())
+        .await;
     b.close().await;
     drop(running);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_series_draws_its_temperatures_a_drift_record_its_allan_curve_and_a_gyro_its_runs() {
-    let tmp = tempfile::tempdir().unwrap();
-    let root = tmp.path().join("runs");
-    std::fs::create_dir(&root).unwrap();
+    let Some(b) = Browser::start(Window::Size(1280, 2000)).await else {
+        return;
+    };
+    let (tmp, root) = lab();
     let catalog = format!("sqlite:{}", tmp.path().join("catalog.sqlite").display());
     for i in 1..=2 {
         run_to_end(
@@ -436,9 +437,6 @@ async fn a_series_draws_its_temperatures_a_drift_record_its_allan_curve_and_a_gy
     run_to_end(&drift, &root.join("drift-1"), &[]);
 
     let serve = Serve::start(&[&root], &[&format!("--catalog={catalog}")]);
-    let Some(b) = Browser::start(Window::Size(1280, 2000)).await else {
-        return;
-    };
 
     b.goto(&serve.at("/run/0/series-1")).await;
     let temps = b
@@ -468,15 +466,7 @@ async fn a_series_draws_its_temperatures_a_drift_record_its_allan_curve_and_a_gy
         .await;
 
     b.goto(&serve.at("/run/0/drift-1")).await;
-    let allan = b
-        .js(
-            "var f = document.getElementById('plot-allan'); \
-             return f ? Number(f.getAttribute('data-points')) : 0;",
-            vec![],
-        )
-        .await
-        .as_u64()
-        .unwrap();
+    let allan = b.data_points("plot-allan").await.unwrap_or(0);
     assert!(
         allan >= 3,
         "σ(τ) points: {allan}, {:?}",

@@ -37,10 +37,12 @@ pub const CHROMIUM_ENV: &str = "GYROCAL_CHROMIUM";
 /// The longest wall time any wait here takes (the machine may be loaded: generous).
 pub const PATIENCE: Duration = Duration::from_secs(60);
 
-/// The first of `candidates` that is a file, or the one the environment variable `env` names.
+/// The file the environment variable `env` names (`None` when it is not one), else the first
+/// of `candidates` that is a file (a bare name: on `PATH`).
 fn find(env: &str, candidates: &[&str]) -> Option<PathBuf> {
     if let Some(p) = std::env::var_os(env) {
-        return Some(PathBuf::from(p));
+        let p = PathBuf::from(p);
+        return p.is_file().then_some(p);
     }
     let path = std::env::var_os("PATH").unwrap_or_default();
     for c in candidates {
@@ -237,6 +239,17 @@ impl Browser {
         .await
         .as_u64()
         .unwrap_or(0)
+    }
+
+    /// The `data-points` of the figure `id` (the points a plot draws), `None` without one.
+    pub async fn data_points(&self, id: &str) -> Option<u64> {
+        self.js(
+            "var f = document.getElementById(arguments[0]); \
+             return f ? Number(f.getAttribute('data-points')) : null;",
+            vec![Value::from(id)],
+        )
+        .await
+        .as_u64()
     }
 
     /// Sets a marker on the window: it survives the page's live updates and is gone after
