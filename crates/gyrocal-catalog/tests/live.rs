@@ -214,3 +214,138 @@ fn a_catalog_that_never_answers_costs_the_publisher_nothing_and_is_said_once() {
         assert_eq!(stats.published, 0);
     }
 }
+
+/// A TCP relay to the test's PostgreSQL that can be frozen (it stops passing bytes either way
+/// and keeps the connections open: a server that stops answering) and thawed.
+struct Relay {
+    port: u16,
+    frozen: std::sync::Arc<std::sync::atomic::AtomicBool>,
+}
+
+impl Relay {
+    fn to(target: String) -> Relay {
+        use std::io::{Read as _, Write as _};
+        use std::sync::atomic::Ordering;
+        let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let port = l.local_addr().unwrap().port();
+        let frozen = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let f = frozen.clone();
+        std::thread::spawn(move || {
+            for client in l.incoming() {
+                let Ok(client) = client else { continue };
+                let Ok(server) = std::net::TcpStream::connect(&target) else {
+                    continue;
+                };
+                for (mut from, mut to) in [
+                    (client.try_clone().unwrap(), server.try_clone().unwrap()),
+                    (server, client),
+                ] {
+                    let f = f.clone();
+                    std::thread::spawn(move || {
+                        from.set_read_timeout(Some(Duration::from_millis(20)))
+                            .unwrap();
+                        let mut buf = [0u8; 16384];
+                        loop {
+                            if f.load(Ordering::SeqCst) {
+                                std::thread::sleep(Duration::from_millis(20));
+                                continue;
+                            }
+                            match from.read(&mut buf) {
+                                Ok(0) => break,
+                                Ok(n) => {
+                                    if to.write_all(&buf[..n]).is_err() {
+                                        break;
+                                    }
+                                }
+                                Err(e)
+                                    if matches!(
+                                        e.kind(),
+                                        std::io::ErrorKind::WouldBlock
+                                            | std::io::ErrorKind::TimedOut
+                                    ) => {}
+                                Err(_) => break,
+                            }
+                        }
+                    });
+                }
+            }
+        });
+        Relay { port, frozen }
+    }
+
+    fn freeze(&self, on: bool) {
+        self.frozen.store(on, std::sync::atomic::Ordering::SeqCst);
+    }
+}
+
+/// PostgreSQL stops answering in the middle of a run and comes back: every hand-over stays
+/// immediate, the outage is warned once, and the bus catches up by itself with the newest
+/// state.
+#[test]
+fn a_catalog_that_stops_answering_mid_run_is_said_once_and_caught_up_with() {
+    let Some(url) = postgres_url() else { return };
+    let text = std::env::var("GYROCAL_TEST_POSTGRES_URL").unwrap();
+    // postgres://USER[:PASS]@HOST:PORT/DB: the relay in place of HOST:PORT
+    let at = text.rfind('@').unwrap() + 1;
+    let slash = at + text[at..].find('/').unwrap();
+    let relay = Relay::to(text[at..slash].to_string());
+    let relayed = CatalogUrl::parse(&format!(
+        "{}127.0.0.1:{}{}",
+        &text[..at],
+        relay.port,
+        &text[slash..]
+    ))
+    .unwrap();
+    let id = uniq("frozen-run");
+    let bus = LiveBus::spawn_with(
+        relayed,
+        LiveBusOptions {
+            connect_timeout: Duration::from_millis(500),
+            statement_timeout: Duration::from_millis(500),
+            retry: Duration::from_millis(100),
+        },
+    );
+    let wait_for = |what: &str, f: &dyn Fn() -> bool| {
+        let t = Instant::now();
+        while !f() {
+            assert!(
+                t.elapsed() < Duration::from_secs(30),
+                "{what}: {:?}",
+                bus.stats()
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+    bus.publish(row(&id, 0));
+    wait_for("the first state", &|| bus.stats().published >= 1);
+    relay.freeze(true);
+    let mut slowest = Duration::ZERO;
+    for done in 1..40 {
+        let t = Instant::now();
+        bus.publish(row(&id, done));
+        slowest = slowest.max(t.elapsed());
+        std::thread::sleep(Duration::from_millis(40));
+    }
+    assert!(
+        slowest < Duration::from_millis(50),
+        "a hand-over took {slowest:?}"
+    );
+    wait_for("the outage noticed", &|| bus.stats().failures >= 1);
+    assert_eq!(bus.stats().warnings, 1, "{:?}", bus.stats());
+    relay.freeze(false);
+    let before = bus.stats().published;
+    bus.publish(row(&id, 40));
+    wait_for("caught up", &|| bus.stats().published > before);
+    assert!(bus.close(Duration::from_secs(10)), "{:?}", bus.stats());
+    // one warning for the one outage (the catalog answered again in between)
+    assert_eq!(bus.stats().warnings, 1, "{:?}", bus.stats());
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    let rows = rt.block_on(async {
+        let c = Catalog::open(&url).await.unwrap();
+        c.live_runs(Some(&id)).await.unwrap()
+    });
+    assert_eq!(rows[0].steps_done, 40, "the newest state is in the catalog");
+}
