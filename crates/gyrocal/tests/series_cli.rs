@@ -105,6 +105,66 @@ fn a_simulated_series_recovers_the_gyros_tempcos_and_leaves_both_machines_safe()
     assert_eq!(m["chamber"]["safe_confirmed"], true, "{:#}", m["chamber"]);
 }
 
+/// The first "Done when" on the whole 25 → −20 → 60 → 25 °C series in virtual time
+/// (paced at 10000 s a second so the kill can land: the soak at −20 °C lasts hours of run
+/// clock, about a second of wall time; this pace made every paced series fail before the
+/// paced clock's jumps were bounded, see `execute::pace`): SIGKILL once temps.csv shows that soak, then `gyrocal
+/// run --simulate --resume DIR` (the simulated bench starts afresh at room temperature): the
+/// resume soaks again at −20 °C before it measures there, every step once, the run clock
+/// monotone across the sessions, and the analysis of both sessions' steps recovers the
+/// tempcos within their U, with the chamber confirmed safe and the table at rest.
+#[test]
+fn a_whole_series_killed_mid_soak_resumes_and_recovers_the_tempcos() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let mut child = gyrocal()
+        .arg("run")
+        .arg(config("series.toml"))
+        .args(["--simulate", "--sim-time-scale", "10000", "--out"])
+        .arg(&dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    wait_for_phase(&mut child, &dir, 1, "soak");
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let before = temps(&dir);
+    let (t_kill, point, phase) = before.last().unwrap().clone();
+    assert_eq!((point, phase.as_str()), (1, "soak"), "{before:?}");
+    assert_eq!(step_numbers(&dir), [1, 2, 3, 4, 5], "the sweep at 25 °C");
+
+    let RunOutput { code, doc, stderr } = run_json(&[&"--simulate", &"--resume", &dir]);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert_eq!(doc["status"], "complete", "{doc:#}");
+    assert_eq!(step_numbers(&dir), (1..=20).collect::<Vec<u32>>());
+    let after = temps(&dir);
+    for w in after.windows(2) {
+        assert!(w[1].0 >= w[0].0, "temps.csv's run clock went back: {w:?}");
+    }
+    let resumed = &after[before.len()..];
+    let soaked = resumed
+        .iter()
+        .position(|(t, p, ph)| *p == 1 && ph == "soak" && *t >= t_kill)
+        .unwrap_or_else(|| panic!("no soak at -20 °C on resume"));
+    let measured = resumed
+        .iter()
+        .position(|(_, p, ph)| *p == 1 && ph == "measure")
+        .unwrap_or_else(|| panic!("no measurement at -20 °C"));
+    assert!(soaked < measured);
+    assert_sensitivities_recovered(&dir);
+    assert!(stderr.contains(SAFE_LINE), "{stderr}");
+    assert_eq!(final_table_state(&stderr)["stopped"], true, "{stderr}");
+    let m = json(&dir, "manifest.json");
+    assert_eq!(
+        m["resumes"].as_array().unwrap().len(),
+        1,
+        "{:#}",
+        m["resumes"]
+    );
+    assert_eq!(m["chamber"]["safe_confirmed"], true, "{:#}", m["chamber"]);
+}
+
 /// A short series for real-time runs over pseudo-terminals against a simulator at 600 sim
 /// seconds a second (the gyro's case, 20 min behind the air, settles in about 2 s): 23 → 26 °C,
 /// three rates of 20 readings at each (readings 1–60 at 23 °C, 61–120 at 26 °C: three rates

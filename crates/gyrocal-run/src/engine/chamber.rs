@@ -168,7 +168,9 @@ fn chamber_error(e: ChamberError, step: Option<usize>) -> SequenceError {
 
 /// Runs `work` while reading `chamber` every `poll` (at once, then after each poll), the run
 /// clock of each reading from `clock` (seconds since `origin`, plus `offset_s`). Stops
-/// reading when `work` ends; a chamber that fails or reports an alarm ends the watch at once
+/// reading when `work` ends (a reading under way then is finished first, and counts: a
+/// request left without its reply would desynchronise the link); a chamber that fails or
+/// reports an alarm ends the watch at once
 /// (`work` is dropped: the step is not recorded) with the error in [`Watched::error`].
 pub(super) async fn watch_while<C: Chamber, F: Future>(
     chamber: &mut C,
@@ -180,10 +182,22 @@ pub(super) async fn watch_while<C: Chamber, F: Future>(
     let mut work = std::pin::pin!(work);
     let mut watched = Watched::default();
     let out = loop {
+        // a reading under way when the work ends is finished, never dropped: its request is on
+        // the wire, and the reply left behind was taken for the next request's (a series over
+        // a real Modbus RTU link: "garbled reply: 1 registers instead of 9", then register
+        // 1061's door alarm read back as 1063's over-temperature)
+        let mut read = std::pin::pin!(chamber.read());
         tokio::select! {
             biased;
-            out = &mut work => break out,
-            r = chamber.read() => {
+            out = &mut work => {
+                let r = read.await;
+                if let Some(e) = take_reading(&mut watched, r, step, &clock) {
+                    watched.error = Some(e);
+                    return (None, watched);
+                }
+                break out;
+            }
+            r = &mut read => {
                 if let Some(e) = take_reading(&mut watched, r, step, &clock) {
                     watched.error = Some(e);
                     return (None, watched);
