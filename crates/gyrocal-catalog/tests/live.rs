@@ -43,6 +43,18 @@ fn uniq(name: &str) -> String {
     format!("{name}-{}-{nanos}", std::process::id())
 }
 
+/// The rows of run `id` in the catalog at `url` (from a synchronous test).
+fn rows_of(url: &CatalogUrl, id: &str) -> Vec<LiveRow> {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let c = Catalog::open(url).await.unwrap();
+        c.live_runs(Some(id)).await.unwrap()
+    })
+}
+
 fn postgres_url() -> Option<CatalogUrl> {
     let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
         eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL test skipped");
@@ -146,14 +158,7 @@ fn the_bus_leaves_the_newest_state_in_the_catalog() {
         stats.published >= 1 && stats.published + stats.superseded >= 200,
         "{stats:?}"
     );
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    let rows = rt.block_on(async {
-        let c = Catalog::open(&url).await.unwrap();
-        c.live_runs(Some(&id)).await.unwrap()
-    });
+    let rows = rows_of(&url, &id);
     assert_eq!(rows.len(), 1);
     assert_eq!(rows[0].steps_done, 199);
 }
@@ -339,13 +344,6 @@ fn a_catalog_that_stops_answering_mid_run_is_said_once_and_caught_up_with() {
     assert!(bus.close(Duration::from_secs(10)), "{:?}", bus.stats());
     // one warning for the one outage (the catalog answered again in between)
     assert_eq!(bus.stats().warnings, 1, "{:?}", bus.stats());
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    let rows = rt.block_on(async {
-        let c = Catalog::open(&url).await.unwrap();
-        c.live_runs(Some(&id)).await.unwrap()
-    });
+    let rows = rows_of(&url, &id);
     assert_eq!(rows[0].steps_done, 40, "the newest state is in the catalog");
 }

@@ -7,7 +7,7 @@
 
 mod common;
 
-use std::io::{BufRead as _, BufReader, Read as _, Write as _};
+use std::io::{Read as _, Write as _};
 use std::net::TcpStream;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
@@ -35,31 +35,14 @@ fn serve_shows_a_paced_run_growing_and_its_event_stream_says_so() {
     let out = root.join("quick-1");
 
     // the server first, on any free port; its first line names the URL
-    let mut serve = Reap(
-        gyrocal()
-            .args(["serve", "--no-catalog", "--port", "0", "--root"])
-            .arg(&root)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    let mut line = String::new();
-    BufReader::new(serve.0.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
+    let mut view = gyrocal();
+    view.args(["serve", "--no-catalog", "--port", "0", "--root"])
+        .arg(&root);
+    let (_serve, line, port) = common::serve::start(view);
     assert!(
         line.starts_with("gyrocal serve: http://127.0.0.1:"),
         "{line}"
     );
-    let port: u16 = line
-        .trim()
-        .trim_end_matches('/')
-        .rsplit(':')
-        .next()
-        .unwrap()
-        .parse()
-        .unwrap();
 
     // a listener on the event stream before the run starts
     let mut events = TcpStream::connect(("127.0.0.1", port)).unwrap();

@@ -69,20 +69,10 @@ fn serve_on_the_catalog_shows_two_benches_runs_growing_and_ending_with_their_ver
     let names = [uniq("bench-a-run"), uniq("bench-b-run")];
 
     // the view: the catalog only, no roots (its working directory has no `runs`)
-    let mut serve = Reap(
-        gyrocal()
-            .current_dir(&empty)
-            .args(["serve", "--catalog", &url, "--port", "0"])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    let mut line = String::new();
-    BufReader::new(serve.0.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let port = port_in(&line);
+    let mut view = gyrocal();
+    view.current_dir(&empty)
+        .args(["serve", "--catalog", &url, "--port", "0"]);
+    let (_serve, _, port) = common::serve::start(view);
     let events = Events::start(port);
     // the listener is up once the view answers (it LISTENs before reading the rows)
     std::thread::sleep(Duration::from_millis(500));

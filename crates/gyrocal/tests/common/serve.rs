@@ -2,9 +2,9 @@
 //! test, plain HTTP/1.1 requests, the port of a printed URL, and an event stream read in the
 //! background.
 
-use std::io::{Read as _, Write as _};
+use std::io::{BufRead as _, BufReader, Read as _, Write as _};
 use std::net::TcpStream;
-use std::process::Child;
+use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -16,6 +16,24 @@ impl Drop for Reap {
         let _ = self.0.kill();
         let _ = self.0.wait();
     }
+}
+
+/// Starts `serve` (a `gyrocal serve` command with `--port 0`) and reads the URL it prints
+/// first: the child (ended with the test), that line, and the port.
+pub fn start(mut serve: Command) -> (Reap, String, u16) {
+    let mut child = Reap(
+        serve
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let mut line = String::new();
+    BufReader::new(child.0.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let port = port_in(&line);
+    (child, line, port)
 }
 
 /// `GET path` on `port` (HTTP/1.1, connection closed after): status line and body.
