@@ -17,7 +17,7 @@ use std::process::Stdio;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use common::serve::{Events, Reap, api_runs, get, port_in};
+use common::serve::{Events, Reap, api_runs, get, port_in, try_get};
 use common::{config, gyrocal, plans, stations};
 
 /// A name no other test (or earlier run on the same database) uses.
@@ -243,14 +243,30 @@ fn run_serve_prints_the_run_page_which_answers_during_the_run() {
     );
     let port = port_in(&page_line);
     let path = &page_line[page_line.find("/run/").unwrap()..];
-    // the page answers while the run goes on, and the run's state shows through it
+    // the page answers while the run goes on, and the run's state shows through it; the
+    // server lives in the run's process, so it may be gone between two polls once the run
+    // has ended (its last state is then read in the run directory)
     let mut statuses = Vec::new();
     loop {
         assert!(t0.elapsed() < Duration::from_secs(120), "{statuses:?}");
-        let (status, html) = get(port, path);
+        let Ok((status, html)) = try_get(port, path) else {
+            if run.0.try_wait().unwrap().is_some() {
+                let live = std::fs::read_to_string(out.join("live.json")).unwrap();
+                let doc: serde_json::Value = serde_json::from_str(&live).unwrap();
+                statuses.push(format!(
+                    "{} (live.json)",
+                    doc["status"].as_str().unwrap_or("")
+                ));
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(100));
+            continue;
+        };
         assert!(status.contains("200"), "{status}");
         assert!(html.contains("served-1"), "{html}");
-        let (_, api) = get(port, "/api/run/0/served-1");
+        let Ok((_, api)) = try_get(port, "/api/run/0/served-1") else {
+            continue;
+        };
         let doc: serde_json::Value = serde_json::from_str(&api).unwrap();
         let st = doc["status"].as_str().unwrap_or("").to_string();
         if statuses.last() != Some(&st) {
@@ -264,6 +280,10 @@ fn run_serve_prints_the_run_page_which_answers_during_the_run() {
     assert_eq!(
         statuses.first().map(String::as_str),
         Some("running"),
+        "{statuses:?}"
+    );
+    assert!(
+        statuses.last().is_some_and(|s| s.starts_with("complete")),
         "{statuses:?}"
     );
     assert!(run.0.wait().unwrap().success());
