@@ -32,6 +32,12 @@ pub fn segments_svg(points: &[(f64, f64)]) -> Result<String, ReportError> {
     crate::plots::live::segments_plot(points)
 }
 
+/// A drift record's running σ(τ) while it records, `(τ s, σ V)` (the streaming accumulator's
+/// octave points, see `gyrocal_run::live::LiveState::adev_v`).
+pub fn running_adev_svg(points: &[(f64, f64)]) -> Result<String, ReportError> {
+    crate::plots::live::running_adev_plot(points)
+}
+
 /// A drift record's σ(τ) with its confidence intervals (the Allan page's curve).
 pub fn allan_svg(doc: &AllanDocument) -> Result<String, ReportError> {
     crate::allan::curve_plot(doc)

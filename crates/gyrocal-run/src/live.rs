@@ -119,6 +119,11 @@ pub struct LiveState {
     /// A temperature series' chamber: the last reading of its soak (absent otherwise).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub chamber: Option<LiveChamber>,
+    /// A drift record's running overlapping Allan deviation, `(τ s, σ V)` at every octave τ
+    /// up to 100 s of this session's readings (the streaming accumulator's figures: a dozen
+    /// points whatever the record's length); empty otherwise.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub adev_v: Vec<(f64, f64)>,
     /// The process writing this file.
     pub pid: u32,
     /// The host it runs on.
@@ -251,6 +256,7 @@ impl LiveFile {
             reason: None,
             verdict: None,
             chamber: None,
+            adev_v: Vec::new(),
             pid: std::process::id(),
             hostname: gyrocal_files::rundir::host_name(),
             updated_utc: String::new(),
@@ -444,6 +450,7 @@ fn apply(s: &mut Shared, event: &Event) {
                 other => format!("{other:?}"),
             });
         }
+        Event::Drift { adev_curve_v, .. } => st.adev_v.clone_from(adev_curve_v),
         Event::Soak {
             target_c,
             setpoint_c,
@@ -717,6 +724,34 @@ mod tests {
     /// A series' soak shows as `soaking` with the gyro's temperature and the setpoint; the
     /// analysis's verdict reaches the last state written and the publisher (the catalog's
     /// bus), after the sinks were told the run finished.
+    #[test]
+    fn a_drift_segment_brings_the_running_allan_curve_and_an_older_reader_skips_it() {
+        let tmp = tempfile::tempdir().unwrap();
+        let mut live = LiveFile::new(tmp.path(), header());
+        let handle = live.handle();
+        assert!(handle.state().adev_v.is_empty());
+        let curve = vec![(0.0217, 3e-5), (0.0434, 2.1e-5), (0.0868, 1.5e-5)];
+        live.event(&Event::Drift {
+            segment: 2,
+            of: 10,
+            readings: 6000,
+            elapsed_s: 130.0,
+            adev_v: vec![(0.0217, 3e-5)],
+            adev_curve_v: curve.clone(),
+        })
+        .unwrap();
+        assert_eq!(handle.state().adev_v, curve);
+        // written as a member of its own, absent when empty (a sweep's file is unchanged)
+        let json = serde_json::to_value(handle.state()).unwrap();
+        assert_eq!(json["adev_v"][2][1], 1.5e-5);
+        let mut sweep = handle.state();
+        sweep.adev_v.clear();
+        let json = serde_json::to_string(&sweep).unwrap();
+        assert!(!json.contains("adev_v"), "{json}");
+        let back: LiveState = serde_json::from_str(&json).unwrap();
+        assert!(back.adev_v.is_empty());
+    }
+
     #[test]
     fn a_soak_shows_its_temperatures_and_the_last_write_carries_the_verdict() {
         let tmp = tempfile::tempdir().unwrap();

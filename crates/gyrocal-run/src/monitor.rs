@@ -174,6 +174,20 @@ impl AdevWatch {
         self.stream.len() as u64
     }
 
+    /// `(τ, σ)` at every octave τ up to [`ADEV_LONGEST_TAU_S`] with a finite deviation (σ in
+    /// the readings' unit): the running curve a live view draws, a dozen points at most
+    /// whatever the record's length.
+    pub fn curve(&self) -> Vec<(f64, f64)> {
+        let Ok(points) = self.stream.deviations() else {
+            return Vec::new();
+        };
+        points
+            .iter()
+            .filter(|p| p.deviation.is_finite() && p.tau_s.is_finite())
+            .map(|p| (p.tau_s, p.deviation))
+            .collect()
+    }
+
     /// `(τ, σ)` at the octave τ nearest each of [`ADEV_SHOWN_TAUS_S`] that has at least two
     /// terms (σ in the readings' unit); empty before there are enough readings.
     pub fn shown(&self) -> Vec<(f64, f64)> {

@@ -321,6 +321,7 @@ impl Sink for Monitors {
             readings: adev.readings(),
             elapsed_s: r.t_end,
             adev_v: adev.shown(),
+            adev_curve_v: adev.curve(),
         });
         Ok(())
     }

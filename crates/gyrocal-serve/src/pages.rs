@@ -379,7 +379,12 @@ pub fn run_part(d: &RunDetail, dir: Option<&Path>) -> String {
     if let Some(r) = &v.reason {
         let _ = write!(h, "<p>Reason: {}</p>", esc(r));
     }
-    h.push_str(&crate::plots::for_run(&v.plan_kind, &d.step_summaries, dir));
+    h.push_str(&crate::plots::for_run(
+        &v.plan_kind,
+        &d.step_summaries,
+        &d.adev_v,
+        dir,
+    ));
     let total = d.step_summaries.len();
     let shown = &d.step_summaries[total.saturating_sub(STEP_ROWS_MAX)..];
     h.push_str("<h2>Steps</h2>");

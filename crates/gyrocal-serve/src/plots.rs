@@ -132,9 +132,10 @@ pub fn bucket_means(pts: &[(f64, f64)], max: usize) -> Vec<(f64, f64)> {
         .collect()
 }
 
-/// A drift record's plots: the segments' means against the run clock and, once analysed,
-/// σ(τ) from `dir/allan.json`.
-pub fn drift(steps: &[StepSummary], dir: &Path) -> String {
+/// A drift record's plots: the segments' means against the run clock and σ(τ): from
+/// `dir/allan.json` once the record is analysed, else the running deviation of its live
+/// state (`adev_v`, the streaming accumulator's octave points).
+pub fn drift(steps: &[StepSummary], dir: Option<&Path>, adev_v: &[(f64, f64)]) -> String {
     let pts: Vec<(f64, f64)> = steps
         .iter()
         .map(|s| (s.t_end_s, s.volts))
@@ -162,17 +163,31 @@ pub fn drift(steps: &[StepSummary], dir: &Path) -> String {
             Err(e) => note("plot-volts", &e.to_string()),
         }
     };
-    h.push_str(&allan(dir));
+    h.push_str(&allan(dir, adev_v));
     h
 }
 
-/// σ(τ) from `dir/allan.json`, or a note saying when it comes.
-fn allan(dir: &Path) -> String {
-    let path = dir.join("allan.json");
-    let Some(bytes) = read_capped(&path, MAX_ALLAN_BYTES) else {
+/// σ(τ) from `dir/allan.json`, else the running deviation, else a note saying when it comes.
+fn allan(dir: Option<&Path>, adev_v: &[(f64, f64)]) -> String {
+    let bytes = dir.and_then(|d| read_capped(&d.join("allan.json"), MAX_ALLAN_BYTES));
+    let Some(bytes) = bytes else {
+        if adev_v.len() >= 2 {
+            return match gyrocal_report::live::running_adev_svg(adev_v) {
+                Ok(svg) => figure(
+                    "plot-allan",
+                    adev_v.len(),
+                    &svg,
+                    "The running overlapping Allan deviation of the readings so far (τ up to \
+                     100 s); the record's full σ(τ), with its intervals and noise terms, \
+                     replaces it once the record is complete and analysed.",
+                ),
+                Err(e) => note("plot-allan", &e.to_string()),
+            };
+        }
         return note(
             "plot-allan",
-            "σ(τ) is drawn here once the record is complete and analysed (allan.json).",
+            "σ(τ) is drawn here as the record runs (from its second octave of readings), then \
+             from allan.json once it is complete and analysed.",
         );
     };
     let doc: gyrocal_analysis::drift::AllanDocument = match serde_json::from_slice(&bytes) {
@@ -245,11 +260,15 @@ fn read_capped(path: &Path, max: u64) -> Option<Vec<u8>> {
 /// `dir` is the run directory when this server has it (a run under one of its roots); a run
 /// known only through the catalog's live rows has none, and gets the plots its step
 /// summaries alone can draw.
-pub fn for_run(kind: &str, steps: &[StepSummary], dir: Option<&Path>) -> String {
+pub fn for_run(
+    kind: &str,
+    steps: &[StepSummary],
+    adev_v: &[(f64, f64)],
+    dir: Option<&Path>,
+) -> String {
     let temps = || dir.map(temperatures).unwrap_or_default();
     let body = match (kind, dir) {
-        ("drift", Some(dir)) => drift(steps, dir) + &temps(),
-        ("drift", None) => String::new(),
+        ("drift", _) => drift(steps, dir, adev_v) + &temps(),
         ("temperature_series", _) => temps() + &sweep(steps, false),
         _ => sweep(steps, true) + &temps(),
     };
@@ -276,11 +295,11 @@ mod tests {
     fn a_sweep_gets_its_line_and_residuals_from_three_steps_on() {
         let tmp = tempfile::tempdir().unwrap();
         let two = [step(1, 0.0, 0.01), step(2, 1.0, 0.37)];
-        let h = for_run("scale_factor", &two, Some(tmp.path()));
+        let h = for_run("scale_factor", &two, &[], Some(tmp.path()));
         assert!(h.contains("data-points=\"2\""), "{h}");
         assert!(!h.contains("plot-residuals"), "no residuals from two steps");
         let three = [step(1, 0.0, 0.01), step(2, 1.0, 0.37), step(3, -1.0, -0.35)];
-        let h = for_run("scale_factor", &three, Some(tmp.path()));
+        let h = for_run("scale_factor", &three, &[], Some(tmp.path()));
         assert!(h.contains("id=\"plot-residuals\" data-points=\"3\""), "{h}");
         assert!(
             h.contains("least squares: K = 0.36"),
@@ -292,23 +311,47 @@ mod tests {
     fn a_long_drift_record_is_drawn_from_a_bounded_number_of_points() {
         let tmp = tempfile::tempdir().unwrap();
         let steps: Vec<StepSummary> = (1..=5000).map(|i| step(i, 0.0, 0.0088)).collect();
-        let h = for_run("drift", &steps, Some(tmp.path()));
+        let h = for_run("drift", &steps, &[], Some(tmp.path()));
         assert!(
             h.contains("data-points=\"385\""),
             "5000 segments in groups of 13"
         );
         assert!(h.matches("<circle").count() <= DRIFT_POINTS_MAX);
-        assert!(
-            h.contains("once the record is complete"),
-            "no allan.json yet"
-        );
+        assert!(h.contains("as the record runs"), "no allan.json yet");
     }
 
     #[test]
     fn a_broken_allan_json_is_a_note_not_a_panic() {
         let tmp = tempfile::tempdir().unwrap();
         std::fs::write(tmp.path().join("allan.json"), "{\"curve\": 7}").unwrap();
-        let h = for_run("drift", &[step(1, 0.0, 0.0)], Some(tmp.path()));
+        let h = for_run("drift", &[step(1, 0.0, 0.0)], &[], Some(tmp.path()));
         assert!(h.contains("allan.json: "), "{h}");
+    }
+
+    #[test]
+    fn a_running_drift_record_draws_its_running_allan_deviation_until_allan_json_comes() {
+        let tmp = tempfile::tempdir().unwrap();
+        let steps: Vec<StepSummary> = (1..=10).map(|i| step(i, 0.0, 0.0088)).collect();
+        // white noise of 30 µV at τ0 = 21.7 ms: σ falls as τ^-1/2 over the octaves
+        let adev: Vec<(f64, f64)> = (0..12)
+            .map(|k| {
+                let tau = 0.0217 * f64::from(1u32 << k);
+                (tau, 30e-6 * (0.0217 / tau).sqrt())
+            })
+            .collect();
+        let h = for_run("drift", &steps, &adev, Some(tmp.path()));
+        assert!(h.contains("Running Allan deviation"), "{h}");
+        assert!(h.contains("id=\"plot-allan\""), "{h}");
+        assert!(
+            h.contains("data-points=\"12\""),
+            "one point per octave: {h}"
+        );
+        // one point is not a curve yet
+        let h = for_run("drift", &steps, &adev[..1], Some(tmp.path()));
+        assert!(!h.contains("Running Allan deviation"));
+        assert!(h.contains("as the record runs"), "{h}");
+        // a run known only through the catalog (no run directory) draws it too
+        let h = for_run("drift", &steps, &adev, None);
+        assert!(h.contains("Running Allan deviation"), "{h}");
     }
 }

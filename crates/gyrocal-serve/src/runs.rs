@@ -129,6 +129,10 @@ pub struct RunDetail {
     pub view: RunView,
     /// Its recorded steps (the live state's, else steps.csv's).
     pub step_summaries: Vec<StepSummary>,
+    /// A drift record's running Allan deviation `(τ s, σ V)` from its live state (empty
+    /// otherwise; see [`LiveState::adev_v`]).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub adev_v: Vec<(f64, f64)>,
     /// The run directory's files (names only), for links.
     pub files: Vec<String>,
 }
@@ -286,6 +290,7 @@ pub fn view_with(
         has_report,
     };
     let mut steps = Vec::new();
+    let mut adev_v = Vec::new();
     if let Some(l) = live {
         v.plan_name = l.plan_name;
         v.plan_kind = l.plan_kind;
@@ -306,6 +311,7 @@ pub fn view_with(
         v.reason = v.reason.or(l.reason);
         v.updated_utc = Some(l.updated_utc.clone());
         steps = l.step_summaries;
+        adev_v = l.adev_v;
         if v.status == "running" {
             if writer_gone(l.pid, &l.hostname) {
                 v.stale = true;
@@ -340,6 +346,7 @@ pub fn view_with(
     Some(RunDetail {
         view: v,
         step_summaries: steps,
+        adev_v,
         files,
     })
 }
@@ -468,9 +475,12 @@ pub fn from_row(row: &gyrocal_catalog::LiveRow, now: SystemTime) -> RunDetail {
         ));
         v.phase = "stale".into();
     }
+    let (step_summaries, adev_v) =
+        live.map_or_else(Default::default, |l| (l.step_summaries, l.adev_v));
     RunDetail {
         view: v,
-        step_summaries: live.map(|l| l.step_summaries).unwrap_or_default(),
+        step_summaries,
+        adev_v,
         files: Vec::new(),
     }
 }

@@ -53,6 +53,7 @@ fn live(run_id: &str, serial: &str, plan: &str, steps_done: usize) -> LiveState 
         reason: None,
         verdict: None,
         chamber: None,
+        adev_v: Vec::new(),
         pid: std::process::id(),
         hostname: gyrocal_files::rundir::host_name(),
         updated_utc: now_utc(),

@@ -102,6 +102,9 @@ pub enum Event {
         elapsed_s: f64,
         /// `(τ, σ)`, s and V.
         adev_v: Vec<(f64, f64)>,
+        /// `(τ, σ)` at every octave τ of the running deviation (up to 100 s), s and V: the
+        /// curve a live view draws while the record runs.
+        adev_curve_v: Vec<(f64, f64)>,
     },
     /// A recovery was needed (logged in the manifest too).
     Retry(Retry),
