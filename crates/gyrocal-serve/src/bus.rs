@@ -9,6 +9,10 @@
 //! reload. A catalog that cannot be reached is said once in the log and tried again every
 //! [`RELISTEN`]; the pages meanwhile show the last rows known (marked stale once old, as a
 //! local run whose writer stopped).
+//!
+//! The server also keeps `live_runs` from growing without bound ([`prune`]): at its start and
+//! every [`PRUNE_EVERY`] it deletes the rows of runs ended 30 days ago and of `running` ones
+//! silent for 7 days (`Catalog::prune_live`), and forgets them in memory too.
 
 use std::collections::HashMap;
 use std::sync::RwLock;
@@ -20,6 +24,9 @@ use tokio::sync::broadcast;
 /// How long a `LISTEN` may take to be set up, and the wait before trying again after a
 /// failure.
 pub const RELISTEN: Duration = Duration::from_secs(2);
+
+/// How often the server prunes `live_runs` (and once at its start).
+pub const PRUNE_EVERY: Duration = Duration::from_secs(3600);
 
 /// The longest run id a notification may name (a directory's name).
 const MAX_ID: usize = 255;
@@ -69,6 +76,14 @@ impl LiveRuns {
         for r in rows {
             map.insert((r.host.clone(), r.run_id.clone()), r);
         }
+    }
+
+    /// Forgets the rows the prune as of `now` deletes ([`LiveRow::prunable`]); how many.
+    pub fn forget_prunable(&self, now: std::time::SystemTime) -> usize {
+        let mut map = self.write();
+        let before = map.len();
+        map.retain(|_, r| !r.prunable(now));
+        before - map.len()
     }
 }
 
@@ -148,5 +163,24 @@ pub async fn listen(catalog: &Catalog, live: &LiveRuns, events: &broadcast::Send
             }
         }
         tokio::time::sleep(RELISTEN).await;
+    }
+}
+
+/// Prunes `live_runs` now and every [`PRUNE_EVERY`], forever (see the module docs): the rows
+/// deleted are forgotten in `live` too. A failure is said in the log and tried again at the
+/// next hour.
+pub async fn prune(catalog: &Catalog, live: &LiveRuns) {
+    loop {
+        let now = std::time::SystemTime::now();
+        match catalog.prune_live(now).await {
+            Ok(n) => {
+                live.forget_prunable(now);
+                if n > 0 {
+                    tracing::info!("pruned {n} old rows of the catalog's live runs");
+                }
+            }
+            Err(e) => tracing::warn!("the catalog's old live runs cannot be pruned: {e}"),
+        }
+        tokio::time::sleep(PRUNE_EVERY).await;
     }
 }

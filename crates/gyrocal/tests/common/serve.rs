@@ -105,3 +105,74 @@ impl Events {
         self.0.lock().unwrap().clone()
     }
 }
+
+/// A TCP relay to the test's PostgreSQL that the test can cut (every connection through it
+/// shut down, and new ones refused, as a server restarting or a network gone) and restore.
+pub struct Relay {
+    /// `url` with the relay in place of its host and port.
+    pub url: String,
+    down: Arc<std::sync::atomic::AtomicBool>,
+    conns: Arc<Mutex<Vec<TcpStream>>>,
+}
+
+impl Relay {
+    /// A relay to the server of `url` (`postgres://USER[:PASS]@HOST:PORT/DB`).
+    pub fn to(url: &str) -> Relay {
+        use std::sync::atomic::Ordering;
+        let at = url.rfind('@').expect("a user in the URL") + 1;
+        let slash = at + url[at..].find('/').expect("a database in the URL");
+        let target = url[at..slash].to_string();
+        let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let relayed = format!(
+            "{}127.0.0.1:{}{}",
+            &url[..at],
+            l.local_addr().unwrap().port(),
+            &url[slash..]
+        );
+        let down = Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let conns = Arc::new(Mutex::new(Vec::new()));
+        let (d, c) = (down.clone(), conns.clone());
+        std::thread::spawn(move || {
+            for client in l.incoming() {
+                let Ok(client) = client else { continue };
+                if d.load(Ordering::SeqCst) {
+                    continue; // dropped: refused
+                }
+                let Ok(server) = TcpStream::connect(&target) else {
+                    continue;
+                };
+                let mut held = c.lock().unwrap();
+                held.push(client.try_clone().unwrap());
+                held.push(server.try_clone().unwrap());
+                for (mut from, mut to) in [
+                    (client.try_clone().unwrap(), server.try_clone().unwrap()),
+                    (server, client),
+                ] {
+                    std::thread::spawn(move || {
+                        let _ = std::io::copy(&mut from, &mut to);
+                        let _ = to.shutdown(std::net::Shutdown::Both);
+                    });
+                }
+            }
+        });
+        Relay {
+            url: relayed,
+            down,
+            conns,
+        }
+    }
+
+    /// Shuts every connection through the relay down and refuses new ones until
+    /// [`Relay::restore`].
+    pub fn cut(&self) {
+        self.down.store(true, std::sync::atomic::Ordering::SeqCst);
+        for s in self.conns.lock().unwrap().drain(..) {
+            let _ = s.shutdown(std::net::Shutdown::Both);
+        }
+    }
+
+    /// Passes new connections again.
+    pub fn restore(&self) {
+        self.down.store(false, std::sync::atomic::Ordering::SeqCst);
+    }
+}
