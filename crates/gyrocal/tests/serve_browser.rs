@@ -25,6 +25,7 @@ use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use browser::{Browser, PATIENCE, Reap, Serve, Window};
+use common::serve::{two_benches_and_a_view, uniq};
 use common::{config, gyrocal, plans};
 
 /// A sweep of seven rates with acceptance limits around the simulated K (0.3612 V/(°/s)):
@@ -484,15 +485,6 @@ async fn a_series_draws_its_temperatures_a_drift_record_its_allan_curve_and_a_gy
     b.close().await;
 }
 
-/// A run id no other test (or earlier run on the same database) uses.
-fn uniq(name: &str) -> String {
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .unwrap()
-        .as_nanos();
-    format!("{name}-{}-{nanos}", std::process::id())
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn two_benches_runs_on_one_postgres_catalog_show_on_a_third_processs_dashboard() {
     let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
@@ -504,14 +496,7 @@ async fn two_benches_runs_on_one_postgres_catalog_show_on_a_third_processs_dashb
     };
     let tmp = tempfile::tempdir().unwrap();
     let plan = sweep_plan(tmp.path());
-    let (root_a, root_b, view) = (
-        tmp.path().join("bench-a"),
-        tmp.path().join("bench-b"),
-        tmp.path().join("view"),
-    );
-    for d in [&root_a, &root_b, &view] {
-        std::fs::create_dir(d).unwrap();
-    }
+    let [root_a, root_b, view] = two_benches_and_a_view(tmp.path());
     // the view: the catalog only, no roots, in a directory without `runs`
     let serve = Serve::start_in(Some(&view), &[], &[&format!("--catalog={url}")]);
     b.goto(&serve.at("/")).await;

@@ -18,17 +18,8 @@ use std::process::Stdio;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use common::serve::{Events, Reap, Relay, api_runs, get, port_in};
+use common::serve::{Events, Reap, Relay, api_runs, get, port_in, two_benches_and_a_view, uniq};
 use common::{config, gyrocal, plans, stations};
-
-/// A name no other test (or earlier run on the same database) uses.
-fn uniq(name: &str) -> String {
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .unwrap()
-        .as_nanos();
-    format!("{name}-{}-{nanos}", std::process::id())
-}
 
 /// The quick plan with acceptance limits, so its end has a verdict.
 fn quick_with_acceptance(dir: &Path) -> std::path::PathBuf {
@@ -59,14 +50,7 @@ fn serve_on_the_catalog_shows_two_benches_runs_growing_and_ending_with_their_ver
     };
     let tmp = tempfile::tempdir().unwrap();
     let plan = quick_with_acceptance(tmp.path());
-    let (root_a, root_b, empty) = (
-        tmp.path().join("bench-a"),
-        tmp.path().join("bench-b"),
-        tmp.path().join("view"),
-    );
-    for d in [&root_a, &root_b, &empty] {
-        std::fs::create_dir(d).unwrap();
-    }
+    let [root_a, root_b, empty] = two_benches_and_a_view(tmp.path());
     let names = [uniq("bench-a-run"), uniq("bench-b-run")];
 
     // the view: the catalog only, no roots (its working directory has no `runs`)
@@ -332,10 +316,7 @@ fn a_view_whose_catalog_connection_is_cut_mid_run_listens_again_and_catches_up()
     };
     let tmp = tempfile::tempdir().unwrap();
     let plan = quick_with_acceptance(tmp.path());
-    let (root, empty) = (tmp.path().join("bench"), tmp.path().join("view"));
-    for d in [&root, &empty] {
-        std::fs::create_dir(d).unwrap();
-    }
+    let [root, _, empty] = two_benches_and_a_view(tmp.path());
     let name = uniq("cut-run");
     // the view reaches the catalog through a relay the test cuts; the run reaches it directly
     let relay = Relay::to(&url);

@@ -8,6 +8,24 @@ use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+/// A run id no other test (or earlier run on the same PostgreSQL database) uses.
+pub fn uniq(name: &str) -> String {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos();
+    format!("{name}-{}-{nanos}", std::process::id())
+}
+
+/// Two benches' roots and a view's empty working directory (no `runs`), made in `dir`.
+pub fn two_benches_and_a_view(dir: &std::path::Path) -> [std::path::PathBuf; 3] {
+    let dirs = ["bench-a", "bench-b", "view"].map(|d| dir.join(d));
+    for d in &dirs {
+        std::fs::create_dir(d).unwrap();
+    }
+    dirs
+}
+
 /// Ends a child process of this test when the test ends, however it ends.
 pub struct Reap(pub Child);
 
