@@ -431,7 +431,8 @@ fn a_view_prunes_the_catalogs_old_live_rows_at_its_start() {
         rt.block_on(catalog.publish_live(r)).unwrap();
     }
     let rows_of = |r: &LiveRow| rt.block_on(catalog.live_runs(Some(&r.run_id))).unwrap();
-    assert!(old.iter().all(|r| rows_of(r).len() == 1));
+    // no check that they are there before the view starts: another test's view (the same
+    // binary) on the same database may prune them first, which shows the binary prunes too
 
     let tmp = tempfile::tempdir().unwrap();
     let mut view = gyrocal();
