@@ -56,7 +56,13 @@ pub fn start(mut serve: Command) -> (Reap, String, u16) {
 
 /// `GET path` on `port` (HTTP/1.1, connection closed after): status line and body.
 pub fn get(port: u16, path: &str) -> (String, String) {
-    let mut s = TcpStream::connect(("127.0.0.1", port)).unwrap();
+    try_get(port, path).unwrap_or_else(|| panic!("nothing listens on port {port}"))
+}
+
+/// [`get`], or `None` when nothing listens on `port` any more (a server that ended with its
+/// run).
+pub fn try_get(port: u16, path: &str) -> Option<(String, String)> {
+    let mut s = TcpStream::connect(("127.0.0.1", port)).ok()?;
     s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
     write!(
         s,
@@ -66,10 +72,10 @@ pub fn get(port: u16, path: &str) -> (String, String) {
     let mut text = String::new();
     s.read_to_string(&mut text).unwrap();
     let (head, body) = text.split_once("\r\n\r\n").unwrap_or((&text, ""));
-    (
+    Some((
         head.lines().next().unwrap_or("").to_string(),
         body.to_string(),
-    )
+    ))
 }
 
 /// The port of the first `http://HOST:PORT` in `line`.
