@@ -67,7 +67,7 @@ pub use history::{
     Band, History, Limits, MIN_BAND_POINTS, PlanGroup, PlanKey, QUANTITIES, Quantity,
     Repeatability, Trend, TrendPoint, describe_plan, plan_key,
 };
-pub use live::{LIVE_CHANNEL, LiveRow, MAX_STATE_JSON};
+pub use live::{LIVE_CHANNEL, LIVE_KEEP_ENDED, LIVE_KEEP_SILENT, LiveRow, MAX_STATE_JSON};
 pub use record::{
     CheckRow, InstrumentRow, KIND_SCALE_FACTOR, Results, RunRecord, RunRow, StepRow, find_run_dirs,
     host_name, is_run_dir, read_run,

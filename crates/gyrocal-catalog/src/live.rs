@@ -17,6 +17,22 @@ pub const LIVE_CHANNEL: &str = "gyrocal_live";
 /// trimmed by the publisher, oldest steps first).
 pub const MAX_STATE_JSON: usize = 64 * 1024;
 
+/// How long the row of an ended run (`complete`, `aborted`, `failed`) stays in `live_runs`
+/// after its last update (see `Catalog::prune_live`): 30 days, long past the dashboard's
+/// "finished today"; the run directory and the `runs` table keep the results.
+pub const LIVE_KEEP_ENDED: std::time::Duration = std::time::Duration::from_secs(30 * 86_400);
+
+/// How long a `running` row that is no longer updated stays in `live_runs` (see
+/// `Catalog::prune_live`): 7 days. A run updates its row at every step; one silent for a
+/// week was killed or lost its host, and the view has shown it stale all that time.
+pub const LIVE_KEEP_SILENT: std::time::Duration = std::time::Duration::from_secs(7 * 86_400);
+
+/// The RFC 3339 UTC text of `keep` before `now` (the epoch when that is earlier): rows last
+/// updated before it are older than `keep`.
+pub(crate) fn cutoff(now: std::time::SystemTime, keep: std::time::Duration) -> String {
+    gyrocal_files::rfc3339_utc(now.checked_sub(keep).unwrap_or(std::time::UNIX_EPOCH))
+}
+
 /// One row of `live_runs`: a run going on (or just ended) on a host.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LiveRow {
@@ -56,4 +72,18 @@ pub struct LiveRow {
     pub updated_utc: String,
     /// The live state itself (`live.json`'s text), at most [`MAX_STATE_JSON`] bytes.
     pub state_json: String,
+}
+
+impl LiveRow {
+    /// Whether the prune of `live_runs` as of `now` deletes this row (an ended run's after
+    /// [`LIVE_KEEP_ENDED`], a silent `running` one's after [`LIVE_KEEP_SILENT`]): the same
+    /// rule as `Catalog::prune_live`, for the rows a view keeps in memory.
+    pub fn prunable(&self, now: std::time::SystemTime) -> bool {
+        let keep = if self.status == "running" {
+            LIVE_KEEP_SILENT
+        } else {
+            LIVE_KEEP_ENDED
+        };
+        self.updated_utc < cutoff(now, keep)
+    }
 }

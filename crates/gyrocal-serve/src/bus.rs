@@ -9,6 +9,10 @@
 //! reload. A catalog that cannot be reached is said once in the log and tried again every
 //! [`RELISTEN`]; the pages meanwhile show the last rows known (marked stale once old, as a
 //! local run whose writer stopped).
+//!
+//! The server also keeps `live_runs` from growing without bound ([`prune`]): at its start and
+//! every [`PRUNE_EVERY`] it deletes the rows of runs ended 30 days ago and of `running` ones
+//! silent for 7 days (`Catalog::prune_live`), and forgets them in memory too.
 
 use std::collections::HashMap;
 use std::sync::RwLock;
@@ -20,6 +24,9 @@ use tokio::sync::broadcast;
 /// How long a `LISTEN` may take to be set up, and the wait before trying again after a
 /// failure.
 pub const RELISTEN: Duration = Duration::from_secs(2);
+
+/// How often the server prunes `live_runs` (and once at its start).
+pub const PRUNE_EVERY: Duration = Duration::from_secs(3600);
 
 /// The longest run id a notification may name (a directory's name).
 const MAX_ID: usize = 255;
@@ -69,6 +76,14 @@ impl LiveRuns {
         for r in rows {
             map.insert((r.host.clone(), r.run_id.clone()), r);
         }
+    }
+
+    /// Forgets the rows the prune as of `now` deletes ([`LiveRow::prunable`]); how many.
+    pub fn forget_prunable(&self, now: std::time::SystemTime) -> usize {
+        let mut map = self.write();
+        let before = map.len();
+        map.retain(|_, r| !r.prunable(now));
+        before - map.len()
     }
 }
 
@@ -148,5 +163,116 @@ pub async fn listen(catalog: &Catalog, live: &LiveRuns, events: &broadcast::Send
             }
         }
         tokio::time::sleep(RELISTEN).await;
+    }
+}
+
+/// Prunes `live_runs` now and every [`PRUNE_EVERY`], forever (see the module docs): the rows
+/// deleted are forgotten in `live` too. A failure is said in the log and tried again at the
+/// next hour.
+pub async fn prune(catalog: &Catalog, live: &LiveRuns) {
+    prune_every(catalog, live, PRUNE_EVERY).await;
+}
+
+/// [`prune`] every `every`.
+async fn prune_every(catalog: &Catalog, live: &LiveRuns, every: Duration) {
+    loop {
+        let now = std::time::SystemTime::now();
+        match catalog.prune_live(now).await {
+            Ok(n) => {
+                live.forget_prunable(now);
+                if n > 0 {
+                    tracing::info!("pruned {n} old rows of the catalog's live runs");
+                }
+            }
+            Err(e) => tracing::warn!("the catalog's old live runs cannot be pruned: {e}"),
+        }
+        tokio::time::sleep(every).await;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)] // a panic is a failed test
+
+    use std::sync::Arc;
+    use std::time::{Instant, SystemTime};
+
+    use gyrocal_catalog::{CatalogUrl, LIVE_KEEP_ENDED, LIVE_KEEP_SILENT};
+
+    use super::*;
+
+    const DAY: Duration = Duration::from_secs(86_400);
+
+    fn row(run_id: &str, status: &str, age: Duration) -> LiveRow {
+        LiveRow {
+            run_id: run_id.into(),
+            host: "bench".into(),
+            station_id: None,
+            dut_serial: None,
+            plan_name: "quick".into(),
+            kind: "scale_factor".into(),
+            phase: "acquiring".into(),
+            step: 1,
+            steps: 5,
+            steps_done: 1,
+            eta_s: None,
+            last_reading_v: None,
+            running_mean_v: None,
+            table_state: None,
+            status: status.into(),
+            verdict: None,
+            updated_utc: gyrocal_files::rfc3339_utc(SystemTime::now() - age),
+            state_json: "{}".into(),
+        }
+    }
+
+    #[test]
+    fn the_view_forgets_the_rows_the_prune_deletes() {
+        let live = LiveRuns::default();
+        live.replace_all(vec![
+            row("ended-31d", "complete", LIVE_KEEP_ENDED + DAY),
+            row("ended-29d", "failed", LIVE_KEEP_ENDED - DAY),
+            row("silent-8d", "running", LIVE_KEEP_SILENT + DAY),
+            row("silent-6d", "running", LIVE_KEEP_SILENT - DAY),
+        ]);
+        assert_eq!(live.forget_prunable(SystemTime::now()), 2);
+        let mut left: Vec<String> = live.rows().into_iter().map(|r| r.run_id).collect();
+        left.sort();
+        assert_eq!(left, ["ended-29d", "silent-6d"]);
+    }
+
+    /// Waits (wall time, generous) until run `id` has no row in `catalog`.
+    async fn gone(catalog: &Catalog, id: &str) -> bool {
+        let t0 = Instant::now();
+        while t0.elapsed() < Duration::from_secs(30) {
+            if catalog.live_runs(Some(id)).await.unwrap().is_empty() {
+                return true;
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        false
+    }
+
+    #[tokio::test]
+    async fn the_prune_runs_at_the_start_and_again_at_each_period() {
+        let dir = tempfile::tempdir().unwrap();
+        let catalog = Catalog::open(&CatalogUrl::Sqlite(dir.path().join("c.sqlite")))
+            .await
+            .unwrap();
+        let old = row("old-at-start", "complete", LIVE_KEEP_ENDED + DAY);
+        catalog.publish_live(&old).await.unwrap();
+        let live = Arc::new(LiveRuns::default());
+        live.replace_all(vec![old.clone()]);
+        let (c, l) = (catalog.clone(), live.clone());
+        let task = tokio::spawn(async move {
+            prune_every(&c, &l, Duration::from_millis(300)).await;
+        });
+        assert!(gone(&catalog, &old.run_id).await, "not pruned at the start");
+        assert!(live.rows().is_empty(), "kept in memory: {:?}", live.rows());
+        // a row that turns up old later goes at a later period
+        let later = row("old-later", "running", LIVE_KEEP_SILENT + DAY);
+        catalog.publish_live(&later).await.unwrap();
+        assert!(gone(&catalog, &later.run_id).await, "not pruned again");
+        task.abort();
     }
 }

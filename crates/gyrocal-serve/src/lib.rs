@@ -218,8 +218,8 @@ impl App {
     }
 
     /// Listens to the catalog's notifications forever (a PostgreSQL catalog; returns at once
-    /// otherwise), keeping the runs known through it and sending one event per change (see
-    /// [`bus`]).
+    /// otherwise), keeping the runs known through it and sending one event per change, and
+    /// prunes the catalog's old live rows at the start and hourly (see [`bus`]).
     pub async fn listen(&self) {
         let Some(catalog) = self.state.cfg.catalog.clone() else {
             return;
@@ -227,7 +227,10 @@ impl App {
         if !catalog.carries_live() {
             return;
         }
-        bus::listen(&catalog, &self.state.live, &self.state.events).await;
+        tokio::join!(
+            bus::listen(&catalog, &self.state.live, &self.state.events),
+            bus::prune(&catalog, &self.state.live),
+        );
     }
 
     /// Serves on `listener` (and polls the roots, and listens to the catalog) until the

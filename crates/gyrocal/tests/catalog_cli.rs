@@ -345,71 +345,16 @@ fn four_gyrocal_processes_index_one_postgres_catalog() {
     concurrent_runs(&tmp.path().join("data"), tmp.path(), &url, &serials);
 }
 
-/// A TCP forwarder standing for the catalog server's network path: `kill` cuts every
-/// connection and stops listening, as a stopped server would.
-struct Proxy {
-    port: u16,
-    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
-    conns: std::sync::Arc<std::sync::Mutex<Vec<std::net::TcpStream>>>,
-}
-
-impl Proxy {
-    fn to(target: String) -> Proxy {
-        use std::sync::atomic::Ordering;
-        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-        listener.set_nonblocking(true).unwrap();
-        let port = listener.local_addr().unwrap().port();
-        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-        let conns = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
-        let (s, c) = (stop.clone(), conns.clone());
-        std::thread::spawn(move || {
-            while !s.load(Ordering::SeqCst) {
-                match listener.accept() {
-                    Ok((client, _)) => {
-                        client.set_nonblocking(false).unwrap();
-                        let Ok(server) = std::net::TcpStream::connect(&target) else {
-                            continue;
-                        };
-                        c.lock().unwrap().push(client.try_clone().unwrap());
-                        c.lock().unwrap().push(server.try_clone().unwrap());
-                        for (mut from, mut to) in [
-                            (client.try_clone().unwrap(), server.try_clone().unwrap()),
-                            (server, client),
-                        ] {
-                            std::thread::spawn(move || {
-                                let _ = std::io::copy(&mut from, &mut to);
-                                let _ = to.shutdown(std::net::Shutdown::Both);
-                            });
-                        }
-                    }
-                    Err(_) => std::thread::sleep(std::time::Duration::from_millis(5)),
-                }
-            }
-            // dropping the listener: new connections are refused
-        });
-        Proxy { port, stop, conns }
-    }
-
-    fn kill(&self) {
-        self.stop.store(true, std::sync::atomic::Ordering::SeqCst);
-        for c in self.conns.lock().unwrap().drain(..) {
-            let _ = c.shutdown(std::net::Shutdown::Both);
-        }
-        std::thread::sleep(std::time::Duration::from_millis(50));
-    }
-}
-
 #[test]
 fn a_catalog_killed_during_a_run_lets_it_complete_and_an_import_catches_up() {
     let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
         eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL test skipped");
         return;
     };
-    // postgres://user@HOST:PORT/db -> the same through the proxy
-    let (head, rest) = url.split_once('@').unwrap();
-    let (hostport, db) = rest.split_once('/').unwrap();
-    let proxy = Proxy::to(hostport.to_string());
-    let via = format!("{head}@127.0.0.1:{}/{db}", proxy.port);
+    // the catalog server's network path: a relay that cuts every connection, as a stopped
+    // server would
+    let proxy = common::serve::Relay::to(&url);
+    let via = proxy.url.clone();
     let tmp = tempfile::tempdir().unwrap();
     let data = tmp.path().join("data");
     let serial = format!("KILL-{}", std::process::id());
@@ -443,7 +388,8 @@ fn a_catalog_killed_during_a_run_lets_it_complete_and_an_import_catches_up() {
         std::thread::sleep(std::time::Duration::from_millis(50));
     };
     assert_eq!(seen_running, "running");
-    proxy.kill();
+    proxy.cut();
+    std::thread::sleep(std::time::Duration::from_millis(50));
     let out = child.wait_with_output().unwrap();
     let doc = json(&out);
     assert_eq!(

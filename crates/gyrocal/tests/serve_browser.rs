@@ -25,6 +25,7 @@ use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use browser::{Browser, PATIENCE, Reap, Serve, Window};
+use common::serve::{two_benches_and_a_view, uniq};
 use common::{config, gyrocal, plans};
 
 /// A sweep of seven rates with acceptance limits around the simulated K (0.3612 V/(°/s)):
@@ -481,5 +482,110 @@ async fn a_series_draws_its_temperatures_a_drift_record_its_allan_curve_and_a_gy
     let rows = b.count("table tr").await;
     assert!(rows >= 3, "two runs listed: {rows} rows in\n{body}");
     b.screenshot(Browser::shot("gyro-page").as_deref()).await;
+    b.close().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn two_benches_runs_on_one_postgres_catalog_show_on_a_third_processs_dashboard() {
+    let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
+        eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL browser test skipped");
+        return;
+    };
+    let Some(b) = Browser::start(Window::Desktop).await else {
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = sweep_plan(tmp.path());
+    let [root_a, root_b, view] = two_benches_and_a_view(tmp.path());
+    // the view: the catalog only, no roots, in a directory without `runs`
+    let serve = Serve::start_in(Some(&view), &[], &[&format!("--catalog={url}")]);
+    b.goto(&serve.at("/")).await;
+    b.set_marker().await;
+
+    let names = [uniq("bench-a-sweep"), uniq("bench-b-sweep")];
+    let mut runs: Vec<Reap> = [(&root_a, &names[0], "SIM-A"), (&root_b, &names[1], "SIM-B")]
+        .into_iter()
+        .map(|(root, name, serial)| {
+            start_run(
+                &plan,
+                &root.join(name),
+                Some(1.0),
+                &["--catalog", &url, "--dut-serial", serial],
+            )
+        })
+        .collect();
+
+    // both grow on the open dashboard, then both are finished with a verdict
+    let mut steps: [Vec<u64>; 2] = [Vec::new(), Vec::new()];
+    let mut shot = Browser::shot("dashboard-two-benches");
+    let t0 = Instant::now();
+    loop {
+        let mut finished = 0;
+        for (i, name) in names.iter().enumerate() {
+            let running = format!("#running tr.run[data-run='{name}'] td.step");
+            if let Some(step) = b.text(&running).await {
+                note(&mut steps[i], done_of(&step));
+            }
+            let ended = b
+                .text(&format!("#finished tr.run[data-run='{name}']"))
+                .await
+                .unwrap_or_default();
+            if ended.contains("PASS") || ended.contains("pass") {
+                finished += 1;
+            }
+        }
+        if steps.iter().all(|s| s.len() >= 2) && shot.is_some() {
+            b.screenshot(shot.take().as_deref()).await;
+        }
+        if finished == 2 {
+            break;
+        }
+        assert!(
+            t0.elapsed() < PATIENCE * 4,
+            "steps seen {steps:?}; the dashboard: {:?}",
+            b.text("#live").await
+        );
+        tokio::time::sleep(Duration::from_millis(150)).await;
+    }
+    for r in &mut runs {
+        assert!(r.0.wait().unwrap().success());
+    }
+    for (name, seen) in names.iter().zip(&steps) {
+        assert_grew(&format!("{name}'s step count on the dashboard"), seen);
+        let row = b
+            .text(&format!("#finished tr.run[data-run='{name}']"))
+            .await
+            .unwrap();
+        assert!(row.contains("7/7"), "{row}");
+        // no longer running (other benches' runs on the same catalog may be)
+        let running = format!("#running tr.run[data-run='{name}']");
+        assert_eq!(b.count(&running).await, 0, "{:?}", b.text("#live").await);
+    }
+    assert!(b.marker_kept().await, "the dashboard was reloaded");
+
+    // the run page of one, through its link on the dashboard: a run known through the catalog
+    let href = b
+        .js(
+            "return document.querySelector(arguments[0]).getAttribute('href');",
+            vec![serde_json::json!(format!(
+                "#finished tr.run[data-run='{}'] a[href^='/live/']",
+                names[0]
+            ))],
+        )
+        .await;
+    let href = href
+        .as_str()
+        .unwrap_or_else(|| panic!("no /live/ link: {href}"));
+    assert!(href.ends_with(&format!("/{}", names[0])), "{href}");
+    b.goto(&serve.at(href)).await;
+    let body = b.text("body").await.unwrap_or_default();
+    assert!(body.contains(&names[0]), "{body}");
+    assert_eq!(b.count("#steps tr.steprow").await, 7, "{body}");
+    assert!(
+        b.text("#step").await.unwrap_or_default().contains("7/7"),
+        "{body}"
+    );
+    b.screenshot(Browser::shot("live-run-page").as_deref())
+        .await;
     b.close().await;
 }

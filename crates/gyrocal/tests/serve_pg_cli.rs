@@ -4,7 +4,8 @@
 //! GYROCAL_TEST_POSTGRES_URL is set); a run against a catalog that never answers finishes in
 //! the same virtual time with every step, the failure said once; `gyrocal run --serve` prints
 //! its page and the page answers during the run; the station's `serve` key prints the lab
-//! view's page of the run.
+//! view's page of the run; a view whose connection to the catalog is cut mid-run listens
+//! again and catches up; a view prunes the catalog's old live rows at its start.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a panic is a failed test
 
@@ -17,17 +18,10 @@ use std::process::Stdio;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use common::serve::{Events, Reap, api_runs, get, port_in, try_get};
+use common::serve::{
+    Events, Reap, Relay, api_runs, get, port_in, try_get, two_benches_and_a_view, uniq,
+};
 use common::{config, gyrocal, plans, stations};
-
-/// A name no other test (or earlier run on the same database) uses.
-fn uniq(name: &str) -> String {
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .unwrap()
-        .as_nanos();
-    format!("{name}-{}-{nanos}", std::process::id())
-}
 
 /// The quick plan with acceptance limits, so its end has a verdict.
 fn quick_with_acceptance(dir: &Path) -> std::path::PathBuf {
@@ -58,14 +52,7 @@ fn serve_on_the_catalog_shows_two_benches_runs_growing_and_ending_with_their_ver
     };
     let tmp = tempfile::tempdir().unwrap();
     let plan = quick_with_acceptance(tmp.path());
-    let (root_a, root_b, empty) = (
-        tmp.path().join("bench-a"),
-        tmp.path().join("bench-b"),
-        tmp.path().join("view"),
-    );
-    for d in [&root_a, &root_b, &empty] {
-        std::fs::create_dir(d).unwrap();
-    }
+    let [root_a, root_b, empty] = two_benches_and_a_view(tmp.path());
     let names = [uniq("bench-a-run"), uniq("bench-b-run")];
 
     // the view: the catalog only, no roots (its working directory has no `runs`)
@@ -243,29 +230,18 @@ fn run_serve_prints_the_run_page_which_answers_during_the_run() {
     );
     let port = port_in(&page_line);
     let path = &page_line[page_line.find("/run/").unwrap()..];
-    // the page answers while the run goes on, and the run's state shows through it; the
-    // server lives in the run's process, so it may be gone between two polls once the run
-    // has ended (its last state is then read in the run directory)
+    // the page answers while the run goes on, and the run's state shows through it
     let mut statuses = Vec::new();
     loop {
         assert!(t0.elapsed() < Duration::from_secs(120), "{statuses:?}");
-        let Ok((status, html)) = try_get(port, path) else {
-            if run.0.try_wait().unwrap().is_some() {
-                let live = std::fs::read_to_string(out.join("live.json")).unwrap();
-                let doc: serde_json::Value = serde_json::from_str(&live).unwrap();
-                statuses.push(format!(
-                    "{} (live.json)",
-                    doc["status"].as_str().unwrap_or("")
-                ));
-                break;
-            }
-            std::thread::sleep(Duration::from_millis(100));
-            continue;
+        // the server ends with the run: under load the run may end between two looks
+        let Some((status, html)) = try_get(port, path) else {
+            break;
         };
         assert!(status.contains("200"), "{status}");
         assert!(html.contains("served-1"), "{html}");
-        let Ok((_, api)) = try_get(port, "/api/run/0/served-1") else {
-            continue;
+        let Some((_, api)) = try_get(port, "/api/run/0/served-1") else {
+            break;
         };
         let doc: serde_json::Value = serde_json::from_str(&api).unwrap();
         let st = doc["status"].as_str().unwrap_or("").to_string();
@@ -282,11 +258,8 @@ fn run_serve_prints_the_run_page_which_answers_during_the_run() {
         Some("running"),
         "{statuses:?}"
     );
-    assert!(
-        statuses.last().is_some_and(|s| s.starts_with("complete")),
-        "{statuses:?}"
-    );
     assert!(run.0.wait().unwrap().success());
+    assert_eq!(common::manifest(&out)["status"], "complete");
 }
 
 #[test]
@@ -334,4 +307,167 @@ fn run_serve_with_a_bad_address_is_refused_before_anything_starts() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("--serve") && err.contains("token"), "{err}");
     assert!(!out.exists());
+}
+
+/// The run named `name` in `/api/runs`, if shown.
+fn run_named(port: u16, name: &str) -> Option<serde_json::Value> {
+    api_runs(port)
+        .into_iter()
+        .find(|r| r["key"]["name"].as_str() == Some(name))
+}
+
+#[test]
+fn a_view_whose_catalog_connection_is_cut_mid_run_listens_again_and_catches_up() {
+    let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
+        eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL test skipped");
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = quick_with_acceptance(tmp.path());
+    let [root, _, empty] = two_benches_and_a_view(tmp.path());
+    let name = uniq("cut-run");
+    // the view reaches the catalog through a relay the test cuts; the run reaches it directly
+    let relay = Relay::to(&url);
+    let mut view = gyrocal();
+    view.current_dir(&empty)
+        .args(["serve", "--catalog", &relay.url, "--port", "0"]);
+    let (_serve, _, port) = common::serve::start(view);
+    let events = Events::start(port);
+    std::thread::sleep(Duration::from_millis(500));
+    let mut run = Reap(
+        gyrocal()
+            .arg("run")
+            .arg(&plan)
+            .args(["--simulate", "--sim-time-scale", "2", "--catalog", &url])
+            .arg("--out")
+            .arg(root.join(&name))
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    // the view follows the run: a step recorded
+    let t0 = Instant::now();
+    let before = loop {
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "{:?}",
+            run_named(port, &name)
+        );
+        if let Some(r) = run_named(port, &name).filter(|r| r["steps_done"].as_u64() >= Some(1)) {
+            break r;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert_eq!(before["status"], "running", "{before}");
+    // the connection is lost (every socket shut, new ones refused) for 4 s: longer than the
+    // view's wait before it tries again, while the run goes on
+    relay.cut();
+    let heard_at_cut = events.text().len();
+    std::thread::sleep(Duration::from_secs(4));
+    relay.restore();
+    // the view listens again by itself: the run's newest state, its end and verdict, reach it
+    let t0 = Instant::now();
+    let end = loop {
+        assert!(
+            t0.elapsed() < Duration::from_secs(180),
+            "before the cut {before}, now {:?}",
+            run_named(port, &name)
+        );
+        if let Some(r) =
+            run_named(port, &name).filter(|r| r["status"] == "complete" && !r["verdict"].is_null())
+        {
+            break r;
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    assert_eq!(
+        (end["steps"].as_u64(), end["steps_done"].as_u64()),
+        (Some(5), Some(5)),
+        "{end}"
+    );
+    assert!(run.0.wait().unwrap().success());
+    // after the cut the pages were told to read everything again (what was missed), and
+    // the run's own updates came as events again
+    let after = events.text()[heard_at_cut..].to_string();
+    assert!(after.contains("{\"all\":true}"), "{after}");
+    assert!(after.contains(name.as_str()), "{after}");
+}
+
+#[test]
+fn a_view_prunes_the_catalogs_old_live_rows_at_its_start() {
+    use gyrocal_catalog::{Catalog, CatalogUrl, LIVE_KEEP_ENDED, LIVE_KEEP_SILENT, LiveRow};
+    let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
+        eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL test skipped");
+        return;
+    };
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    let catalog = rt
+        .block_on(Catalog::open(&CatalogUrl::parse(&url).unwrap()))
+        .unwrap();
+    let now = std::time::SystemTime::now();
+    let day = Duration::from_secs(86_400);
+    let row = |name: &str, status: &str, age: Duration| LiveRow {
+        run_id: uniq(name),
+        host: "old-bench".into(),
+        station_id: None,
+        dut_serial: Some("SIM-OLD".into()),
+        plan_name: "quick".into(),
+        kind: "scale_factor".into(),
+        phase: "done".into(),
+        step: 5,
+        steps: 5,
+        steps_done: 5,
+        eta_s: None,
+        last_reading_v: None,
+        running_mean_v: None,
+        table_state: None,
+        status: status.into(),
+        verdict: None,
+        updated_utc: gyrocal_files::rfc3339_utc(now - age),
+        state_json: "{}".into(),
+    };
+    let old = [
+        row("ended-long-ago", "complete", LIVE_KEEP_ENDED + day),
+        row("silent-for-a-week", "running", LIVE_KEEP_SILENT + day),
+    ];
+    let recent = row("ended-an-hour-ago", "complete", Duration::from_secs(3600));
+    for r in old.iter().chain([&recent]) {
+        rt.block_on(catalog.publish_live(r)).unwrap();
+    }
+    let rows_of = |r: &LiveRow| rt.block_on(catalog.live_runs(Some(&r.run_id))).unwrap();
+    // no check that they are there before the view starts: another test's view (the same
+    // binary) on the same database may prune them first, which shows the binary prunes too
+
+    let tmp = tempfile::tempdir().unwrap();
+    let mut view = gyrocal();
+    view.current_dir(tmp.path())
+        .args(["serve", "--catalog", &url, "--port", "0"]);
+    let (_serve, _, port) = common::serve::start(view);
+    let t0 = Instant::now();
+    while old.iter().any(|r| !rows_of(r).is_empty()) {
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "not pruned: {:?}",
+            old.iter().map(|r| rows_of(r).len()).collect::<Vec<_>>()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert_eq!(rows_of(&recent).len(), 1, "a recent row pruned");
+    // and the view shows the recent one, not the pruned ones
+    let t0 = Instant::now();
+    while run_named(port, &recent.run_id).is_none() {
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "{:?}",
+            api_runs(port)
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    for r in &old {
+        assert!(run_named(port, &r.run_id).is_none(), "{} shown", r.run_id);
+    }
 }

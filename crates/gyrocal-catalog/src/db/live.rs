@@ -10,7 +10,7 @@ use sqlx::postgres::PgListener;
 
 use super::{Catalog, Pool};
 use crate::error::CatalogError;
-use crate::live::{LIVE_CHANNEL, LiveRow, MAX_STATE_JSON};
+use crate::live::{LIVE_CHANNEL, LIVE_KEEP_ENDED, LIVE_KEEP_SILENT, LiveRow, MAX_STATE_JSON};
 
 const UPSERT_LIVE: &str = "INSERT INTO live_runs (run_id, host, station_id, dut_serial, \
      plan_name, kind, phase, step, steps, steps_done, eta_s, last_reading_v, running_mean_v, \
@@ -178,6 +178,31 @@ impl Catalog {
                 Ok(out)
             }
             .await
+        });
+        result.map_err(|e| self.err(&e))
+    }
+
+    /// Deletes the rows of `live_runs` that no view needs any more, as of `now`: an ended
+    /// run's row last updated more than [`LIVE_KEEP_ENDED`] ago, and a `running` row not
+    /// updated for [`LIVE_KEEP_SILENT`] (its run was killed or its host lost). Without this
+    /// the table grows by a row per run forever (`gyrocal serve` calls it at its start and
+    /// hourly; [`LiveRow::prunable`] says the same of a row in memory). Returns the number of rows
+    /// deleted.
+    pub async fn prune_live(&self, now: std::time::SystemTime) -> Result<u64, CatalogError> {
+        let (ended, silent) = (
+            crate::live::cutoff(now, LIVE_KEEP_ENDED),
+            crate::live::cutoff(now, LIVE_KEEP_SILENT),
+        );
+        let result: Result<u64, sqlx::Error> = on_pool!(self, |p| {
+            sqlx::query(
+                "DELETE FROM live_runs WHERE (status <> 'running' AND updated_utc < $1) \
+                 OR (status = 'running' AND updated_utc < $2)",
+            )
+            .bind(&ended)
+            .bind(&silent)
+            .execute(p)
+            .await
+            .map(|r| r.rows_affected())
         });
         result.map_err(|e| self.err(&e))
     }

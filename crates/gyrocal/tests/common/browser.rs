@@ -336,7 +336,16 @@ pub struct Serve {
 impl Serve {
     /// Starts it and reads the URL it prints first.
     pub fn start(roots: &[&Path], extra: &[&str]) -> Serve {
+        Serve::start_in(None, roots, extra)
+    }
+
+    /// [`Serve::start`] in the working directory `cwd` (`None`: the test's): a view with no
+    /// roots and a PostgreSQL catalog runs in a directory without `runs`.
+    pub fn start_in(cwd: Option<&Path>, roots: &[&Path], extra: &[&str]) -> Serve {
         let mut cmd = crate::common::gyrocal();
+        if let Some(dir) = cwd {
+            cmd.current_dir(dir);
+        }
         cmd.args(["serve", "--port", "0"]);
         for r in roots {
             cmd.arg("--root").arg(r);

@@ -8,6 +8,24 @@ use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+/// A run id no other test (or earlier run on the same PostgreSQL database) uses.
+pub fn uniq(name: &str) -> String {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos();
+    format!("{name}-{}-{nanos}", std::process::id())
+}
+
+/// Two benches' roots and a view's empty working directory (no `runs`), made in `dir`.
+pub fn two_benches_and_a_view(dir: &std::path::Path) -> [std::path::PathBuf; 3] {
+    let dirs = ["bench-a", "bench-b", "view"].map(|d| dir.join(d));
+    for d in &dirs {
+        std::fs::create_dir(d).unwrap();
+    }
+    dirs
+}
+
 /// Ends a child process of this test when the test ends, however it ends.
 pub struct Reap(pub Child);
 
@@ -38,21 +56,23 @@ pub fn start(mut serve: Command) -> (Reap, String, u16) {
 
 /// `GET path` on `port` (HTTP/1.1, connection closed after): status line and body.
 pub fn get(port: u16, path: &str) -> (String, String) {
-    try_get(port, path).unwrap()
+    try_get(port, path).unwrap_or_else(|| panic!("nothing listens on port {port}"))
 }
 
-/// [`get`], or the error when nothing answers (a server that has exited).
-pub fn try_get(port: u16, path: &str) -> std::io::Result<(String, String)> {
-    let mut s = TcpStream::connect(("127.0.0.1", port))?;
-    s.set_read_timeout(Some(Duration::from_secs(30)))?;
+/// [`get`], or `None` when nothing listens on `port` any more (a server that ended with its
+/// run).
+pub fn try_get(port: u16, path: &str) -> Option<(String, String)> {
+    let mut s = TcpStream::connect(("127.0.0.1", port)).ok()?;
+    s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
     write!(
         s,
         "GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n"
-    )?;
+    )
+    .unwrap();
     let mut text = String::new();
-    s.read_to_string(&mut text)?;
+    s.read_to_string(&mut text).unwrap();
     let (head, body) = text.split_once("\r\n\r\n").unwrap_or((&text, ""));
-    Ok((
+    Some((
         head.lines().next().unwrap_or("").to_string(),
         body.to_string(),
     ))
@@ -107,5 +127,76 @@ impl Events {
     /// What came so far.
     pub fn text(&self) -> String {
         self.0.lock().unwrap().clone()
+    }
+}
+
+/// A TCP relay to the test's PostgreSQL that the test can cut (every connection through it
+/// shut down, and new ones refused, as a server restarting or a network gone) and restore.
+pub struct Relay {
+    /// `url` with the relay in place of its host and port.
+    pub url: String,
+    down: Arc<std::sync::atomic::AtomicBool>,
+    conns: Arc<Mutex<Vec<TcpStream>>>,
+}
+
+impl Relay {
+    /// A relay to the server of `url` (`postgres://USER[:PASS]@HOST:PORT/DB`).
+    pub fn to(url: &str) -> Relay {
+        use std::sync::atomic::Ordering;
+        let at = url.rfind('@').expect("a user in the URL") + 1;
+        let slash = at + url[at..].find('/').expect("a database in the URL");
+        let target = url[at..slash].to_string();
+        let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let relayed = format!(
+            "{}127.0.0.1:{}{}",
+            &url[..at],
+            l.local_addr().unwrap().port(),
+            &url[slash..]
+        );
+        let down = Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let conns = Arc::new(Mutex::new(Vec::new()));
+        let (d, c) = (down.clone(), conns.clone());
+        std::thread::spawn(move || {
+            for client in l.incoming() {
+                let Ok(client) = client else { continue };
+                if d.load(Ordering::SeqCst) {
+                    continue; // dropped: refused
+                }
+                let Ok(server) = TcpStream::connect(&target) else {
+                    continue;
+                };
+                let mut held = c.lock().unwrap();
+                held.push(client.try_clone().unwrap());
+                held.push(server.try_clone().unwrap());
+                for (mut from, mut to) in [
+                    (client.try_clone().unwrap(), server.try_clone().unwrap()),
+                    (server, client),
+                ] {
+                    std::thread::spawn(move || {
+                        let _ = std::io::copy(&mut from, &mut to);
+                        let _ = to.shutdown(std::net::Shutdown::Both);
+                    });
+                }
+            }
+        });
+        Relay {
+            url: relayed,
+            down,
+            conns,
+        }
+    }
+
+    /// Shuts every connection through the relay down and refuses new ones until
+    /// [`Relay::restore`].
+    pub fn cut(&self) {
+        self.down.store(true, std::sync::atomic::Ordering::SeqCst);
+        for s in self.conns.lock().unwrap().drain(..) {
+            let _ = s.shutdown(std::net::Shutdown::Both);
+        }
+    }
+
+    /// Passes new connections again.
+    pub fn restore(&self) {
+        self.down.store(false, std::sync::atomic::Ordering::SeqCst);
     }
 }
