@@ -340,6 +340,19 @@ impl LiveFile {
     }
 }
 
+/// A state written outside the writer thread (the run's end, its verdict): handed to the
+/// publisher and written to `path`; a failed write is warned (`then` says what still holds),
+/// never an error of the run.
+fn deliver(publisher: &Mutex<Option<Publisher>>, path: &Path, state: &LiveState, then: &str) {
+    publish(publisher, state);
+    if let Err(e) = write_live(path, state) {
+        tracing::warn!(
+            "{}: cannot write the live state ({e}); {then}",
+            path.display()
+        );
+    }
+}
+
 fn publish(publisher: &Mutex<Option<Publisher>>, state: &LiveState) {
     let p = publisher
         .lock()
@@ -370,13 +383,12 @@ impl LiveHandle {
             }
             s.snapshot()
         };
-        publish(&self.publisher, &snap);
-        if let Err(e) = write_live(&self.path, &snap) {
-            tracing::warn!(
-                "{}: cannot write the live state's verdict ({e}); the manifest has it",
-                self.path.display()
-            );
-        }
+        deliver(
+            &self.publisher,
+            &self.path,
+            &snap,
+            "its verdict is in the manifest",
+        );
     }
 
     /// The state as it is now.
@@ -519,13 +531,12 @@ impl Sink for LiveFile {
             s.state.eta_s = Some(0.0);
             s.snapshot()
         };
-        publish(&self.publisher, &snap);
-        if let Err(e) = write_live(&self.path, &snap) {
-            tracing::warn!(
-                "{}: cannot write the live state ({e}); the run's own files are not affected",
-                self.path.display()
-            );
-        }
+        deliver(
+            &self.publisher,
+            &self.path,
+            &snap,
+            "the run's own files are not affected",
+        );
         Ok(())
     }
 

@@ -172,6 +172,8 @@ fn a_run_against_a_catalog_that_never_answers_finishes_the_same_and_says_it_once
     for doc in [off, silent_doc] {
         assert_eq!(doc["status"], "complete", "{doc}");
         assert_eq!(doc["steps_done"], 5, "{doc}");
+        // a catalog that never answers keeps the run's safe end: the table confirmed at rest
+        assert_eq!(doc["table"]["at_rest"], true, "{doc}");
     }
     // the run clock (virtual) is the same to the microsecond: the catalog cost it nothing
     let (a, b) = (
@@ -260,6 +262,17 @@ fn run_serve_prints_the_run_page_which_answers_during_the_run() {
     );
     assert!(run.0.wait().unwrap().success());
     assert_eq!(common::manifest(&out)["status"], "complete");
+    // the in-process view changes nothing of the run's end: the table is said to be at rest
+    // (the reader thread may still be draining the pipe: give it a moment)
+    let t1 = Instant::now();
+    let said = loop {
+        let said = lines.lock().unwrap().join("\n");
+        if said.contains("at rest") || t1.elapsed() > Duration::from_secs(10) {
+            break said;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(said.contains("at rest"), "{said}");
 }
 
 #[test]
