@@ -121,10 +121,17 @@ fn serve_on_the_catalog_shows_two_benches_runs_growing_and_ending_with_their_ver
             ["pass", "marginal", "indeterminate", "fail"].contains(&r["verdict"].as_str().unwrap()),
             "{r}"
         );
+        // when it started and ended, from the run's state in the row (no directory here)
+        let (started, end) = (
+            r["started_utc"].as_str().unwrap(),
+            r["ended_utc"].as_str().unwrap(),
+        );
+        assert!(started.ends_with('Z') && started <= end, "{r}");
         // its page, from the catalog's row
         let (status, html) = get(port, r["href"].as_str().unwrap());
         assert!(status.contains("200"), "{status}");
         assert!(html.contains(name.as_str()), "{html}");
+        assert!(html.contains(started), "the start not on the page: {html}");
     }
     // the event stream carried each run's updates (a notification per update)
     let text = events.text();
