@@ -46,6 +46,18 @@ fn with_u(v: Option<f64>, u: Option<f64>) -> String {
     }
 }
 
+/// A table cell for when a run started: `YYYY-MM-DD HH:MM` (UTC, the column says so), read
+/// whole, with the full stamp as its title; a stamp that does not read is shown as it is.
+fn when_cell(utc: &str) -> String {
+    let short = gyrocal_files::parse_rfc3339_utc(utc)
+        .and_then(|_| Some(format!("{} {}", utc.get(..10)?, utc.get(11..16)?)));
+    format!(
+        "<td class=\"when\" title=\"{}\">{}</td>",
+        esc(utc),
+        esc(short.as_deref().unwrap_or(utc))
+    )
+}
+
 /// The history page of `h` (`gyrocal history SERIAL -o FILE.html`).
 pub fn render(h: &History) -> String {
     let mut out = String::new();
@@ -110,19 +122,29 @@ pub fn render(h: &History) -> String {
             ),
             _ => String::new(),
         };
-        let _ = write!(
-            out,
-            "<h2>Repeatability from calibration to calibration</h2><ul>\
-             <li>scale factor: mean {} V/(°/s), {} ppm (std/mean over {} calibrations{})</li>\
-             <li>bias: mean {} °/h, std {} °/h</li></ul>",
-            num(r.scale_factor_mean),
-            r.scale_factor_ppm
-                .map_or("—".to_string(), |v| format!("{v:.2}")),
-            r.n,
-            of_plan,
-            num(r.bias_dph_mean),
-            num(r.bias_dph),
-        );
+        if r.n < 2 {
+            // as `gyrocal history` says it: a spread needs two calibrations
+            let _ = write!(
+                out,
+                "<h2>Repeatability from calibration to calibration</h2>\
+                 <p class=\"note\">Needs two calibrations or more{of_plan} ({} so far).</p>",
+                r.n
+            );
+        } else {
+            let _ = write!(
+                out,
+                "<h2>Repeatability from calibration to calibration</h2><ul>\
+                 <li>scale factor: mean {} V/(°/s), {} ppm (std/mean over {} calibrations{})</li>\
+                 <li>bias: mean {} °/h, std {} °/h</li></ul>",
+                num(r.scale_factor_mean),
+                r.scale_factor_ppm
+                    .map_or("—".to_string(), |v| format!("{v:.2}")),
+                r.n,
+                of_plan,
+                num(r.bias_dph_mean),
+                num(r.bias_dph),
+            );
+        }
         out.push_str(
             "<h2>Calibrations</h2><table class=\"history\"><tr><th>started (UTC)</th><th>run</th><th>station</th>\
              <th>plan</th><th>K ± U (V/(°/s))</th><th>bias ± U (°/h)</th><th>nonlinearity (ppm)</th>\
@@ -132,9 +154,9 @@ pub fn render(h: &History) -> String {
             let res = c.results.clone().unwrap_or_default();
             let _ = write!(
                 out,
-                "<tr><td>{}</td><td title=\"{}\">{}</td><td>{}</td>\
-                 <td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td>{}</td><td>{}</td></tr>",
-                esc(&c.run.started_utc),
+                "<tr>{}<td title=\"{}\">{}</td><td>{}</td>\
+                 <td class=\"plan\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td>{}</td><td>{}</td></tr>",
+                when_cell(&c.run.started_utc),
                 esc(&c.run.directory),
                 esc(&c.run.id.chars().take(12).collect::<String>()),
                 esc(c.run.station_id.as_deref().unwrap_or("")),
@@ -159,9 +181,9 @@ pub fn render(h: &History) -> String {
             let res = c.results.clone().unwrap_or_default();
             let _ = write!(
                 out,
-                "<tr><td>{}</td><td title=\"{}\">{}</td><td>{}</td>\
-                 <td>{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td>{}</td></tr>",
-                esc(&c.run.started_utc),
+                "<tr>{}<td title=\"{}\">{}</td><td>{}</td>\
+                 <td class=\"plan\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td>{}</td></tr>",
+                when_cell(&c.run.started_utc),
                 esc(&c.run.directory),
                 esc(&c.run.id.chars().take(12).collect::<String>()),
                 esc(c.run.station_id.as_deref().unwrap_or("")),
@@ -255,10 +277,10 @@ fn series_tables(out: &mut String, series: &[(&gyrocal_catalog::Calibration, Str
         let order = |o: Option<i64>| o.map_or("—".to_string(), |o| o.to_string());
         let _ = write!(
             out,
-            "<tr><td>{}</td><td title=\"{}\">{}</td><td>{}</td><td>{}</td>\
+            "<tr>{}<td title=\"{}\">{}</td><td>{}</td><td class=\"plan\">{}</td>\
              <td class=\"num\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td>\
              <td>{}, {}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td>{}</td></tr>",
-            esc(&c.run.started_utc),
+            when_cell(&c.run.started_utc),
             esc(&c.run.directory),
             esc(&c.run.id.chars().take(12).collect::<String>()),
             esc(c.run.station_id.as_deref().unwrap_or("")),

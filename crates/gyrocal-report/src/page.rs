@@ -68,6 +68,17 @@ table.history th, table.history td { padding: 0.2rem 0.4rem; }
 /* a station id reads whole; the plan's words wrap instead (a wider column would push the
    verdict off a printed page) */
 table.history td:nth-child(3) { white-space: nowrap; }
+/* when a run started reads whole; a plan's name wraps in a column wide enough to read */
+table.history td.when { white-space: nowrap; }
+table.history td.plan { min-width: 9rem; }
+/* on a narrow screen (a phone) a history table scrolls, not the page; a
+   long serial in a heading wraps */
+@media screen and (max-width: 48rem) {
+  table.history { display: block; overflow-x: auto; max-width: 100%; }
+}
+h1, h2 { overflow-wrap: anywhere; }
+/* a plot outside a figure (the history's trends) scales to the width too */
+svg { max-width: 100%; height: auto; }
 th, td { border: 1px solid #ccc; padding: 0.25rem 0.6rem; text-align: left; vertical-align: top; }
 th { background: #f2f2f2; }
 td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }

@@ -255,3 +255,38 @@ fn calibrations_of_another_plan_are_named_and_kept_out_of_the_repeatability() {
         "{t:?}"
     );
 }
+
+#[test]
+fn a_calibration_shows_when_it_started_to_the_minute_and_the_full_stamp_on_hover() {
+    let mut h = three("A-0421");
+    h.calibrations[0].run.started_utc = "2026-01-05T15:30:12.345Z".into();
+    h.calibrations[1].run.started_utc = "not a time <b>".into();
+    let html = gyrocal_report::history::render(&History::of("A-0421", true, h.calibrations));
+    assert!(
+        html.contains(
+            "<td class=\"when\" title=\"2026-01-05T15:30:12.345Z\">2026-01-05 15:30</td>"
+        ),
+        "{html}"
+    );
+    // a stamp that does not read is shown as it is, escaped
+    assert!(html.contains(">not a time &lt;b&gt;</td>"), "{html}");
+}
+
+#[test]
+fn one_calibration_says_a_repeatability_needs_two_not_a_dash_over_one() {
+    let one = History::of("S-1", false, vec![sweep("S-1", 1, 0.36, false)]);
+    let html = gyrocal_report::history::render(&one);
+    assert!(
+        html.contains("Needs two calibrations or more (1 so far)"),
+        "{html}"
+    );
+    assert!(!html.contains("over 1 calibrations"), "{html}");
+    // two give the spread
+    let two = History::of(
+        "S-1",
+        false,
+        vec![sweep("S-1", 1, 0.36, false), sweep("S-1", 2, 0.3601, false)],
+    );
+    let html = gyrocal_report::history::render(&two);
+    assert!(html.contains("std/mean over 2 calibrations"), "{html}");
+}

@@ -359,16 +359,27 @@ async fn at_a_phones_width_no_page_scrolls_sideways() {
     };
     let (tmp, root) = lab();
     let plan = sweep_plan(tmp.path());
-    // a finished run with a long name and a serial, and one running (paced)
+    let catalog = format!("sqlite:{}", tmp.path().join("catalog.sqlite").display());
+    // a finished run with a long name and a serial (in the catalog, for its gyro page, whose
+    // table is the widest), and one running (paced)
     run_to_end(
         &plan,
         &root.join("sweep-with-a-rather-long-run-directory-name-2026-12-07T06-30-00Z"),
-        &["--dut-serial", "SIM-42-LONG-SERIAL-NUMBER"],
+        &[
+            "--dut-serial",
+            "SIM-42-LONG-SERIAL-NUMBER",
+            "--catalog",
+            &catalog,
+        ],
     );
     let running = start_run(&plan, &root.join("sweep-running"), Some(1.0), &[]);
     wait_for_steps(&root.join("sweep-running"), 1).await;
-    let serve = Serve::start(&[&root], &[]);
+    let serve = Serve::start(&[&root], &[&format!("--catalog={catalog}")]);
     for (path, shot) in [
+        (
+            "/gyro/SIM-42-LONG-SERIAL-NUMBER?include_simulated=1",
+            "phone-gyro",
+        ),
         ("/", "phone-dashboard"),
         ("/run/0/sweep-running", "phone-run-page"),
         (
@@ -377,6 +388,12 @@ async fn at_a_phones_width_no_page_scrolls_sideways() {
         ),
     ] {
         b.goto(&serve.at(path)).await;
+        if path.starts_with("/gyro/") {
+            // the page with its table, not a page saying there is none
+            let text = b.js("return document.body.innerText;", vec![]).await;
+            let text = text.as_str().unwrap_or_default();
+            assert!(text.contains("1 complete calibration"), "{text}");
+        }
         let (scroll, inner) = widths(&b).await;
         assert!(inner <= 360, "the window is a phone's: {inner} px");
         assert!(
