@@ -199,7 +199,11 @@ pub(crate) fn history_plot(rows: &[HistoryRow]) -> Result<String, ReportError> {
             .builder(&root, "Temperatures through the run", right)
             .build_cartesian_2d(xa.coord(), ya.coord())?;
         mesh(&mut chart, &xa, &ya, "run time (h)", "temperature (°C)")?;
-        for (_, color, pts, dashed) in entries {
+        // the setpoint last, on top: a controller that ramps its setpoint (a Watlow's ramp
+        // rate) reads back a setpoint the air follows within a few tenths, and drawn under the
+        // air it was hidden
+        let [setpoint, air_entry, product_entry] = entries;
+        for (_, color, pts, dashed) in [air_entry, product_entry, setpoint] {
             if dashed {
                 chart.draw_series(DashedLineSeries::new(
                     pts.iter().copied(),
@@ -215,4 +219,32 @@ pub(crate) fn history_plot(rows: &[HistoryRow]) -> Result<String, ReportError> {
         root.present()?;
         Ok(())
     })
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn the_setpoint_is_drawn_over_the_air_it_coincides_with() {
+        // a ramped setpoint that the air follows exactly: the dashed setpoint must be the
+        // last line drawn, or it is invisible under the air's
+        let rows: Vec<HistoryRow> = (0..100)
+            .map(|i| {
+                let t = f64::from(i) * 60.0;
+                let sp = 25.0 - f64::from(i) * 0.4;
+                (t, Some(sp), Some(sp), Some(sp + 2.0))
+            })
+            .collect();
+        let svg = history_plot(&rows).unwrap();
+        // the first use of each colour is its line (the legend comes after the lines)
+        let air = format!("#{:02X}{:02X}{:02X}", AIR.0, AIR.1, AIR.2);
+        let air_line = svg.find(&air).unwrap();
+        let setpoint_line = svg.find("#5A5A5A").unwrap();
+        assert!(
+            setpoint_line > air_line,
+            "the setpoint is drawn under the air"
+        );
+    }
 }
