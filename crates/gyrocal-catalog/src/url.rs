@@ -125,13 +125,21 @@ impl fmt::Debug for CatalogUrl {
     }
 }
 
-/// The `user:password@` part's bounds in a URL: (start of userinfo, end of userinfo).
+/// The `user:password@` part's bounds in a URL: (start of userinfo, end of userinfo). A text
+/// that is not quite a URL (`postgres//lab:pw@db`, `lab:pw@db`: a typo the parser refuses, in
+/// a message that quotes it) has its userinfo after the last `/` before the `@`, so that its
+/// password is found too: more may be hidden, never less.
 fn userinfo(url: &str) -> Option<(usize, usize)> {
-    let start = url.find("://")? + 3;
+    let start = url.find("://").map_or(0, |i| i + 3);
     let rest = &url[start..];
     let end_authority = rest.find(['?', '#']).unwrap_or(rest.len());
     let at = rest[..end_authority].rfind('@')?;
-    Some((start, start + at))
+    let from = if start == 0 {
+        rest[..at].rfind('/').map_or(0, |i| i + 1)
+    } else {
+        0
+    };
+    Some((start + from, start + at))
 }
 
 fn password_of(url: &str) -> Option<String> {
@@ -241,6 +249,16 @@ mod tests {
         assert_eq!(none.redacted(), "postgres://lab@db/gyro");
         let bad = CatalogUrl::parse("mysql://u:pw@h/db").unwrap_err();
         assert!(!bad.to_string().contains("pw@"), "{bad}");
+        // a typo that is not a URL at all still keeps its password out of the message
+        for typo in [
+            "postgres//lab:hunter2@db/x",
+            "postgres:/lab:hunter2@db/x",
+            "lab:hunter2@db/x",
+        ] {
+            let bad = CatalogUrl::parse(typo).unwrap_err().to_string();
+            assert!(!bad.contains("hunter2"), "{bad}");
+            assert!(bad.contains("***@db/x"), "{bad}");
+        }
     }
 
     #[test]
