@@ -124,6 +124,14 @@ pub struct LiveState {
     /// points whatever the record's length); empty otherwise.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub adev_v: Vec<(f64, f64)>,
+    /// When the run started (its first session), RFC 3339 UTC, as in its manifest: a view
+    /// that knows the run only through the catalog shows it (absent in older files).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub started_utc: Option<String>,
+    /// When the run ended, RFC 3339 UTC, once it has: the wall clock at its end, or in virtual
+    /// time `started_utc` plus the run clock (the manifest's rule; absent while running).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ended_utc: Option<String>,
     /// The process writing this file.
     pub pid: u32,
     /// The host it runs on.
@@ -149,6 +157,11 @@ pub struct LiveHeader {
     pub steps: usize,
     /// Steps already recorded (a resumed run).
     pub steps_done: usize,
+    /// See [`LiveState::started_utc`].
+    pub started_utc: Option<String>,
+    /// The run's stamps are on the run clock (a simulated run in virtual time): its end is
+    /// `started_utc` plus the run clock, not the wall clock.
+    pub virtual_time: bool,
 }
 
 impl LiveHeader {
@@ -167,6 +180,8 @@ impl LiveHeader {
             plan_kind: m.plan.kind().as_str().to_string(),
             steps: m.steps_total,
             steps_done: m.steps_done.len(),
+            started_utc: Some(m.started_utc.clone()),
+            virtual_time: m.virtual_time,
         }
     }
 }
@@ -178,6 +193,8 @@ struct Shared {
     /// counts down within the step.
     eta: Option<(Duration, Duration, Instant)>,
     last_sent: Option<Instant>,
+    /// [`LiveHeader::virtual_time`].
+    virtual_time: bool,
 }
 
 impl Shared {
@@ -257,6 +274,8 @@ impl LiveFile {
             verdict: None,
             chamber: None,
             adev_v: Vec::new(),
+            started_utc: header.started_utc,
+            ended_utc: None,
             pid: std::process::id(),
             hostname: gyrocal_files::rundir::host_name(),
             updated_utc: String::new(),
@@ -265,6 +284,7 @@ impl LiveFile {
             state,
             eta: None,
             last_sent: None,
+            virtual_time: header.virtual_time,
         }));
         let publisher: Arc<Mutex<Option<Publisher>>> = Arc::new(Mutex::new(None));
         let (tx, rx) = mpsc::sync_channel::<()>(1);
@@ -529,6 +549,22 @@ impl Sink for LiveFile {
             s.state.reason = f.reason.clone();
             s.eta = None;
             s.state.eta_s = Some(0.0);
+            let now = std::time::SystemTime::now();
+            let end = if s.virtual_time {
+                s.state
+                    .started_utc
+                    .as_deref()
+                    .and_then(gyrocal_files::parse_rfc3339_utc)
+                    .and_then(|t0| {
+                        Duration::try_from_secs_f64(f.elapsed_s)
+                            .ok()
+                            .and_then(|d| t0.checked_add(d))
+                    })
+                    .unwrap_or(now)
+            } else {
+                now
+            };
+            s.state.ended_utc = Some(gyrocal_files::rfc3339_utc(end));
             s.snapshot()
         };
         deliver(
@@ -709,6 +745,38 @@ mod tests {
             .map(|e| e.unwrap().file_name())
             .collect();
         assert_eq!(names, vec![std::ffi::OsString::from(LIVE_JSON)]);
+    }
+
+    #[test]
+    fn the_end_is_the_wall_clock_or_in_virtual_time_the_start_plus_the_run_clock() {
+        use std::time::SystemTime;
+        let end_of = |virtual_time: bool| {
+            let tmp = tempfile::tempdir().unwrap();
+            let mut live = LiveFile::new(
+                tmp.path(),
+                LiveHeader {
+                    started_utc: Some("2026-12-07T08:00:00.000Z".into()),
+                    virtual_time,
+                    ..header()
+                },
+            );
+            let running = live.handle().state();
+            assert_eq!(running.ended_utc, None, "an end while running");
+            live.finish(&Finish {
+                status: Status::Complete,
+                reason: None,
+                elapsed_s: 3600.5,
+                timing: None,
+            })
+            .unwrap();
+            let s = read_live(tmp.path()).unwrap();
+            assert_eq!(s.started_utc.as_deref(), Some("2026-12-07T08:00:00.000Z"));
+            s.ended_utc.unwrap()
+        };
+        assert_eq!(end_of(true), "2026-12-07T09:00:00.500Z");
+        let before = SystemTime::now() - Duration::from_secs(1);
+        let wall = gyrocal_files::parse_rfc3339_utc(&end_of(false)).unwrap();
+        assert!(wall >= before && wall <= SystemTime::now(), "not the wall clock");
     }
 
     #[test]

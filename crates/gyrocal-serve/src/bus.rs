@@ -46,17 +46,26 @@ impl LiveRuns {
         self.rows.write().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// Every row, newest update first.
+    /// Every row, newest update first, except those the prune would delete now
+    /// ([`LiveRow::prunable`]): a reload that read the table just before a prune (the two run
+    /// side by side, at the start) must not bring back the rows it deleted for an hour.
     pub fn rows(&self) -> Vec<LiveRow> {
-        let mut out: Vec<LiveRow> = self.read().values().cloned().collect();
+        let now = std::time::SystemTime::now();
+        let mut out: Vec<LiveRow> = self
+            .read()
+            .values()
+            .filter(|r| !r.prunable(now))
+            .cloned()
+            .collect();
         out.sort_by(|a, b| b.updated_utc.cmp(&a.updated_utc));
         out
     }
 
-    /// The row of run `run_id` on `host`.
+    /// The row of run `run_id` on `host`, unless the prune would delete it now (as [`Self::rows`]).
     pub fn get(&self, host: &str, run_id: &str) -> Option<LiveRow> {
         self.read()
             .get(&(host.to_string(), run_id.to_string()))
+            .filter(|r| !r.prunable(std::time::SystemTime::now()))
             .cloned()
     }
 
@@ -236,9 +245,27 @@ mod tests {
             row("silent-6d", "running", LIVE_KEEP_SILENT - DAY),
         ]);
         assert_eq!(live.forget_prunable(SystemTime::now()), 2);
+        assert_eq!(live.read().len(), 2, "still held in memory");
         let mut left: Vec<String> = live.rows().into_iter().map(|r| r.run_id).collect();
         left.sort();
         assert_eq!(left, ["ended-29d", "silent-6d"]);
+    }
+
+    #[test]
+    fn rows_read_just_before_a_prune_are_never_shown() {
+        // the start's reload and the start's prune run side by side: the reload may read the
+        // old rows before the prune deletes them and store them after it forgot them
+        let live = LiveRuns::default();
+        live.replace_all(vec![
+            row("ended-31d", "complete", LIVE_KEEP_ENDED + DAY),
+            row("silent-8d", "running", LIVE_KEEP_SILENT + DAY),
+            row("ended-1h", "complete", Duration::from_secs(3600)),
+        ]);
+        let shown: Vec<String> = live.rows().into_iter().map(|r| r.run_id).collect();
+        assert_eq!(shown, ["ended-1h"]);
+        assert!(live.get("bench", "ended-31d").is_none());
+        assert!(live.get("bench", "silent-8d").is_none());
+        assert!(live.get("bench", "ended-1h").is_some());
     }
 
     /// Waits (wall time, generous) until run `id` has no row in `catalog`.
@@ -268,7 +295,7 @@ mod tests {
             prune_every(&c, &l, Duration::from_millis(300)).await;
         });
         assert!(gone(&catalog, &old.run_id).await, "not pruned at the start");
-        assert!(live.rows().is_empty(), "kept in memory: {:?}", live.rows());
+        assert!(live.read().is_empty(), "kept in memory: {:?}", live.read());
         // a row that turns up old later goes at a later period
         let later = row("old-later", "running", LIVE_KEEP_SILENT + DAY);
         catalog.publish_live(&later).await.unwrap();

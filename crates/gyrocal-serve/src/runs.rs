@@ -462,8 +462,8 @@ pub fn from_row(row: &gyrocal_catalog::LiveRow, now: SystemTime) -> RunDetail {
         table: row.table_state.clone(),
         verdict: row.verdict.clone(),
         reason: live.as_ref().and_then(|l| l.reason.clone()),
-        started_utc: None,
-        ended_utc: None,
+        started_utc: live.as_ref().and_then(|l| l.started_utc.clone()),
+        ended_utc: live.as_ref().and_then(|l| l.ended_utc.clone()),
         updated_utc: Some(row.updated_utc.clone()),
         has_report: false,
     };

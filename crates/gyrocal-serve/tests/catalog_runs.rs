@@ -97,3 +97,20 @@ fn a_row_whose_state_does_not_read_is_shown_from_its_columns() {
     assert_eq!((d.view.steps_done, d.view.plan_name.as_str()), (2, "paper"));
     assert!(d.step_summaries.is_empty());
 }
+
+#[test]
+fn a_row_shows_when_its_run_started_and_ended_and_an_older_state_shows_neither() {
+    let now = SystemTime::now();
+    let mut r = row("done-2", "bench-e", now, "complete");
+    let mut state: serde_json::Value = serde_json::from_str(&r.state_json).unwrap();
+    state["started_utc"] = "2026-12-07T08:00:00.000Z".into();
+    state["ended_utc"] = "2026-12-07T08:12:30.500Z".into();
+    r.state_json = state.to_string();
+    let d = runs::from_row(&r, now).view;
+    assert_eq!(d.started_utc.as_deref(), Some("2026-12-07T08:00:00.000Z"));
+    assert_eq!(d.ended_utc.as_deref(), Some("2026-12-07T08:12:30.500Z"));
+    // a state written before these members existed still reads, without them
+    let older = runs::from_row(&row("done-3", "bench-e", now, "complete"), now).view;
+    assert_eq!((older.started_utc, older.ended_utc), (None, None));
+    assert_eq!(older.status, "complete");
+}

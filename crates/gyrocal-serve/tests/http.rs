@@ -54,6 +54,8 @@ fn live(run_id: &str, serial: &str, plan: &str, steps_done: usize) -> LiveState 
         verdict: None,
         chamber: None,
         adev_v: Vec::new(),
+        started_utc: None,
+        ended_utc: None,
         pid: std::process::id(),
         hostname: gyrocal_files::rundir::host_name(),
         updated_utc: now_utc(),
