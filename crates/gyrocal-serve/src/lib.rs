@@ -35,10 +35,11 @@
 //!
 //! Limits ([`limits`]): at most [`MAX_CONNECTIONS`] connections at once (more wait in the
 //! kernel's backlog, answered as slots free), at most [`MAX_EVENT_STREAMS`] event streams
-//! (more are answered 503, so streams can never take every connection), a request's head
-//! read within [`HEADER_TIMEOUT`] and a connection with no traffic either way for
-//! [`IDLE_TIMEOUT`] closed (a slow or silent client cannot hold a slot; an event stream's
-//! keep-alive is traffic), URI, headers and body bounded.
+//! (more are answered 503, so streams can never take every connection), every request's
+//! head read within [`HEADER_TIMEOUT`] (the next one's too, on a kept-alive connection) and a
+//! connection with no traffic either way for [`IDLE_TIMEOUT`] closed (a slow or silent client
+//! cannot hold a slot; an event stream's keep-alive is traffic), URI, headers and body
+//! bounded.
 
 pub mod bus;
 pub mod catalog;
@@ -267,7 +268,7 @@ impl App {
     pub async fn serve_limited(self, limited: limits::Limited) -> Result<(), ServeError> {
         let app = self.router();
         tokio::select! {
-            r = axum::serve(limited, app) => Ok(r?),
+            () = limits::serve_connections(limited, app) => Ok(()),
             () = self.poll() => Ok(()),
             () = async { self.follow_catalog().await; std::future::pending::<()>().await } => Ok(()),
         }
