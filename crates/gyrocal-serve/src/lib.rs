@@ -19,6 +19,10 @@
 //! runs (a run in both once, from its directory), each notification re-reads that run's row
 //! and is pushed to the event streams, and after a lost connection every row is read again.
 //!
+//! The catalog may come after the server ([`catalog`]): one that does not answer at the
+//! start is tried again in the background until it opens; meanwhile the gyro pages answer
+//! 503 ("not reachable yet") and the dashboard says so beside the catalog's name.
+//!
 //! Why polling and files: a run publishes its live state into its own directory
 //! ([`gyrocal_run::live`]) and never waits on a viewer; the server only reads. A stopped or
 //! slow server costs the run nothing.
@@ -31,17 +35,20 @@
 //!
 //! Limits ([`limits`]): at most [`MAX_CONNECTIONS`] connections at once (more wait in the
 //! kernel's backlog, answered as slots free), at most [`MAX_EVENT_STREAMS`] event streams
-//! (more are answered 503, so streams can never take every connection), a request's head
-//! read within [`HEADER_TIMEOUT`] and a connection with no traffic either way for
-//! [`IDLE_TIMEOUT`] closed (a slow or silent client cannot hold a slot; an event stream's
-//! keep-alive is traffic), URI, headers and body bounded.
+//! (more are answered 503, so streams can never take every connection), every request's
+//! head read within [`HEADER_TIMEOUT`] (the next one's too, on a kept-alive connection) and a
+//! connection with no traffic either way for [`IDLE_TIMEOUT`] closed (a slow or silent client
+//! cannot hold a slot; an event stream's keep-alive is traffic), URI, headers and body
+//! bounded.
 
 pub mod bus;
+pub mod catalog;
 pub mod limits;
 pub mod pages;
 pub mod plots;
 pub mod runs;
 
+pub use catalog::{CatalogNow, CatalogSource};
 pub use limits::{HEADER_TIMEOUT, IDLE_TIMEOUT, MAX_CONNECTIONS, MAX_HEADER_BYTES};
 
 use std::net::SocketAddr;
@@ -57,7 +64,7 @@ use axum::response::sse::{Event as SseEvent, KeepAlive, Sse};
 use axum::response::{Html, IntoResponse, Redirect, Response};
 use axum::routing::get;
 use tokio::net::TcpListener;
-use tokio::sync::{Semaphore, broadcast};
+use tokio::sync::{Semaphore, broadcast, watch};
 
 use runs::{RunKey, run_dir};
 
@@ -139,8 +146,9 @@ pub struct ServeConfig {
     pub roots: Vec<PathBuf>,
     /// The token every request must carry; `None`: none asked (loopback only).
     pub token: Option<String>,
-    /// The catalog, for the gyro pages.
-    pub catalog: Option<gyrocal_catalog::Catalog>,
+    /// The catalog, for the gyro pages and (PostgreSQL) the other benches' live runs: open,
+    /// or to be opened once it answers ([`catalog`]).
+    pub catalog: CatalogSource,
     /// The catalog's URL: pages and answers show it redacted only (never its password).
     pub catalog_url: Option<gyrocal_catalog::CatalogUrl>,
     /// A running run is stale once its live state is this old; `None`: [`runs::STALE_AFTER`].
@@ -149,7 +157,9 @@ pub struct ServeConfig {
 
 struct AppState {
     cfg: ServeConfig,
-    /// The runs known through the catalog's `live_runs` (kept by [`App::listen`]).
+    /// The catalog now (see [`catalog`]): kept by [`App::follow_catalog`].
+    catalog: watch::Sender<CatalogNow>,
+    /// The runs known through the catalog's `live_runs` (kept by [`App::follow_catalog`]).
     live: bus::LiveRuns,
     /// The catalog's URL as shown: redacted.
     catalog_shown: Option<String>,
@@ -171,6 +181,7 @@ impl App {
         App {
             state: Arc::new(AppState {
                 catalog_shown: cfg.catalog_url.as_ref().map(|u| u.redacted()),
+                catalog: watch::Sender::new(CatalogNow::at_start(&cfg.catalog)),
                 cfg,
                 live: bus::LiveRuns::default(),
                 events,
@@ -217,12 +228,26 @@ impl App {
         }
     }
 
-    /// Listens to the catalog's notifications forever (a PostgreSQL catalog; returns at once
-    /// otherwise), keeping the runs known through it and sending one event per change, and
-    /// prunes the catalog's old live rows at the start and hourly (see [`bus`]).
-    pub async fn listen(&self) {
-        let Some(catalog) = self.state.cfg.catalog.clone() else {
-            return;
+    /// The catalog now, and its changes: a [`CatalogSource::Later`] one turns from
+    /// [`CatalogNow::Waiting`] to [`CatalogNow::Open`] once it answers (for the caller to say).
+    pub fn catalog_now(&self) -> watch::Receiver<CatalogNow> {
+        self.state.catalog.subscribe()
+    }
+
+    /// Opens a [`CatalogSource::Later`] catalog once it answers (see [`catalog`]); then, with
+    /// a PostgreSQL catalog, listens to its notifications forever, keeping the runs known
+    /// through it and sending one event per change, and prunes its old live rows at the
+    /// start and hourly (see [`bus`]). Returns when there is nothing (more) to do: no
+    /// catalog, or one that carries no live runs (SQLite).
+    pub async fn follow_catalog(&self) {
+        let catalog = match &self.state.cfg.catalog {
+            CatalogSource::None => return,
+            CatalogSource::Open(c) => c.clone(),
+            CatalogSource::Later(url) => {
+                let c = catalog::open_when_it_answers(url).await;
+                self.state.catalog.send_replace(CatalogNow::Open(c.clone()));
+                c
+            }
         };
         if !catalog.carries_live() {
             return;
@@ -233,8 +258,8 @@ impl App {
         );
     }
 
-    /// Serves on `listener` (and polls the roots, and listens to the catalog) until the
-    /// process ends.
+    /// Serves on `listener` (and polls the roots, and follows the catalog, see
+    /// [`App::follow_catalog`]) until the process ends.
     pub async fn serve(self, listener: TcpListener) -> Result<(), ServeError> {
         self.serve_limited(limits::Limited::new(listener)).await
     }
@@ -243,9 +268,9 @@ impl App {
     pub async fn serve_limited(self, limited: limits::Limited) -> Result<(), ServeError> {
         let app = self.router();
         tokio::select! {
-            r = axum::serve(limited, app) => Ok(r?),
+            () = limits::serve_connections(limited, app) => Ok(()),
             () = self.poll() => Ok(()),
-            () = async { self.listen().await; std::future::pending::<()>().await } => Ok(()),
+            () = async { self.follow_catalog().await; std::future::pending::<()>().await } => Ok(()),
         }
     }
 }
@@ -420,9 +445,18 @@ fn today() -> String {
         .collect()
 }
 
+/// The catalog as the pages name it: redacted, and said when it does not answer yet.
+fn catalog_label(st: &Shared) -> Option<String> {
+    let shown = st.catalog_shown.clone()?;
+    Some(match *st.catalog.borrow() {
+        CatalogNow::Waiting => format!("{shown} (not reachable yet: tried again until it answers)"),
+        _ => shown,
+    })
+}
+
 async fn dashboard_html(st: &Shared) -> String {
     let all = all_runs(st).await;
-    pages::dashboard_part(&all, &today(), st.catalog_shown.as_deref())
+    pages::dashboard_part(&all, &today(), catalog_label(st).as_deref())
 }
 
 async fn dashboard(State(st): State<Shared>) -> Html<String> {
@@ -619,20 +653,39 @@ async fn history(
     serial: &str,
     q: &GyroQuery,
 ) -> Result<gyrocal_catalog::History, (StatusCode, String)> {
-    let Some(catalog) = &st.cfg.catalog else {
-        return Err((
-            StatusCode::NOT_FOUND,
-            "no catalog: start gyrocal serve with --catalog for a gyro's history".into(),
-        ));
+    let now = st.catalog.borrow().clone();
+    let catalog = match now {
+        CatalogNow::Open(c) => c,
+        CatalogNow::Waiting => {
+            return Err((
+                StatusCode::SERVICE_UNAVAILABLE,
+                "the catalog is not reachable yet: the server tries it again until it \
+                 answers, and this page works once it does"
+                    .into(),
+            ));
+        }
+        CatalogNow::None => {
+            return Err((
+                StatusCode::NOT_FOUND,
+                "no catalog: start gyrocal serve with --catalog for a gyro's history".into(),
+            ));
+        }
     };
     let sim = q.include_simulated.as_deref().is_some_and(|v| v != "0");
     catalog.history(serial, sim).await.map_err(|e| {
         // the error may name the catalog: said in the server's log, not on the page
         tracing::warn!("history of {serial}: {e}");
-        (
-            StatusCode::INTERNAL_SERVER_ERROR,
-            "the catalog could not be read (see the server's log)".into(),
-        )
+        if e.kind() == gyrocal_catalog::ErrorKind::Unreachable {
+            (
+                StatusCode::SERVICE_UNAVAILABLE,
+                "the catalog does not answer now (see the server's log)".into(),
+            )
+        } else {
+            (
+                StatusCode::INTERNAL_SERVER_ERROR,
+                "the catalog could not be read (see the server's log)".into(),
+            )
+        }
     })
 }
 

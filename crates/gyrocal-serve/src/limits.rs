@@ -3,12 +3,21 @@
 //! [`Limited`] accepts a connection only while it holds one of [`MAX_CONNECTIONS`] slots; past
 //! that, new connections wait in the kernel's backlog and are answered as slots free (nothing
 //! is refused, nothing is dropped). A slot comes back when its connection closes, and a client
-//! cannot keep one by being slow ([`LimitedIo`]): the head of its first request must arrive
-//! within [`HEADER_TIMEOUT`] (a client that connects and says nothing, or drips its headers a
-//! byte at a time, is closed), and a connection with no traffic either way for
-//! [`IDLE_TIMEOUT`] is closed (an event stream sends a keep-alive well within it, so a
-//! listening browser stays). Request heads are bounded by the HTTP parser's buffer, and the
-//! router refuses URIs and header sets above their limits (`MAX_URI`, [`MAX_HEADER_BYTES`]).
+//! cannot keep one by being slow:
+//!
+//! - every request's head must arrive within [`HEADER_TIMEOUT`], the first as each next one
+//!   on a kept-alive connection ([`serve_connections`]: hyper's own per-request header
+//!   timeout, which starts when the connection waits for a head, so it is also the idle
+//!   keep-alive timeout). A client that connects and says nothing, drips a head a byte at a
+//!   time, or sends one request and then drips the next, is closed at the deadline. Note:
+//!   `axum::serve` sets hyper no timer, which turns that timeout off, so the server serves
+//!   its connections with hyper's HTTP/1 builder itself;
+//! - a connection with no traffic either way for [`IDLE_TIMEOUT`] is closed ([`LimitedIo`]: a
+//!   client that stops reading its answer; an event stream sends a keep-alive well within
+//!   it, so a listening browser stays).
+//!
+//! Request heads are bounded by the HTTP parser's buffer, and the router refuses URIs and
+//! header sets above their limits (`MAX_URI`, [`MAX_HEADER_BYTES`]).
 
 use std::net::SocketAddr;
 use std::pin::Pin;
@@ -23,7 +32,9 @@ use tokio::time::{Instant, Sleep};
 
 /// The most open connections; more wait in the kernel's backlog.
 pub const MAX_CONNECTIONS: usize = 256;
-/// The longest a new connection may take to send its first request's head.
+/// The longest a connection may take to send a request's head, counted from when it waits
+/// for one: from its start, and on a kept-alive connection from the end of the previous
+/// answer (the idle keep-alive timeout).
 pub const HEADER_TIMEOUT: Duration = Duration::from_secs(10);
 /// The longest a connection may stay without traffic either way (an event stream's
 /// keep-alive comes every 15 s).
@@ -61,56 +72,29 @@ impl Limited {
     }
 }
 
-/// A connection holding its slot until it closes, closed when too slow (see the module docs).
+/// A connection holding its slot until it closes, closed after [`IDLE_TIMEOUT`] without
+/// traffic either way (see the module docs).
 pub struct LimitedIo {
     io: TcpStream,
     _slot: OwnedSemaphorePermit,
-    /// The head deadline until the first head is complete, then the idle deadline.
+    /// The idle deadline.
     timer: Pin<Box<Sleep>>,
     idle_timeout: Duration,
-    /// How many bytes of `\r\n\r\n` the last bytes read matched (4: the first head is in).
-    head: usize,
 }
 
 impl LimitedIo {
-    fn head_done(&self) -> bool {
-        self.head >= 4
-    }
-
-    /// Follows the end of the first request's head through `bytes`.
-    fn scan(&mut self, bytes: &[u8]) {
-        const END: &[u8; 4] = b"\r\n\r\n";
-        for &b in bytes {
-            if self.head_done() {
-                return;
-            }
-            self.head = if b == END[self.head] {
-                self.head + 1
-            } else if b == END[0] {
-                1
-            } else {
-                0
-            };
-        }
-    }
-
-    /// Traffic: once the first head is in, the idle deadline starts again.
+    /// Traffic: the idle deadline starts again.
     fn progress(&mut self) {
-        if self.head_done() {
-            let at = Instant::now() + self.idle_timeout;
-            self.timer.as_mut().reset(at);
-        }
+        let at = Instant::now() + self.idle_timeout;
+        self.timer.as_mut().reset(at);
     }
 
     fn expired(&mut self, cx: &mut Context<'_>) -> Option<std::io::Error> {
-        self.timer.as_mut().poll(cx).is_ready().then(|| {
-            let what = if self.head_done() {
-                "no traffic"
-            } else {
-                "no complete request head"
-            };
-            std::io::Error::new(std::io::ErrorKind::TimedOut, what)
-        })
+        self.timer
+            .as_mut()
+            .poll(cx)
+            .is_ready()
+            .then(|| std::io::Error::new(std::io::ErrorKind::TimedOut, "no traffic"))
     }
 }
 
@@ -123,15 +107,7 @@ impl AsyncRead for LimitedIo {
         let before = buf.filled().len();
         match Pin::new(&mut self.io).poll_read(cx, buf) {
             Poll::Ready(Ok(())) => {
-                let new = buf.filled()[before..].to_vec();
-                if !new.is_empty() {
-                    let was = self.head_done();
-                    self.scan(&new);
-                    if !was && self.head_done() {
-                        // the first head is in: from now on the idle deadline
-                        let at = Instant::now() + self.idle_timeout;
-                        self.timer.as_mut().reset(at);
-                    }
+                if buf.filled().len() > before {
                     self.progress();
                 }
                 Poll::Ready(Ok(()))
@@ -174,6 +150,33 @@ impl AsyncWrite for LimitedIo {
     }
 }
 
+impl Limited {
+    /// The longest a request's head may take (see [`HEADER_TIMEOUT`]).
+    pub fn header_timeout(&self) -> Duration {
+        self.header_timeout
+    }
+}
+
+/// Serves every connection `limited` accepts with `app`, forever: hyper's HTTP/1 with its
+/// per-request header timeout on (see the module docs).
+pub async fn serve_connections(mut limited: Limited, app: axum::Router) {
+    use axum::serve::Listener as _;
+    let header_timeout = limited.header_timeout();
+    loop {
+        let (io, _) = limited.accept().await;
+        let service = hyper_util::service::TowerToHyperService::new(app.clone());
+        tokio::spawn(async move {
+            let mut http = hyper::server::conn::http1::Builder::new();
+            http.timer(hyper_util::rt::TokioTimer::new())
+                .header_read_timeout(header_timeout);
+            // an error is the client's (gone, too slow, not HTTP): its connection ends
+            let _ = http
+                .serve_connection(hyper_util::rt::TokioIo::new(io), service)
+                .await;
+        });
+    }
+}
+
 impl axum::serve::Listener for Limited {
     type Io = LimitedIo;
     type Addr = SocketAddr;
@@ -188,14 +191,13 @@ impl axum::serve::Listener for Limited {
             match self.inner.accept().await {
                 Ok((io, addr)) => {
                     let _ = io.set_nodelay(true);
-                    let timer = Box::pin(tokio::time::sleep(self.header_timeout));
+                    let timer = Box::pin(tokio::time::sleep(self.idle_timeout));
                     return (
                         LimitedIo {
                             io,
                             _slot: slot,
                             timer,
                             idle_timeout: self.idle_timeout,
-                            head: 0,
                         },
                         addr,
                     );

@@ -1,8 +1,9 @@
 //! The server's connection limits on a real socket: past [`MAX_CONNECTIONS`] a connection
 //! waits (queued in the backlog, never refused) and is answered once a slot frees; a client
 //! that says nothing, or drips its request head, is closed at the head deadline and gives its
-//! slot back; a listening event stream stays past the idle deadline (its keep-alive); header
-//! sets above the limit are refused.
+//! slot back, and so is one that drips the head of its second request on a kept-alive
+//! connection, or sends none; a listening event stream stays past the idle deadline (its
+//! keep-alive); header sets above the limit are refused.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a panic is a failed test
 
@@ -127,6 +128,103 @@ fn a_dripping_client_is_closed_at_the_head_deadline_and_gives_its_slot_back() {
     s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
     let status = ask(&mut s, "/api/runs").expect("answered");
     assert!(status.contains("200"), "{status}");
+}
+
+/// Reads one answer on a kept-alive connection (its head, then `Content-Length` bytes): its
+/// status line.
+fn read_answer(s: &mut TcpStream) -> String {
+    let mut got = Vec::new();
+    let mut buf = [0u8; 4096];
+    let head_end = loop {
+        if let Some(i) = got.windows(4).position(|w| w == b"\r\n\r\n") {
+            break i + 4;
+        }
+        let n = s.read(&mut buf).unwrap();
+        assert!(n > 0, "closed before the answer");
+        got.extend_from_slice(&buf[..n]);
+    };
+    let head = String::from_utf8_lossy(&got[..head_end]).to_string();
+    let len: usize = head
+        .lines()
+        .find_map(|l| {
+            let (k, v) = l.split_once(':')?;
+            k.eq_ignore_ascii_case("content-length")
+                .then(|| v.trim().parse().unwrap())
+        })
+        .expect("a Content-Length");
+    while got.len() < head_end + len {
+        let n = s.read(&mut buf).unwrap();
+        assert!(n > 0, "closed in the answer's body");
+        got.extend_from_slice(&buf[..n]);
+    }
+    head.lines().next().unwrap().to_string()
+}
+
+/// True when the server closed `s` (a write fails, or a read finds the end).
+fn closed_by_server(s: &mut TcpStream) -> bool {
+    let mut buf = [0u8; 256];
+    matches!(s.read(&mut buf), Ok(0) | Err(_))
+}
+
+#[test]
+fn on_a_kept_alive_connection_the_next_head_has_the_same_deadline_as_the_first() {
+    // head deadline 2 s, idle deadline 60 s: only the head deadline can close these
+    let head = Duration::from_secs(2);
+    let port = start(move |l| Limited::with(l, 2, head, Duration::from_secs(60)));
+
+    // one full request answered, then the next head dripped a byte every 50 ms
+    let mut drip = TcpStream::connect(("127.0.0.1", port)).unwrap();
+    drip.set_read_timeout(Some(Duration::from_secs(30)))
+        .unwrap();
+    write!(drip, "GET /api/runs HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+    assert!(read_answer(&mut drip).contains("200"));
+    let t0 = Instant::now();
+    let mut closed = false;
+    for b in b"GET /api/runs HTTP/1.1\r\nHost: x\r\nX-Slow: "
+        .iter()
+        .cycle()
+        .take(400)
+    {
+        if drip.write_all(&[*b]).is_err() {
+            closed = true;
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+        if t0.elapsed() > Duration::from_secs(20) {
+            break;
+        }
+    }
+    // a write may still succeed after the server closed (the kernel's buffer): read too
+    closed = closed || closed_by_server(&mut drip);
+    assert!(
+        closed,
+        "the second head was dripped for {:?} and the connection stayed",
+        t0.elapsed()
+    );
+    assert!(t0.elapsed() >= head / 2, "closed before the deadline");
+
+    // one request answered, then nothing: closed at the head deadline, not the idle one
+    let mut quiet = TcpStream::connect(("127.0.0.1", port)).unwrap();
+    quiet
+        .set_read_timeout(Some(Duration::from_secs(30)))
+        .unwrap();
+    write!(quiet, "GET /api/runs HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+    assert!(read_answer(&mut quiet).contains("200"));
+    let t0 = Instant::now();
+    assert!(closed_by_server(&mut quiet), "still open");
+    assert!(
+        t0.elapsed() < Duration::from_secs(30),
+        "closed only after {:?}",
+        t0.elapsed()
+    );
+    // a second request in time on a kept-alive connection is answered as the first
+    let mut keep = TcpStream::connect(("127.0.0.1", port)).unwrap();
+    keep.set_read_timeout(Some(Duration::from_secs(30)))
+        .unwrap();
+    for _ in 0..2 {
+        write!(keep, "GET /api/runs HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+        assert!(read_answer(&mut keep).contains("200"));
+    }
 }
 
 #[test]

@@ -1,7 +1,7 @@
 //! `gyrocal serve` through the binary, next to a paced simulated `gyrocal run`: the run's
 //! `live.json` grows step by step, the server's `/api/runs` shows the run and its step count
-//! growing, its event stream delivers a change, and a public address without a token is
-//! refused before anything listens.
+//! growing, its event stream delivers a change; a public address without a token, and a
+//! catalog URL that does not parse, are refused before anything listens.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a panic is a failed test
 
@@ -129,4 +129,32 @@ fn serve_on_a_public_address_without_a_token_is_refused() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("token"), "{err}");
     assert!(o.stdout.is_empty(), "nothing was served");
+}
+
+#[test]
+fn a_catalog_url_that_does_not_parse_is_refused_at_once_naming_where_it_came_from() {
+    // waiting cannot mend a bad URL: refused before anything listens, unlike a catalog that
+    // does not answer (tried again in the background)
+    let by_flag = gyrocal()
+        .args([
+            "serve",
+            "--port",
+            "0",
+            "--catalog",
+            "mysql://lab:hunter2@db/gyro",
+        ])
+        .output()
+        .unwrap();
+    let by_env = gyrocal()
+        .args(["serve", "--port", "0"])
+        .env("GYROCAL_CATALOG", "pg://lab:hunter2@db/gyro")
+        .output()
+        .unwrap();
+    for (o, names) in [(by_flag, "--catalog"), (by_env, "$GYROCAL_CATALOG")] {
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert!(err.contains(names), "{err}");
+        assert!(!err.contains("hunter2"), "{err}");
+        assert!(o.stdout.is_empty(), "nothing was served");
+    }
 }

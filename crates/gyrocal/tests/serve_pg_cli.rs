@@ -5,7 +5,9 @@
 //! the same virtual time with every step, the failure said once; `gyrocal run --serve` prints
 //! its page and the page answers during the run; the station's `serve` key prints the lab
 //! view's page of the run; a view whose connection to the catalog is cut mid-run listens
-//! again and catches up; a view prunes the catalog's old live rows at its start.
+//! again and catches up; a view prunes the catalog's old live rows at its start; a view
+//! started while its catalog does not answer serves at once and takes the catalog (the other
+//! benches' runs, the gyro pages) once it answers.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)] // test helpers: a panic is a failed test
 
@@ -489,5 +491,140 @@ fn a_view_prunes_the_catalogs_old_live_rows_at_its_start() {
     }
     for r in &old {
         assert!(run_named(port, &r.run_id).is_none(), "{} shown", r.run_id);
+    }
+}
+
+/// `url` with `password` in it (`postgres://USER:PASSWORD@...`), unless it carries one.
+fn with_password(url: &str, password: &str) -> String {
+    let (scheme, rest) = url.split_once("://").unwrap();
+    let (user, host) = rest.split_once('@').unwrap();
+    if user.contains(':') {
+        return url.to_string();
+    }
+    format!("{scheme}://{user}:{password}@{host}")
+}
+
+#[test]
+fn a_view_started_before_its_catalog_answers_serves_at_once_and_takes_the_catalog_when_it_does() {
+    use gyrocal_catalog::{Catalog, CatalogUrl};
+    let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
+        eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL test skipped");
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = quick_with_acceptance(tmp.path());
+    let [root, _, empty] = two_benches_and_a_view(tmp.path());
+    let name = uniq("late-catalog-run");
+    let serial = uniq("G-LATE");
+    // the view reaches the catalog through a relay that refuses until restored (PostgreSQL
+    // not up yet at boot); its URL carries the password, which must show nowhere
+    let relay = Relay::to(&url);
+    relay.cut();
+    let password = std::env::var("PGPASSWORD").ok().filter(|p| p.len() >= 6);
+    let view_url = match &password {
+        Some(pw) => with_password(&relay.url, pw),
+        None => relay.url.clone(),
+    };
+    let mut view = Reap(
+        gyrocal()
+            .current_dir(&empty)
+            .args(["serve", "--catalog", &view_url, "--port", "0"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let said = collect_stderr(&mut view.0);
+    let mut line = String::new();
+    BufReader::new(view.0.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let port = port_in(&line);
+
+    // a run publishes to the catalog itself meanwhile
+    let mut run = Reap(
+        gyrocal()
+            .arg("run")
+            .arg(&plan)
+            .args(["--simulate", "--sim-time-scale", "4", "--catalog", &url])
+            .args(["--dut-serial", &serial, "--out"])
+            .arg(root.join(&name))
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    let catalog = rt
+        .block_on(Catalog::open(&CatalogUrl::parse(&url).unwrap()))
+        .unwrap();
+    let t0 = Instant::now();
+    while rt
+        .block_on(catalog.live_runs(Some(&name)))
+        .unwrap()
+        .is_empty()
+    {
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "the run never published"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // the view answers, without the catalog: no run of it, and a gyro page that says why
+    assert!(
+        api_runs(port).iter().all(|r| !r["key"]["host"].is_string()),
+        "{:?}",
+        api_runs(port)
+    );
+    let (status, html) = get(port, &format!("/gyro/{serial}"));
+    assert!(status.contains("503"), "{status}");
+    assert!(html.contains("not reachable yet"), "{html}");
+    let (_, dash) = get(port, "/");
+    assert!(dash.contains("not reachable yet"), "{dash}");
+
+    // the catalog answers: the run appears, and its gyro's page works
+    relay.restore();
+    let t0 = Instant::now();
+    while run_named(port, &name).is_none() {
+        assert!(
+            t0.elapsed() < Duration::from_secs(150),
+            "the run never appeared: {:?}; the view said {:?}",
+            api_runs(port),
+            said.lock().unwrap()
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    let r = run_named(port, &name).unwrap();
+    assert!(
+        r["key"]["host"].is_string(),
+        "known through the catalog: {r}"
+    );
+    let (status, html) = get(port, &format!("/gyro/{serial}"));
+    assert!(status.contains("200"), "{status}: {html}");
+    assert!(html.contains(serial.as_str()), "{html}");
+    // and once the run has ended (indexed in the catalog), the gyro's page lists it
+    assert!(run.0.wait().unwrap().success());
+    let t0 = Instant::now();
+    loop {
+        let (status, html) = get(port, &format!("/gyro/{serial}?include_simulated=1"));
+        assert!(status.contains("200"), "{status}");
+        if html.contains("1 complete calibration") {
+            break;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(30), "{html}");
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    // said once each: not answering yet, then answering; never the password
+    let text = said.lock().unwrap().join("\n");
+    assert_eq!(text.matches("does not answer yet").count(), 1, "{text}");
+    assert_eq!(text.matches("answers: gyro pages on").count(), 1, "{text}");
+    if let Some(pw) = &password {
+        assert!(!text.contains(pw.as_str()), "{text}");
+        for path in ["/", "/api/runs", &format!("/gyro/{serial}")] {
+            assert!(!get(port, path).1.contains(pw.as_str()), "{path}");
+        }
     }
 }

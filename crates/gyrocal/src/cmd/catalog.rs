@@ -104,14 +104,6 @@ pub fn open(opt: &CatalogOpt) -> anyhow::Result<(tokio::runtime::Runtime, Catalo
     Ok((rt, catalog))
 }
 
-/// The existing catalog named by `opt`, opened on `rt` (`gyrocal serve`, whose runtime
-/// outlives the opening).
-pub fn open_in(rt: &tokio::runtime::Runtime, opt: &CatalogOpt) -> anyhow::Result<Catalog> {
-    let url = resolve(opt)?;
-    rt.block_on(Catalog::open_existing(&url))
-        .map_err(user_error)
-}
-
 /// Before a rebuild of an SQLite catalog: a damaged file is moved aside (kept) and said, so
 /// the rebuild starts from a new file; a sound or missing one is left as it is.
 fn set_aside_if_damaged(

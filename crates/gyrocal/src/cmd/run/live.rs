@@ -132,7 +132,7 @@ fn start_server(
     let cfg = gyrocal_serve::ServeConfig {
         roots: vec![root],
         token,
-        catalog: None,
+        catalog: gyrocal_serve::CatalogSource::None,
         catalog_url: None,
         stale_after: None,
     };
