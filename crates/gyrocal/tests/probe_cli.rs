@@ -618,3 +618,72 @@ fn check_probe_of_a_sweep_plan_probes_no_chamber() {
     let doc: Value = serde_json::from_slice(&out.stdout).unwrap();
     assert!(doc["probe"]["chamber"].is_null(), "{doc:#}");
 }
+
+/// The chamber over Modbus TCP (`gyrocal sim --chamber-tcp`): `--chamber-port tcp://HOST:PORT`
+/// is probed as `gyrocal run` would reach it, identified and read.
+#[test]
+fn check_probe_reads_a_chamber_over_modbus_tcp() {
+    let plan = common::config("series.toml");
+    let sim = Sim::start(&[
+        &"--config",
+        &plan,
+        &"--chamber",
+        &"watlow_f4",
+        &"--chamber-tcp",
+        &"0",
+    ]);
+    assert!(
+        sim.chamber().starts_with("tcp://127.0.0.1:"),
+        "{}",
+        sim.chamber()
+    );
+    let out = check_series_probe(&sim, &[]);
+    let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stdout.contains(&format!(
+            "probe: chamber Watlow F4 at {} (°C;",
+            sim.chamber()
+        )),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("setpoint 23.0 °C, mode constant, no alarm"),
+        "{stdout}"
+    );
+    let state = sim.finish();
+    assert!(
+        state["chamber"]["requests_seen"].as_u64().unwrap() > 0,
+        "{state:#}"
+    );
+}
+
+/// Another instrument on the chamber's port (here a second bench's rate table): the chamber
+/// does not answer, and the second look says who did, and to give the chamber's own port.
+#[test]
+fn check_probe_says_who_answered_on_the_chambers_port() {
+    let sim = start_series_sim(&[]);
+    let other = start_sim(&common::config("series.toml"));
+    let out = check_probe(
+        &common::config("series.toml"),
+        sim.dmm(),
+        sim.table(),
+        &["--chamber-port", other.table()],
+    );
+    let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
+    assert_eq!(out.status.code(), Some(1), "{stdout}{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "the chamber (watlow_f4) at --chamber-port {} did not answer",
+            other.table()
+        )) && stderr.contains("a rate table answered (*IDN? \"ACUTRONIC,ACUTROL3000")
+            && stderr.contains("there: give the chamber's own port"),
+        "{stderr}"
+    );
+    assert!(
+        !stderr.contains("check that the controller is on"),
+        "{stderr}"
+    );
+    let state = other.finish();
+    assert_eq!(state["table"]["demands_seen"], 0, "{state:#}");
+}
