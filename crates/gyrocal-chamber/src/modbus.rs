@@ -6,8 +6,12 @@
 //!   [`crate::ChamberErrorKind::Timeout`], one that came but did not decode (a CRC error, a cut or
 //!   malformed frame, a reply to another request) is [`crate::ChamberErrorKind::Garbled`];
 //! - reads (idempotent) are asked again, `1 + retries` attempts in all, each noted for
-//!   [`crate::Chamber::take_retries`]; writes are never sent twice (a write whose reply was
-//!   lost may have been done: the caller reads back instead);
+//!   [`crate::Chamber::take_retries`]; a write is sent once ([`ModbusLink::write`]: a
+//!   register whose write starts an action, such as the F4's "terminate profile", may have
+//!   acted when its echo was lost) unless the caller says it is a level
+//!   ([`ModbusLink::write_level`]: a setpoint, whose write sets the register to a value and
+//!   means the same the second time, so it is written again after a lost or garbled echo,
+//!   like a read is asked again);
 //! - a Modbus exception reply is a definite answer ([`crate::ChamberErrorKind::Instrument`], naming the
 //!   exception and the register), never asked again;
 //! - stale input (a late reply to an attempt that timed out) is thrown away before each request,
@@ -427,7 +431,68 @@ impl ModbusLink {
         }
     }
 
-    /// Writes one holding register (function 6), once: a write is never sent twice.
+    /// Writes one holding register that holds a level (function 6: a setpoint), written
+    /// again after a lost or garbled echo, `1 + retries` attempts in all, each noted for
+    /// [`crate::Chamber::take_retries`].
+    ///
+    /// Why a write may be repeated here: function 6 sets the register to the value. If the
+    /// first write was done and only its echo was corrupted on the way back (a CRC error, the
+    /// one fault a noisy RS-485 line makes), the second sets it to the same value again: the
+    /// controller ends in the same state either way (in the Modbus application protocol the
+    /// echo of function 6 is sent after the register is written). Refusing to write it again
+    /// ended a whole temperature series at one corrupted echo of one of the setpoints its
+    /// ramps write at every poll (`series_faults_cli`). The caller still reads the register
+    /// back. An exception is a definite answer and is never repeated.
+    pub async fn write_level(&mut self, addr: u16, value: u16) -> Result<(), ChamberError> {
+        let request = format!("write register {addr} = {} (0x{value:04X})", value as i16);
+        let attempts = self.retries.saturating_add(1);
+        let mut last = String::new();
+        let mut silent = true;
+        for attempt in 1..=attempts {
+            if attempt > 1 {
+                let note = format!(
+                    "{}: {request}: {last}; written again, the same value (attempt {attempt} of \
+                     {attempts})",
+                    self.device
+                );
+                tracing::warn!("{note}");
+                self.retry_notes.push(note);
+            }
+            match self
+                .transact(Request::WriteSingleRegister(addr, value))
+                .await
+            {
+                Ok(Response::WriteSingleRegister(a, v)) if a == addr && v == value => {
+                    return Ok(());
+                }
+                Ok(other) => {
+                    silent = false;
+                    last = format!("garbled echo: {other:?} is not this write's");
+                    self.rebuild();
+                }
+                Err(Failure::Exception(code)) => return Err(self.exception_error(&request, code)),
+                Err(Failure::Link(detail)) => {
+                    return Err(ChamberError::Link {
+                        device: self.device.clone(),
+                        request,
+                        detail,
+                    });
+                }
+                Err(Failure::Silent) => {
+                    last = format!("no echo within {} ms", self.timeout.as_millis());
+                }
+                Err(Failure::Garbled(detail)) => {
+                    silent = false;
+                    last = format!("garbled echo: {detail}");
+                }
+            }
+        }
+        Err(self.final_error(request, silent, last, attempts))
+    }
+
+    /// Writes one holding register (function 6), once: a write that starts an action (a
+    /// command register) is never sent twice, since a write whose echo was lost may have
+    /// been done.
     pub async fn write(&mut self, addr: u16, value: u16) -> Result<(), ChamberError> {
         let request = format!("write register {addr} = {} (0x{value:04X})", value as i16);
         match self

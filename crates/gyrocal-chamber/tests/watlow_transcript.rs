@@ -322,13 +322,57 @@ async fn garbled_every_time_is_a_garbled_error_after_the_retries() {
     finish(f4, peer).await;
 }
 
+/// The setpoint's echo corrupted (a CRC error): register 300 holds a level, so the same
+/// write is sent again (noted like a query's retry), then read back.
 #[tokio::test(start_paused = true)]
-async fn a_write_whose_reply_is_garbled_is_not_sent_again() {
+async fn a_setpoint_whose_echo_is_garbled_is_written_again_and_read_back() {
     let mut corrupted = write_request(300, 250);
     corrupted[7] ^= 0x10;
     let set = vec![
         ask(read_request(200, 1), read_reply(&[0])),
         ask(write_request(300, 250), corrupted),
+        ask(write_request(300, 250), write_request(300, 250)),
+        ask(read_request(300, 1), read_reply(&[250])),
+    ];
+    let (mut f4, peer) = chamber(WatlowConfig::default(), script(&[connect_script(), set]));
+    f4.connect().await.unwrap();
+    f4.set_setpoint(25.0).await.unwrap();
+    let notes = f4.take_retries();
+    assert_eq!(notes.len(), 1, "{notes:?}");
+    assert!(
+        notes[0].contains("write register 300 = 250")
+            && notes[0].contains("CRC error")
+            && notes[0].contains("written again, the same value (attempt 2 of 3)"),
+        "{notes:?}"
+    );
+    finish(f4, peer).await;
+}
+
+/// Every echo of the setpoint's write garbled: a garbled error after the retries, the write
+/// sent `1 + retries` times and no more.
+#[tokio::test(start_paused = true)]
+async fn a_setpoint_garbled_every_time_is_a_garbled_error_after_the_retries() {
+    let mut corrupted = write_request(300, 250);
+    corrupted[7] ^= 0x10;
+    let mut set = vec![ask(read_request(200, 1), read_reply(&[0]))];
+    set.extend((0..3).map(|_| ask(write_request(300, 250), corrupted.clone())));
+    let (mut f4, peer) = chamber(WatlowConfig::default(), script(&[connect_script(), set]));
+    f4.connect().await.unwrap();
+    let e = f4.set_setpoint(25.0).await.unwrap_err();
+    assert_eq!(e.kind(), ChamberErrorKind::Garbled);
+    assert!(e.to_string().contains("asked 3 times"), "{e}");
+    finish(f4, peer).await;
+}
+
+/// A command whose echo is garbled (1217, terminate the controller's profile: an action) is
+/// not sent again.
+#[tokio::test(start_paused = true)]
+async fn a_command_whose_echo_is_garbled_is_not_sent_again() {
+    let mut corrupted = write_request(1217, 1);
+    corrupted[7] ^= 0x10;
+    let set = vec![
+        ask(read_request(200, 1), read_reply(&[2])),
+        ask(write_request(1217, 1), corrupted),
     ];
     let (mut f4, peer) = chamber(WatlowConfig::default(), script(&[connect_script(), set]));
     f4.connect().await.unwrap();

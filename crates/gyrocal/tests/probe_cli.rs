@@ -452,3 +452,238 @@ fn a_resume_on_the_same_mismatching_bench_records_the_deviation_once() {
     let last = sim.finish();
     assert_eq!(last["table"]["stopped"], true, "{last}");
 }
+
+// --- the chamber of a temperature series -----------------------------------------------------
+
+/// `gyrocal sim` for `configs/series.toml` with a Watlow F4 chamber on its own
+/// pseudo-terminal, `faults` armed.
+fn start_series_sim(faults: &[&str]) -> Sim {
+    let plan = common::config("series.toml");
+    let mut args: Vec<&dyn AsRef<std::ffi::OsStr>> =
+        vec![&"--config", &plan, &"--chamber", &"watlow_f4"];
+    for f in faults {
+        args.push(&"--fault");
+        args.push(f);
+    }
+    Sim::start(&args)
+}
+
+/// `gyrocal check configs/series.toml --probe` with every port the simulator's, plus `extra`.
+fn check_series_probe(sim: &Sim, extra: &[&str]) -> Output {
+    check_probe(
+        &common::config("series.toml"),
+        sim.dmm(),
+        sim.table(),
+        &[&["--chamber-port", sim.chamber()], extra].concat(),
+    )
+}
+
+/// A series plan's chamber is probed with the meter and the table: identified (°C, decimal
+/// places, range, the limits in force) and read (air, gyro, setpoint, mode, alarms), in the
+/// human text and in --json; the series' line names the --chamber-port probed; nothing moved
+/// or changed on either machine.
+#[test]
+fn check_probe_identifies_and_reads_a_series_chamber_changing_nothing() {
+    let sim = start_series_sim(&[]);
+    let out = check_series_probe(&sim, &[]);
+    let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stdout.contains(&format!(
+            "probe: chamber Watlow F4 at {} (°C; input 1 (air) 1 decimals, range -70 .. 180 °C; \
+             product on input 2 (1 decimals); setpoint limits -40 .. 85 °C)",
+            sim.chamber()
+        )),
+        "{stdout}"
+    );
+    let reads = stdout
+        .lines()
+        .find(|l| l.starts_with("probe: chamber reads air "))
+        .unwrap_or_else(|| panic!("no chamber reading: {stdout}"));
+    assert!(
+        reads.contains("setpoint 23.0 °C, mode constant, no alarm") && reads.contains("gyro 2"),
+        "{reads}"
+    );
+    assert!(
+        stdout.contains(&format!("chamber watlow_f4 on {}", sim.chamber())),
+        "the series' line names the port probed: {stdout}"
+    );
+    let out = check_series_probe(&sim, &["--json"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let doc: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let c = &doc["probe"]["chamber"];
+    assert_eq!(c["answered"], true, "{c:#}");
+    assert_eq!(c["model"], "Watlow F4", "{c:#}");
+    assert_eq!(c["port"], sim.chamber(), "{c:#}");
+    assert_eq!(c["setpoint_c"], 23.0, "{c:#}");
+    assert_eq!(c["mode"], "constant", "{c:#}");
+    assert_eq!(c["alarms"], serde_json::json!([]), "{c:#}");
+    let air = c["air_c"].as_f64().unwrap();
+    assert!((air - 23.0).abs() < 1.0, "room temperature: {c:#}");
+    assert!(c["product_c"].as_f64().is_some(), "{c:#}");
+    let state = sim.finish();
+    assert_eq!(state["table"]["demands_seen"], 0, "{state:#}");
+    assert_eq!(state["chamber"]["setpoint_c"], 23.0, "{state:#}");
+}
+
+/// A chamber that does not answer: refused, exit 1, the port named as the user gave it, the
+/// second look said ("nothing answered there") with what to check on the link; the meter and
+/// the table are still probed (no word against them).
+#[test]
+fn check_probe_refuses_a_silent_chamber_naming_its_port() {
+    let sim = start_series_sim(&["chamber:silent@request1"]);
+    let out = check_series_probe(&sim, &[]);
+    let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
+    assert_eq!(out.status.code(), Some(1), "{stdout}{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "the chamber (watlow_f4) at --chamber-port {} did not answer",
+            sim.chamber()
+        )) && stderr.contains("the chamber is silent")
+            && stderr.contains("nothing answered there: check that the controller is on"),
+        "{stderr}"
+    );
+    assert!(!stdout.contains("probe: chamber"), "{stdout}");
+    assert!(
+        stdout.contains("probe: multimeter HEWLETT-PACKARD,34401A"),
+        "{stdout}"
+    );
+    let out = check_series_probe(&sim, &["--json"]);
+    assert_eq!(out.status.code(), Some(1));
+    let doc: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let c = &doc["probe"]["chamber"];
+    assert_eq!(c["answered"], false, "{c:#}");
+    assert_eq!(c["answered_by"], "nothing", "{c:#}");
+    let state = sim.finish();
+    assert_eq!(state["table"]["demands_seen"], 0, "{state:#}");
+}
+
+/// A door alarm latched at the chamber: the probe reads it and shows it, and refuses (exit
+/// 1) saying a run would stop at once and the alarm is cleared at the chamber.
+#[test]
+fn check_probe_shows_a_latched_chamber_alarm_and_fails() {
+    let sim = start_series_sim(&["chamber:door@t=0s"]);
+    let out = check_series_probe(&sim, &[]);
+    let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
+    assert_eq!(out.status.code(), Some(1), "{stdout}{stderr}");
+    assert!(
+        stdout.contains("mode constant, ALARM: door open"),
+        "the reading shown: {stdout}"
+    );
+    assert!(
+        stderr.contains(&format!(
+            "chamber alarm: door open latched on the chamber (watlow_f4) at --chamber-port {}: \
+             a run stops at its first reading of the chamber",
+            sim.chamber()
+        )) && stderr.contains("cleared at the chamber"),
+        "{stderr}"
+    );
+    let out = check_series_probe(&sim, &["--json"]);
+    let doc: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        doc["probe"]["chamber"]["alarms"],
+        serde_json::json!(["door open"]),
+        "{doc:#}"
+    );
+    let state = sim.finish();
+    // the probe reads the alarm, never resets it
+    assert_eq!(
+        state["chamber"]["alarms"],
+        serde_json::json!(["door open"]),
+        "{state:#}"
+    );
+}
+
+/// A sweep plan has no chamber: nothing about one is probed or said, and a --chamber-port
+/// given to it is a warning that it was not probed.
+#[test]
+fn check_probe_of_a_sweep_plan_probes_no_chamber() {
+    let tmp = tempfile::tempdir().unwrap();
+    let plan = write_plan(tmp.path(), "acl");
+    let sim = start_sim(&plan);
+    let out = check_probe(
+        &plan,
+        sim.dmm(),
+        sim.table(),
+        &["--chamber-port", "/dev/null"],
+    );
+    let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
+    assert!(out.status.success(), "{stderr}");
+    assert!(!stdout.contains("chamber"), "{stdout}");
+    assert!(
+        stderr.contains("the plan has no [chamber] (it is not a temperature series): --chamber-port is not probed"),
+        "{stderr}"
+    );
+    let out = check_probe(&plan, sim.dmm(), sim.table(), &["--json"]);
+    let doc: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(doc["probe"]["chamber"].is_null(), "{doc:#}");
+}
+
+/// The chamber over Modbus TCP (`gyrocal sim --chamber-tcp`): `--chamber-port tcp://HOST:PORT`
+/// is probed as `gyrocal run` would reach it, identified and read.
+#[test]
+fn check_probe_reads_a_chamber_over_modbus_tcp() {
+    let plan = common::config("series.toml");
+    let sim = Sim::start(&[
+        &"--config",
+        &plan,
+        &"--chamber",
+        &"watlow_f4",
+        &"--chamber-tcp",
+        &"0",
+    ]);
+    assert!(
+        sim.chamber().starts_with("tcp://127.0.0.1:"),
+        "{}",
+        sim.chamber()
+    );
+    let out = check_series_probe(&sim, &[]);
+    let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stdout.contains(&format!(
+            "probe: chamber Watlow F4 at {} (°C;",
+            sim.chamber()
+        )),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("setpoint 23.0 °C, mode constant, no alarm"),
+        "{stdout}"
+    );
+    let state = sim.finish();
+    assert!(
+        state["chamber"]["requests_seen"].as_u64().unwrap() > 0,
+        "{state:#}"
+    );
+}
+
+/// Another instrument on the chamber's port (here a second bench's rate table): the chamber
+/// does not answer, and the second look says who did, and to give the chamber's own port.
+#[test]
+fn check_probe_says_who_answered_on_the_chambers_port() {
+    let sim = start_series_sim(&[]);
+    let other = start_sim(&common::config("series.toml"));
+    let out = check_probe(
+        &common::config("series.toml"),
+        sim.dmm(),
+        sim.table(),
+        &["--chamber-port", other.table()],
+    );
+    let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
+    assert_eq!(out.status.code(), Some(1), "{stdout}{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "the chamber (watlow_f4) at --chamber-port {} did not answer",
+            other.table()
+        )) && stderr.contains("a rate table answered (*IDN? \"ACUTRONIC,ACUTROL3000")
+            && stderr.contains("there: give the chamber's own port"),
+        "{stderr}"
+    );
+    assert!(
+        !stderr.contains("check that the controller is on"),
+        "{stderr}"
+    );
+    let state = other.finish();
+    assert_eq!(state["table"]["demands_seen"], 0, "{state:#}");
+}

@@ -18,7 +18,8 @@
 //! product input is configured); [`Chamber::read`] 3 reads (100..=108 in one block, or 100
 //! alone without a product input; 200; 300) plus one per alarm register configured;
 //! [`Chamber::set_setpoint`] 3 or 4 (read 200, write 1217 if a profile runs, write 300, read
-//! 300 back). If the controller refuses the block 100..=108 (exception 2, illegal data
+//! 300 back; 300 is written again after a garbled or lost echo, 1217 never: see
+//! [`ModbusLink::write_level`]). If the controller refuses the block 100..=108 (exception 2, illegal data
 //! address: some firmware may not map the registers between), the driver reads 100 and the
 //! product's register one at a time from then on.
 
@@ -322,7 +323,8 @@ impl WatlowF4 {
             tracing::info!(device = %self.description, "terminating the controller's own profile");
             self.link.write(REG_TERMINATE_PROFILE, 1).await?;
         }
-        self.link.write(REG_SETPOINT, word).await?;
+        // a level: written again after a garbled or lost echo (see ModbusLink::write_level)
+        self.link.write_level(REG_SETPOINT, word).await?;
         let back = self.read_one(REG_SETPOINT).await?;
         if back != word {
             return Err(ChamberError::Instrument {

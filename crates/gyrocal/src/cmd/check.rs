@@ -25,8 +25,11 @@ pub struct CheckArgs {
     /// Also open each instrument, identify it, read the table's mode and rate (nothing
     /// moves). Both ports are probed; when one fails, say who answered there (ports given the
     /// wrong way round are said as swapped) and, when nothing did, what to check on that
-    /// link. With a station file, its serials are compared with the instruments'. Exit 1 when
-    /// an instrument is not found on its port.
+    /// link. With a station file, its serials are compared with the instruments'. A plan with
+    /// a [chamber] (a temperature series) has its chamber probed too: identified (units,
+    /// decimal places, range) and read (air and gyro temperature, setpoint, mode, alarms),
+    /// nothing written. Exit 1 when an instrument is not found on its port, or the chamber
+    /// has an alarm latched (a run would stop at once).
     #[arg(long)]
     pub probe: bool,
     /// With --probe: the multimeter's port instead of the plan's.
@@ -35,6 +38,10 @@ pub struct CheckArgs {
     /// With --probe: the rate table's port instead of the plan's.
     #[arg(long, value_name = "PORT", requires = "probe")]
     pub table_port: Option<String>,
+    /// With --probe: the thermal chamber's port instead of the plan's `[chamber] port` (a
+    /// serial device for Modbus RTU or the Espec's text, tcp://HOST:PORT for Modbus TCP).
+    #[arg(long, value_name = "PORT", requires = "probe")]
+    pub chamber_port: Option<String>,
     /// The station file to check with the plan (else $GYROCAL_STATION, else
     /// ~/.config/gyrocal/station.toml when it exists), as `gyrocal run` would read it: a bad
     /// file, or a calibration dated after today, exits 2; a missing [multimeter] (or, for a
@@ -78,6 +85,20 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
         args.dmm_port.as_deref(),
         args.table_port.as_deref(),
     )?;
+    // --chamber-port in place of the plan's, as `gyrocal run` takes it (the series' line
+    // then names the port probed)
+    let chamber_port = match &args.chamber_port {
+        Some(p) => Some(
+            p.parse::<gyrocal_link::PortSpec>()
+                .map_err(|e| BadInput(format!("--chamber-port {p}: {e}")))?,
+        ),
+        None => None,
+    };
+    if let Some(spec) = &chamber_port
+        && plan.chamber().is_some()
+    {
+        plan.set_chamber_port(spec.clone());
+    }
     let steps = plan.schedule();
     let timing = crate::instruments::meter_timing(&plan);
     let est = estimate::estimate(&plan, &steps, 0.0, timing.as_ref());
@@ -105,7 +126,14 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
             ));
         }
     }
-    let probe = if args.probe {
+    if chamber_port.is_some() && plan.chamber().is_none() {
+        warnings.push(format!(
+            "{}: the plan has no [chamber] (it is not a temperature series): --chamber-port \
+             is not probed",
+            args.plan.display()
+        ));
+    }
+    let (probe, chamber) = if args.probe {
         use anyhow::Context as _;
         let rt = tokio::runtime::Builder::new_current_thread()
             .enable_all()
@@ -115,9 +143,16 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
             dmm: args.dmm_port.is_some(),
             table: args.table_port.is_some(),
         };
-        Some(rt.block_on(crate::cmd::probe::probe(&plan, flags)))
+        // all three at once: a failure on one does not hide the others
+        let (probe, chamber) = rt.block_on(async {
+            tokio::join!(
+                crate::cmd::probe::probe(&plan, flags),
+                crate::cmd::probe::chamber::probe(&plan, chamber_port.as_ref()),
+            )
+        });
+        (Some(probe), chamber)
     } else {
-        None
+        (None, None)
     };
     // the station's serials against the instruments' identities, once both are known
     let serials = match (&probe, &station) {
@@ -164,6 +199,12 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
                     .collect();
             }
         }
+        if let Some(c) = &chamber {
+            doc["probe"]["chamber"] = match c {
+                Ok(found) => found.json(),
+                Err(e) => e.json(),
+            };
+        }
         println!("{doc:#}");
     } else {
         print!("{}", render(&plan, &args.plan, &est));
@@ -184,9 +225,27 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
             }
         }
     }
-    // a silent instrument is an error (exit 1) whatever the output format
-    match probe {
-        Some(Err(e)) => Err(e),
+    if !args.json
+        && let Some(c) = &chamber
+    {
+        let found = match c {
+            Ok(found) => Some(found),
+            Err(e) => e.found.as_ref(),
+        };
+        if let Some(f) = found {
+            println!("probe: chamber {} at {} ({})", f.model, f.port, f.detail);
+            println!("probe: chamber reads {}", f.reading_words());
+        }
+    }
+    // a silent instrument is an error (exit 1) whatever the output format; the chamber's
+    // failure is said too when the meter's or the table's is the one returned
+    match (probe, chamber) {
+        (Some(Err(e)), Some(Err(c))) => {
+            eprintln!("gyrocal: {c}");
+            Err(e)
+        }
+        (Some(Err(e)), _) => Err(e),
+        (_, Some(Err(c))) => Err(c.into()),
         _ => Ok(()),
     }
 }

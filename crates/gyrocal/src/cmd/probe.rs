@@ -9,8 +9,12 @@
 //! there, so swapped cables read "the ports look swapped ... swap them" rather than "the
 //! multimeter did not answer" with cable advice; the likely causes for a link (baud, cable,
 //! address) are given only when no instrument answered at all.
+//!
+//! A plan with a `[chamber]` (a temperature series) has its chamber probed too, at the same
+//! time ([`chamber`]): identified and read, nothing written.
 
 mod answer;
+pub mod chamber;
 
 use std::time::Duration;
 
