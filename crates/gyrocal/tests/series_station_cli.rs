@@ -113,7 +113,13 @@ fn a_sweep_needs_no_chamber_and_is_not_refused_for_an_overdue_one() {
     let plain = station(&dir, "");
     let (code, stderr) = run("quick.toml", &plain, &tmp.path().join("sweep2"), &[]);
     assert_eq!(code, Some(0), "{stderr}");
-    assert!(!stderr.contains("chamber"), "{stderr}");
+    // (the checkout's own path may hold the word, as /work/wt-chamber did: not gyrocal's)
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .ancestors()
+        .nth(2)
+        .unwrap();
+    let words = stderr.replace(&*root.to_string_lossy(), "<checkout>");
+    assert!(!words.contains("chamber"), "{stderr}");
 }
 
 #[test]
