@@ -223,6 +223,14 @@ fn attach(tap: Tap, framing: Framing, slave: u8) -> Context {
     }
 }
 
+/// What a request sent again is, for the note of each retry: a read is asked again, the
+/// write of a level (a setpoint) written again with the same value.
+#[derive(Debug, Clone, Copy)]
+enum Repeat {
+    Read,
+    Level,
+}
+
 impl ModbusLink {
     /// A client over `stream` for `slave`.
     pub fn new(
@@ -356,39 +364,62 @@ impl ModbusLink {
                 addr.saturating_add(count.saturating_sub(1))
             )
         };
+        self.idempotent(
+            request,
+            Request::ReadHoldingRegisters(addr, count),
+            Repeat::Read,
+            |reply| match reply {
+                Response::ReadHoldingRegisters(words) if words.len() == usize::from(count) => {
+                    Ok(words)
+                }
+                // A reply of another length: not this request's (never indexed past).
+                Response::ReadHoldingRegisters(words) => {
+                    Err(format!("{} registers instead of {count}", words.len()))
+                }
+                other => Err(format!("{other:?}")),
+            },
+        )
+        .await
+    }
+
+    /// Sends `req` (named `request`) until `accept` takes its reply, `1 + retries` attempts in
+    /// all, each attempt after the first noted for [`crate::Chamber::take_retries`] with what
+    /// went wrong before it: for a request that means the same the second time (a read; the
+    /// write of a level, [`Repeat`]). `accept` says why a decoded reply is not this request's
+    /// (another function, another length, another echo): the link is rebuilt then, as after a
+    /// garbled frame. An exception or a link failure ends it at once.
+    async fn idempotent<T>(
+        &mut self,
+        request: String,
+        req: Request<'static>,
+        repeat: Repeat,
+        accept: impl Fn(Response) -> Result<T, String>,
+    ) -> Result<T, ChamberError> {
+        let (reply, again) = match repeat {
+            Repeat::Read => ("reply", "asked again"),
+            Repeat::Level => ("echo", "written again, the same value"),
+        };
         let attempts = self.retries.saturating_add(1);
         let mut last = String::new();
         let mut silent = true;
         for attempt in 1..=attempts {
             if attempt > 1 {
                 let note = format!(
-                    "{}: {request}: {last}; asked again (attempt {attempt} of {attempts})",
+                    "{}: {request}: {last}; {again} (attempt {attempt} of {attempts})",
                     self.device
                 );
                 tracing::warn!("{note}");
                 self.retry_notes.push(note);
             }
-            match self
-                .transact(Request::ReadHoldingRegisters(addr, count))
-                .await
-            {
-                Ok(Response::ReadHoldingRegisters(words)) if words.len() == usize::from(count) => {
-                    return Ok(words);
-                }
-                Ok(Response::ReadHoldingRegisters(words)) => {
-                    // A reply of another length: not this request's (never indexed past).
-                    silent = false;
-                    last = format!(
-                        "garbled reply: {} registers instead of {count}",
-                        words.len()
-                    );
-                    self.rebuild();
-                }
-                Ok(other) => {
-                    silent = false;
-                    last = format!("garbled reply: {other:?}");
-                    self.rebuild();
-                }
+            match self.transact(req.clone()).await {
+                Ok(response) => match accept(response) {
+                    Ok(v) => return Ok(v),
+                    Err(why) => {
+                        silent = false;
+                        last = format!("garbled {reply}: {why}");
+                        self.rebuild();
+                    }
+                },
                 Err(Failure::Exception(code)) => return Err(self.exception_error(&request, code)),
                 Err(Failure::Link(detail)) => {
                     return Err(ChamberError::Link {
@@ -398,11 +429,11 @@ impl ModbusLink {
                     });
                 }
                 Err(Failure::Silent) => {
-                    last = format!("no reply within {} ms", self.timeout.as_millis());
+                    last = format!("no {reply} within {} ms", self.timeout.as_millis());
                 }
                 Err(Failure::Garbled(detail)) => {
                     silent = false;
-                    last = format!("garbled reply: {detail}");
+                    last = format!("garbled {reply}: {detail}");
                 }
             }
         }
@@ -445,49 +476,16 @@ impl ModbusLink {
     /// back. An exception is a definite answer and is never repeated.
     pub async fn write_level(&mut self, addr: u16, value: u16) -> Result<(), ChamberError> {
         let request = format!("write register {addr} = {} (0x{value:04X})", value as i16);
-        let attempts = self.retries.saturating_add(1);
-        let mut last = String::new();
-        let mut silent = true;
-        for attempt in 1..=attempts {
-            if attempt > 1 {
-                let note = format!(
-                    "{}: {request}: {last}; written again, the same value (attempt {attempt} of \
-                     {attempts})",
-                    self.device
-                );
-                tracing::warn!("{note}");
-                self.retry_notes.push(note);
-            }
-            match self
-                .transact(Request::WriteSingleRegister(addr, value))
-                .await
-            {
-                Ok(Response::WriteSingleRegister(a, v)) if a == addr && v == value => {
-                    return Ok(());
-                }
-                Ok(other) => {
-                    silent = false;
-                    last = format!("garbled echo: {other:?} is not this write's");
-                    self.rebuild();
-                }
-                Err(Failure::Exception(code)) => return Err(self.exception_error(&request, code)),
-                Err(Failure::Link(detail)) => {
-                    return Err(ChamberError::Link {
-                        device: self.device.clone(),
-                        request,
-                        detail,
-                    });
-                }
-                Err(Failure::Silent) => {
-                    last = format!("no echo within {} ms", self.timeout.as_millis());
-                }
-                Err(Failure::Garbled(detail)) => {
-                    silent = false;
-                    last = format!("garbled echo: {detail}");
-                }
-            }
-        }
-        Err(self.final_error(request, silent, last, attempts))
+        self.idempotent(
+            request,
+            Request::WriteSingleRegister(addr, value),
+            Repeat::Level,
+            |reply| match reply {
+                Response::WriteSingleRegister(a, v) if a == addr && v == value => Ok(()),
+                other => Err(format!("{other:?} is not this write's")),
+            },
+        )
+        .await
     }
 
     /// Writes one holding register (function 6), once: a write that starts an action (a
