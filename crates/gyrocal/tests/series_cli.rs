@@ -13,10 +13,14 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
+use common::series::{
+    RUN_LIMIT, SAFE_LINE, printed_resume, run_on, run_printed, said, short_series,
+    sim_with_chamber, step_numbers,
+};
 use common::sim::{Ended, Sim, output_within};
 use common::{RunOutput, config, final_table_state, gyrocal, json, run_json, steps_done};
 
@@ -165,80 +169,6 @@ fn a_whole_series_killed_mid_soak_resumes_and_recovers_the_tempcos() {
     assert_eq!(m["chamber"]["safe_confirmed"], true, "{:#}", m["chamber"]);
 }
 
-/// A short series for real-time runs over pseudo-terminals against a simulator at 600 sim
-/// seconds a second (the gyro's case, 20 min behind the air, settles in about 2 s): 23 → 26 °C,
-/// three rates of 20 readings at each (readings 1–60 at 23 °C, 61–120 at 26 °C: three rates
-/// so that each temperature's K has a U, and the series its tempcos), the soak's criterion
-/// (±1 °C, 60 °C/min, 1.2 s: on the run clock, which is the wall clock here) met in a few
-/// seconds, `overrides` (key or section.key, value) on top. About 10 s a run.
-fn short_series(dir: &Path, overrides: &[(&str, &str)]) -> PathBuf {
-    let text = std::fs::read_to_string(config("series.toml")).unwrap();
-    let mut set: Vec<(&str, &str)> = vec![
-        ("rates_dps", "[0, 10, -10]"),
-        ("samples_per_rate", "20"),
-        ("settle_s", "0.1"),
-        ("stability_window_s", "0.3"),
-        ("acceleration_dps2", "100"),
-        ("temperatures_c", "[23, 26]"),
-        ("band_c", "1"),
-        ("stability_c_per_min", "60"),
-        ("soak_min", "0.02"),
-        ("max_wait_min", "5"),
-        ("poll_s", "0.2"),
-        ("ramp_c_per_min", "100"),
-    ];
-    set.extend_from_slice(overrides);
-    let mut out = String::new();
-    let mut section = "";
-    for line in text.lines() {
-        if let Some(name) = line
-            .trim()
-            .strip_prefix('[')
-            .and_then(|l| l.strip_suffix(']'))
-        {
-            section = name;
-        }
-        let key = line.split('=').next().unwrap_or("").trim();
-        let dotted = format!("{section}.{key}");
-        match set.iter().rev().find(|(k, _)| *k == key || *k == dotted) {
-            Some((_, v)) => out.push_str(&format!("{key} = {v}")),
-            None => out.push_str(line),
-        }
-        out.push('\n');
-    }
-    let path = dir.join("short-series.toml");
-    std::fs::write(&path, out).unwrap();
-    path
-}
-
-/// `gyrocal sim` with the plan's bench and a Watlow F4 chamber, at 600 sim seconds a second.
-fn sim_with_chamber(plan: &Path, extra: &[&str]) -> Sim {
-    let mut args: Vec<&dyn AsRef<std::ffi::OsStr>> = vec![
-        &"--config",
-        &plan,
-        &"--chamber",
-        &"watlow_f4",
-        &"--time-scale",
-        &"600",
-    ];
-    for e in extra {
-        args.push(e);
-    }
-    Sim::start(&args)
-}
-
-/// `gyrocal run PLAN` against the simulator, every port given on the command line.
-fn run_on(sim: &Sim, plan: &Path, dir: &Path) -> std::process::Command {
-    let mut c = gyrocal();
-    c.arg("run")
-        .arg(plan)
-        .args(["--dmm-port", sim.dmm(), "--table-port", sim.table()])
-        .args(["--chamber-port", sim.chamber()])
-        .arg("--out")
-        .arg(dir);
-    c
-}
-
 /// The resume command a run against `sim` prints in its ending (the ports repeated, the
 /// chamber's too, so the resume reaches the same instruments).
 fn resume_command(sim: &Sim, dir: &Path) -> String {
@@ -249,35 +179,6 @@ fn resume_command(sim: &Sim, dir: &Path) -> String {
         sim.chamber(),
         dir.display()
     )
-}
-
-/// The resume command printed in `stderr` ("resume with: gyrocal run ...").
-fn printed_resume(stderr: &str) -> String {
-    let line = stderr
-        .lines()
-        .find_map(|l| l.split("resume with: ").nth(1))
-        .unwrap_or_else(|| panic!("no resume command in:\n{stderr}"));
-    line.trim().to_string()
-}
-
-/// Runs a printed `gyrocal run ...` command word for word (the binary for "gyrocal").
-fn run_printed(command: &str) -> Ended {
-    let words: Vec<&str> = command.split_whitespace().collect();
-    assert_eq!(words.first(), Some(&"gyrocal"), "{command}");
-    output_within(gyrocal().args(&words[1..]), RUN_LIMIT)
-}
-
-/// The bound on one session of a run here (a few seconds on a quiet machine).
-const RUN_LIMIT: Duration = Duration::from_secs(120);
-
-/// steps.csv's step numbers (`step_no`), in file order.
-fn step_numbers(dir: &Path) -> Vec<u32> {
-    let text = std::fs::read_to_string(dir.join("steps.csv")).unwrap_or_default();
-    text.lines()
-        .skip(1)
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| l.split(',').next().unwrap().parse().unwrap())
-        .collect()
 }
 
 /// Blocks until temps.csv has a row of `point` in `phase`, failing if the run ended first.
@@ -302,8 +203,6 @@ fn wait_for_phase(child: &mut std::process::Child, dir: &Path, point: u32, phase
         std::thread::sleep(Duration::from_millis(10));
     }
 }
-
-const SAFE_LINE: &str = "chamber: setpoint 23 °C (ambient), in control: confirmed";
 
 #[test]
 fn sigint_during_a_soak_leaves_the_table_at_rest_and_the_chamber_safe() {
@@ -335,12 +234,6 @@ fn sigint_during_a_soak_leaves_the_table_at_rest_and_the_chamber_safe() {
     assert_eq!(state["chamber"]["setpoint_c"], 23.0, "{state:#}");
     let m = json(&dir, "manifest.json");
     assert_eq!(m["status"], "aborted", "{:#}", m["status"]);
-}
-
-/// Everything a run printed: the human ending of a complete run is on stdout (stderr without
-/// `--json` has only warnings and the failures' words).
-fn said(e: &Ended) -> String {
-    format!("{}{}", e.stdout, e.stderr)
 }
 
 /// What every completed series here shows: exit 0, each of the 6 steps once in steps.csv,

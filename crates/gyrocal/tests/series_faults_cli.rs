@@ -5,125 +5,19 @@
 //! fault is placed by a count (the meter's reading, the chamber's request), never by wall
 //! time; every test asserts the table at rest and the chamber's ending line.
 //!
-//! The short series and its helpers are `series_cli.rs`'s (copied, not shared: a test binary
-//! of its own keeps series_cli.rs under its size and these tests runnable alone).
+//! The short series and its helpers are `common::series`, shared with `series_cli.rs`.
 #![allow(clippy::unwrap_used, clippy::expect_used, missing_docs)]
 
 mod common;
 
-use std::path::{Path, PathBuf};
-use std::time::Duration;
+use std::path::Path;
 
+use common::json;
+use common::series::{
+    NOT_CONFIRMED, RUN_LIMIT, SAFE_LINE, printed_resume, run_on, run_printed, said, short_series,
+    sim_with_chamber, step_numbers,
+};
 use common::sim::{Ended, Sim, output_within};
-use common::{config, gyrocal, json};
-
-/// The bound on one session of a run here (a few seconds on a quiet machine).
-const RUN_LIMIT: Duration = Duration::from_secs(120);
-
-const SAFE_LINE: &str = "chamber: setpoint 23 °C (ambient), in control: confirmed";
-const NOT_CONFIRMED: &str = "chamber: setpoint 23 °C (ambient), in control could NOT be confirmed";
-
-/// `series_cli.rs`'s short series: 23 → 26 °C, three rates of 20 readings at each (readings
-/// 1–60 at 23 °C, 61–120 at 26 °C), a soak of 1.2 s within ±1 °C, against a simulator at
-/// 600 sim seconds a second; `overrides` (key or section.key, value) on top.
-fn short_series(dir: &Path, overrides: &[(&str, &str)]) -> PathBuf {
-    let text = std::fs::read_to_string(config("series.toml")).unwrap();
-    let mut set: Vec<(&str, &str)> = vec![
-        ("rates_dps", "[0, 10, -10]"),
-        ("samples_per_rate", "20"),
-        ("settle_s", "0.1"),
-        ("stability_window_s", "0.3"),
-        ("acceleration_dps2", "100"),
-        ("temperatures_c", "[23, 26]"),
-        ("band_c", "1"),
-        ("stability_c_per_min", "60"),
-        ("soak_min", "0.02"),
-        ("max_wait_min", "5"),
-        ("poll_s", "0.2"),
-        ("ramp_c_per_min", "100"),
-    ];
-    set.extend_from_slice(overrides);
-    let mut out = String::new();
-    let mut section = "";
-    for line in text.lines() {
-        if let Some(name) = line
-            .trim()
-            .strip_prefix('[')
-            .and_then(|l| l.strip_suffix(']'))
-        {
-            section = name;
-        }
-        let key = line.split('=').next().unwrap_or("").trim();
-        let dotted = format!("{section}.{key}");
-        match set.iter().rev().find(|(k, _)| *k == key || *k == dotted) {
-            Some((_, v)) => out.push_str(&format!("{key} = {v}")),
-            None => out.push_str(line),
-        }
-        out.push('\n');
-    }
-    let path = dir.join("short-series.toml");
-    std::fs::write(&path, out).unwrap();
-    path
-}
-
-/// `gyrocal sim` with the plan's bench and a Watlow F4 chamber, at 600 sim seconds a second.
-fn sim_with_chamber(plan: &Path, extra: &[&str]) -> Sim {
-    let mut args: Vec<&dyn AsRef<std::ffi::OsStr>> = vec![
-        &"--config",
-        &plan,
-        &"--chamber",
-        &"watlow_f4",
-        &"--time-scale",
-        &"600",
-    ];
-    for e in extra {
-        args.push(e);
-    }
-    Sim::start(&args)
-}
-
-/// `gyrocal run PLAN` against the simulator, every port given on the command line.
-fn run_on(sim: &Sim, plan: &Path, dir: &Path) -> std::process::Command {
-    let mut c = gyrocal();
-    c.arg("run")
-        .arg(plan)
-        .args(["--dmm-port", sim.dmm(), "--table-port", sim.table()])
-        .args(["--chamber-port", sim.chamber()])
-        .arg("--out")
-        .arg(dir);
-    c
-}
-
-/// The resume command printed in `stderr` ("resume with: gyrocal run ...").
-fn printed_resume(stderr: &str) -> String {
-    let line = stderr
-        .lines()
-        .find_map(|l| l.split("resume with: ").nth(1))
-        .unwrap_or_else(|| panic!("no resume command in:\n{stderr}"));
-    line.trim().to_string()
-}
-
-/// Runs a printed `gyrocal run ...` command word for word (the binary for "gyrocal").
-fn run_printed(command: &str) -> Ended {
-    let words: Vec<&str> = command.split_whitespace().collect();
-    assert_eq!(words.first(), Some(&"gyrocal"), "{command}");
-    output_within(gyrocal().args(&words[1..]), RUN_LIMIT)
-}
-
-/// Everything a run printed (the human ending of a complete run is on stdout).
-fn said(e: &Ended) -> String {
-    format!("{}{}", e.stdout, e.stderr)
-}
-
-/// steps.csv's step numbers, in file order.
-fn step_numbers(dir: &Path) -> Vec<u32> {
-    let text = std::fs::read_to_string(dir.join("steps.csv")).unwrap_or_default();
-    text.lines()
-        .skip(1)
-        .filter(|l| !l.trim().is_empty())
-        .map(|l| l.split(',').next().unwrap().parse().unwrap())
-        .collect()
-}
 
 /// A retry's step is one at 26 °C: the manifest's step is the schedule's index, 3 to 5 for
 /// steps 4 to 6. The fault fires at the chamber's first request after the meter's 65th

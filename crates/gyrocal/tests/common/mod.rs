@@ -16,6 +16,7 @@ pub mod plans;
 #[path = "../../../../tests/support/stations.rs"]
 pub mod stations;
 
+pub mod series;
 pub mod serve;
 pub mod sim;
 
