@@ -18,33 +18,15 @@ use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use common::series::{
-    RUN_LIMIT, SAFE_LINE, printed_resume, run_on, run_printed, said, short_series,
-    sim_with_chamber, step_numbers,
+    RUN_LIMIT, SAFE_LINE, assert_completed, printed_resume, run_on, run_printed, said,
+    short_series, sim_with_chamber, step_numbers, temps,
 };
-use common::sim::{Ended, Sim, output_within};
+use common::sim::{Sim, output_within};
 use common::{RunOutput, config, final_table_state, gyrocal, json, run_json, steps_done};
 
 /// The simulated gyro's coefficients in `configs/series.toml` (`[simulation]`).
 const K_TEMPCO_PPM_PER_C: f64 = 30.0;
 const BIAS_TEMPCO_DPH_PER_C: f64 = 1.5;
-
-/// temps.csv's rows: (t_s, series_point, phase).
-fn temps(dir: &Path) -> Vec<(f64, u32, String)> {
-    let Ok(text) = std::fs::read_to_string(dir.join("temps.csv")) else {
-        return Vec::new();
-    };
-    text.lines()
-        .skip(1)
-        .filter_map(|l| {
-            let c: Vec<&str> = l.split(',').collect();
-            Some((
-                c.first()?.parse().ok()?,
-                c.get(4)?.parse().ok()?,
-                c.get(5)?.to_string(),
-            ))
-        })
-        .collect()
-}
 
 fn assert_sensitivities_recovered(dir: &Path) {
     let s = json(dir, "series.json");
@@ -234,52 +216,6 @@ fn sigint_during_a_soak_leaves_the_table_at_rest_and_the_chamber_safe() {
     assert_eq!(state["chamber"]["setpoint_c"], 23.0, "{state:#}");
     let m = json(&dir, "manifest.json");
     assert_eq!(m["status"], "aborted", "{:#}", m["status"]);
-}
-
-/// What every completed series here shows: exit 0, each of the 6 steps once in steps.csv,
-/// temps.csv's run clock never going back (across sessions too), the chamber confirmed in its
-/// safe state (said, and in the manifest), the series' analysis written with its tempcos and
-/// each temperature measured with the gyro within the band of its setpoint.
-fn assert_completed(ended: &Ended, dir: &Path) {
-    let text = said(ended);
-    assert_eq!(ended.code, Some(0), "{text}");
-    assert!(text.contains(SAFE_LINE), "{text}");
-    assert!(
-        text.contains("result: sensitivities over the range: K "),
-        "{text}"
-    );
-    assert_eq!(
-        step_numbers(dir),
-        [1, 2, 3, 4, 5, 6],
-        "no step lost or twice"
-    );
-    let t = temps(dir);
-    for w in t.windows(2) {
-        assert!(w[1].0 >= w[0].0, "temps.csv's run clock went back: {w:?}");
-    }
-    let m = json(dir, "manifest.json");
-    assert_eq!(m["status"], "complete", "{:#}", m["status"]);
-    assert_eq!(m["chamber"]["safe_confirmed"], true, "{:#}", m["chamber"]);
-    let c = json(dir, "series.json")["catalog"].clone();
-    let points = c["points"].as_array().unwrap();
-    assert_eq!(points.len(), 2, "{c:#}");
-    for p in points {
-        let (set, mean) = (
-            p["setpoint_c"].as_f64().unwrap(),
-            p["temp_mean_c"].as_f64().unwrap(),
-        );
-        assert!(
-            (mean - set).abs() <= 1.0,
-            "measured outside the band: {p:#}"
-        );
-    }
-    for key in [
-        "k_tempco_ppm_per_c",
-        "u_k_tempco_ppm_per_c",
-        "bias_tempco_dph_per_c",
-    ] {
-        assert!(c[key].as_f64().is_some_and(f64::is_finite), "{key}: {c:#}");
-    }
 }
 
 /// The first "Done when", over pseudo-terminals: killed (SIGKILL: no ending, no safe

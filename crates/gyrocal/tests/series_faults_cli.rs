@@ -14,10 +14,10 @@ use std::path::Path;
 
 use common::json;
 use common::series::{
-    NOT_CONFIRMED, RUN_LIMIT, SAFE_LINE, printed_resume, run_on, run_printed, said, short_series,
-    sim_with_chamber, step_numbers,
+    NOT_CONFIRMED, RUN_LIMIT, SAFE_LINE, assert_completed, printed_resume, run_on, run_printed,
+    said, short_series, sim_with_chamber, step_numbers,
 };
-use common::sim::{Ended, Sim, output_within};
+use common::sim::{Sim, output_within};
 
 /// A retry's step is one at 26 °C: the manifest's step is the schedule's index, 3 to 5 for
 /// steps 4 to 6. The fault fires at the chamber's first request after the meter's 65th
@@ -66,26 +66,6 @@ fn chamber_retries(dir: &Path) -> Vec<(Option<u64>, String)> {
             )
         })
         .collect()
-}
-
-/// A completed short series: exit 0, steps 1–6 once each, the chamber confirmed safe (said,
-/// and in the manifest), the series' sensitivities written.
-fn assert_completed(ended: &Ended, dir: &Path) {
-    let text = said(ended);
-    assert_eq!(ended.code, Some(0), "{text}");
-    assert!(text.contains(SAFE_LINE), "{text}");
-    assert!(
-        text.contains("result: sensitivities over the range: K "),
-        "{text}"
-    );
-    assert_eq!(
-        step_numbers(dir),
-        [1, 2, 3, 4, 5, 6],
-        "no step lost or twice"
-    );
-    let m = json(dir, "manifest.json");
-    assert_eq!(m["status"], "complete", "{:#}", m["status"]);
-    assert_eq!(m["chamber"]["safe_confirmed"], true, "{:#}", m["chamber"]);
 }
 
 /// The simulator's end: the table stopped, the chamber at its ambient setpoint, every fault

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use super::sim::{Ended, Sim, output_within};
-use super::{config, gyrocal};
+use super::{config, gyrocal, json};
 
 /// What a run ends with when the chamber is confirmed in its safe state.
 pub const SAFE_LINE: &str = "chamber: setpoint 23 °C (ambient), in control: confirmed";
@@ -121,4 +121,68 @@ pub fn step_numbers(dir: &Path) -> Vec<u32> {
 /// `--json` has only warnings and the failures' words).
 pub fn said(e: &Ended) -> String {
     format!("{}{}", e.stdout, e.stderr)
+}
+
+/// What every completed series here shows: exit 0, each of the 6 steps once in steps.csv,
+/// temps.csv's run clock never going back (across sessions too), the chamber confirmed in its
+/// safe state (said, and in the manifest), the series' analysis written with its tempcos and
+/// each temperature measured with the gyro within the band of its setpoint.
+pub fn assert_completed(ended: &Ended, dir: &Path) {
+    let text = said(ended);
+    assert_eq!(ended.code, Some(0), "{text}");
+    assert!(text.contains(SAFE_LINE), "{text}");
+    assert!(
+        text.contains("result: sensitivities over the range: K "),
+        "{text}"
+    );
+    assert_eq!(
+        step_numbers(dir),
+        [1, 2, 3, 4, 5, 6],
+        "no step lost or twice"
+    );
+    let t = temps(dir);
+    for w in t.windows(2) {
+        assert!(w[1].0 >= w[0].0, "temps.csv's run clock went back: {w:?}");
+    }
+    let m = json(dir, "manifest.json");
+    assert_eq!(m["status"], "complete", "{:#}", m["status"]);
+    assert_eq!(m["chamber"]["safe_confirmed"], true, "{:#}", m["chamber"]);
+    let c = json(dir, "series.json")["catalog"].clone();
+    let points = c["points"].as_array().unwrap();
+    assert_eq!(points.len(), 2, "{c:#}");
+    for p in points {
+        let (set, mean) = (
+            p["setpoint_c"].as_f64().unwrap(),
+            p["temp_mean_c"].as_f64().unwrap(),
+        );
+        assert!(
+            (mean - set).abs() <= 1.0,
+            "measured outside the band: {p:#}"
+        );
+    }
+    for key in [
+        "k_tempco_ppm_per_c",
+        "u_k_tempco_ppm_per_c",
+        "bias_tempco_dph_per_c",
+    ] {
+        assert!(c[key].as_f64().is_some_and(f64::is_finite), "{key}: {c:#}");
+    }
+}
+
+/// temps.csv's rows: (t_s, series_point, phase).
+pub fn temps(dir: &Path) -> Vec<(f64, u32, String)> {
+    let Ok(text) = std::fs::read_to_string(dir.join("temps.csv")) else {
+        return Vec::new();
+    };
+    text.lines()
+        .skip(1)
+        .filter_map(|l| {
+            let c: Vec<&str> = l.split(',').collect();
+            Some((
+                c.first()?.parse().ok()?,
+                c.get(4)?.parse().ok()?,
+                c.get(5)?.to_string(),
+            ))
+        })
+        .collect()
 }
