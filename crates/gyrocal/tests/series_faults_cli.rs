@@ -165,6 +165,13 @@ fn a_crc_error_on_a_setpoint_writes_echo_is_written_again_and_the_series_complet
     assert_sim_safe(sim);
 }
 
+/// The line in which a failed run names the chamber as the cause.
+fn the_chamber_failure(text: &str) -> &str {
+    text.lines()
+        .find(|l| l.starts_with("gyrocal: run failed: chamber: "))
+        .unwrap_or_else(|| panic!("no chamber failure said:\n{text}"))
+}
+
 /// A Modbus exception (4, slave device failure) on a read of the chamber during a step at
 /// 26 °C: an instrument error naming the chamber's port, the register and the exception; the
 /// table brought to rest, the chamber confirmed in its safe state, exit 1, that step not
@@ -179,10 +186,7 @@ fn a_modbus_exception_mid_step_stops_the_run_and_the_resume_completes() {
     let first = output_within(&mut run_on(&sim, &plan, &dir), RUN_LIMIT);
     let text = said(&first);
     assert_eq!(first.code, Some(1), "{text}");
-    let failed = text
-        .lines()
-        .find(|l| l.starts_with("gyrocal: run failed: chamber: "))
-        .unwrap_or_else(|| panic!("no chamber failure said:\n{text}"));
+    let failed = the_chamber_failure(&text);
     assert!(
         failed.contains(&format!("{} (Watlow F4", sim.chamber()))
             && failed.contains("the controller refused `read register")
@@ -229,10 +233,7 @@ fn slow_chamber_replies_beyond_the_deadline_are_a_silent_chamber() {
     let ended = output_within(&mut run_on(&sim, &plan, &dir), RUN_LIMIT);
     let text = said(&ended);
     assert_eq!(ended.code, Some(1), "{text}");
-    let failed = text
-        .lines()
-        .find(|l| l.starts_with("gyrocal: run failed: chamber: "))
-        .unwrap_or_else(|| panic!("no chamber failure said:\n{text}"));
+    let failed = the_chamber_failure(&text);
     assert!(
         failed.contains("no answer to `read register")
             && failed.contains("(asked 3 times; the chamber is silent)"),
