@@ -687,3 +687,56 @@ fn check_probe_says_who_answered_on_the_chambers_port() {
     let state = other.finish();
     assert_eq!(state["table"]["demands_seen"], 0, "{state:#}");
 }
+
+/// With a station file, the chamber's controller is compared with the station's `[chamber]`
+/// record as `gyrocal run` compares it: another model is a warning before the series starts
+/// (its certificate would name another chamber's calibration), the same model is said.
+#[test]
+fn check_probe_compares_the_chamber_with_the_stations_record() {
+    let tmp = tempfile::tempdir().unwrap();
+    let sim = start_series_sim(&[]);
+    let record = |model: &str| {
+        let path = tmp.path().join(format!("station-{}.toml", model.len()));
+        let chamber = format!(
+            "[chamber]\nmodel = \"{model}\"\nasset_id = \"TC-03\"\nserial = \"S-1\"\n\
+             certificate = \"C-3\"\ncalibrated = \"2026-01-01\"\ndue = \"2099-01-01\"\n"
+        );
+        std::fs::write(
+            &path,
+            format!("{}\n{chamber}", common::stations::bench_2("")),
+        )
+        .unwrap();
+        path
+    };
+    let other = record("Espec SH-641");
+    let out = check_series_probe(&sim, &["--station", other.to_str().unwrap()]);
+    let (stdout, stderr) = (text(&out.stdout), text(&out.stderr));
+    assert!(out.status.success(), "a warning, not a failure: {stderr}");
+    assert!(
+        stderr.contains(
+            "gyrocal: warning: the thermal chamber TC-03: station bench-2 names a Espec SH-641, \
+             but the controller that answered is a Watlow F4"
+        ),
+        "{stderr}"
+    );
+    let same = record("Watlow F4");
+    let out = check_series_probe(&sim, &["--station", same.to_str().unwrap()]);
+    let (stdout2, stderr) = (text(&out.stdout), text(&out.stderr));
+    assert!(out.status.success(), "{stderr}");
+    assert!(!stderr.contains("thermal chamber TC-03"), "{stderr}");
+    assert!(
+        stdout2.contains(
+            "station: the thermal chamber's controller (Watlow F4) is the one station bench-2 names"
+        ),
+        "{stdout2}\n(the first: {stdout})"
+    );
+    let state = sim.finish();
+    assert_eq!(
+        state["chamber"]["setpoint_c"], 23.0,
+        "nothing written: {state:#}"
+    );
+    assert_eq!(
+        state["table"]["demands_seen"], 0,
+        "nothing moved: {state:#}"
+    );
+}

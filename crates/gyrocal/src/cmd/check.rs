@@ -28,8 +28,9 @@ pub struct CheckArgs {
     /// link. With a station file, its serials are compared with the instruments'. A plan with
     /// a [chamber] (a temperature series) has its chamber probed too: identified (units,
     /// decimal places, range) and read (air and gyro temperature, setpoint, mode, alarms),
-    /// nothing written. Exit 1 when an instrument is not found on its port, or the chamber
-    /// has an alarm latched (a run would stop at once).
+    /// nothing written, and with a station file its controller is compared with the
+    /// station's [chamber] model. Exit 1 when an instrument is not found on its port, or the
+    /// chamber has an alarm latched (a run would stop at once).
     #[arg(long)]
     pub probe: bool,
     /// With --probe: the multimeter's port instead of the plan's.
@@ -155,10 +156,15 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
         (None, None)
     };
     // the station's serials against the instruments' identities, once both are known
-    let serials = match (&probe, &station) {
+    let mut serials = match (&probe, &station) {
         (Some(Ok(found)), Some((_, station))) => crate::cmd::probe::serial_checks(station, found),
         _ => Vec::new(),
     };
+    // the chamber's controller against the station's [chamber] record, as `gyrocal run`
+    // compares it (the model: the controller reports no serial)
+    if let (Some(Ok(found)), Some((_, station))) = (&chamber, &station) {
+        serials.extend(station.check_chamber(Some(found.model.as_str()), None));
+    }
     for c in serials.iter().filter(|c| c.is_mismatch()) {
         if let Some((_, station)) = &station {
             warnings.push(c.words(&station.id));
