@@ -306,3 +306,43 @@ fn sim_time_scale_paces_the_runs_own_waits_too() {
     assert!(wall < 9.0, "the run's own waits are paced too: {wall} s");
     assert_eq!(m["virtual_time"], true);
 }
+
+/// SIGINT to a run whose virtual clock is paced (`--sim-time-scale`, the clock advanced in
+/// bounded jumps while the run's tasks run between them): the stop goes through the same
+/// ending as an unpaced run's, and the simulated table ends at rest, said on the terminal and
+/// in the manifest's status.
+#[test]
+fn sigint_to_a_paced_run_leaves_the_simulated_table_at_rest() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("run");
+    let mut child = common::gyrocal()
+        .arg("run")
+        .arg(config("quick.toml"))
+        .args(["--simulate", "--sim-time-scale", "20", "--no-report", "-o"])
+        .arg(&dir)
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t0 = std::time::Instant::now();
+    while common::steps_done(&dir) < 1 {
+        assert!(t0.elapsed().as_secs() < 60, "no step recorded");
+        assert!(child.try_wait().unwrap().is_none(), "the run ended early");
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    let pid = nix::unistd::Pid::from_raw(i32::try_from(child.id()).unwrap());
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGINT).unwrap();
+    let out = child.wait_with_output().unwrap();
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(130), "{stderr}");
+    assert_eq!(
+        common::final_table_state(&stderr)["stopped"],
+        true,
+        "{stderr}"
+    );
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(m["status"], "aborted", "{m:#}");
+    assert_eq!(m["virtual_time"], true);
+}
