@@ -169,8 +169,7 @@ fn runs_and_history_on_the_default_sqlite_catalog() {
 
 #[test]
 fn runs_and_history_on_postgres() {
-    let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
-        eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL test skipped");
+    let Some(url) = common::postgres_url() else {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();
@@ -334,8 +333,7 @@ fn two_gyrocal_processes_index_one_sqlite_catalog() {
 
 #[test]
 fn four_gyrocal_processes_index_one_postgres_catalog() {
-    let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
-        eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL test skipped");
+    let Some(url) = common::postgres_url() else {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();
@@ -347,8 +345,7 @@ fn four_gyrocal_processes_index_one_postgres_catalog() {
 
 #[test]
 fn a_catalog_killed_during_a_run_lets_it_complete_and_an_import_catches_up() {
-    let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
-        eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL test skipped");
+    let Some(url) = common::postgres_url() else {
         return;
     };
     // the catalog server's network path: a relay that cuts every connection, as a stopped
@@ -510,8 +507,7 @@ fn a_drift_test_is_catalogued_with_its_noise_terms() {
 
 #[test]
 fn a_drift_test_is_catalogued_with_its_noise_terms_on_postgres() {
-    let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
-        eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL test skipped");
+    let Some(url) = common::postgres_url() else {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();

@@ -504,8 +504,7 @@ async fn a_series_draws_its_temperatures_a_drift_record_its_allan_curve_and_a_gy
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn two_benches_runs_on_one_postgres_catalog_show_on_a_third_processs_dashboard() {
-    let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
-        eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL browser test skipped");
+    let Some(url) = common::postgres_url() else {
         return;
     };
     let Some(b) = Browser::start(Window::Desktop).await else {

@@ -48,8 +48,7 @@ fn collect_stderr(child: &mut std::process::Child) -> Arc<Mutex<Vec<String>>> {
 
 #[test]
 fn serve_on_the_catalog_shows_two_benches_runs_growing_and_ending_with_their_verdicts() {
-    let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
-        eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL test skipped");
+    let Some(url) = common::postgres_url() else {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();
@@ -340,8 +339,7 @@ fn run_named(port: u16, name: &str) -> Option<serde_json::Value> {
 
 #[test]
 fn a_view_whose_catalog_connection_is_cut_mid_run_listens_again_and_catches_up() {
-    let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
-        eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL test skipped");
+    let Some(url) = common::postgres_url() else {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();
@@ -419,8 +417,7 @@ fn a_view_whose_catalog_connection_is_cut_mid_run_listens_again_and_catches_up()
 #[test]
 fn a_view_prunes_the_catalogs_old_live_rows_at_its_start() {
     use gyrocal_catalog::{Catalog, CatalogUrl, LIVE_KEEP_ENDED, LIVE_KEEP_SILENT, LiveRow};
-    let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
-        eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL test skipped");
+    let Some(url) = common::postgres_url() else {
         return;
     };
     let rt = tokio::runtime::Builder::new_current_thread()
@@ -507,8 +504,7 @@ fn with_password(url: &str, password: &str) -> String {
 #[test]
 fn a_view_started_before_its_catalog_answers_serves_at_once_and_takes_the_catalog_when_it_does() {
     use gyrocal_catalog::{Catalog, CatalogUrl};
-    let Ok(url) = std::env::var("GYROCAL_TEST_POSTGRES_URL") else {
-        eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL test skipped");
+    let Some(url) = common::postgres_url() else {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();

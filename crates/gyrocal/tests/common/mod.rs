@@ -179,3 +179,13 @@ pub fn copy_dir(from: &Path, to: &Path) {
             .unwrap_or_else(|e| panic!("{}: {e}", entry.path().display()));
     }
 }
+
+/// The PostgreSQL server the catalog tests use (`GYROCAL_TEST_POSTGRES_URL`, which `.ci/run`
+/// sets), or `None` after saying the test is skipped (a machine without one).
+pub fn postgres_url() -> Option<String> {
+    let url = std::env::var("GYROCAL_TEST_POSTGRES_URL").ok();
+    if url.is_none() {
+        eprintln!("note: GYROCAL_TEST_POSTGRES_URL is not set; PostgreSQL test skipped");
+    }
+    url
+}
