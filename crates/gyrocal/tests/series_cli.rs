@@ -112,12 +112,7 @@ fn a_whole_series_killed_mid_soak_resumes_and_recovers_the_tempcos() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    wait_for_phase(&mut child, &dir, 1, "soak");
-    child.kill().unwrap();
-    child.wait().unwrap();
-    let before = temps(&dir);
-    let (t_kill, point, phase) = before.last().unwrap().clone();
-    assert_eq!((point, phase.as_str()), (1, "soak"), "{before:?}");
+    let (t_kill, rows_before) = kill_in_the_second_soak(&mut child, &dir);
     assert_eq!(step_numbers(&dir), [1, 2, 3, 4, 5], "the sweep at 25 °C");
 
     let RunOutput { code, doc, stderr } = run_json(&[&"--simulate", &"--resume", &dir]);
@@ -128,7 +123,7 @@ fn a_whole_series_killed_mid_soak_resumes_and_recovers_the_tempcos() {
     for w in after.windows(2) {
         assert!(w[1].0 >= w[0].0, "temps.csv's run clock went back: {w:?}");
     }
-    let resumed = &after[before.len()..];
+    let resumed = &after[rows_before..];
     let soaked = resumed
         .iter()
         .position(|(t, p, ph)| *p == 1 && ph == "soak" && *t >= t_kill)
@@ -161,6 +156,19 @@ fn resume_command(sim: &Sim, dir: &Path) -> String {
         sim.chamber(),
         dir.display()
     )
+}
+
+/// SIGKILL (no ending, no safe state) once temps.csv shows the soak at the series' second
+/// temperature; the run clock of temps.csv's last row, which must be that soak's, and the
+/// number of its rows.
+fn kill_in_the_second_soak(child: &mut std::process::Child, dir: &Path) -> (f64, usize) {
+    wait_for_phase(child, dir, 1, "soak");
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let before = temps(dir);
+    let (t_kill, point, phase) = before.last().unwrap().clone();
+    assert_eq!((point, phase.as_str()), (1, "soak"), "{before:?}");
+    (t_kill, before.len())
 }
 
 /// Blocks until temps.csv has a row of `point` in `phase`, failing if the run ended first.
@@ -235,12 +243,7 @@ fn a_series_killed_mid_soak_soaks_again_on_resume_and_completes() {
         .spawn()
         .unwrap();
     // the kill waits on what the run directory shows, not on wall time
-    wait_for_phase(&mut child, &dir, 1, "soak");
-    child.kill().unwrap();
-    child.wait().unwrap();
-    let before = temps(&dir);
-    let (t_kill, point, phase) = before.last().unwrap().clone();
-    assert_eq!((point, phase.as_str()), (1, "soak"), "{before:?}");
+    let (t_kill, rows_before) = kill_in_the_second_soak(&mut child, &dir);
     assert_eq!(
         step_numbers(&dir),
         [1, 2, 3],
@@ -260,7 +263,7 @@ fn a_series_killed_mid_soak_soaks_again_on_resume_and_completes() {
     let ended = run_printed(&format!("gyrocal run --resume {}", dir.display()));
     assert_completed(&ended, &dir);
     let after = temps(&dir);
-    let resumed = &after[before.len()..];
+    let resumed = &after[rows_before..];
     // the resumed session soaked at 26 °C again, after the kill, before measuring there
     let soaked = resumed
         .iter()
