@@ -60,7 +60,8 @@ pub fn get(port: u16, path: &str) -> (String, String) {
 }
 
 /// [`get`], or `None` when nothing listens on `port` any more (a server that ended with its
-/// run).
+/// run), or the server went away during the exchange (the run ended while it answered: the
+/// connection is reset, or closed before a status line).
 pub fn try_get(port: u16, path: &str) -> Option<(String, String)> {
     let mut s = TcpStream::connect(("127.0.0.1", port)).ok()?;
     s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
@@ -68,9 +69,14 @@ pub fn try_get(port: u16, path: &str) -> Option<(String, String)> {
         s,
         "GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n"
     )
-    .unwrap();
+    .ok()?;
     let mut text = String::new();
-    s.read_to_string(&mut text).unwrap();
+    match s.read_to_string(&mut text) {
+        Ok(_) if text.starts_with("HTTP/") => {}
+        Ok(_) => return None,
+        Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => return None,
+        Err(e) => panic!("GET {path} on port {port}: {e}"),
+    }
     let (head, body) = text.split_once("\r\n\r\n").unwrap_or((&text, ""));
     Some((
         head.lines().next().unwrap_or("").to_string(),
